@@ -1,0 +1,274 @@
+"""Robot-human distances, two methods, one result type (paper Sect. 4, eq. 1).
+
+* **spheres** (the paper's method): for robot set i and human part j, the minimum-norm
+  difference d*_ij between any robot point of i and any human point of j, and
+  ``‖d_ij‖ = ‖d*_ij‖ - r_R - r_j`` (eq. 1). Vectorised over all pairs.
+* **capsules** (exact): coal's capsule-capsule distance between the capsule of set i and
+  the capsule of part j.
+
+Both fill a :class:`DistanceTable`. Its witness points lie on the surfaces of the two
+shapes (for spheres: the sphere centres moved by their radius along the direction), so
+that ``distance == (robot_point - human_point) @ vector`` in both methods. A part with
+no usable point has distance +inf, a zero vector and NaN witness points.
+
+For use in a control loop, build :class:`SphereDistance` or :class:`CapsuleDistance`
+once and call it every tick with the robot's :class:`~qpavoid.robot.Kinematics` and the
+human's :class:`~qpavoid.human.HumanGeometry`; the free functions
+:func:`sphere_distances` and :func:`capsule_distances` are the one-shot form.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+
+from .errors import InputError
+from .human import HumanGeometry, KinectHuman
+from .robot import Kinematics, Robot
+
+#: Direction used when two witness points coincide (deep penetration): straight up, m.
+FALLBACK_DIRECTION = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass(frozen=True)
+class DistanceTable:
+    """Distances between every robot set (rows) and human part (columns).
+
+    Attributes
+    ----------
+    method
+        ``"spheres"`` or ``"capsules"``.
+    distance
+        (S, K) signed distance, m (eq. 1); negative = penetration; +inf = part not seen.
+    vector
+        (S, K, 3) unit direction from the human to the robot at the closest pair.
+    robot_point, human_point
+        (S, K, 3) witness points on the robot and human surfaces, base frame, m.
+    robot_index
+        (S, K) index of the robot control point that realised the minimum (spheres; the
+        point whose Jacobian eq. (6) uses), -1 for capsules.
+    robot_s
+        (S, K) parameter in [0, 1] along the set's capsule axis of the robot point
+        (capsules), NaN for spheres.
+    human_index
+        (S, K) index of the human model point (spheres), -1 for capsules.
+    set_names, part_names
+        Row and column labels.
+    """
+
+    method: str
+    distance: np.ndarray
+    vector: np.ndarray
+    robot_point: np.ndarray
+    human_point: np.ndarray
+    robot_index: np.ndarray
+    robot_s: np.ndarray
+    human_index: np.ndarray
+    set_names: tuple[str, ...]
+    part_names: tuple[str, ...]
+
+    def min_per_set(self) -> np.ndarray:
+        """(S,) minimum distance of each robot set over all parts, m."""
+        return self.distance.min(axis=1)
+
+    def closest_part(self, set_index: int) -> int:
+        """Column of the part closest to robot set ``set_index``."""
+        return int(np.argmin(self.distance[set_index]))
+
+    def robot_jacobian(self, kin: Kinematics, set_index: int, part: int) -> np.ndarray:
+        """(3, nv) Jacobian of the robot point of pair (set, part) at ``kin``.
+
+        For spheres, the Jacobian of the control point that realised the minimum (the
+        sphere centre, as in eq. 6); for capsules, that of the closest point on the axis.
+        """
+        k = self.robot_index[set_index, part]
+        if k >= 0:
+            return kin.point_jacobians[k]
+        return kin.segment_point_jacobian(set_index, float(self.robot_s[set_index, part]))
+
+
+def _unit(diff: np.ndarray, norm: np.ndarray) -> np.ndarray:
+    """diff / norm along the last axis, FALLBACK_DIRECTION where norm is ~0."""
+    small = norm < 1e-12
+    out = diff / np.where(small, 1.0, norm)[..., None]
+    out[small] = FALLBACK_DIRECTION
+    return out
+
+
+class SphereDistance:
+    """The paper's sphere distances (eq. 1), vectorised; build once, call every tick.
+
+    Parameters
+    ----------
+    robot
+        Gives the control points' set membership and sphere radii.
+    human
+        Gives the points' part membership and sphere radii.
+    """
+
+    method = "spheres"
+
+    def __init__(self, robot: Robot, human: KinectHuman):
+        n_sets, n_parts = len(robot.sets), len(human.parts)
+        self.set_names, self.part_names = robot.set_names, human.part_names
+        # pair_mask[i, j, p, m]: robot point p is in set i and human point m in part j.
+        in_set = robot.point_set[None, :] == np.arange(n_sets)[:, None]          # (S, P)
+        self._pair_mask = in_set[:, None, :, None] & human.point_part.T[None, :, None, :]
+        self._r_robot = np.array([s.sphere_radius_m for s in robot.sets])
+        self._r_human = human.sphere_radii
+        self._shape = (n_sets, n_parts)
+
+    def __call__(self, kin: Kinematics, geo: HumanGeometry) -> DistanceTable:
+        """Distance table between the robot at ``kin`` and the human ``geo``."""
+        P, H = kin.points, geo.points
+        n_sets, n_parts = self._shape
+        diff = P[:, None, :] - H[None, :, :]                                         # (P, M, 3)
+        norm = np.sqrt(np.einsum("pmk,pmk->pm", diff, diff))
+        norm = np.where(geo.point_valid[None, :], norm, np.inf)
+        masked = np.where(self._pair_mask, norm[None, None], np.inf)               # (S, K, P, M)
+        flat = masked.reshape(n_sets, n_parts, -1)
+        best = flat.argmin(axis=2)
+        d_star = np.take_along_axis(flat, best[..., None], axis=2)[..., 0]
+        p_idx, m_idx = np.divmod(best, H.shape[0])
+        seen = np.isfinite(d_star)
+        vector = _unit(diff[p_idx, m_idx], d_star)
+        vector[~seen] = 0.0
+        r_r = self._r_robot[:, None]
+        r_h = self._r_human[None, :]
+        distance = d_star - r_r - r_h                                                # eq. (1)
+        robot_point = P[p_idx] - r_r[..., None] * vector
+        human_point = H[m_idx] + r_h[..., None] * vector
+        robot_point[~seen] = np.nan
+        human_point[~seen] = np.nan
+        return DistanceTable(
+            self.method, distance, vector, robot_point, human_point,
+            np.where(seen, p_idx, -1), np.full(self._shape, np.nan), np.where(seen, m_idx, -1),
+            self.set_names, self.part_names)
+
+
+def axis_rotations(u: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) rotations taking +z onto the unit vectors ``u`` (N, 3) (Rodrigues)."""
+    x, y, z = u[:, 0], u[:, 1], u[:, 2]
+    R = np.empty((len(u), 3, 3))
+    k = 1.0 / np.maximum(1.0 + z, 1e-12)
+    R[:, 0, 0] = 1 - x * x * k
+    R[:, 0, 1] = -x * y * k
+    R[:, 0, 2] = x
+    R[:, 1, 0] = -x * y * k
+    R[:, 1, 1] = 1 - y * y * k
+    R[:, 1, 2] = y
+    R[:, 2, 0] = -x
+    R[:, 2, 1] = -y
+    R[:, 2, 2] = z
+    flip = z < -1 + 1e-9
+    R[flip] = np.diag([1.0, -1.0, -1.0])
+    return R
+
+
+class CapsuleDistance:
+    """Exact capsule-capsule distances from coal; build once, call every tick.
+
+    The coal shapes, transforms and distance functors are created once; each call only
+    moves them. coal's signed distance gives the witness points and the normal (from the
+    human capsule to the robot capsule), also under penetration.
+    """
+
+    method = "capsules"
+
+    def __init__(self, robot: Robot, human: KinectHuman):
+        self.set_names, self.part_names = robot.set_names, human.part_names
+        self._robot_shapes = [coal.Capsule(r, 0.0) for r in robot.capsule_radii]
+        self._human_shapes = [coal.Capsule(r, 0.0) for r in human.capsule_radii]
+        self._robot_tf = [coal.Transform3s() for _ in self._robot_shapes]
+        self._human_tf = [coal.Transform3s() for _ in self._human_shapes]
+        self._functors = [[coal.ComputeDistance(h, r) for h in self._human_shapes]
+                          for r in self._robot_shapes]
+        self._request = coal.DistanceRequest()
+        self._request.enable_signed_distance = True
+        self._result = coal.DistanceResult()
+
+    @staticmethod
+    def _place(shapes, tfs, segments: np.ndarray, valid: np.ndarray) -> None:
+        axis = segments[:, 1] - segments[:, 0]
+        length = np.linalg.norm(axis, axis=1)
+        u = _unit(axis, length)
+        R = axis_rotations(u)
+        centre = 0.5 * (segments[:, 0] + segments[:, 1])
+        for k in np.flatnonzero(valid):
+            shapes[k].halfLength = 0.5 * length[k]
+            tfs[k].setRotation(R[k])
+            tfs[k].setTranslation(centre[k])
+
+    def __call__(self, kin: Kinematics, geo: HumanGeometry) -> DistanceTable:
+        """Distance table between the robot capsules at ``kin`` and the human ``geo``."""
+        seg = kin.segments
+        n_sets, n_parts = len(self._robot_shapes), len(self._human_shapes)
+        self._place(self._robot_shapes, self._robot_tf, seg, np.ones(n_sets, dtype=bool))
+        self._place(self._human_shapes, self._human_tf, geo.segments, geo.segment_valid)
+        distance = np.full((n_sets, n_parts), np.inf)
+        robot_point = np.full((n_sets, n_parts, 3), np.nan)
+        human_point = np.full((n_sets, n_parts, 3), np.nan)
+        normal = np.zeros((n_sets, n_parts, 3))
+        req, res = self._request, self._result
+        parts = np.flatnonzero(geo.segment_valid)
+        for i in range(n_sets):
+            tf_r, functors = self._robot_tf[i], self._functors[i]
+            for j in parts:
+                res.clear()
+                distance[i, j] = functors[j](self._human_tf[j], tf_r, req, res)
+                human_point[i, j] = res.getNearestPoint1()
+                robot_point[i, j] = res.getNearestPoint2()
+                normal[i, j] = res.normal
+        # Direction human -> robot: coal's normal; if it degenerates (coincident axes),
+        # the witness difference, else the fallback.
+        nn = np.linalg.norm(normal, axis=2)
+        diff = robot_point - human_point
+        sign = np.where(distance < 0, -1.0, 1.0)[..., None]
+        alt = _unit(sign * diff, np.linalg.norm(diff, axis=2))
+        vector = np.where((nn > 0.5)[..., None], normal / np.maximum(nn, 1e-12)[..., None], alt)
+        vector[~np.isfinite(distance)] = 0.0
+        a, b = seg[:, 0], seg[:, 1]
+        ab = b - a
+        s = np.einsum("ijk,ik->ij", robot_point - a[:, None], ab) / np.maximum(
+            np.einsum("ik,ik->i", ab, ab), 1e-18)[:, None]
+        s = np.clip(np.nan_to_num(s, nan=0.0), 0.0, 1.0)
+        minus_one = np.full((n_sets, n_parts), -1)
+        return DistanceTable(self.method, distance, vector, robot_point, human_point,
+                             minus_one, s, minus_one.copy(), self.set_names, self.part_names)
+
+
+METHODS = {"spheres": SphereDistance, "capsules": CapsuleDistance}
+
+
+def distance_method(name: str, robot: Robot, human: KinectHuman):
+    """Build the distance method called ``name`` (``"spheres"`` or ``"capsules"``)."""
+    try:
+        return METHODS[name](robot, human)
+    except KeyError:
+        raise InputError(f"unknown distance method {name!r}; choose from {sorted(METHODS)}") from None
+
+
+def sphere_distances(robot: Robot, q, human: KinectHuman, joints, state=None) -> DistanceTable:
+    """The paper's sphere distance table (eq. 1) at robot angles ``q`` (rad).
+
+    Parameters
+    ----------
+    robot, q
+        The robot and its joint angles (nq,), rad.
+    human, joints, state
+        The human model, its (25, 3) Kinect joints (m, robot base frame) and optional
+        (25,) tracking states (None = all tracked).
+    """
+    return SphereDistance(robot, human)(robot.kinematics(q, jacobians=False),
+                                        human.geometry(joints, state))
+
+
+def capsule_distances(robot: Robot, q, human: KinectHuman, joints, state=None) -> DistanceTable:
+    """The exact capsule distance table (coal) at robot angles ``q`` (rad).
+
+    Same arguments as :func:`sphere_distances`.
+    """
+    return CapsuleDistance(robot, human)(robot.kinematics(q, jacobians=False),
+                                         human.geometry(joints, state))

@@ -1,0 +1,253 @@
+"""The human: Kinect v2 skeleton joints and the paper's upper-body model (Sect. 4).
+
+The Kinect v2 gives 25 joints, each with a tracking state. The paper keeps the upper
+body: 8 parts, 21 points (13 Kinect joints plus one mid-point per part). Each part is
+covered by spheres of one radius centred on its points (eq. 1) and, for the exact method,
+by one capsule along its chain of joints.
+
+A joint is *usable* when its coordinates are finite and its state is not NotTracked
+(Inferred joints are used, as the Kinect SDK's consumers usually do). A mid-point is
+usable when both its ends are. A part whose points are all unusable is left out of the
+distances (distance +inf), so a lost limb never becomes a NaN command.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import numpy as np
+
+from ._checks import as_array
+from .errors import InputError
+
+
+class JointType(IntEnum):
+    """Kinect v2 joint indices (``JointType`` order of the SDK)."""
+
+    SpineBase = 0
+    SpineMid = 1
+    Neck = 2
+    Head = 3
+    ShoulderLeft = 4
+    ElbowLeft = 5
+    WristLeft = 6
+    HandLeft = 7
+    ShoulderRight = 8
+    ElbowRight = 9
+    WristRight = 10
+    HandRight = 11
+    HipLeft = 12
+    KneeLeft = 13
+    AnkleLeft = 14
+    FootLeft = 15
+    HipRight = 16
+    KneeRight = 17
+    AnkleRight = 18
+    FootRight = 19
+    SpineShoulder = 20
+    HandTipLeft = 21
+    ThumbLeft = 22
+    HandTipRight = 23
+    ThumbRight = 24
+
+
+class TrackingState(IntEnum):
+    """Kinect v2 tracking state of a joint."""
+
+    NotTracked = 0
+    Inferred = 1
+    Tracked = 2
+
+
+N_KINECT_JOINTS = 25
+J = JointType
+
+#: Order of the Kinect joints among the model points (spine up, then left and right arm).
+POINT_ORDER = (J.SpineBase, J.SpineMid, J.SpineShoulder, J.Neck, J.Head,
+               J.ShoulderLeft, J.ElbowLeft, J.WristLeft, J.HandLeft,
+               J.ShoulderRight, J.ElbowRight, J.WristRight, J.HandRight)
+
+
+@dataclass(frozen=True)
+class BodyPart:
+    """One part of the upper-body model.
+
+    Attributes
+    ----------
+    name
+        Part name.
+    chain
+        Kinect joints along the part, proximal first. The capsule runs between the first
+        and the last usable joint of the chain.
+    mid
+        The two joints whose mid-point is the part's extra point (paper Fig. 3).
+    sphere_radius_m
+        Radius r_j of the part's spheres (eq. 1), m.
+    capsule_radius_m
+        Radius of the part's capsule (exact method), m.
+    """
+
+    name: str
+    chain: tuple[JointType, ...]
+    mid: tuple[JointType, JointType]
+    sphere_radius_m: float
+    capsule_radius_m: float
+
+
+def _arm(side: str, shoulder, elbow, wrist, hand) -> tuple[BodyPart, ...]:
+    # Sphere radii cover the capsule between consecutive points (spacing h):
+    # r_sphere >= sqrt(r_capsule^2 + (h/2)^2), with h about 0.14 m (upper arm),
+    # 0.125 m (forearm) and 0.045 m (hand) for an adult skeleton.
+    return (
+        BodyPart(f"{side}_upper_arm", (shoulder, elbow), (shoulder, elbow), 0.09, 0.055),
+        BodyPart(f"{side}_forearm", (elbow, wrist), (elbow, wrist), 0.08, 0.045),
+        BodyPart(f"{side}_hand", (wrist, hand), (wrist, hand), 0.06, 0.05),
+    )
+
+
+#: The paper's eight parts, in the order of the distance tables' columns.
+UPPER_BODY: tuple[BodyPart, ...] = (
+    BodyPart("head", (J.Neck, J.Head), (J.Neck, J.Head), 0.11, 0.10),
+    # The trunk's extra point is on the chest (SpineShoulder-SpineMid), the part of the
+    # trunk at the height of the robot's links when the operator sits at the table.
+    BodyPart("trunk", (J.SpineShoulder, J.SpineMid, J.SpineBase), (J.SpineShoulder, J.SpineMid),
+             0.17, 0.15),
+    *_arm("left", J.ShoulderLeft, J.ElbowLeft, J.WristLeft, J.HandLeft),
+    *_arm("right", J.ShoulderRight, J.ElbowRight, J.WristRight, J.HandRight),
+)
+
+
+@dataclass(frozen=True)
+class HumanGeometry:
+    """The human's points and capsules at one camera frame (what the distances need).
+
+    Attributes
+    ----------
+    points
+        (M, 3) model points, m; rows of unusable points are NaN.
+    point_valid
+        (M,) True where the point is usable.
+    segments
+        (K, 2, 3) capsule axis of each part, m; NaN for a part with no usable joint.
+    segment_valid
+        (K,) True where the part has at least one usable joint.
+    """
+
+    points: np.ndarray
+    point_valid: np.ndarray
+    segments: np.ndarray
+    segment_valid: np.ndarray
+
+
+@dataclass(frozen=True)
+class KinectHuman:
+    """The upper-body model on top of a Kinect v2 skeleton.
+
+    Parameters
+    ----------
+    parts
+        The body parts, in table-column order (default: the paper's eight).
+
+    Attributes
+    ----------
+    joint_ids
+        (13,) Kinect joints used as points, in point order.
+    point_part
+        (M, K) bool, True where point m belongs to part k.
+    """
+
+    parts: tuple[BodyPart, ...] = UPPER_BODY
+    joint_ids: np.ndarray = field(init=False, repr=False)
+    point_part: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        used = {int(j) for p in self.parts for j in (*p.chain, *p.mid)}
+        joints = [int(j) for j in POINT_ORDER if int(j) in used] + sorted(used - set(POINT_ORDER))
+        n_points = len(joints) + len(self.parts)
+        member = np.zeros((n_points, len(self.parts)), dtype=bool)
+        for k, p in enumerate(self.parts):
+            for j in p.chain:
+                member[joints.index(int(j)), k] = True
+            member[len(joints) + k, k] = True
+        object.__setattr__(self, "joint_ids", np.array(joints))
+        object.__setattr__(self, "point_part", member)
+        object.__setattr__(self, "_mid_ids", np.array([[int(a), int(b)] for a, b in
+                                                       (p.mid for p in self.parts)]))
+
+    @property
+    def part_names(self) -> tuple[str, ...]:
+        """Names of the parts, in column order."""
+        return tuple(p.name for p in self.parts)
+
+    @property
+    def sphere_radii(self) -> np.ndarray:
+        """(K,) sphere radius of each part, m."""
+        return np.array([p.sphere_radius_m for p in self.parts])
+
+    @property
+    def capsule_radii(self) -> np.ndarray:
+        """(K,) capsule radius of each part, m."""
+        return np.array([p.capsule_radius_m for p in self.parts])
+
+    @property
+    def n_points(self) -> int:
+        """Number of model points (21 for the paper's model)."""
+        return self.point_part.shape[0]
+
+    @staticmethod
+    def check_joints(joints) -> np.ndarray:
+        """(25, 3) float array of Kinect joints; NaN allowed (= not usable), inf is not."""
+        arr = as_array(joints, (N_KINECT_JOINTS, 3), "joints (Kinect v2, m)", finite=False)
+        if np.any(np.isinf(arr)):
+            bad = np.argwhere(np.isinf(arr))[0]
+            raise InputError(f"joints has an infinite coordinate at joint {JointType(bad[0]).name}")
+        return arr
+
+    @staticmethod
+    def check_state(state) -> np.ndarray | None:
+        """(25,) int tracking states in {0, 1, 2}, or None (all tracked)."""
+        if state is None:
+            return None
+        arr = np.asarray(state)
+        if arr.shape != (N_KINECT_JOINTS,):
+            raise InputError(f"state (Kinect tracking states) must have shape (25,), got {arr.shape}")
+        if not np.all(np.isin(arr, (0, 1, 2))):
+            bad = int(np.flatnonzero(~np.isin(arr, (0, 1, 2)))[0])
+            raise InputError(f"state[{bad}] ({JointType(bad).name}) is {arr[bad]!r}, "
+                             "expected 0 (not tracked), 1 (inferred) or 2 (tracked)")
+        return arr.astype(np.int8)
+
+    def joint_usable(self, joints, state=None) -> np.ndarray:
+        """(25,) True where a joint has finite coordinates and is not NotTracked."""
+        joints = self.check_joints(joints)
+        state = self.check_state(state)
+        ok = np.all(np.isfinite(joints), axis=1)
+        if state is not None:
+            ok &= state != TrackingState.NotTracked
+        return ok
+
+    def points(self, joints, state=None) -> np.ndarray:
+        """The model points (21, 3) from (25, 3) Kinect joints, m.
+
+        Rows are the 13 joints (SpineBase, SpineMid, SpineShoulder, Neck, Head, then
+        Shoulder, Elbow, Wrist, Hand left and right) followed by the 8 mid-points in part
+        order. Unusable points are NaN.
+        """
+        return self.geometry(joints, state).points
+
+    def geometry(self, joints, state=None) -> HumanGeometry:
+        """Points, capsules and their usability at one frame."""
+        joints = self.check_joints(joints)
+        usable = self.joint_usable(joints, state)
+        clean = np.where(usable[:, None], joints, np.nan)
+        mids = 0.5 * (clean[self._mid_ids[:, 0]] + clean[self._mid_ids[:, 1]])
+        points = np.vstack([clean[self.joint_ids], mids])
+        point_valid = np.all(np.isfinite(points), axis=1)
+        segments = np.full((len(self.parts), 2, 3), np.nan)
+        for k, part in enumerate(self.parts):
+            ok = [int(j) for j in part.chain if usable[int(j)]]
+            if ok:
+                segments[k] = clean[[ok[0], ok[-1]]]
+        return HumanGeometry(points, point_valid, segments, np.all(np.isfinite(segments), axis=(1, 2)))
+

@@ -1,0 +1,340 @@
+"""The robot: a Pinocchio model with its control points and capsules (paper Sect. 4).
+
+A robot description is a folder with a URDF and a control-point file (TOML, see
+``docs/robot.md``). Every control point and capsule end becomes an operational frame of
+the Pinocchio model, so positions and Jacobians come from Pinocchio; locking joints (the
+paper locks A3) is Pinocchio's ``buildReducedModel``, which carries the frames over.
+
+Typical use::
+
+    robot = load_robot("iiwa14")            # A3 locked, robot.model.nv == 6
+    kin = robot.kinematics(q)               # positions and Jacobians at q
+    kin.points                              # (9, 3) control points, base frame, m
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from ._checks import as_array
+from .errors import InputError, RobotDescriptionError
+
+CONFIG_NAME = "control_points.toml"
+LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+@dataclass(frozen=True)
+class ControlSet:
+    """One set of control points (L1, L2 or EE in the paper) and its capsule.
+
+    Attributes
+    ----------
+    name
+        Set name, e.g. ``"L2"``.
+    sphere_radius_m
+        Radius r_R of the spheres centred on the set's points (paper eq. 1), m.
+    points
+        Indices of the set's points in :attr:`Robot.point_frames` order.
+    capsule_frames
+        Frame ids of the capsule's two ends (from, to).
+    capsule_radius_m
+        Capsule radius for the exact distance method, m.
+    """
+
+    name: str
+    sphere_radius_m: float
+    points: tuple[int, ...]
+    capsule_frames: tuple[int, int]
+    capsule_radius_m: float
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """Everything the distance methods and the controllers need at one configuration.
+
+    All positions are in the base frame (m); Jacobians map joint velocities (rad/s) to
+    linear velocities (m/s) of the point, expressed in the base frame, and for the end
+    effector to its twist ``[v; omega]`` in LOCAL_WORLD_ALIGNED coordinates.
+
+    Attributes
+    ----------
+    q
+        Joint angles (nq,), rad.
+    points
+        Control points (P, 3).
+    point_jacobians
+        (P, 3, nv), or ``None`` if not computed.
+    segments
+        Capsule axes (S, 2, 3): start and end point of each set's capsule.
+    segment_jacobians
+        (S, 2, 3, nv) Jacobians of the capsule ends, or ``None``.
+    ee_placement
+        (4, 4) homogeneous pose of the end-effector frame.
+    ee_jacobian
+        (6, nv) end-effector Jacobian, or ``None``.
+    """
+
+    q: np.ndarray
+    points: np.ndarray
+    point_jacobians: np.ndarray | None
+    segments: np.ndarray
+    segment_jacobians: np.ndarray | None
+    ee_placement: np.ndarray
+    ee_jacobian: np.ndarray | None
+
+    def segment_point_jacobian(self, set_index: int, s: float) -> np.ndarray:
+        """Jacobian (3, nv) of the point at parameter ``s`` in [0, 1] on a capsule axis.
+
+        The capsule ends lie on one rigid segment (for the iiwa the locked or spinning
+        joint between them turns about that very segment), so the velocity of the point
+        ``(1 - s) a + s b`` is exactly ``(1 - s) v_a + s v_b``.
+        """
+        if self.segment_jacobians is None:
+            raise InputError("kinematics were computed without Jacobians")
+        ja, jb = self.segment_jacobians[set_index]
+        return (1.0 - s) * ja + s * jb
+
+
+class Robot:
+    """A serial arm as a Pinocchio model plus its control-point description.
+
+    Parameters
+    ----------
+    model
+        Pinocchio model (possibly reduced), with one operational frame per control point
+        and per capsule end.
+    sets
+        The control sets, in order (their points are consecutive).
+    point_frames
+        Frame id of every control point, set after set.
+    ee_frame
+        Frame id of the end effector.
+    name
+        Name of the description (folder name).
+    locked
+        Joints removed from the model and the angle (rad) they are locked at.
+    """
+
+    def __init__(self, model: pin.Model, sets: Sequence[ControlSet], point_frames: Sequence[int],
+                 ee_frame: int, name: str, locked: Mapping[str, float]):
+        self.model = model
+        self.data = model.createData()
+        self.sets = tuple(sets)
+        self.point_frames = tuple(point_frames)
+        self.ee_frame = ee_frame
+        self.name = name
+        self.locked = dict(locked)
+        self.joint_names = tuple(model.names[i] for i in range(1, model.njoints))
+        self.q_min = np.array(model.lowerPositionLimit, dtype=float)
+        self.q_max = np.array(model.upperPositionLimit, dtype=float)
+        self.dq_max = np.array(model.velocityLimit, dtype=float)
+        self.set_names = tuple(s.name for s in self.sets)
+        self.point_set = np.concatenate([[k] * len(s.points) for k, s in enumerate(self.sets)])
+        self.sphere_radii = np.array([self.sets[k].sphere_radius_m for k in self.point_set])
+        self.capsule_radii = np.array([s.capsule_radius_m for s in self.sets])
+        self._segment_frames = [s.capsule_frames for s in self.sets]
+
+    @property
+    def nq(self) -> int:
+        """Number of configuration variables."""
+        return self.model.nq
+
+    @property
+    def nv(self) -> int:
+        """Number of joint velocities (6 with A3 locked, 7 without)."""
+        return self.model.nv
+
+    def set_index(self, name: str) -> int:
+        """Index of the control set called ``name``."""
+        try:
+            return self.set_names.index(name)
+        except ValueError:
+            raise InputError(f"unknown control set {name!r}; sets are {self.set_names}") from None
+
+    def check_q(self, q) -> np.ndarray:
+        """Return ``q`` as a float array of shape (nq,) or raise :class:`InputError`."""
+        return as_array(q, (self.nq,), "q (joint angles, rad)")
+
+    def kinematics(self, q, jacobians: bool = True) -> Kinematics:
+        """Forward kinematics (and Jacobians) of every control point, capsule and the EE.
+
+        Parameters
+        ----------
+        q
+            Joint angles (nq,), rad, in the model's joint order.
+        jacobians
+            Also compute the Jacobians (needed by the controllers, not by distances).
+        """
+        q = self.check_q(q)
+        model, data = self.model, self.data
+        if jacobians:
+            pin.computeJointJacobians(model, data, q)
+        else:
+            pin.forwardKinematics(model, data, q)
+        pin.updateFramePlacements(model, data)
+        omf = data.oMf
+        points = np.array([omf[f].translation for f in self.point_frames])
+        segments = np.array([[omf[a].translation, omf[b].translation] for a, b in self._segment_frames])
+        ee = omf[self.ee_frame].homogeneous.copy()
+        pj = sj = ej = None
+        if jacobians:
+            def jac(f):
+                return pin.getFrameJacobian(model, data, f, LWA)
+            pj = np.array([jac(f)[:3] for f in self.point_frames])
+            sj = np.array([[jac(a)[:3], jac(b)[:3]] for a, b in self._segment_frames])
+            ej = jac(self.ee_frame)
+        return Kinematics(q, points, pj, segments, sj, ee, ej)
+
+    def control_points(self, q) -> np.ndarray:
+        """Control points (P, 3) at ``q``, base frame, m; for the iiwa L1(4), L2(4), EE(1)."""
+        return self.kinematics(q, jacobians=False).points
+
+    def capsules(self, q) -> np.ndarray:
+        """Capsule axes (S, 2, 3) at ``q``, one per control set, m."""
+        return self.kinematics(q, jacobians=False).segments
+
+    def end_effector(self, q) -> np.ndarray:
+        """End-effector pose (4, 4) at ``q`` in the base frame."""
+        return self.kinematics(q, jacobians=False).ee_placement
+
+    def neutral(self) -> np.ndarray:
+        """The zero configuration (nq,)."""
+        return pin.neutral(self.model)
+
+    def full_configuration(self, q) -> dict[str, float]:
+        """Angle of every joint of the description, locked ones included, by name (rad)."""
+        q = self.check_q(q)
+        out = dict(zip(self.joint_names, q.tolist()))
+        out.update(self.locked)
+        return out
+
+
+# --------------------------------------------------------------------------- loading
+
+def _description_dir(name: str | Path) -> Path:
+    """Folder of a robot description: a path, or the name of a bundled description."""
+    path = Path(name)
+    if path.suffix == ".toml" and path.is_file():
+        return path.parent
+    if path.is_dir() and (path / CONFIG_NAME).is_file():
+        return path
+    bundled = resources.files("qpavoid.robots") / str(name)
+    if bundled.is_dir() and (bundled / CONFIG_NAME).is_file():
+        return Path(str(bundled))
+    available = sorted(p.name for p in resources.files("qpavoid.robots").iterdir()
+                       if p.is_dir() and (p / CONFIG_NAME).is_file())
+    raise RobotDescriptionError(
+        f"unknown robot {str(name)!r}: not a folder with {CONFIG_NAME} and not one of the "
+        f"bundled descriptions {available}")
+
+
+def _carriers(model: pin.Model, frame_id: int) -> set[int]:
+    """Joints whose body carries the origin of a frame.
+
+    The origin of a revolute joint's frame lies on its axis, so it is fixed on both the
+    parent body and the joint's own body.
+    """
+    frame = model.frames[frame_id]
+    carriers = {frame.parentJoint}
+    if frame.type == pin.FrameType.JOINT:
+        carriers.add(model.parents[frame.parentJoint])
+    return carriers
+
+
+def _add_point_frame(model: pin.Model, data: pin.Data, label: str, names: Sequence[str]) -> int:
+    """Add an operational frame at the centroid of the named frames; return its id."""
+    ids = []
+    for n in names:
+        if not model.existFrame(n):
+            raise RobotDescriptionError(f"{label}: no frame named {n!r} in the URDF")
+        ids.append(model.getFrameId(n))
+    common = set.intersection(*(_carriers(model, i) for i in ids))
+    if not common:
+        raise RobotDescriptionError(f"{label}: frames {list(names)} are not on one rigid body")
+    parent = max(common)  # the deepest body carrying all of them
+    centre = np.mean([data.oMf[i].translation for i in ids], axis=0)
+    placement = data.oMi[parent].actInv(pin.SE3(np.eye(3), centre))
+    return model.addFrame(pin.Frame(label, parent, placement, pin.FrameType.OP_FRAME))
+
+
+def load_robot(name: str | Path = "iiwa14", locked: Mapping[str, float] | Sequence[str] | None = None
+               ) -> Robot:
+    """Load a robot description and build its (reduced) Pinocchio model.
+
+    Parameters
+    ----------
+    name
+        A bundled description (``"iiwa14"``), a folder holding a URDF and a
+        ``control_points.toml``, or the path of such a TOML file.
+    locked
+        Joints to lock: ``None`` uses the description's default (A3 at 0 for the iiwa),
+        ``()`` locks nothing, a sequence of names locks them at the description's value
+        (or 0), a mapping gives the angles (rad).
+
+    Returns
+    -------
+    Robot
+    """
+    folder = _description_dir(name)
+    with open(folder / CONFIG_NAME, "rb") as fh:
+        try:
+            cfg = tomllib.load(fh)
+        except tomllib.TOMLDecodeError as exc:
+            raise RobotDescriptionError(f"{folder / CONFIG_NAME}: {exc}") from exc
+    try:
+        urdf = folder / cfg["urdf"]
+        set_cfgs = cfg["sets"]
+        ee_name = cfg["end_effector"]
+    except KeyError as exc:
+        raise RobotDescriptionError(f"{folder / CONFIG_NAME}: missing key {exc}") from None
+    model = pin.buildModelFromUrdf(str(urdf))
+    default_locked = {k: float(v) for k, v in cfg.get("locked", {}).items()}
+    if locked is None:
+        locked = default_locked
+    elif not isinstance(locked, Mapping):
+        locked = {n: default_locked.get(n, 0.0) for n in locked}
+    locked = {str(k): float(v) for k, v in locked.items()}
+
+    # Operational frames for points and capsule ends, placed at the neutral configuration.
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    labels: list[tuple[str, list[str]]] = []
+    for sc in set_cfgs:
+        for k, names in enumerate(sc["points"]):
+            labels.append((f"{sc['name']}_p{k}", list(names)))
+        cap = sc["capsule"]
+        labels.append((f"{sc['name']}_capsule_from", [cap["from"]]))
+        labels.append((f"{sc['name']}_capsule_to", [cap["to"]]))
+    for label, names in labels:
+        _add_point_frame(model, data, label, names)
+    if not model.existFrame(ee_name):
+        raise RobotDescriptionError(f"end_effector {ee_name!r} is not a frame of {urdf.name}")
+
+    if locked:
+        for jn in locked:
+            if not model.existJointName(jn):
+                raise InputError(f"cannot lock {jn!r}: joints are {list(model.names)[1:]}")
+        q_ref = pin.neutral(model)
+        for jn, angle in locked.items():
+            q_ref[model.joints[model.getJointId(jn)].idx_q] = angle
+        model = pin.buildReducedModel(model, [model.getJointId(jn) for jn in locked], q_ref)
+
+    sets, point_frames = [], []
+    for sc in set_cfgs:
+        idx = []
+        for k in range(len(sc["points"])):
+            idx.append(len(point_frames))
+            point_frames.append(model.getFrameId(f"{sc['name']}_p{k}"))
+        sets.append(ControlSet(
+            name=sc["name"], sphere_radius_m=float(sc["sphere_radius_m"]), points=tuple(idx),
+            capsule_frames=(model.getFrameId(f"{sc['name']}_capsule_from"),
+                            model.getFrameId(f"{sc['name']}_capsule_to")),
+            capsule_radius_m=float(sc["capsule"]["capsule_radius_m"])))
+    return Robot(model, sets, point_frames, model.getFrameId(ee_name), folder.name, locked)
