@@ -26,7 +26,7 @@ def as_array(value, shape: tuple[int | None, ...], name: str, *, finite: bool = 
     except (TypeError, ValueError) as exc:
         raise InputError(f"{name} must be numeric, got {type(value).__name__}") from exc
     if arr.ndim != len(shape) or any(s is not None and s != n for s, n in zip(shape, arr.shape)):
-        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        want = str(tuple("N" if s is None else s for s in shape)).replace("'", "")
         raise InputError(f"{name} must have shape {want}, got {arr.shape}")
     if finite and not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]

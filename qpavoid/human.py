@@ -214,7 +214,7 @@ class KinectHuman:
             raise InputError(f"state (Kinect tracking states) must have shape (25,), got {arr.shape}")
         if not np.all(np.isin(arr, (0, 1, 2))):
             bad = int(np.flatnonzero(~np.isin(arr, (0, 1, 2)))[0])
-            raise InputError(f"state[{bad}] ({JointType(bad).name}) is {arr[bad]!r}, "
+            raise InputError(f"state[{bad}] ({JointType(bad).name}) is {arr[bad].item()!r}, "
                              "expected 0 (not tracked), 1 (inferred) or 2 (tracked)")
         return arr.astype(np.int8)
 
