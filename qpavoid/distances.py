@@ -113,39 +113,60 @@ class SphereDistance:
     def __init__(self, robot: Robot, human: KinectHuman):
         n_sets, n_parts = len(robot.sets), len(human.parts)
         self.set_names, self.part_names = robot.set_names, human.part_names
-        # pair_mask[i, j, p, m]: robot point p is in set i and human point m in part j.
-        in_set = robot.point_set[None, :] == np.arange(n_sets)[:, None]          # (S, P)
-        self._pair_mask = in_set[:, None, :, None] & human.point_part.T[None, :, None, :]
-        self._r_robot = np.array([s.sphere_radius_m for s in robot.sets])
-        self._r_human = human.sphere_radii
+        # For every (set, part) the flat indices p * M + m of its (robot point, human point)
+        # pairs, padded with an index that points at +inf: one gather, one argmin per tick.
+        n_human = human.n_points
+        pad = len(robot.point_set) * n_human
+        pairs = [[[p * n_human + m for p in robot.sets[i].points
+                   for m in np.flatnonzero(human.point_part[:, j])] for j in range(n_parts)]
+                 for i in range(n_sets)]
+        width = max(len(x) for row in pairs for x in row)
+        self._pairs = np.full((n_sets * n_parts, width), pad)
+        for i in range(n_sets):
+            for j in range(n_parts):
+                self._pairs[i * n_parts + j, :len(pairs[i][j])] = pairs[i][j]
+        self._rows = np.arange(n_sets * n_parts)
+        self._pairs_pad = pad
+        # Flat pair index -> robot point, human point (-1 for the padding index).
+        self._p_of = np.append(np.arange(pad) // n_human, -1)
+        self._m_of = np.append(np.arange(pad) % n_human, -1)
+        self._no_s = np.full((n_sets, n_parts), np.nan)
+        self._no_s.setflags(write=False)
+        self._n_human = n_human
+        r_robot = np.array([s.sphere_radius_m for s in robot.sets])
+        self._r_robot_flat = np.repeat(r_robot, n_parts)
+        self._r_human_flat = np.tile(human.sphere_radii, n_sets)
+        self._radii = self._r_robot_flat + self._r_human_flat
         self._shape = (n_sets, n_parts)
 
     def __call__(self, kin: Kinematics, geo: HumanGeometry) -> DistanceTable:
         """Distance table between the robot at ``kin`` and the human ``geo``."""
-        P, H = kin.points, geo.points
-        n_sets, n_parts = self._shape
+        P, H = kin.points, geo.filled_points
         diff = P[:, None, :] - H[None, :, :]                                         # (P, M, 3)
-        norm = np.sqrt(np.einsum("pmk,pmk->pm", diff, diff))
-        norm = np.where(geo.point_valid[None, :], norm, np.inf)
-        masked = np.where(self._pair_mask, norm[None, None], np.inf)               # (S, K, P, M)
-        flat = masked.reshape(n_sets, n_parts, -1)
-        best = flat.argmin(axis=2)
-        d_star = np.take_along_axis(flat, best[..., None], axis=2)[..., 0]
-        p_idx, m_idx = np.divmod(best, H.shape[0])
-        seen = np.isfinite(d_star)
-        vector = _unit(diff[p_idx, m_idx], d_star)
-        vector[~seen] = 0.0
-        r_r = self._r_robot[:, None]
-        r_h = self._r_human[None, :]
-        distance = d_star - r_r - r_h                                                # eq. (1)
-        robot_point = P[p_idx] - r_r[..., None] * vector
-        human_point = H[m_idx] + r_h[..., None] * vector
-        robot_point[~seen] = np.nan
-        human_point[~seen] = np.nan
+        buf = np.empty(self._pairs_pad + 1)
+        buf[-1] = np.inf
+        np.add(np.sqrt(np.einsum("pmk,pmk->pm", diff, diff)), geo.point_penalty,
+               out=buf[:-1].reshape(len(P), -1))
+        best = self._pairs[self._rows, buf[self._pairs].argmin(axis=1)]             # flat pair
+        d_star = buf[best]
+        vector = diff.reshape(-1, 3)[np.minimum(best, self._pairs_pad - 1)]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            vector /= d_star[:, None]                                               # inf -> 0
+        if d_star.min() < 1e-12:
+            vector[d_star < 1e-12] = FALLBACK_DIRECTION
+        p_idx, m_idx = self._p_of[best], self._m_of[best]                           # -1: unseen
+        distance = d_star - self._radii                                              # eq. (1)
+        robot_point = P[p_idx] - self._r_robot_flat[:, None] * vector
+        human_point = H[m_idx] + self._r_human_flat[:, None] * vector
+        if d_star.max() == np.inf:
+            robot_point[p_idx < 0] = np.nan
+            human_point[p_idx < 0] = np.nan
+        shape = self._shape
         return DistanceTable(
-            self.method, distance, vector, robot_point, human_point,
-            np.where(seen, p_idx, -1), np.full(self._shape, np.nan), np.where(seen, m_idx, -1),
-            self.set_names, self.part_names)
+            self.method, distance.reshape(shape), vector.reshape(*shape, 3),
+            robot_point.reshape(*shape, 3), human_point.reshape(*shape, 3),
+            p_idx.reshape(shape), self._no_s, m_idx.reshape(shape), self.set_names,
+            self.part_names)
 
 
 def axis_rotations(u: np.ndarray) -> np.ndarray:

@@ -132,12 +132,22 @@ class HumanGeometry:
         (K, 2, 3) capsule axis of each part, m; NaN for a part with no usable joint.
     segment_valid
         (K,) True where the part has at least one usable joint.
+    filled_points, point_penalty
+        Derived: ``points`` with unusable rows set to 0, and 0 / +inf per point.
     """
 
     points: np.ndarray
     point_valid: np.ndarray
     segments: np.ndarray
     segment_valid: np.ndarray
+    filled_points: np.ndarray = field(init=False, repr=False)
+    point_penalty: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        # For vectorised distances: unusable points at the origin, with +inf added to any
+        # distance to them (so they never win a minimum and never make a NaN).
+        object.__setattr__(self, "filled_points", np.where(self.point_valid[:, None], self.points, 0.0))
+        object.__setattr__(self, "point_penalty", np.where(self.point_valid, 0.0, np.inf))
 
 
 @dataclass(frozen=True)

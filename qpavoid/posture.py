@@ -22,6 +22,9 @@ ARM = {
     "right": (J.ShoulderRight, J.ElbowRight, J.WristRight, J.HandRight, J.HandTipRight, J.ThumbRight),
 }
 
+#: Joints that move with the upper body when the operator leans.
+UPPER = (J.SpineShoulder, J.Neck, J.Head, *ARM["left"], *ARM["right"])
+
 
 @dataclass(frozen=True)
 class Operator:
@@ -35,6 +38,8 @@ class Operator:
         Segment lengths shoulder-elbow, elbow-wrist, wrist-hand.
     shoulder_half_width_m
         Half the distance between the shoulders.
+    max_lean_m
+        How far the upper body may lean towards an out-of-reach target.
     """
 
     x_m: float = 0.15
@@ -43,6 +48,7 @@ class Operator:
     forearm_m: float = 0.25
     hand_m: float = 0.08
     shoulder_half_width_m: float = 0.18
+    max_lean_m: float = 0.35
 
     def rest(self) -> np.ndarray:
         """(25, 3) skeleton at rest: seated upright, forearms on the table, hands in front."""
@@ -74,11 +80,23 @@ class Operator:
     def reach(self, joints: np.ndarray, side: str, target) -> np.ndarray:
         """Copy of ``joints`` with the ``side`` hand (Hand joint) moved to ``target`` (3,).
 
-        The shoulder stays; the elbow hangs below the shoulder-wrist line. A target out of
-        reach is approached as far as the arm goes along the shoulder-target line.
+        The elbow hangs below the shoulder-wrist line. A target beyond the arm's reach
+        makes the operator lean: the upper body (from SpineShoulder up, both arms) shifts
+        horizontally towards it by the missing length, at most ``max_lean_m`` (SpineMid
+        by half as much, SpineBase not at all). What is still out of reach is approached
+        as far as the arm goes along the shoulder-target line.
         """
         out = np.array(joints, dtype=float, copy=True)
-        self._place_arm(out, side, np.asarray(target, dtype=float))
+        target = np.asarray(target, dtype=float)
+        shoulder = out[ARM[side][0]]
+        missing = np.linalg.norm(target - shoulder) - 0.98 * (self.upper_arm_m + self.forearm_m
+                                                              + self.hand_m)
+        horizontal = (target - shoulder) * [1.0, 1.0, 0.0]
+        if missing > 0 and np.linalg.norm(horizontal) > 1e-9:
+            lean = min(missing, self.max_lean_m) * horizontal / np.linalg.norm(horizontal)
+            out[list(UPPER)] += lean
+            out[J.SpineMid] += 0.5 * lean
+        self._place_arm(out, side, target)
         return out
 
     def _place_arm(self, j: np.ndarray, side: str, hand: np.ndarray) -> None:

@@ -1,0 +1,242 @@
+"""What every controller shares: configuration, the tick's measurements, the command.
+
+A tick (:meth:`Controller.step`) takes the joint angles, the latest human frame and the
+path time, and returns a :class:`Command`: joint velocities plus everything needed to see
+why. The shared prelude measures (kinematics, distance table, f of eq. 2, the reference
+pose and twist) and applies the paper's stop rules; the shared epilogue is the last-resort
+layer (never cross a joint position limit, never command a non-finite velocity). Between
+them each controller computes its joint velocities: :class:`~qpavoid.analytic.AnalyticController`
+with eqs. (3)-(9), :class:`~qpavoid.qp.controller.QPController` with one QP.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .distances import DistanceTable, distance_method
+from .errors import InputError
+from .human import KinectHuman
+from .laws import AvoidanceConfig, l1_factor, stop_reason
+from .robot import Kinematics, Robot
+from .task import ArcPath, pose_error
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Settings shared by the controllers.
+
+    Attributes
+    ----------
+    distance
+        Distance method: ``"spheres"`` (paper eq. 1) or ``"capsules"`` (exact, coal).
+    avoidance
+        Constants of the avoidance laws (eqs. 2-7) and the stop rules.
+    gain_position, gain_orientation
+        Diagonal of K in eq. (8) for the position and orientation error, 1/s.
+    sigma_min, lambda_max
+        Damped inverse of eqs. (6) and (8): no damping while the smallest singular value
+        is above ``sigma_min``; damping up to ``lambda_max`` at a singularity.
+    limit_mode
+        How the velocity limits of eq. (3) are enforced by the analytic controller:
+        ``"scale"`` shrinks the whole joint velocity vector (the direction, hence the
+        path, is kept and the path clock slows by the same factor), ``"clip"`` saturates
+        each joint on its own (the path clock runs on; the direction changes).
+    control_period_s
+        Period of the control loop, s: a command that would carry a joint past its
+        position limit within one period stops the robot instead.
+    scaled_joints
+        Joints whose limits eq. (3) scales by (1 − f): the two that move L1.
+    l2_joints
+        Joints of the 3×3 Jacobian of eq. (6) and of ``q̇(1:3)`` in eq. (9).
+    require_human
+        Stop when no body part is tracked at all (the safe reading of "nobody seen").
+    """
+
+    distance: str = "spheres"
+    avoidance: AvoidanceConfig = field(default_factory=AvoidanceConfig)
+    gain_position: float = 5.0
+    gain_orientation: float = 5.0
+    sigma_min: float = 0.02
+    lambda_max: float = 0.05
+    limit_mode: str = "scale"
+    control_period_s: float = 0.002
+    scaled_joints: tuple[str, ...] = ("A1", "A2")
+    l2_joints: tuple[str, ...] = ("A1", "A2", "A4")
+    require_human: bool = True
+
+
+@dataclass(frozen=True)
+class Command:
+    """One tick's output.
+
+    Attributes
+    ----------
+    dq
+        (nv,) commanded joint velocities, rad/s; exactly zero when stopped.
+    stopped
+        True if a stop rule (or the last-resort layer) holds.
+    reason
+        Why the robot stops ("" while it moves).
+    time_scale
+        Rate in [0, 1] at which the path clock should advance (0 when stopped).
+    f
+        The L1 factor of eq. (2).
+    distance
+        (S,) minimum distance per robot set (L1, L2, EE), m, of the method in use.
+    table
+        The full distance table.
+    v_rep_L2, v_rep_EE
+        (3,) repulsive velocities of eqs. (5) and (7), m/s.
+    limits
+        (nv,) joint velocity limits in force this tick (eq. 3), rad/s.
+    ee_pos, ee_ref
+        (3,) end-effector position and its reference, m.
+    info
+        Controller-specific extras (e.g. solver status and iterations).
+    """
+
+    dq: np.ndarray
+    stopped: bool
+    reason: str
+    time_scale: float
+    f: float
+    distance: np.ndarray
+    table: DistanceTable
+    v_rep_L2: np.ndarray
+    v_rep_EE: np.ndarray
+    limits: np.ndarray
+    ee_pos: np.ndarray
+    ee_ref: np.ndarray
+    info: dict = field(default_factory=dict)
+
+
+@dataclass
+class Tick:
+    """The measurements of one tick, shared by the controllers (internal)."""
+
+    q: np.ndarray
+    kin: Kinematics
+    table: DistanceTable
+    distance: np.ndarray
+    f: float
+    limits: np.ndarray
+    ref_pose: np.ndarray
+    ref_twist: np.ndarray
+    error: np.ndarray
+    reason: str
+
+
+class Controller:
+    """Base of the controllers: the shared prelude, stop rules and last-resort layer.
+
+    Parameters
+    ----------
+    robot
+        The arm.
+    path
+        The planned end-effector path.
+    config
+        Shared settings (:class:`ControllerConfig`).
+    human
+        The human model (default: the paper's upper body).
+    """
+
+    name = "base"
+
+    def __init__(self, robot: Robot, path: ArcPath | None = None,
+                 config: ControllerConfig | None = None, human: KinectHuman | None = None):
+        self.robot = robot
+        self.path = path or ArcPath()
+        self.config = config or ControllerConfig()
+        self.human = human or KinectHuman()
+        self.distances = distance_method(self.config.distance, robot, self.human)
+        if self.config.limit_mode not in ("scale", "clip"):
+            raise InputError(f"limit_mode must be 'scale' or 'clip', got {self.config.limit_mode!r}")
+        self.K = np.r_[[self.config.gain_position] * 3, [self.config.gain_orientation] * 3]
+        self.i_L1, self.i_L2, self.i_EE = (robot.set_index(n) for n in ("L1", "L2", "EE"))
+        self.scaled_cols = self._columns(self.config.scaled_joints)
+        self.l2_cols = self._columns(self.config.l2_joints)
+        self._frame_key: tuple[bytes, bytes | None] | None = None
+        self._geometry = None
+
+    def _columns(self, names) -> np.ndarray:
+        missing = [n for n in names if n not in self.robot.joint_names]
+        if missing:
+            raise InputError(f"joints {missing} are not active joints of {self.robot.joint_names}")
+        return np.array([self.robot.joint_names.index(n) for n in names])
+
+    def human_geometry(self, joints, state):
+        """The human geometry of a frame, recomputed only when the frame's bytes change."""
+        joints = np.ascontiguousarray(joints, dtype=float)
+        state_arr = None if state is None else np.ascontiguousarray(state, dtype=np.int8)
+        key = (joints.tobytes(), None if state_arr is None else state_arr.tobytes())
+        if key != self._frame_key:
+            self._geometry = self.human.geometry(joints, state_arr)
+            self._frame_key = key
+        return self._geometry
+
+    def measure(self, q, joints, state, t: float) -> Tick:
+        """Shared prelude: kinematics, distances, f (eq. 2), reference, stop rules."""
+        kin = self.robot.kinematics(q)
+        table = self.distances(kin, self.human_geometry(joints, state))
+        dmin = table.min_per_set()
+        cfg = self.config.avoidance
+        f = float(l1_factor(dmin[self.i_L1], cfg))
+        limits = self.robot.dq_max.copy()
+        limits[self.scaled_cols] *= 1.0 - f                                           # eq. (3)
+        ref_pose, ref_twist = self.path.reference(t)
+        error = pose_error(ref_pose, kin.ee_placement)
+        if self.config.require_human and not np.isfinite(table.distance).any():
+            reason = "no body part of the operator is tracked"
+        else:
+            reason = stop_reason(f, dmin[self.i_L2], dmin[self.i_EE], cfg) or ""
+        return Tick(kin.q, kin, table, dmin, f, limits, ref_pose, ref_twist, error, reason)
+
+    def command(self, tick: Tick, dq: np.ndarray | None, time_scale: float = 1.0,
+                v_rep_L2: np.ndarray | None = None, v_rep_EE: np.ndarray | None = None,
+                reason: str = "", info: dict | None = None) -> Command:
+        """Shared epilogue: the last-resort layer, then the :class:`Command`.
+
+        ``dq = None`` or a non-empty ``reason`` (or the tick's own) means stop. A command
+        that is not finite, or that would carry a joint past its position limit within one
+        control period, becomes a stop too.
+        """
+        reason = tick.reason or reason
+        if not reason and dq is not None:
+            if not np.all(np.isfinite(dq)):
+                reason = "non-finite joint velocity computed"
+            else:
+                q_next = tick.q + dq * self.config.control_period_s
+                out = (q_next > self.robot.q_max) | (q_next < self.robot.q_min)
+                if out.any():
+                    k = int(np.flatnonzero(out)[0])
+                    reason = (f"joint {self.robot.joint_names[k]} would cross its position limit "
+                              f"(q = {tick.q[k]:.4f} rad)")
+        stopped = bool(reason) or dq is None
+        zero3 = np.zeros(3)
+        return Command(
+            dq=np.zeros(self.robot.nv) if stopped else np.asarray(dq, dtype=float),
+            stopped=stopped, reason=reason if stopped else "",
+            time_scale=0.0 if stopped else float(time_scale), f=tick.f, distance=tick.distance,
+            table=tick.table, v_rep_L2=zero3 if v_rep_L2 is None else v_rep_L2,
+            v_rep_EE=zero3 if v_rep_EE is None else v_rep_EE, limits=tick.limits,
+            ee_pos=tick.kin.ee_placement[:3, 3].copy(), ee_ref=tick.ref_pose[:3, 3].copy(),
+            info=info or {})
+
+    def step(self, q, joints, state=None, t: float = 0.0) -> Command:
+        """One control tick.
+
+        Parameters
+        ----------
+        q
+            (nq,) joint angles, rad.
+        joints
+            (25, 3) Kinect joints of the latest frame, m, robot base frame; NaN = lost.
+        state
+            (25,) tracking states (0 not tracked, 1 inferred, 2 tracked), or None.
+        t
+            Path time, s (the clock of the planned path, which waits while stopped).
+        """
+        raise NotImplementedError

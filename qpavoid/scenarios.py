@@ -1,0 +1,200 @@
+"""Human motions for the paper's tests, generated in code, and random approaches.
+
+A motion is anything with ``frame_at(t) -> (joints (25, 3), state (25,))``: these
+scripted reaches, or a :class:`~qpavoid.recording.Recording`. The simulation samples it
+at the camera rate (sample and hold).
+
+* ``free``  the operator works at the table (hands circling 5 cm around their rest) and
+  never comes near the robot;
+* ``test1`` (paper Sect. 6.1) the right hand reaches to just beside the end effector's
+  planned path, ahead of the robot, stays while the robot passes, and withdraws;
+* ``test2`` (paper Sect. 6.2) the right hand comes close to L1 (forearm-side of the
+  elbow) until f exceeds 0.8 and the robot stops; it holds there, then withdraws;
+* :func:`random_approach` a hand moving at up to 1.6 m/s towards a random point of a
+  random robot set, from a random direction, at a random time.
+
+Targets are placed against the robot's *nominal* motion (the path tracked with nobody
+near, :func:`nominal_configurations`), so they stay right if the path or radii change.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .human import KinectHuman
+from .posture import Operator
+from .robot import Robot
+from .task import ArcPath, inverse_kinematics
+
+
+def smoothstep(x: float) -> float:
+    """Quintic 0 → 1 on [0, 1] with zero velocity and acceleration at both ends."""
+    x = min(max(x, 0.0), 1.0)
+    return x ** 3 * (10 - 15 * x + 6 * x * x)
+
+
+@dataclass(frozen=True)
+class ScriptedReach:
+    """The seated operator, one hand moving through keyframes, the rest still.
+
+    Parameters
+    ----------
+    operator
+        The operator's body.
+    side
+        ``"left"`` or ``"right"`` hand.
+    keyframes
+        ``(t_s, target)`` pairs in increasing time; ``target`` (3,) m is where the hand
+        is at that time (``None`` = its rest position). Between keyframes the hand moves
+        on a straight line with the quintic time law; before the first and after the last
+        it holds.
+    """
+
+    operator: Operator
+    side: str
+    keyframes: tuple[tuple[float, np.ndarray | None], ...]
+
+    def hand_position(self, t: float) -> np.ndarray:
+        """The hand target at time ``t`` (s)."""
+        rest = self.operator.rest()[_hand_joint(self.side)]
+        pts = [(tk, rest if p is None else np.asarray(p, dtype=float)) for tk, p in self.keyframes]
+        if t <= pts[0][0]:
+            return pts[0][1]
+        for (t0, p0), (t1, p1) in zip(pts, pts[1:]):
+            if t <= t1:
+                return p0 + smoothstep((t - t0) / (t1 - t0)) * (p1 - p0)
+        return pts[-1][1]
+
+    def frame_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Kinect joints (25, 3) and states (25,) (all tracked) at time ``t``."""
+        joints = self.operator.reach(self.operator.rest(), self.side, self.hand_position(t))
+        return joints, np.full(25, 2, dtype=np.int8)
+
+
+@dataclass(frozen=True)
+class Working:
+    """The ``free`` scenario: both hands circle ``radius_m`` around their rest position."""
+
+    operator: Operator
+    radius_m: float = 0.05
+    period_s: float = 4.0
+
+    def frame_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        joints = self.operator.rest()
+        for side, phase in (("right", 0.0), ("left", np.pi)):
+            w = 2 * np.pi * t / self.period_s + phase
+            target = joints[_hand_joint(side)] + self.radius_m * np.array([np.cos(w), np.sin(w), 0])
+            joints = self.operator.reach(joints, side, target)
+        return joints, np.full(25, 2, dtype=np.int8)
+
+
+def _hand_joint(side: str) -> int:
+    from .posture import ARM
+    return int(ARM[side][3])
+
+
+def nominal_configurations(robot: Robot, path: ArcPath, times: np.ndarray) -> np.ndarray:
+    """Joint angles (len(times), nq) tracking the path exactly, by IK from the start."""
+    q = inverse_kinematics(robot, path.reference(0.0)[0])
+    out = []
+    for t in times:
+        q = inverse_kinematics(robot, path.reference(float(t))[0], q0=q)
+        out.append(q)
+    return np.array(out)
+
+
+def _clearance_target(robot: Robot, human: KinectHuman, path: ArcPath, operator: Operator,
+                      side: str, anchor: np.ndarray, direction: np.ndarray, clearance_m: float,
+                      sets: tuple[str, ...]) -> np.ndarray:
+    """Hand target ``anchor + s·direction`` whose sphere distance to ``sets`` over the
+    nominal motion is ``clearance_m`` at its closest (bisection on s)."""
+    from .distances import SphereDistance
+    times = np.linspace(0, path.duration_s, 61)
+    kins = [robot.kinematics(q, jacobians=False) for q in nominal_configurations(robot, path, times)]
+    spheres = SphereDistance(robot, human)
+    rows = [robot.set_index(n) for n in sets]
+    hand = human.part_names.index(f"{side}_hand")
+
+    def closest(s: float) -> float:
+        joints = operator.reach(operator.rest(), side, anchor + s * direction)
+        geo = human.geometry(joints)
+        return min(spheres(k, geo).distance[rows, hand].min() for k in kins)
+
+    lo, hi = 0.0, 0.5
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if closest(mid) < clearance_m else (lo, mid)
+    return anchor + hi * direction
+
+
+def make_scenario(name: str, robot: Robot, path: ArcPath | None = None,
+                  human: KinectHuman | None = None, operator: Operator | None = None):
+    """The generated motion called ``name`` (``free``, ``test1`` or ``test2``)."""
+    from .errors import InputError
+    path = path or ArcPath()
+    human = human or KinectHuman()
+    op = operator or Operator()
+    if name == "free":
+        return Working(op)
+    if name == "test1":
+        # Beside the EE path where the robot passes at 60 % of the path, on the operator's
+        # side and a little above; the closest approach to EE and L2 of the nominal motion
+        # is 0.04 m, so the repulsion has to move the robot to keep it beyond 0.05 m.
+        tc = 0.6 * path.duration_s
+        anchor = path.reference(tc)[0][:3, 3]
+        target = _clearance_target(robot, human, path, op, "right", anchor,
+                                   _unit([0.0, 1.0, 0.3]), 0.04, ("L2", "EE"))
+        return ScriptedReach(op, "right", ((2.0, None), (5.0, target), (11.0, target), (14.0, None)))
+    if name == "test2":
+        # Towards A3 (the lower half of L1) of the robot's start configuration, from the
+        # operator's right and below L2 (which lies between the operator and L1), to
+        # 0.02 m (f = 0.96): the robot must stop.
+        # The operator sits 0.4 m further to -x, so that leaning in keeps the head clear of
+        # the end effector.
+        op = operator or Operator(x_m=-0.25)
+        q0 = inverse_kinematics(robot, path.reference(0.0)[0])
+        anchor = robot.control_points(q0)[1]
+        target = _clearance_target(robot, human, ArcPath(path.start, path.start, 1.0, 0.0), op,
+                                   "right", anchor, _unit([-1.0, 0.5, -0.2]), 0.02, ("L1",))
+        return ScriptedReach(op, "right", ((1.0, None), (4.0, target), (9.0, target), (11.0, None)))
+    raise InputError(f"unknown scenario {name!r}; choose from {list(SCENARIOS)}")
+
+
+def _unit(v) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v)
+
+
+SCENARIOS = ("test1", "test2", "free")
+
+
+def random_approach(rng: np.random.Generator, robot: Robot, path: ArcPath | None = None,
+                    operator: Operator | None = None, max_speed_mps: float = 1.6,
+                    nominal: np.ndarray | None = None) -> ScriptedReach:
+    """A hand approaching a random robot set from a random direction at a random time.
+
+    The target is a random control point of the robot's nominal configuration at a random
+    path time, shifted 0-0.1 m along a random direction on the operator's side; the hand
+    travels there at a random peak speed up to ``max_speed_mps`` (the quintic law peaks at
+    1.875 times the mean speed), holds 1-4 s, and withdraws.
+    """
+    path = path or ArcPath()
+    op = operator or Operator(x_m=0.15 + rng.uniform(-0.2, 0.2))
+    times = np.linspace(0, path.duration_s, 31)
+    if nominal is None:
+        nominal = nominal_configurations(robot, path, times)
+    k = rng.integers(len(times))
+    P = robot.control_points(nominal[k])
+    side = "right" if rng.random() < 0.7 else "left"
+    direction = _unit(rng.normal(size=3) + np.array([0.0, 1.5, 0.3]))
+    target = P[rng.integers(len(P))] + rng.uniform(0.0, 0.1) * direction
+    rest = op.rest()[_hand_joint(side)]
+    peak = rng.uniform(0.3, max_speed_mps)
+    travel = np.linalg.norm(target - rest) * 1.875 / peak
+    start = max(0.0, times[k] - travel + rng.uniform(-3.0, 2.0))
+    hold = rng.uniform(1.0, 4.0)
+    return ScriptedReach(op, side, ((start, None), (start + travel, target),
+                                    (start + travel + hold, target),
+                                    (start + 2 * travel + hold, None)))

@@ -1,0 +1,213 @@
+"""Closed-loop kinematic simulation: a controller, the planned path and a moving person.
+
+The control loop runs at ``control_rate_hz`` (default 500 Hz) and integrates the
+commanded joint velocities (explicit Euler: ``q[k+1] = q[k] + dq[k] · dt``, the robot
+follows its velocity command exactly). Human frames arrive at ``frame_rate_hz`` (30 Hz):
+at time t the controller sees the frame taken at ``floor(t · 30) / 30`` (sample and hold,
+never a frame from the future; after a recording's last frame the person holds that pose).
+
+The path has its own clock τ. It advances at the rate the controller returns
+(``Command.time_scale``): 0 while stopped, so resuming causes no jump, and the factor by
+which the velocity limits shrank the command, so that a slowed robot is not left behind by
+its reference. A deflection does not stop the clock: while the repulsion pushes the end
+effector off the path the reference runs on, and when the person withdraws the K·e term
+of eq. (8) pulls it back to where the reference is by then (the delay is absorbed as path
+error, never as a jump of the reference).
+
+As a last guard the simulation saturates each joint velocity at its nominal limit (and
+counts the ticks where that was needed: ``joint_velocity_limit_violations``, which a
+correct controller keeps at 0).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+import pinocchio as pin
+
+from .controller import Controller
+from .distances import distance_method
+from .task import inverse_kinematics
+
+
+class HumanMotion(Protocol):
+    """Anything that gives the Kinect frame at a time: generated scenarios, recordings."""
+
+    def frame_at(self, t: float) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Simulation settings.
+
+    Attributes
+    ----------
+    control_rate_hz
+        Control loop rate, Hz.
+    frame_rate_hz
+        Camera frame rate (Kinect v2: 30 Hz).
+    max_time_s
+        Cap on the run's duration, s.
+    goal_tolerance_m, goal_tolerance_rad
+        The goal counts as reached when the path clock is over and the end effector is
+        this close to the final pose (position, m; orientation, rad).
+    """
+
+    control_rate_hz: float = 500.0
+    frame_rate_hz: float = 30.0
+    max_time_s: float = 40.0
+    goal_tolerance_m: float = 1e-3
+    goal_tolerance_rad: float = 1e-2
+
+
+@dataclass
+class SimResult:
+    """A run: per-tick ``log`` arrays (see :func:`simulate`) and summary ``metrics``."""
+
+    log: dict[str, np.ndarray]
+    metrics: dict = field(default_factory=dict)
+
+
+def _frame_source(motion: HumanMotion):
+    """``f(t)`` giving the motion's frame at run time t, recordings replayed from t[0]."""
+    t0 = float(np.asarray(getattr(motion, "t", [0.0]))[0])
+    return lambda t: motion.frame_at(t0 + t)
+
+
+def simulate(controller: Controller, motion: HumanMotion, config: SimConfig | None = None,
+             q0: np.ndarray | None = None) -> SimResult:
+    """Run the controller in closed loop against ``motion`` along ``controller.path``.
+
+    Parameters
+    ----------
+    controller
+        Analytic or QP controller (its ``control_period_s`` should equal 1/control rate).
+    motion
+        The person (see :class:`HumanMotion`).
+    config
+        Simulation settings.
+    q0
+        Start configuration (default: inverse kinematics of the path's start pose).
+
+    Returns
+    -------
+    SimResult
+        ``log`` keys (row k = state at t[k] and the command computed from it, so that
+        ``q[k+1] = q[k] + dq[k] · (t[k+1] − t[k])``): ``t``, ``q`` (T, nq), ``dq`` (T, nv),
+        ``joints`` (T, 25, 3), ``state`` (T, 25), ``stopped`` (T,), ``f`` (T,),
+        ``distance`` (T, 3) per set of the method in use, ``distance_other`` (T, 3) of the
+        other method, ``v_rep_L2`` and ``v_rep_EE`` (T, 3), ``ee_pos`` and ``ee_ref`` (T, 3),
+        ``tau`` (T,) path clock, ``tick_us`` (T,) controller time per tick.
+    """
+    cfg = config or SimConfig()
+    robot, path = controller.robot, controller.path
+    dt = 1.0 / cfg.control_rate_hz
+    q = (inverse_kinematics(robot, path.reference(0.0)[0]) if q0 is None
+         else robot.check_q(q0).astype(float).copy())
+    n_max = int(math.floor(cfg.max_time_s * cfg.control_rate_hz + 1e-9)) + 1
+    other_name = "capsules" if controller.config.distance == "spheres" else "spheres"
+    other = distance_method(other_name, robot, controller.human)
+    frame = _frame_source(motion)
+    goal = path.reference(path.duration_s)[0]
+
+    log = {
+        "t": np.empty(n_max), "q": np.empty((n_max, robot.nq)), "dq": np.empty((n_max, robot.nv)),
+        "joints": np.empty((n_max, 25, 3)), "state": np.empty((n_max, 25), dtype=np.int8),
+        "stopped": np.empty(n_max, dtype=bool), "f": np.empty(n_max),
+        "distance": np.empty((n_max, 3)), "distance_other": np.empty((n_max, 3)),
+        "v_rep_L2": np.empty((n_max, 3)), "v_rep_EE": np.empty((n_max, 3)),
+        "ee_pos": np.empty((n_max, 3)), "ee_ref": np.empty((n_max, 3)), "tau": np.empty(n_max),
+        "tick_us": np.empty(n_max),
+    }
+    stop_events = []
+    vel_violations = pos_violations = 0
+    tau, was_stopped, frame_key, geo, joints, state = 0.0, False, None, None, None, None
+    reached, n = False, 0
+    for k in range(n_max):
+        t = k * dt
+        key = math.floor(t * cfg.frame_rate_hz + 1e-9)
+        if key != frame_key:
+            frame_key = key
+            joints, state = frame(key / cfg.frame_rate_hz)
+            joints = np.asarray(joints, dtype=float)
+            state = None if state is None else np.asarray(state)
+            geo = controller.human.geometry(joints, state)
+        t0 = time.perf_counter_ns()
+        cmd = controller.step(q, joints, state, tau)
+        tick_us = (time.perf_counter_ns() - t0) / 1e3
+        other_table = other(robot.kinematics(q, jacobians=False), geo)
+
+        dq = cmd.dq
+        if np.any(np.abs(dq) > robot.dq_max * (1 + 1e-9)):
+            vel_violations += 1
+            dq = np.clip(dq, -robot.dq_max, robot.dq_max)
+        if np.any(q > robot.q_max + 1e-12) or np.any(q < robot.q_min - 1e-12):
+            pos_violations += 1
+        if cmd.stopped and not was_stopped:
+            stop_events.append({"t": round(t, 6), "reason": cmd.reason})
+        was_stopped = cmd.stopped
+
+        log["t"][k], log["q"][k], log["dq"][k] = t, q, dq
+        log["joints"][k] = joints
+        log["state"][k] = 2 if state is None else state
+        log["stopped"][k], log["f"][k] = cmd.stopped, cmd.f
+        log["distance"][k], log["distance_other"][k] = cmd.distance, other_table.min_per_set()
+        log["v_rep_L2"][k], log["v_rep_EE"][k] = cmd.v_rep_L2, cmd.v_rep_EE
+        log["ee_pos"][k], log["ee_ref"][k] = cmd.ee_pos, cmd.ee_ref
+        log["tau"][k], log["tick_us"][k] = tau, tick_us
+        n = k + 1
+
+        if tau >= path.duration_s and not cmd.stopped:
+            T = robot.end_effector(q)
+            pos_err = np.linalg.norm(T[:3, 3] - goal[:3, 3])
+            rot_err = _rot_err(goal, T)
+            if pos_err < cfg.goal_tolerance_m and rot_err < cfg.goal_tolerance_rad:
+                reached = True
+                break
+        q = q + dq * dt
+        tau = min(tau + cmd.time_scale * dt, path.duration_s)
+
+    log = {key: v[:n] for key, v in log.items()}
+    return SimResult(log, run_metrics(log, robot, goal, reached, stop_events, vel_violations,
+                                      pos_violations, controller, cfg))
+
+
+def _rot_err(A: np.ndarray, B: np.ndarray) -> float:
+    return float(np.linalg.norm(pin.log3(A[:3, :3] @ B[:3, :3].T)))
+
+
+def run_metrics(log, robot, goal, reached, stop_events, vel_violations, pos_violations,
+                controller, cfg) -> dict:
+    """The summary of a run (the keys of ``metrics.json``)."""
+    dt = 1.0 / cfg.control_rate_hz
+    path_err = np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)
+    method = controller.config.distance
+    other = "capsules" if method == "spheres" else "spheres"
+    dmin = {method: float(np.min(log["distance"])), other: float(np.min(log["distance_other"]))}
+    tick = log["tick_us"]
+    final_err = float(np.linalg.norm(log["ee_pos"][-1] - goal[:3, 3]))
+    return {
+        "reached_goal": bool(reached),
+        "final_position_error_m": final_err,
+        "rms_path_error_m": float(np.sqrt(np.mean(path_err ** 2))),
+        "max_path_error_m": float(np.max(path_err)),
+        "duration_s": float(log["t"][-1]),
+        "stopped_s": float(np.count_nonzero(log["stopped"]) * dt),
+        "stop_events": stop_events,
+        "max_f": float(np.max(log["f"])),
+        "min_distance_m": {"spheres": dmin["spheres"], "capsules": dmin["capsules"]},
+        "min_distance_per_set_m": {
+            method: dict(zip(robot.set_names, np.min(log["distance"], axis=0).tolist())),
+            other: dict(zip(robot.set_names, np.min(log["distance_other"], axis=0).tolist()))},
+        "joint_velocity_limit_violations": int(vel_violations),
+        "joint_position_limit_violations": int(pos_violations),
+        "tick_us": {"median": float(np.median(tick)), "p99": float(np.percentile(tick, 99))},
+        "controller": controller.name,
+        "distance_method": method,
+        "control_rate_hz": cfg.control_rate_hz,
+        "ticks": int(len(tick)),
+    }
