@@ -139,13 +139,19 @@ def make_scenario(name: str, robot: Robot, path: ArcPath | None = None,
     if name == "free":
         return Working(op)
     if name == "test1":
-        # Beside the EE path where the robot passes at 60 % of the path, on the operator's
-        # side and a little above; the closest approach to EE and L2 of the nominal motion
-        # is 0.04 m, so the repulsion has to move the robot to keep it beyond 0.05 m.
+        # Beside the wrist of the nominal motion at 60 % of the path: from the point half-way
+        # between the wrist centre A6 (the last L2 point) and the flange (the EE point),
+        # square to that axis, towards the operator, so that L2 and EE come equally close: the
+        # nominal motion's closest approach to them is 0.04 m, and the repulsion has to
+        # deflect the robot to keep it beyond the 0.05 m stop distance.
         tc = 0.6 * path.duration_s
-        anchor = path.reference(tc)[0][:3, 3]
-        target = _clearance_target(robot, human, path, op, "right", anchor,
-                                   _unit([0.0, 1.0, 0.3]), 0.04, ("L2", "EE"))
+        P = robot.control_points(nominal_configurations(robot, path, np.array([tc]))[0])
+        wrist = P[robot.sets[robot.set_index("L2")].points[-1]]
+        flange = P[robot.sets[robot.set_index("EE")].points[-1]]
+        axis = _unit(flange - wrist)
+        towards = np.array([0.0, 1.0, 0.3])                  # the operator's side, above
+        target = _clearance_target(robot, human, path, op, "right", 0.5 * (wrist + flange),
+                                   _unit(towards - (towards @ axis) * axis), 0.04, ("L2", "EE"))
         return ScriptedReach(op, "right", ((2.0, None), (5.0, target), (11.0, target), (14.0, None)))
     if name == "test2":
         # Towards A3 (the lower half of L1) of the robot's start configuration, from the
