@@ -41,8 +41,8 @@ class AnalyticController(Controller):
 
     name = "analytic"
 
-    def step(self, q, joints, state=None, t: float = 0.0) -> Command:
-        tick = self.measure(q, joints, state, t)
+    def step(self, q, joints, state=None, t: float = 0.0, frame_age_s: float = 0.0) -> Command:
+        tick = self.measure(q, joints, state, t, frame_age_s)
         if tick.reason:
             return self.command(tick, None)
         cfg, avo = self.config, self.config.avoidance

@@ -52,6 +52,8 @@ class ControllerConfig:
         Joints of the 3×3 Jacobian of eq. (6) and of ``q̇(1:3)`` in eq. (9).
     require_human
         Stop when no body part is tracked at all (the safe reading of "nobody seen").
+    max_frame_age_s
+        Stop when the human frame is older than this, s (default: 3 Kinect frames).
     """
 
     distance: str = "spheres"
@@ -65,6 +67,7 @@ class ControllerConfig:
     scaled_joints: tuple[str, ...] = ("A1", "A2")
     l2_joints: tuple[str, ...] = ("A1", "A2", "A4")
     require_human: bool = True
+    max_frame_age_s: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -177,7 +180,7 @@ class Controller:
             self._frame_key = key
         return self._geometry
 
-    def measure(self, q, joints, state, t: float) -> Tick:
+    def measure(self, q, joints, state, t: float, frame_age_s: float = 0.0) -> Tick:
         """Shared prelude: kinematics, distances, f (eq. 2), reference, stop rules."""
         kin = self.robot.kinematics(q)
         table = self.distances(kin, self.human_geometry(joints, state))
@@ -188,7 +191,10 @@ class Controller:
         limits[self.scaled_cols] *= 1.0 - f                                           # eq. (3)
         ref_pose, ref_twist = self.path.reference(t)
         error = pose_error(ref_pose, kin.ee_placement)
-        if self.config.require_human and not np.isfinite(table.distance).any():
+        if not frame_age_s <= self.config.max_frame_age_s:
+            reason = (f"human frame is stale ({frame_age_s:.3f} s old, "
+                      f"max {self.config.max_frame_age_s} s)")
+        elif self.config.require_human and not np.isfinite(table.distance).any():
             reason = "no body part of the operator is tracked"
         else:
             reason = stop_reason(f, dmin[self.i_L2], dmin[self.i_EE], cfg) or ""
@@ -225,7 +231,7 @@ class Controller:
             ee_pos=tick.kin.ee_placement[:3, 3].copy(), ee_ref=tick.ref_pose[:3, 3].copy(),
             info=info or {})
 
-    def step(self, q, joints, state=None, t: float = 0.0) -> Command:
+    def step(self, q, joints, state=None, t: float = 0.0, frame_age_s: float = 0.0) -> Command:
         """One control tick.
 
         Parameters
@@ -238,5 +244,8 @@ class Controller:
             (25,) tracking states (0 not tracked, 1 inferred, 2 tracked), or None.
         t
             Path time, s (the clock of the planned path, which waits while stopped).
+        frame_age_s
+            Age of the human frame, s (now minus its capture time); too old, or NaN, stops
+            the robot.
         """
         raise NotImplementedError

@@ -218,6 +218,15 @@ class Robot:
 
 # --------------------------------------------------------------------------- loading
 
+def _bundled_root() -> Path:
+    """Folder of the bundled descriptions: the installed ``qpavoid.robots`` package, or
+    ``robots/`` beside the package in a source checkout."""
+    try:
+        return Path(str(resources.files("qpavoid.robots")))
+    except ModuleNotFoundError:
+        return Path(__file__).resolve().parent.parent / "robots"
+
+
 def _description_dir(name: str | Path) -> Path:
     """Folder of a robot description: a path, or the name of a bundled description."""
     path = Path(name)
@@ -225,11 +234,10 @@ def _description_dir(name: str | Path) -> Path:
         return path.parent
     if path.is_dir() and (path / CONFIG_NAME).is_file():
         return path
-    bundled = resources.files("qpavoid.robots") / str(name)
-    if bundled.is_dir() and (bundled / CONFIG_NAME).is_file():
-        return Path(str(bundled))
-    available = sorted(p.name for p in resources.files("qpavoid.robots").iterdir()
-                       if p.is_dir() and (p / CONFIG_NAME).is_file())
+    root = _bundled_root()
+    if (root / str(name) / CONFIG_NAME).is_file():
+        return root / str(name)
+    available = sorted(p.name for p in root.iterdir() if (p / CONFIG_NAME).is_file())
     raise RobotDescriptionError(
         f"unknown robot {str(name)!r}: not a folder with {CONFIG_NAME} and not one of the "
         f"bundled descriptions {available}")

@@ -107,20 +107,21 @@ def nominal_configurations(robot: Robot, path: ArcPath, times: np.ndarray) -> np
 
 def _clearance_target(robot: Robot, human: KinectHuman, path: ArcPath, operator: Operator,
                       side: str, anchor: np.ndarray, direction: np.ndarray, clearance_m: float,
-                      sets: tuple[str, ...]) -> np.ndarray:
-    """Hand target ``anchor + s·direction`` whose sphere distance to ``sets`` over the
-    nominal motion is ``clearance_m`` at its closest (bisection on s)."""
-    from .distances import SphereDistance
+                      sets: tuple[str, ...], methods: tuple[str, ...] = ("spheres",)) -> np.ndarray:
+    """Hand target ``anchor + s·direction`` whose distance to ``sets`` over the nominal
+    motion is ``clearance_m`` at its closest, by every one of the distance ``methods``
+    (the largest of them; bisection on s)."""
+    from .distances import distance_method
     times = np.linspace(0, path.duration_s, 61)
     kins = [robot.kinematics(q, jacobians=False) for q in nominal_configurations(robot, path, times)]
-    spheres = SphereDistance(robot, human)
+    tables = [distance_method(m, robot, human) for m in methods]
     rows = [robot.set_index(n) for n in sets]
     hand = human.part_names.index(f"{side}_hand")
 
     def closest(s: float) -> float:
         joints = operator.reach(operator.rest(), side, anchor + s * direction)
         geo = human.geometry(joints)
-        return min(spheres(k, geo).distance[rows, hand].min() for k in kins)
+        return max(min(m(k, geo).distance[rows, hand].min() for k in kins) for m in tables)
 
     lo, hi = 0.0, 0.5
     for _ in range(40):
@@ -156,14 +157,16 @@ def make_scenario(name: str, robot: Robot, path: ArcPath | None = None,
     if name == "test2":
         # Towards A3 (the lower half of L1) of the robot's start configuration, from the
         # operator's right and below L2 (which lies between the operator and L1), to
-        # 0.02 m (f = 0.96): the robot must stop.
+        # 0.02 m by spheres and by capsules (f = 0.96): the robot must stop, whichever
+        # distance method it uses.
         # The operator sits 0.4 m further to -x, so that leaning in keeps the head clear of
         # the end effector.
         op = operator or Operator(x_m=-0.25)
         q0 = inverse_kinematics(robot, path.reference(0.0)[0])
         anchor = robot.control_points(q0)[1]
         target = _clearance_target(robot, human, ArcPath(path.start, path.start, 1.0, 0.0), op,
-                                   "right", anchor, _unit([-1.0, 0.5, -0.2]), 0.02, ("L1",))
+                                   "right", anchor, _unit([-1.0, 0.5, -0.2]), 0.02, ("L1",),
+                                   ("spheres", "capsules"))
         return ScriptedReach(op, "right", ((1.0, None), (4.0, target), (9.0, target), (11.0, None)))
     raise InputError(f"unknown scenario {name!r}; choose from {list(SCENARIOS)}")
 

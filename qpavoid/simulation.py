@@ -137,7 +137,7 @@ def simulate(controller: Controller, motion: HumanMotion, config: SimConfig | No
             state = None if state is None else np.asarray(state)
             geo = controller.human.geometry(joints, state)
         t0 = time.perf_counter_ns()
-        cmd = controller.step(q, joints, state, tau)
+        cmd = controller.step(q, joints, state, tau, t - key / cfg.frame_rate_hz)
         tick_us = (time.perf_counter_ns() - t0) / 1e3
         other_table = other(robot.kinematics(q, jacobians=False), geo)
 

@@ -1,0 +1,153 @@
+"""The analytic controller in closed loop: the paper's two tests, free work, invariants."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from qpavoid.analytic import AnalyticController, enforce_limits
+from qpavoid.controller import ControllerConfig
+from qpavoid.human import JointType
+from qpavoid.posture import Operator
+from qpavoid.scenarios import make_scenario, nominal_configurations, random_approach
+from qpavoid.simulation import SimConfig, simulate
+from qpavoid.task import ArcPath, inverse_kinematics
+
+
+@pytest.fixture(scope="module")
+def runs(robot):
+    """Each scenario once, analytic controller, spheres, default 500 Hz."""
+    out = {}
+    for name in ("free", "test1", "test2"):
+        out[name] = simulate(AnalyticController(robot), make_scenario(name, robot))
+    return out
+
+
+def test_free_tracks_the_path_alone(runs):
+    m = runs["free"].metrics
+    assert m["reached_goal"]
+    assert m["rms_path_error_m"] < 1e-3
+    assert m["final_position_error_m"] < 1e-3
+    assert m["stop_events"] == [] and m["stopped_s"] == 0.0
+    assert m["joint_velocity_limit_violations"] == 0 and m["joint_position_limit_violations"] == 0
+
+
+def test_test1_deflects_without_stopping_and_returns(runs):
+    m, log = runs["test1"].metrics, runs["test1"].log
+    assert m["stop_events"] == []
+    assert np.linalg.norm(log["v_rep_EE"], axis=1).max() > 0.05      # m/s
+    assert np.linalg.norm(log["v_rep_L2"], axis=1).max() > 0.005
+    assert log["distance"][:, 1:].min() > 0.05                        # beyond the stop distance
+    near = np.linalg.norm(log["v_rep_EE"], axis=1) > 0.01
+    path_err = np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)
+    assert path_err[near].max() > 0.01                                 # really deflected
+    assert m["reached_goal"] and m["final_position_error_m"] < 1e-3
+    assert path_err[-1] < 1e-3                                         # back on the path
+
+
+def test_test2_stops_when_f_exceeds_08_and_holds_still(runs, robot):
+    m, log = runs["test2"].metrics, runs["test2"].log
+    assert m["stop_events"] and m["stop_events"][0]["reason"].startswith("f = ")
+    k = int(np.argmax(log["stopped"]))
+    assert log["f"][k] > 0.8 and np.all(log["f"][:k] <= 0.8)
+    assert log["f"][k] > log["f"][0] + 0.5                             # f rose on the approach
+    # While stopped with the hand holding still (the frames do not change), the joint
+    # angles and the L1 distance stay exactly constant (paper Fig. 13).
+    motion = make_scenario("test2", robot)
+    hold = (log["t"] >= motion.keyframes[1][0] + 0.1) & (log["t"] <= motion.keyframes[2][0])
+    assert log["stopped"][hold].all()
+    assert hold.sum() > 1000
+    assert (log["q"][hold] == log["q"][hold][0]).all()
+    assert (log["distance"][hold, 0] == log["distance"][hold][0, 0]).all()
+    np.testing.assert_array_equal(log["dq"][log["stopped"]], 0.0)
+    assert m["reached_goal"]                                           # resumes after withdrawal
+
+
+class Corrupted:
+    """A motion whose frames randomly lose joints (NaN or NotTracked)."""
+
+    def __init__(self, motion, seed, p_lost=0.15):
+        self.motion, self.rng, self.p = motion, np.random.default_rng(seed), p_lost
+
+    def frame_at(self, t):
+        joints, state = self.motion.frame_at(t)
+        joints, state = joints.copy(), state.copy()
+        lost = self.rng.random(25) < self.p
+        half = self.rng.random(25) < 0.5
+        joints[lost & half] = np.nan
+        state[lost & ~half] = 0
+        if self.rng.random() < 0.03:                     # the whole body lost for a frame
+            joints[:] = np.nan
+        return joints, state
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_invariants_over_random_approaches(robot, seed):
+    rng = np.random.default_rng(seed)
+    path = ArcPath()
+    nominal = nominal_configurations(robot, path, np.linspace(0, path.duration_s, 31))
+    motion = random_approach(rng, robot, path, nominal=nominal)
+    if seed % 2:
+        motion = Corrupted(motion, seed)
+    ctrl = AnalyticController(robot, path, ControllerConfig(control_period_s=0.01))
+    log = simulate(ctrl, motion, SimConfig(control_rate_hz=100, max_time_s=20)).log
+    cfg = ctrl.config.avoidance
+    assert np.isfinite(log["dq"]).all() and np.isfinite(log["q"]).all()
+    rule = (log["f"] > cfg.f_stop) | (log["distance"][:, 1] <= cfg.d_stop_L2_m) \
+        | (log["distance"][:, 2] <= cfg.d_stop_EE_m)
+    assert log["stopped"][rule].all()
+    np.testing.assert_array_equal(log["dq"][log["stopped"]], 0.0)
+    assert (np.abs(log["dq"]) <= robot.dq_max * (1 + 1e-12)).all()
+    # eq. (3): A1 and A2 within their scaled limits.
+    lim = robot.dq_max[:2] * (1 - log["f"][:, None])
+    assert (np.abs(log["dq"][:, :2]) <= lim + 1e-12).all()
+
+
+def test_whole_body_lost_stops_with_a_reason(robot):
+    ctrl = AnalyticController(robot)
+    q = inverse_kinematics(robot, ArcPath().reference(0)[0])
+    cmd = ctrl.step(q, np.full((25, 3), np.nan), None, 1.0)
+    assert cmd.stopped and "no body part" in cmd.reason
+    np.testing.assert_array_equal(cmd.dq, 0.0)
+    state = np.zeros(25, dtype=int)
+    cmd = ctrl.step(q, Operator().rest(), state, 1.0)
+    assert cmd.stopped and "no body part" in cmd.reason
+    # Only the legs tracked: the upper body is lost all the same.
+    state[[JointType.KneeLeft, JointType.KneeRight]] = 2
+    assert ctrl.step(q, Operator().rest(), state, 1.0).stopped
+
+
+def test_stale_frame_stops(robot):
+    ctrl = AnalyticController(robot)
+    q = inverse_kinematics(robot, ArcPath().reference(0)[0])
+    assert not ctrl.step(q, Operator().rest(), None, 1.0, frame_age_s=0.05).stopped
+    for age in (0.5, np.nan):
+        cmd = ctrl.step(q, Operator().rest(), None, 1.0, frame_age_s=age)
+        assert cmd.stopped and "stale" in cmd.reason
+
+
+def test_nobody_near_is_eq8(robot):
+    """Far from the operator the command is J^-1 (v_PL + K e + v_EE), v_EE ~ 1e-7 m/s."""
+    ctrl = AnalyticController(robot)
+    path = ctrl.path
+    q = inverse_kinematics(robot, path.reference(5.0)[0]) + 0.01
+    cmd = ctrl.step(q, Operator().rest(), None, 5.0)
+    kin = robot.kinematics(q)
+    from qpavoid.task import pose_error
+    T_ref, twist = path.reference(5.0)
+    target = twist + 5.0 * pose_error(T_ref, kin.ee_placement)
+    assert 0 < np.linalg.norm(cmd.v_rep_EE) < 1e-6 and np.linalg.norm(cmd.v_rep_L2) < 1e-8
+    target[:3] += cmd.v_rep_EE
+    np.testing.assert_allclose(kin.ee_jacobian @ cmd.dq, target, atol=1e-8)
+
+
+def test_enforce_limits_modes():
+    lim = np.array([1.0, 1.0, 2.0])
+    dq, s = enforce_limits(np.array([2.0, 0.5, -1.0]), lim, "scale")
+    np.testing.assert_allclose(dq, [1.0, 0.25, -0.5])
+    assert s == 0.5
+    dq, s = enforce_limits(np.array([2.0, 0.5, -1.0]), lim, "clip")
+    np.testing.assert_allclose(dq, [1.0, 0.5, -1.0])
+    assert s == 1.0
+    dq, s = enforce_limits(np.array([0.1, 0.1, 0.1]), np.zeros(3), "scale")   # f = 1: all stop
+    np.testing.assert_allclose(dq, 0.0)

@@ -1,0 +1,105 @@
+"""The laws of eqs. (2)-(9) against hand-computed values."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from qpavoid.laws import (AvoidanceConfig, damped_pinv, distance_at_factor, ee_repulsive_velocity,
+                          l1_factor, l2_joint_velocity, modified_ik, repulsive_speed,
+                          repulsive_velocity, scaled_velocity_limits, stop_reason)
+
+CFG = AvoidanceConfig()
+
+
+def test_f_at_hand_computed_distances():
+    # f = 1 / (1 + exp((2d/rho - 1) alpha)), rho = 0.1, alpha = 9 (paper Fig. 6)
+    assert l1_factor(0.0, CFG) == pytest.approx(1 / (1 + math.exp(-9)))      # 0.99988
+    assert l1_factor(0.05, CFG) == pytest.approx(0.5)
+    assert l1_factor(0.1, CFG) == pytest.approx(1 / (1 + math.exp(9)))       # 1.234e-4
+    assert l1_factor(np.inf, CFG) == 0.0
+    assert l1_factor(-np.inf, CFG) == 1.0
+    assert not np.isnan(l1_factor(np.array([np.inf, -np.inf, 1e6]), CFG)).any()
+    # The reading notes: f > 0.8 below about 0.042 m.
+    d08 = CFG.d_stop_L1_m()
+    assert d08 == pytest.approx(0.05 * (1 - math.log(4) / 9))
+    assert d08 == pytest.approx(0.0423, abs=1e-4)
+    assert l1_factor(d08, CFG) == pytest.approx(0.8)
+    assert distance_at_factor(0.5, 0.1, 9) == pytest.approx(0.05)
+
+
+def test_f_is_monotone_decreasing():
+    d = np.linspace(-0.05, 0.2, 1000)          # beyond, it saturates at exactly 1 or 0
+    assert np.all(np.diff(l1_factor(d, CFG)) < 0)
+    d = np.linspace(-1, 1, 1000)
+    assert np.all(np.diff(l1_factor(d, CFG)) <= 0)
+
+
+def test_scaled_limits_eq3():
+    dq = np.array([1.4835, 1.4835])
+    np.testing.assert_allclose(scaled_velocity_limits(dq, 0.25), 0.75 * dq)
+    np.testing.assert_allclose(scaled_velocity_limits(dq, 1.0), 0.0)
+
+
+def test_repulsive_speed_eq4_and_velocity_eq5():
+    cfg = AvoidanceConfig(v_max_mps=0.3, rho_rep_m=0.2, alpha_rep=9)
+    assert repulsive_speed(0.1, cfg) == pytest.approx(0.15)                 # V_max / 2 at rho/2
+    assert repulsive_speed(0.2, cfg) == pytest.approx(0.3 / (1 + math.exp(9)))
+    v = repulsive_velocity(0.1, np.array([0, 0.6, 0.8]), cfg)
+    np.testing.assert_allclose(v, [0, 0.09, 0.12])
+    np.testing.assert_array_equal(repulsive_velocity(np.inf, np.array([1.0, 0, 0]), cfg), 0.0)
+
+
+def test_ee_sum_eq7_ignores_unseen_parts():
+    d = np.array([0.1, 0.1, np.inf, 0.5])
+    dirs = np.array([[1.0, 0, 0], [0, 1.0, 0], [np.nan, np.nan, np.nan], [0, 0, 1.0]])
+    v = ee_repulsive_velocity(d, dirs, CFG)
+    half = CFG.v_max_mps / 2
+    np.testing.assert_allclose(v, [half, half, repulsive_speed(0.5, CFG)])
+
+
+def test_damped_pinv_is_the_inverse_away_from_singularities():
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(6, 6)) + 3 * np.eye(6)
+    np.testing.assert_allclose(damped_pinv(J, 0.02, 0.05), np.linalg.inv(J), atol=1e-10)
+
+
+def test_damped_pinv_stays_bounded_at_a_singularity():
+    J = np.diag([1.0, 1.0, 1e-9])
+    Jp = damped_pinv(J, 0.02, 0.05)
+    assert np.abs(Jp).max() < 1.0 / 0.05          # sigma / (sigma^2 + lambda^2) <= 1 / (2 lambda)
+    np.testing.assert_allclose(Jp[:2, :2], np.eye(2), atol=1e-2)
+
+
+def test_l2_velocity_eq6_moves_the_point_as_asked():
+    J = np.array([[0.2, 0.0, 0.1], [0.0, 0.3, 0.0], [0.1, 0.0, 0.4]])
+    v = np.array([0.01, -0.02, 0.03])
+    np.testing.assert_allclose(J @ l2_joint_velocity(J, v, 0.02, 0.05), v, atol=1e-12)
+
+
+def test_modified_ik_eq8():
+    rng = np.random.default_rng(1)
+    J = rng.normal(size=(6, 6)) + 3 * np.eye(6)
+    v_pl, e = rng.normal(size=6), rng.normal(size=6)
+    K = np.full(6, 5.0)
+    v_ee = np.array([0.1, 0.0, -0.1])
+    dq = modified_ik(J, v_pl, K, e, v_ee, 0.02, 0.05)
+    np.testing.assert_allclose(J @ dq, v_pl + K * e + np.r_[v_ee, 0, 0, 0], atol=1e-10)
+
+
+@pytest.mark.parametrize("f, d_l2, d_ee, expect", [
+    (0.8, 1.0, 1.0, None),            # f must exceed 0.8
+    (0.8000001, 1.0, 1.0, "f = "),
+    (0.0, 0.05, 1.0, "d_L2"),         # <= 0.05 m stops
+    (0.0, 0.0500001, 1.0, None),
+    (0.0, 1.0, 0.05, "d_EE"),
+    (0.0, np.inf, np.inf, None),
+])
+def test_stop_rules(f, d_l2, d_ee, expect):
+    reason = stop_reason(f, d_l2, d_ee, CFG)
+    if expect is None:
+        assert reason is None
+    else:
+        assert reason.startswith(expect)
