@@ -25,10 +25,11 @@ def as_array(value, shape: tuple[int | None, ...], name: str, *, finite: bool = 
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise InputError(f"{name} must be numeric, got {type(value).__name__}") from exc
-    if arr.ndim != len(shape) or any(s is not None and s != n for s, n in zip(shape, arr.shape)):
+    if arr.shape != shape and (arr.ndim != len(shape) or any(
+            s is not None and s != n for s, n in zip(shape, arr.shape))):
         want = str(tuple("N" if s is None else s for s in shape)).replace("'", "")
         raise InputError(f"{name} must have shape {want}, got {arr.shape}")
-    if finite and not np.all(np.isfinite(arr)):
+    if finite and not np.isfinite(arr).all():
         bad = np.argwhere(~np.isfinite(arr))[0]
         raise InputError(f"{name} has a non-finite entry at index {tuple(int(i) for i in bad)}: "
                          f"{arr[tuple(bad)]}")

@@ -184,6 +184,10 @@ class KinectHuman:
         object.__setattr__(self, "point_part", member)
         object.__setattr__(self, "_mid_ids", np.array([[int(a), int(b)] for a, b in
                                                        (p.mid for p in self.parts)]))
+        width = max(len(p.chain) for p in self.parts)
+        object.__setattr__(self, "_chains", np.array(
+            [[int(j) for j in p.chain] + [int(p.chain[-1])] * (width - len(p.chain))
+             for p in self.parts]))
 
     @property
     def part_names(self) -> tuple[str, ...]:
@@ -222,8 +226,9 @@ class KinectHuman:
         arr = np.asarray(state)
         if arr.shape != (N_KINECT_JOINTS,):
             raise InputError(f"state (Kinect tracking states) must have shape (25,), got {arr.shape}")
-        if not np.all(np.isin(arr, (0, 1, 2))):
-            bad = int(np.flatnonzero(~np.isin(arr, (0, 1, 2)))[0])
+        bad_mask = (arr != 0) & (arr != 1) & (arr != 2)
+        if bad_mask.any():
+            bad = int(np.flatnonzero(bad_mask)[0])
             raise InputError(f"state[{bad}] ({JointType(bad).name}) is {arr[bad].item()!r}, "
                              "expected 0 (not tracked), 1 (inferred) or 2 (tracked)")
         return arr.astype(np.int8)
@@ -248,16 +253,16 @@ class KinectHuman:
 
     def geometry(self, joints, state=None) -> HumanGeometry:
         """Points, capsules and their usability at one frame."""
-        joints = self.check_joints(joints)
         usable = self.joint_usable(joints, state)
-        clean = np.where(usable[:, None], joints, np.nan)
+        clean = np.where(usable[:, None], np.asarray(joints, dtype=float), np.nan)
         mids = 0.5 * (clean[self._mid_ids[:, 0]] + clean[self._mid_ids[:, 1]])
-        points = np.vstack([clean[self.joint_ids], mids])
-        point_valid = np.all(np.isfinite(points), axis=1)
-        segments = np.full((len(self.parts), 2, 3), np.nan)
-        for k, part in enumerate(self.parts):
-            ok = [int(j) for j in part.chain if usable[int(j)]]
-            if ok:
-                segments[k] = clean[[ok[0], ok[-1]]]
-        return HumanGeometry(points, point_valid, segments, np.all(np.isfinite(segments), axis=(1, 2)))
-
+        points = np.concatenate([clean[self.joint_ids], mids])
+        point_valid = ~np.isnan(points[:, 0])
+        # Capsule of each part: first and last usable joint of its chain (padded by
+        # repeating the last joint, which changes neither).
+        ok = usable[self._chains]                                      # (K, L)
+        first = ok.argmax(axis=1)
+        last = ok.shape[1] - 1 - ok[:, ::-1].argmax(axis=1)
+        rows = np.arange(len(self.parts))
+        segments = np.stack([clean[self._chains[rows, first]], clean[self._chains[rows, last]]], axis=1)
+        return HumanGeometry(points, point_valid, segments, ok.any(axis=1))

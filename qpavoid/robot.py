@@ -139,7 +139,30 @@ class Robot:
         self.point_set = np.concatenate([[k] * len(s.points) for k, s in enumerate(self.sets)])
         self.sphere_radii = np.array([self.sets[k].sphere_radius_m for k in self.point_set])
         self.capsule_radii = np.array([s.capsule_radius_m for s in self.sets])
-        self._segment_frames = [s.capsule_frames for s in self.sets]
+        # Frames whose positions/Jacobians a tick needs, each once: the control points, then
+        # any capsule end that is not a control point (for the iiwa only A2).
+        placement = {}
+        for f in self.point_frames:
+            placement.setdefault(self._frame_key(f), f)
+        frames = list(self.point_frames)
+        seg_idx = []
+        for s in self.sets:
+            pair = []
+            for f in s.capsule_frames:
+                key = self._frame_key(f)
+                if key not in placement:
+                    placement[key] = f
+                    frames.append(f)
+                pair.append(frames.index(placement[key]))
+            seg_idx.append(pair)
+        self._frames = tuple(frames)
+        self._segment_index = np.array(seg_idx)
+        self._n_points = len(self.point_frames)
+
+    def _frame_key(self, frame_id: int) -> tuple:
+        """Identity of a frame's origin: its parent joint and placement (rounded)."""
+        f = self.model.frames[frame_id]
+        return (f.parentJoint, tuple(np.round(f.placement.translation, 12)))
 
     @property
     def nq(self) -> int:
@@ -180,16 +203,14 @@ class Robot:
             pin.forwardKinematics(model, data, q)
         pin.updateFramePlacements(model, data)
         omf = data.oMf
-        points = np.array([omf[f].translation for f in self.point_frames])
-        segments = np.array([[omf[a].translation, omf[b].translation] for a, b in self._segment_frames])
-        ee = omf[self.ee_frame].homogeneous.copy()
+        pos = np.array([omf[f].translation for f in self._frames])
+        points, segments = pos[:self._n_points], pos[self._segment_index]
+        ee = omf[self.ee_frame].homogeneous
         pj = sj = ej = None
         if jacobians:
-            def jac(f):
-                return pin.getFrameJacobian(model, data, f, LWA)
-            pj = np.array([jac(f)[:3] for f in self.point_frames])
-            sj = np.array([[jac(a)[:3], jac(b)[:3]] for a, b in self._segment_frames])
-            ej = jac(self.ee_frame)
+            jac = np.array([pin.getFrameJacobian(model, data, f, LWA)[:3] for f in self._frames])
+            pj, sj = jac[:self._n_points], jac[self._segment_index]
+            ej = pin.getFrameJacobian(model, data, self.ee_frame, LWA)
         return Kinematics(q, points, pj, segments, sj, ee, ej)
 
     def control_points(self, q) -> np.ndarray:

@@ -13,6 +13,7 @@ seed on the elbow-up, non-flipped-wrist branch that faces the target.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -88,6 +89,9 @@ class ArcPath:
                         e2=np.cross(axis, e1))
         object.__setattr__(self, "_geom", geom)
         object.__setattr__(self, "_rotation", orthonormalize(np.asarray(self.start)[:3, :3]))
+        pose = np.eye(4)
+        pose[:3, :3] = self._rotation
+        object.__setattr__(self, "_pose", pose)
 
     @property
     def rotation(self) -> np.ndarray:
@@ -100,7 +104,7 @@ class ArcPath:
         if g["kind"] == "line":
             return g["p0"] + sigma * g["chord"], g["chord"].copy()
         phi = g["angle"] * sigma
-        c, s = np.cos(phi), np.sin(phi)
+        c, s = math.cos(phi), math.sin(phi)
         R, e1, e2 = g["radius"], g["e1"], g["e2"]
         return g["centre"] + R * (c * e1 + s * e2), (R * g["angle"]) * (c * e2 - s * e1)
 
@@ -111,11 +115,10 @@ class ArcPath:
         """
         sigma, dsigma = quintic(t / self.duration_s)
         p, dp = self.position(sigma)
-        T = np.eye(4)
-        T[:3, :3] = self._rotation
+        T = self._pose.copy()
         T[:3, 3] = p
         twist = np.zeros(6)
-        twist[:3] = dp * dsigma / self.duration_s
+        twist[:3] = dp * (dsigma / self.duration_s)
         return T, twist
 
     def length_m(self, n: int = 2001) -> float:
