@@ -17,7 +17,7 @@ import numpy as np
 
 from .distances import DistanceTable, distance_method
 from .errors import InputError
-from .human import KinectHuman
+from .human import HumanGeometry, KinectHuman
 from .laws import AvoidanceConfig, l1_factor, stop_reason
 from .robot import Kinematics, Robot
 from .task import ArcPath, pose_error
@@ -129,6 +129,7 @@ class Tick:
     ref_twist: np.ndarray
     error: np.ndarray
     reason: str
+    human: HumanGeometry
 
 
 class Controller:
@@ -183,7 +184,8 @@ class Controller:
     def measure(self, q, joints, state, t: float, frame_age_s: float = 0.0) -> Tick:
         """Shared prelude: kinematics, distances, f (eq. 2), reference, stop rules."""
         kin = self.robot.kinematics(q)
-        table = self.distances(kin, self.human_geometry(joints, state))
+        geo = self.human_geometry(joints, state)
+        table = self.distances(kin, geo)
         dmin = table.min_per_set()
         cfg = self.config.avoidance
         f = float(l1_factor(dmin[self.i_L1], cfg))
@@ -198,7 +200,7 @@ class Controller:
             reason = "no body part of the operator is tracked"
         else:
             reason = stop_reason(f, dmin[self.i_L2], dmin[self.i_EE], cfg) or ""
-        return Tick(kin.q, kin, table, dmin, f, limits, ref_pose, ref_twist, error, reason)
+        return Tick(kin.q, kin, table, dmin, f, limits, ref_pose, ref_twist, error, reason, geo)
 
     def command(self, tick: Tick, dq: np.ndarray | None, time_scale: float = 1.0,
                 v_rep_L2: np.ndarray | None = None, v_rep_EE: np.ndarray | None = None,

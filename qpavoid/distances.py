@@ -19,7 +19,8 @@ human's :class:`~qpavoid.human.HumanGeometry`; the free functions
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import coal
 import numpy as np
@@ -44,11 +45,9 @@ class DistanceTable:
         (S, K) signed distance, m (eq. 1); negative = penetration; +inf = part not seen.
     vector
         (S, K, 3) unit direction from the human to the robot at the closest pair.
-    robot_point, human_point
-        (S, K, 3) witness points on the robot and human surfaces, base frame, m.
     robot_index
         (S, K) index of the robot control point that realised the minimum (spheres; the
-        point whose Jacobian eq. (6) uses), -1 for capsules.
+        point whose Jacobian eq. (6) uses), -1 for capsules and for parts not seen.
     robot_s
         (S, K) parameter in [0, 1] along the set's capsule axis of the robot point
         (capsules), NaN for spheres.
@@ -56,18 +55,43 @@ class DistanceTable:
         (S, K) index of the human model point (spheres), -1 for capsules.
     set_names, part_names
         Row and column labels.
+    robot_point, human_point
+        (S, K, 3) witness points on the robot and human surfaces, base frame, m (NaN for
+        parts not seen). For spheres they are computed on first access.
     """
 
     method: str
     distance: np.ndarray
     vector: np.ndarray
-    robot_point: np.ndarray
-    human_point: np.ndarray
     robot_index: np.ndarray
     robot_s: np.ndarray
     human_index: np.ndarray
     set_names: tuple[str, ...]
     part_names: tuple[str, ...]
+    _witness: tuple = field(repr=False, default=())
+
+    @cached_property
+    def robot_point(self) -> np.ndarray:
+        return self._witnesses[0]
+
+    @cached_property
+    def human_point(self) -> np.ndarray:
+        return self._witnesses[1]
+
+    @cached_property
+    def _witnesses(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.method == "capsules":
+            return self._witness
+        # spheres: the centres moved by their radii along the direction.
+        P, H, r_robot, r_human = self._witness
+        shape = self.distance.shape
+        v = self.vector.reshape(-1, 3)
+        p_idx, m_idx = self.robot_index.ravel(), self.human_index.ravel()
+        rp = P[p_idx] - r_robot[:, None] * v
+        hp = H[m_idx] + r_human[:, None] * v
+        rp[p_idx < 0] = np.nan
+        hp[p_idx < 0] = np.nan
+        return rp.reshape(*shape, 3), hp.reshape(*shape, 3)
 
     def min_per_set(self) -> np.ndarray:
         """(S,) minimum distance of each robot set over all parts, m."""
@@ -155,18 +179,11 @@ class SphereDistance:
         if d_star.min() < 1e-12:
             vector[d_star < 1e-12] = FALLBACK_DIRECTION
         p_idx, m_idx = self._p_of[best], self._m_of[best]                           # -1: unseen
-        distance = d_star - self._radii                                              # eq. (1)
-        robot_point = P[p_idx] - self._r_robot_flat[:, None] * vector
-        human_point = H[m_idx] + self._r_human_flat[:, None] * vector
-        if d_star.max() == np.inf:
-            robot_point[p_idx < 0] = np.nan
-            human_point[p_idx < 0] = np.nan
         shape = self._shape
         return DistanceTable(
-            self.method, distance.reshape(shape), vector.reshape(*shape, 3),
-            robot_point.reshape(*shape, 3), human_point.reshape(*shape, 3),
+            self.method, (d_star - self._radii).reshape(shape), vector.reshape(*shape, 3),  # eq. (1)
             p_idx.reshape(shape), self._no_s, m_idx.reshape(shape), self.set_names,
-            self.part_names)
+            self.part_names, (P, H, self._r_robot_flat, self._r_human_flat))
 
 
 def axis_rotations(u: np.ndarray) -> np.ndarray:
@@ -264,9 +281,9 @@ class CapsuleDistance:
             / np.maximum(np.einsum("nk,nk->n", ab, ab), 1e-18)
         shape = self._shape
         return DistanceTable(self.method, distance.reshape(shape), vector.reshape(*shape, 3),
-                             robot_point.reshape(*shape, 3), human_point.reshape(*shape, 3),
                              self._minus_one, np.clip(s, 0.0, 1.0).reshape(shape), self._minus_one,
-                             self.set_names, self.part_names)
+                             self.set_names, self.part_names,
+                             (robot_point.reshape(*shape, 3), human_point.reshape(*shape, 3)))
 
 
 METHODS = {"spheres": SphereDistance, "capsules": CapsuleDistance}

@@ -100,9 +100,8 @@ def ee_repulsive_velocity(d: np.ndarray, directions: np.ndarray, cfg: AvoidanceC
     directions
         (K, 3) unit directions human → robot.
     """
-    d = np.asarray(d, dtype=float)
-    seen = np.isfinite(d)
-    return repulsive_speed(d[seen], cfg) @ directions[seen]
+    speed = repulsive_speed(d, cfg)                       # 0 at d = +inf
+    return speed @ np.where(speed[:, None] > 0.0, directions, 0.0)
 
 
 def damped_pinv(J: np.ndarray, sigma_min: float, lambda_max: float) -> np.ndarray:

@@ -163,3 +163,27 @@ def write_snapshots(path: Path, log: dict, robot: Robot) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def write_comparison(path: Path, label: str, series: dict) -> None:
+    """Minimum distance and path error over time of every (controller, distance) run."""
+    plt = _plt()
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    styles = {"analytic": "-", "qp": "--"}
+    colors = {"spheres": "C0", "capsules": "C1"}
+    for (ctrl, dist), s in series.items():
+        kw = dict(ls=styles.get(ctrl, "-"), color=colors.get(dist, "k"), lw=1.3,
+                  label=f"{ctrl}, {dist}")
+        a1.plot(s["t"], s["min_distance"], **kw)
+        a2.plot(s["t"], np.asarray(s["path_error"]) * 1e3, **kw)
+    a1.axhline(0.05, color="r", lw=0.8, ls=":")
+    a1.set_ylabel("min distance (m)\n(own method)")
+    a2.set_ylabel("path error (mm)")
+    a2.set_xlabel("time (s)")
+    a1.set_title(f"{label}: analytic (solid) vs QP (dashed)")
+    a1.legend(fontsize=8, ncol=2)
+    for a in (a1, a2):
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

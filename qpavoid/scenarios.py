@@ -8,10 +8,10 @@ at the camera rate (sample and hold).
   never comes near the robot;
 * ``test1`` (paper Sect. 6.1) the right hand reaches to just beside the end effector's
   planned path, ahead of the robot, stays while the robot passes, and withdraws;
-* ``test2`` (paper Sect. 6.2) the right hand comes close to L1 (forearm-side of the
-  elbow) until f exceeds 0.8 and the robot stops; it holds there, then withdraws;
-* :func:`random_approach` a hand moving at up to 1.6 m/s towards a random point of a
-  random robot set, from a random direction, at a random time.
+* ``test2`` (paper Sect. 6.2) the right hand comes close to L1 (near A3) until f
+  exceeds 0.8 and the robot stops; it holds there, then withdraws;
+* ``random:SEED`` (:func:`random_approach`) a hand moving at up to 1.6 m/s towards a
+  random point of a random robot set, from a random direction, at a random time.
 
 Targets are placed against the robot's *nominal* motion (the path tracked with nobody
 near, :func:`nominal_configurations`), so they stay right if the path or radii change.
@@ -132,7 +132,7 @@ def _clearance_target(robot: Robot, human: KinectHuman, path: ArcPath, operator:
 
 def make_scenario(name: str, robot: Robot, path: ArcPath | None = None,
                   human: KinectHuman | None = None, operator: Operator | None = None):
-    """The generated motion called ``name`` (``free``, ``test1`` or ``test2``)."""
+    """The generated motion called ``name`` (``free``, ``test1``, ``test2``, ``random:SEED``)."""
     from .errors import InputError
     path = path or ArcPath()
     human = human or KinectHuman()
@@ -168,7 +168,9 @@ def make_scenario(name: str, robot: Robot, path: ArcPath | None = None,
                                    "right", anchor, _unit([-1.0, 0.5, -0.2]), 0.02, ("L1",),
                                    ("spheres", "capsules"))
         return ScriptedReach(op, "right", ((1.0, None), (4.0, target), (9.0, target), (11.0, None)))
-    raise InputError(f"unknown scenario {name!r}; choose from {list(SCENARIOS)}")
+    if name.startswith("random:") and name[7:].isdigit():
+        return random_approach(np.random.default_rng(int(name[7:])), robot, path)
+    raise InputError(f"unknown scenario {name!r}; choose from {list(SCENARIOS)} or random:SEED")
 
 
 def _unit(v) -> np.ndarray:

@@ -1,0 +1,204 @@
+"""Assembling and solving the QP: the one place where pieces become a problem.
+
+Each tick the pieces (tasks, limits, barriers) give their rows and the problem
+
+    minimise    ½ xᵀ H x + cᵀ x
+    subject to  G x ≤ h
+                lb ≤ x ≤ ub
+
+over ``x = [q̇; s_L2; s_EE]`` is solved by one of two backends that give the same
+answer to the documented tolerance (docs/qp.md):
+
+* :class:`PersistentOSQP` sets one ``osqp.OSQP`` problem up once with a fixed sparsity
+  pattern (dense blocks: every G row exists every tick, inactive rows have h = +inf) and
+  only ``update()``s its numbers each tick, warm started;
+* :class:`QPSolversBackend` builds a new problem each tick through qpsolvers, with any
+  installed solver, for portability and cross-checking.
+
+A solution is returned with ``found = False`` (and a reason) unless the solver reports
+success; the controller then stops the robot.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import SolverError
+from .config import QPConfig
+
+
+@dataclass(frozen=True)
+class QPProblem:
+    """The dense matrices of one tick's QP (see the module docstring)."""
+
+    H: np.ndarray
+    c: np.ndarray
+    G: np.ndarray
+    h: np.ndarray
+    lb: np.ndarray
+    ub: np.ndarray
+
+
+@dataclass(frozen=True)
+class QPSolution:
+    """What a backend returns.
+
+    Attributes
+    ----------
+    x
+        The solution (n,), or None if not found.
+    found
+        True only if the solver reported success.
+    status
+        The solver's status text.
+    iterations
+        Iterations used (-1 if the solver does not say).
+    """
+
+    x: np.ndarray | None
+    found: bool
+    status: str
+    iterations: int = -1
+
+
+def assemble(objectives, inequalities, bounds, n: int, inp) -> QPProblem:
+    """Sum the pieces' costs, stack their rows and intersect their bounds."""
+    H = np.zeros((n, n))
+    c = np.zeros(n)
+    for piece in objectives:
+        Hp, cp = piece.compute_qp_objective(inp)
+        H[:len(Hp), :len(Hp)] += Hp
+        c[:len(cp)] += cp
+    rows = [piece.compute_qp_inequalities(inp) for piece in inequalities]
+    G = np.vstack([g for g, _ in rows])
+    h = np.concatenate([hh for _, hh in rows])
+    lb = np.full(n, -np.inf)
+    ub = np.full(n, np.inf)
+    for piece in bounds:
+        lo, hi = piece.compute_qp_bounds(inp)
+        k = len(lo)
+        np.maximum(lb[:k], lo, out=lb[:k])
+        np.minimum(ub[:k], hi, out=ub[:k])
+    return QPProblem(H, c, G, h, lb, ub)
+
+
+def _osqp_settings(cfg: QPConfig) -> dict:
+    return dict(eps_abs=cfg.eps_abs, eps_rel=cfg.eps_rel, max_iter=cfg.max_iter,
+                polish=cfg.polish, verbose=False)
+
+
+class PersistentOSQP:
+    """One OSQP problem for the controller's lifetime, updated and warm started each tick.
+
+    OSQP's form is ``min ½xᵀPx + qᵀx, l ≤ Ax ≤ u``: here ``A = [I; G]``,
+    ``l = [lb; −inf]``, ``u = [ub; h]``. P (upper triangle) and A have a fixed dense
+    pattern, so each tick is ``update(q, l, u, Px, Ax)`` and ``solve()``.
+
+    Parameters
+    ----------
+    n
+        Number of variables.
+    m
+        Number of G rows.
+    cfg
+        Tolerances and iteration cap.
+    """
+
+    name = "osqp-persistent"
+
+    def __init__(self, n: int, m: int, cfg: QPConfig):
+        import osqp
+        self.n, self.m = n, m
+        # CSC patterns: P upper triangle column by column; A = [I; G] with every G entry.
+        rows_p = [r for j in range(n) for r in range(j + 1)]
+        cols_p = [j for j in range(n) for _ in range(j + 1)]
+        self._p_idx = np.array(rows_p) * n + np.array(cols_p)
+        a_rows = [[j] + list(range(n, n + m)) for j in range(n)]
+        self._a_idx = np.array([r * n + j for j in range(n) for r in a_rows[j]])
+        P = sp.csc_matrix((np.ones(len(rows_p)), (rows_p, cols_p)), shape=(n, n))
+        A = sp.csc_matrix((np.ones(len(self._a_idx)),
+                           ([r for j in range(n) for r in a_rows[j]],
+                            [j for j in range(n) for _ in a_rows[j]])), shape=(n + m, n))
+        self._M = np.zeros((n + m, n))
+        self._M[:n] = np.eye(n)
+        self._l = np.full(n + m, -np.inf)
+        self._u = np.full(n + m, np.inf)
+        self._solver = osqp.OSQP()
+        # The numbers here are placeholders (P must be positive semidefinite for setup);
+        # only the pattern matters: every tick replaces all of them.
+        P.data[:] = np.eye(n)[rows_p, cols_p]
+        self._solver.setup(P, np.zeros(n), A, self._l, self._u, **_osqp_settings(cfg))
+        self._solved = osqp.SolverStatus.OSQP_SOLVED
+        self._infinity = float(self._solver.constant("OSQP_INFTY"))
+        # osqp's Python layer costs 5-8 times its C solve on a problem this small (it
+        # rebuilds an info namespace per solve and caches data for derivatives per update):
+        # where the compiled solver object offers the calls that layer makes, use them.
+        native = getattr(self._solver, "_solver", None)
+        self._native = native if all(hasattr(native, a) for a in
+                                     ("update_data_vec", "update_data_mat", "solve", "info",
+                                      "solution")) else None
+
+    def solve(self, prob: QPProblem) -> QPSolution:
+        n, inf = self.n, self._infinity
+        self._M[n:] = prob.G
+        self._l[:n], self._u[:n], self._u[n:] = prob.lb, prob.ub, prob.h
+        l, u = np.maximum(self._l, -inf), np.minimum(self._u, inf)
+        Px, Ax = prob.H.ravel()[self._p_idx], self._M.ravel()[self._a_idx]
+        if self._native is not None:
+            s = self._native
+            s.update_data_vec(q=prob.c, l=l, u=u)
+            s.update_data_mat(P_x=Px, P_i=None, A_x=Ax, A_i=None)
+            s.solve()
+            info = s.info
+            status_val, status, iters = info.status_val, info.status, info.iter
+            x = s.solution.x
+        else:
+            self._solver.update(q=prob.c, l=l, u=u, Px=Px, Ax=Ax)
+            res = self._solver.solve(raise_error=False)
+            status_val, status, iters, x = res.info.status_val, res.info.status, res.info.iter, res.x
+        found = status_val == self._solved
+        return QPSolution(np.array(x) if found else None, found, str(status), int(iters))
+
+    def update_settings(self, **settings) -> None:
+        """Change OSQP settings (e.g. ``max_iter``) of the live problem."""
+        self._solver.update_settings(**settings)
+
+
+class QPSolversBackend:
+    """A new problem each tick through qpsolvers (any installed solver).
+
+    Rows with h = +inf are dropped (not every solver accepts infinite bounds).
+    """
+
+    def __init__(self, solver: str, cfg: QPConfig):
+        import qpsolvers
+        if solver not in qpsolvers.available_solvers:
+            raise SolverError(f"QP solver {solver!r} is not installed; available: "
+                              f"{sorted(qpsolvers.available_solvers)}")
+        self.name, self._qpsolvers = solver, qpsolvers
+        self._settings = _osqp_settings(cfg) if solver == "osqp" else {}
+        if solver == "proxqp":
+            self._settings = dict(eps_abs=cfg.eps_abs, eps_rel=0.0)
+
+    def solve(self, prob: QPProblem) -> QPSolution:
+        keep = np.isfinite(prob.h)
+        problem = self._qpsolvers.Problem(prob.H, prob.c, prob.G[keep], prob.h[keep],
+                                          lb=prob.lb, ub=prob.ub)
+        try:
+            sol = self._qpsolvers.solve_problem(problem, solver=self.name, **self._settings)
+        except Exception as exc:   # a solver's own failure must stop the robot, not crash
+            return QPSolution(None, False, f"{type(exc).__name__}: {exc}")
+        found = bool(sol.found) and sol.x is not None and np.all(np.isfinite(sol.x))
+        return QPSolution(sol.x if found else None, found, "solved" if found else "not solved")
+
+
+def make_backend(cfg: QPConfig, n: int, m: int):
+    """The backend named by ``cfg.backend``."""
+    if cfg.backend == "persistent":
+        return PersistentOSQP(n, m, cfg)
+    if cfg.backend == "qpsolvers":
+        return QPSolversBackend(cfg.solver, cfg)
+    raise SolverError(f"unknown QP backend {cfg.backend!r}; choose 'persistent' or 'qpsolvers'")

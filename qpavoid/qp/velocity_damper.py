@@ -1,0 +1,65 @@
+"""Velocity dampers: every robot set × human part pair may approach only so fast.
+
+For a pair at distance d (m) inside the influence distance d_i, with the unit direction n
+from the human to the robot and the Jacobian J_p of the robot's closest point:
+
+    approach speed  −nᵀ J_p q̇  ≤  ξ (d − d_s) / (d_i − d_s)
+
+so the allowed approach speed falls linearly from ξ at d_i to 0 at the set's stop
+distance d_s (Faverjon and Tournassoud's damper). d_s is the stop distance of the
+paper's rules: 0.05 m for L2 and EE, and for L1 the distance at which f reaches 0.8
+(eq. 2 inverted, 0.0423 m). A row exists for every pair (fixed structure); pairs beyond
+d_i, or not seen, get the bound +inf.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .layout import Layout, QPInput
+
+
+class VelocityDamper:
+    """All set × part damper rows.
+
+    Parameters
+    ----------
+    layout
+        The QP's variables.
+    d_stop
+        (S,) stop distance of each robot set, m.
+    influence_m
+        d_i, m.
+    gain_mps
+        ξ, m/s.
+    n_parts
+        Number of human parts (table columns).
+    """
+
+    def __init__(self, layout: Layout, d_stop: np.ndarray, influence_m: float, gain_mps: float,
+                 n_parts: int):
+        self.layout = layout
+        self.d_stop = np.repeat(np.asarray(d_stop, dtype=float), n_parts)
+        self.influence_m, self.gain = influence_m, gain_mps
+        self.rows = len(self.d_stop)
+
+    def compute_qp_inequalities(self, inp: QPInput) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, n) G and (rows,) h."""
+        table, kin = inp.tick.table, inp.tick.kin
+        d = table.distance.ravel()
+        G = np.zeros((self.rows, self.layout.n))
+        h = np.full(self.rows, np.inf)
+        active = np.flatnonzero(d < self.influence_m)
+        if len(active):
+            S, K = table.distance.shape
+            i, j = np.divmod(active, K)
+            if table.method == "spheres":
+                Jp = kin.point_jacobians[table.robot_index.ravel()[active]]
+            else:
+                s = table.robot_s.ravel()[active][:, None, None]                      # capsules
+                Jp = (1.0 - s) * kin.segment_jacobians[i, 0] + s * kin.segment_jacobians[i, 1]
+            n = table.vector.reshape(-1, 3)[active]
+            G[active, :self.layout.nv] = -np.einsum("ak,akv->av", n, Jp)
+            ds = self.d_stop[active]
+            h[active] = self.gain * (d[active] - ds) / (self.influence_m - ds)
+        return G, h

@@ -1,0 +1,142 @@
+"""Safety sweeps: many random hand approaches, each run checked for the safety invariants.
+
+Every approach is an independent closed-loop run (:func:`check_approach`), so a sweep is a
+map over seeds: here over a local process pool; on a cluster, the same function over
+another executor (anything with ``map``).
+
+Each run is checked, tick by tick, for what must never happen:
+
+* a joint outside its position limits, or faster than its (eq. 3 scaled) velocity limit;
+* a non-zero command while one of the paper's stop rules holds;
+* the robot moving while the *exact capsule* distance of a set is below that set's stop
+  threshold (0.05 m for L2 and EE; for L1 the distance where f = 0.8), whichever distance
+  method the controller itself uses.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ApproachCheck:
+    """The outcome of one random approach (counts are ticks).
+
+    Attributes
+    ----------
+    seed, controller, distance
+        What was run.
+    ticks
+        Number of control ticks simulated.
+    position_violations, velocity_violations
+        Ticks with a joint outside its position limits / over its scaled velocity limit.
+    moving_under_stop_rule
+        Ticks with a non-zero command while a stop rule held.
+    moving_below_capsule_threshold
+        Ticks with a non-zero command while a set's capsule distance was below its
+        threshold.
+    min_capsule_distance_moving_m
+        (L1, L2, EE) smallest capsule distance over the ticks where the robot moved, m.
+    stopped_s, reached_goal
+        Time spent stopped, and whether the goal was reached.
+    """
+
+    seed: int
+    controller: str
+    distance: str
+    ticks: int
+    position_violations: int
+    velocity_violations: int
+    moving_under_stop_rule: int
+    moving_below_capsule_threshold: int
+    min_capsule_distance_moving_m: tuple[float, float, float]
+    stopped_s: float
+    reached_goal: bool
+
+    @property
+    def safe(self) -> bool:
+        """True if no invariant was broken."""
+        return not (self.position_violations or self.velocity_violations
+                    or self.moving_under_stop_rule or self.moving_below_capsule_threshold)
+
+
+def check_approach(seed: int, controller: str = "qp", distance: str = "spheres",
+                   rate_hz: float = 50.0, max_time_s: float = 25.0) -> ApproachCheck:
+    """Simulate the random approach ``seed`` and check the invariants of every tick."""
+    from .cli import simulate_one
+    result, robot, config, _ = simulate_one(f"random:{seed}", None, controller, distance,
+                                            max_time_s, rate_hz)
+    log, avo = result.log, config.avoidance
+    capsule = log["distance"] if distance == "capsules" else log["distance_other"]
+    threshold = np.array([avo.d_stop_L1_m(), avo.d_stop_L2_m, avo.d_stop_EE_m])
+    moving = np.any(log["dq"] != 0.0, axis=1)
+    rule = ((log["f"] > avo.f_stop) | (log["distance"][:, 1] <= avo.d_stop_L2_m)
+            | (log["distance"][:, 2] <= avo.d_stop_EE_m))
+    limits = np.tile(robot.dq_max, (len(moving), 1))
+    cols = [robot.joint_names.index(n) for n in config.scaled_joints]
+    limits[:, cols] *= (1.0 - log["f"])[:, None]
+    over = np.any(np.abs(log["dq"]) > limits * (1 + 1e-9) + 1e-12, axis=1)
+    outside = np.any((log["q"] > robot.q_max) | (log["q"] < robot.q_min), axis=1)
+    below = np.any(capsule < threshold, axis=1)
+    min_moving = capsule[moving].min(axis=0) if moving.any() else np.full(3, np.inf)
+    return ApproachCheck(seed, controller, distance, len(moving), int(outside.sum()),
+                         int(over.sum()), int((moving & rule).sum()), int((moving & below).sum()),
+                         tuple(float(x) for x in min_moving), result.metrics["stopped_s"],
+                         result.metrics["reached_goal"])
+
+
+def _check(args) -> ApproachCheck:
+    return check_approach(*args)
+
+
+def safety_sweep(seeds, controller: str = "qp", distance: str = "spheres", rate_hz: float = 50.0,
+                 max_time_s: float = 25.0, workers: int | None = None, executor=None
+                 ) -> list[ApproachCheck]:
+    """Check every seed's random approach; in parallel over ``workers`` processes.
+
+    Parameters
+    ----------
+    seeds
+        Seeds of :func:`qpavoid.scenarios.random_approach`.
+    controller, distance
+        ``"analytic"`` or ``"qp"``; ``"spheres"`` or ``"capsules"``.
+    rate_hz, max_time_s
+        Control rate and cap of each run.
+    workers
+        Local processes (default: all cores).
+    executor
+        Any object with ``map`` (e.g. a cluster's executor) to use instead of a local pool.
+    """
+    jobs = [(int(s), controller, distance, rate_hz, max_time_s) for s in seeds]
+    if executor is not None:
+        return list(executor.map(_check, jobs))
+    workers = workers or os.cpu_count() or 1
+    if workers == 1 or len(jobs) == 1:
+        return [_check(j) for j in jobs]
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(_check, jobs, chunksize=max(1, len(jobs) // (4 * workers))))
+
+
+def summarize(checks: list[ApproachCheck]) -> dict:
+    """Totals over a sweep (for reports and docs)."""
+    mins = np.array([c.min_capsule_distance_moving_m for c in checks])
+    return {
+        "approaches": len(checks),
+        "unsafe": sum(not c.safe for c in checks),
+        "position_violations": sum(c.position_violations for c in checks),
+        "velocity_violations": sum(c.velocity_violations for c in checks),
+        "moving_under_stop_rule": sum(c.moving_under_stop_rule for c in checks),
+        "moving_below_capsule_threshold": sum(c.moving_below_capsule_threshold for c in checks),
+        "min_capsule_distance_moving_m": dict(zip(("L1", "L2", "EE"), mins.min(axis=0).tolist())),
+        "reached_goal": sum(c.reached_goal for c in checks),
+        "mean_stopped_s": float(np.mean([c.stopped_s for c in checks])),
+    }
+
+
+def as_dicts(checks: list[ApproachCheck]) -> list[dict]:
+    """The checks as plain dicts (JSON)."""
+    return [asdict(c) for c in checks]
