@@ -110,11 +110,14 @@ class QPController(Controller):
                                 f"{sol.status})", info=info)
         x = sol.x
         nv = self.layout.nv
-        # Hard rows: bounds are enforced exactly (the solver meets them to its tolerance);
-        # the damper rows are checked.
-        x[:nv] = np.clip(x[:nv], prob.lb[:nv], prob.ub[:nv])
-        excess = float(np.max(prob.G[2:] @ x - prob.h[2:], initial=-np.inf))
+        # Hard rows, checked against the problem we meant to solve: a solution that breaks
+        # a bound or a damper by more than the solver's tolerance is never applied; within
+        # it, the bounds (joint limits) are then met exactly.
+        lb, ub = prob.lb[:nv], prob.ub[:nv]
+        excess = max(float(np.max(lb - x[:nv])), float(np.max(x[:nv] - ub)),
+                     float(np.max(prob.G[2:] @ x - prob.h[2:], initial=-np.inf)))
         if excess > FEASIBILITY_TOL:
-            return self.command(tick, None, reason=f"QP solution breaks a velocity damper by "
-                                f"{excess:.2e} m/s", info=info)
-        return self.command(tick, x[:nv], 1.0, inp.v_rep_L2, inp.v_rep_EE, info=info)
+            return self.command(tick, None, reason=f"QP solution breaks a hard constraint by "
+                                f"{excess:.2e} ({self.backend.name}: {sol.status})", info=info)
+        return self.command(tick, np.clip(x[:nv], lb, ub), 1.0, inp.v_rep_L2, inp.v_rep_EE,
+                            info=info)

@@ -85,9 +85,14 @@ def assemble(objectives, inequalities, bounds, n: int, inp) -> QPProblem:
     return QPProblem(H, c, G, h, lb, ub)
 
 
+#: ProxQP's absolute tolerance: at OSQP's 1e-7 its answers differ from daqp's by up to
+#: 4e-5 rad/s on recorded ticks; at 1e-9 by less than 1e-6 (docs/qp.md).
+PROXQP_EPS_ABS = 1e-9
+
+
 def _osqp_settings(cfg: QPConfig) -> dict:
     return dict(eps_abs=cfg.eps_abs, eps_rel=cfg.eps_rel, max_iter=cfg.max_iter,
-                polish=cfg.polish, verbose=False)
+                polishing=cfg.polish, verbose=False)
 
 
 class PersistentOSQP:
@@ -146,16 +151,27 @@ class PersistentOSQP:
         self._M[n:] = prob.G
         self._l[:n], self._u[:n], self._u[n:] = prob.lb, prob.ub, prob.h
         l, u = np.maximum(self._l, -inf), np.minimum(self._u, inf)
+        # OSQP rejects l > u (or a non-convex P) in an update by keeping the *previous*
+        # data, after which solve() reports "solved" for that old problem: never let it.
+        if np.any(l > u):
+            k = int(np.argmax(l > u))
+            return QPSolution(None, False, f"infeasible bounds: l > u in row {k} "
+                                           f"({l[k]:.4g} > {u[k]:.4g})")
         Px, Ax = prob.H.ravel()[self._p_idx], self._M.ravel()[self._a_idx]
         if self._native is not None:
             s = self._native
-            s.update_data_vec(q=prob.c, l=l, u=u)
-            s.update_data_mat(P_x=Px, P_i=None, A_x=Ax, A_i=None)
+            flag = s.update_data_vec(q=prob.c, l=l, u=u) or s.update_data_mat(
+                P_x=Px, P_i=None, A_x=Ax, A_i=None)
+            if flag:
+                return QPSolution(None, False, f"OSQP rejected the update (exit flag {flag})")
             s.solve()
             info = s.info
             status_val, status, iters = info.status_val, info.status, info.iter
             x = s.solution.x
         else:
+            # The public update() discards OSQP's exit flag: check convexity here instead.
+            if np.linalg.eigvalsh(prob.H).min() < -1e-9:
+                return QPSolution(None, False, "the cost is not convex")
             self._solver.update(q=prob.c, l=l, u=u, Px=Px, Ax=Ax)
             res = self._solver.solve(raise_error=False)
             status_val, status, iters, x = res.info.status_val, res.info.status, res.info.iter, res.x
@@ -181,12 +197,14 @@ class QPSolversBackend:
         self.name, self._qpsolvers = solver, qpsolvers
         self._settings = _osqp_settings(cfg) if solver == "osqp" else {}
         if solver == "proxqp":
-            self._settings = dict(eps_abs=cfg.eps_abs, eps_rel=0.0)
+            self._settings = dict(eps_abs=PROXQP_EPS_ABS, eps_rel=0.0)
 
     def solve(self, prob: QPProblem) -> QPSolution:
         keep = np.isfinite(prob.h)
-        problem = self._qpsolvers.Problem(prob.H, prob.c, prob.G[keep], prob.h[keep],
-                                          lb=prob.lb, ub=prob.ub)
+        H, G = prob.H, prob.G[keep]
+        if self.name == "osqp":          # it wants sparse matrices (and warns otherwise)
+            H, G = sp.csc_matrix(H), sp.csc_matrix(G)
+        problem = self._qpsolvers.Problem(H, prob.c, G, prob.h[keep], lb=prob.lb, ub=prob.ub)
         try:
             sol = self._qpsolvers.solve_problem(problem, solver=self.name, **self._settings)
         except Exception as exc:   # a solver's own failure must stop the robot, not crash

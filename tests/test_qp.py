@@ -1,0 +1,224 @@
+"""The QP controller: agreement with eq. (8), safety over random approaches, solver paths."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import qpsolvers
+
+import qpavoid
+from qpavoid.analytic import AnalyticController
+from qpavoid.cli import main
+from qpavoid.controller import ControllerConfig
+from qpavoid.human import JointType
+from qpavoid.qp import QPConfig, QPController
+from qpavoid.qp.elbow_task import ElbowClearanceTask
+from qpavoid.qp.problem import PersistentOSQP, QPProblem, QPSolversBackend
+from qpavoid.qp.velocity_limits import VelocityLimit
+from qpavoid.scenarios import make_scenario
+from qpavoid.simulation import SimConfig, simulate
+from qpavoid.sweep import safety_sweep, summarize
+from qpavoid.task import ArcPath, inverse_kinematics
+
+#: Documented agreement between the solve paths (docs/qp.md), rad/s.
+SOLVER_TOL = 1e-5
+
+
+def test_nobody_near_qp_equals_analytic_at_every_tick(robot):
+    """In `free` both controllers solve eq. (8): same command within 1e-4 rad/s."""
+    result = simulate(QPController(robot), make_scenario("free", robot))
+    log = result.log
+    analytic = AnalyticController(robot)
+    worst = 0.0
+    for k in range(len(log["t"])):
+        cmd = analytic.step(log["q"][k], log["joints"][k], log["state"][k], log["tau"][k])
+        worst = max(worst, float(np.abs(cmd.dq - log["dq"][k]).max()))
+    assert worst < 1e-4
+    m = result.metrics
+    assert m["reached_goal"] and m["rms_path_error_m"] < 1e-3 and m["stop_events"] == []
+
+
+@pytest.mark.parametrize("name", ["test1", "test2", "free"])
+@pytest.mark.parametrize("distance", ["spheres", "capsules"])
+def test_scenarios_are_safe(name, distance):
+    """Every scenario, both distance methods: the sweep's invariants hold."""
+    from qpavoid.cli import simulate_one
+    result, robot, config, _ = simulate_one(name, None, "qp", distance, 40.0, 100.0)
+    log, avo = result.log, config.avoidance
+    capsule = log["distance"] if distance == "capsules" else log["distance_other"]
+    moving = np.any(log["dq"] != 0, axis=1)
+    thr = np.array([avo.d_stop_L1_m(), avo.d_stop_L2_m, avo.d_stop_EE_m])
+    assert not np.any(moving[:, None] & (capsule < thr))
+    assert result.metrics["joint_velocity_limit_violations"] == 0
+    assert result.metrics["joint_position_limit_violations"] == 0
+    assert result.metrics["reached_goal"]
+    if name == "test2":
+        assert result.metrics["stop_events"][0]["reason"].startswith("f = ")
+
+
+@pytest.mark.parametrize("distance", ["spheres", "capsules"])
+def test_safety_over_200_random_approaches(distance):
+    """Random part, direction and timing, hand speeds up to 1.6 m/s (scenarios.random_approach)."""
+    checks = safety_sweep(range(200), "qp", distance, rate_hz=50.0)
+    s = summarize(checks)
+    assert s["approaches"] == 200
+    assert s["position_violations"] == 0
+    assert s["velocity_violations"] == 0
+    assert s["moving_under_stop_rule"] == 0
+    assert s["moving_below_capsule_threshold"] == 0, [c for c in checks if not c.safe][:3]
+    assert sum(c.stopped_s > 0 for c in checks) > 20      # the approaches do reach the robot
+
+
+@pytest.fixture(scope="module")
+def recorded_problems(robot):
+    """QP problems of every tick of a test1 run (100 Hz), many with active rows."""
+    ctrl = QPController(robot, config=ControllerConfig(control_period_s=0.01))
+    log = simulate(ctrl, make_scenario("test1", robot), SimConfig(control_rate_hz=100)).log
+    probe = QPController(robot, config=ControllerConfig(control_period_s=0.01))
+    problems = []
+    for k in range(0, len(log["t"]), 3):
+        tick = probe.measure(log["q"][k], log["joints"][k], log["state"][k], log["tau"][k])
+        if not tick.reason:
+            problems.append(probe.problem(tick)[1])
+    return problems
+
+
+def test_solve_paths_agree(recorded_problems):
+    n, m = recorded_problems[0].H.shape[0], len(recorded_problems[0].h)
+    persistent = PersistentOSQP(n, m, QPConfig())
+    through_osqp = QPSolversBackend("osqp", QPConfig())
+    daqp = QPSolversBackend("daqp", QPConfig())
+    others = [QPSolversBackend(s, QPConfig()) for s in ("proxqp",) if s in qpsolvers.available_solvers]
+    active = 0
+    for prob in recorded_problems:
+        ref = daqp.solve(prob)
+        assert ref.found
+        keep = np.isfinite(prob.h)
+        if np.any(prob.G[keep] @ ref.x > prob.h[keep] - 1e-9):
+            active += 1
+        for backend in (persistent, through_osqp, *others):
+            sol = backend.solve(prob)
+            assert sol.found, (backend.name, sol.status)
+            np.testing.assert_allclose(sol.x[:-2], ref.x[:-2], atol=SOLVER_TOL)
+    assert active > 50                       # constraints were really active on many ticks
+
+
+def test_persistent_paths_agree(recorded_problems):
+    """The fast path into osqp's solver object equals osqp's public API."""
+    n, m = recorded_problems[0].H.shape[0], len(recorded_problems[0].h)
+    fast, public = PersistentOSQP(n, m, QPConfig()), PersistentOSQP(n, m, QPConfig())
+    public._native = None
+    for prob in recorded_problems[::5]:
+        a, b = fast.solve(prob), public.solve(prob)
+        assert a.found and b.found
+        np.testing.assert_allclose(a.x, b.x, atol=1e-9)
+
+
+def _start(robot):
+    path = ArcPath()
+    return path, inverse_kinematics(robot, path.reference(1.0)[0])
+
+
+def test_iteration_limit_stops_the_robot(robot):
+    path, q = _start(robot)
+    ctrl = QPController(robot, path, qp=QPConfig(max_iter=1))
+    from qpavoid.posture import Operator
+    cmd = ctrl.step(q + 0.05, Operator().rest(), None, 1.0)
+    assert cmd.stopped and cmd.reason.startswith("QP not solved")
+    assert "maximum iterations" in cmd.reason
+    np.testing.assert_array_equal(cmd.dq, 0.0)
+
+
+@pytest.mark.parametrize("backend", ["persistent", "qpsolvers"])
+def test_infeasible_problem_stops_the_robot(robot, monkeypatch, backend):
+    path, q = _start(robot)
+    monkeypatch.setattr(VelocityLimit, "compute_qp_bounds",
+                        lambda self, inp: (np.full(len(inp.tick.limits), 1.0),
+                                           np.full(len(inp.tick.limits), -1.0)))
+    ctrl = QPController(robot, path, qp=QPConfig(backend=backend, solver="daqp"))
+    from qpavoid.posture import Operator
+    cmd = ctrl.step(q, Operator().rest(), None, 1.0)
+    assert cmd.stopped and cmd.reason.startswith("QP not solved")
+    np.testing.assert_array_equal(cmd.dq, 0.0)
+
+
+def test_backends_report_infeasibility():
+    prob = QPProblem(np.eye(2), np.zeros(2), np.zeros((1, 2)), np.array([-1.0]),
+                     np.full(2, -1.0), np.full(2, 1.0))              # 0 <= -1: infeasible
+    assert not PersistentOSQP(2, 1, QPConfig()).solve(prob).found
+    assert not QPSolversBackend("daqp", QPConfig()).solve(prob).found
+    with pytest.raises(qpavoid.SolverError, match="not installed"):
+        QPSolversBackend("nosuchsolver", QPConfig())
+
+
+def test_redundancy_moves_the_elbow_away_keeping_the_end_effector(robot7):
+    """A3 free: the elbow task acts in the null space of the end-effector task."""
+    path = ArcPath()
+    q = inverse_kinematics(robot7, path.reference(5.0)[0])
+    P = robot7.control_points(q)
+    elbow = P[3]
+    side = np.cross(P[7] - P[3], P[3] - robot7.capsules(q)[0, 0])
+    side /= np.linalg.norm(side)
+    for sign in (1.0, -1.0):
+        joints = np.full((25, 3), np.nan)                     # only one hand is tracked
+        joints[JointType.WristRight] = elbow + sign * 0.35 * side
+        joints[JointType.HandRight] = elbow + sign * 0.33 * side
+        speeds = []
+        for weight in (0.0, 0.05):
+            ctrl = QPController(robot7, path, qp=QPConfig(elbow_weight=weight, regularization=1e-4))
+            tick = ctrl.measure(q, joints, None, 5.0)
+            inp, _ = ctrl.problem(tick)
+            cmd = ctrl.step(q, joints, None, 5.0)
+            assert not cmd.stopped
+            radii = np.where(ctrl.human.point_part, ctrl.human.sphere_radii, 0).max(axis=1)
+            d, n = ElbowClearanceTask(ctrl.layout, 3, robot7.sphere_radii[3], radii, 1, 0.4,
+                                      0.1).clearance(inp)
+            speeds.append(n @ tick.kin.point_jacobians[3] @ cmd.dq)
+            residual = tick.kin.ee_jacobian @ cmd.dq - ctrl.ee_task.target(inp)
+            assert np.abs(residual).max() < 1e-3                # the end effector keeps its path
+        assert speeds[1] > speeds[0] + 0.03                    # m/s: the elbow moves away
+
+
+def test_cli_qp_solver_redundant_and_compare(tmp_path, capsys):
+    out = tmp_path / "qp"
+    assert main(["run", "test1", "--controller", "qp", "--solver", "daqp", "--out", str(out),
+                 "--max-time", "1", "--rate", "100", "--no-plots"]) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["controller"] == "qp" and m["solver"] == "daqp"
+    out = tmp_path / "red"
+    assert main(["run", "free", "--controller", "qp", "--redundant", "--out", str(out),
+                 "--max-time", "1", "--rate", "100", "--no-plots"]) == 0
+    assert np.load(out / "log.npz")["q"].shape[1] == 7
+    assert main(["run", "free", "--redundant", "--out", str(out)]) == 2
+    assert "needs --controller qp" in capsys.readouterr().err
+    cmp = tmp_path / "cmp"
+    assert main(["compare", "--out", str(cmp), "--scenarios", "free", "--random", "1",
+                 "--max-time", "2", "--rate", "50"]) == 0
+    data = json.loads((cmp / "compare.json").read_text())
+    assert set(data) == {"free", "random:0"}
+    for ctrl in ("analytic", "qp"):
+        assert set(data["free"][ctrl]) == {"spheres", "capsules"}
+        assert "min_distance_m" in data["free"][ctrl]["spheres"]
+    table = (cmp / "compare.md").read_text()
+    assert table.count("| free |") == 4 and "random ×1" in table
+
+
+def test_rejected_update_is_never_solved_stale(robot):
+    """OSQP keeps the old data when an update is invalid; the backend must not 'solve' it."""
+    ok = QPProblem(np.eye(2), np.zeros(2), np.zeros((1, 2)), np.array([1.0]),
+                   np.full(2, -1.0), np.full(2, 1.0))
+    bad = QPProblem(np.eye(2), np.zeros(2), np.zeros((1, 2)), np.array([1.0]),
+                    np.full(2, 1.0), np.full(2, -1.0))                # lb > ub
+    nonconvex = QPProblem(-np.eye(2), np.zeros(2), np.zeros((1, 2)), np.array([1.0]),
+                          np.full(2, -1.0), np.full(2, 1.0))
+    for native in (True, False):
+        b = PersistentOSQP(2, 1, QPConfig())
+        if not native:
+            b._native = None
+        assert b.solve(ok).found
+        sol = b.solve(bad)
+        assert not sol.found and "infeasible bounds" in sol.status
+        assert not b.solve(nonconvex).found
+        assert b.solve(ok).found
