@@ -64,13 +64,14 @@ class ApproachCheck:
                     or self.moving_under_stop_rule or self.moving_below_capsule_threshold)
 
 
-def check_approach(seed: int, controller: str = "qp", distance: str = "spheres",
-                   rate_hz: float = 50.0, max_time_s: float = 25.0) -> ApproachCheck:
-    """Simulate the random approach ``seed`` and check the invariants of every tick."""
-    from .cli import simulate_one
-    result, robot, config, _ = simulate_one(f"random:{seed}", None, controller, distance,
-                                            max_time_s, rate_hz)
-    log, avo = result.log, config.avoidance
+def check_log(log: dict, robot, config, distance: str) -> dict:
+    """Tick counts of every broken invariant in a simulation log (see the module docstring).
+
+    Returns a dict with ``position_violations``, ``velocity_violations``,
+    ``moving_under_stop_rule``, ``moving_below_capsule_threshold`` (tick counts) and
+    ``min_capsule_distance_moving_m`` (per set, m).
+    """
+    avo = config.avoidance
     capsule = log["distance"] if distance == "capsules" else log["distance_other"]
     threshold = np.array([avo.d_stop_L1_m(), avo.d_stop_L2_m, avo.d_stop_EE_m])
     moving = np.any(log["dq"] != 0.0, axis=1)
@@ -82,11 +83,26 @@ def check_approach(seed: int, controller: str = "qp", distance: str = "spheres",
     over = np.any(np.abs(log["dq"]) > limits * (1 + 1e-9) + 1e-12, axis=1)
     outside = np.any((log["q"] > robot.q_max) | (log["q"] < robot.q_min), axis=1)
     below = np.any(capsule < threshold, axis=1)
-    min_moving = capsule[moving].min(axis=0) if moving.any() else np.full(3, np.inf)
-    return ApproachCheck(seed, controller, distance, len(moving), int(outside.sum()),
-                         int(over.sum()), int((moving & rule).sum()), int((moving & below).sum()),
-                         tuple(float(x) for x in min_moving), result.metrics["stopped_s"],
-                         result.metrics["reached_goal"])
+    return {
+        "position_violations": int(outside.sum()),
+        "velocity_violations": int(over.sum()),
+        "moving_under_stop_rule": int((moving & rule).sum()),
+        "moving_below_capsule_threshold": int((moving & below).sum()),
+        "min_capsule_distance_moving_m": tuple(
+            float(x) for x in (capsule[moving].min(axis=0) if moving.any() else np.full(3, np.inf))),
+    }
+
+
+def check_approach(seed: int, controller: str = "qp", distance: str = "spheres",
+                   rate_hz: float = 50.0, max_time_s: float = 25.0) -> ApproachCheck:
+    """Simulate the random approach ``seed`` and check the invariants of every tick."""
+    from .cli import simulate_one
+    result, robot, config, _ = simulate_one(f"random:{seed}", None, controller, distance,
+                                            max_time_s, rate_hz)
+    return ApproachCheck(seed, controller, distance, len(result.log["t"]),
+                         **check_log(result.log, robot, config, distance),
+                         stopped_s=result.metrics["stopped_s"],
+                         reached_goal=result.metrics["reached_goal"])
 
 
 def _check(args) -> ApproachCheck:

@@ -11,6 +11,7 @@ from qpavoid.human import JointType
 from qpavoid.posture import Operator
 from qpavoid.scenarios import make_scenario, nominal_configurations, random_approach
 from qpavoid.simulation import SimConfig, simulate
+from qpavoid.sweep import check_log
 from qpavoid.task import ArcPath, inverse_kinematics
 
 
@@ -91,16 +92,12 @@ def test_invariants_over_random_approaches(robot, seed):
         motion = Corrupted(motion, seed)
     ctrl = AnalyticController(robot, path, ControllerConfig(control_period_s=0.01))
     log = simulate(ctrl, motion, SimConfig(control_rate_hz=100, max_time_s=20)).log
-    cfg = ctrl.config.avoidance
     assert np.isfinite(log["dq"]).all() and np.isfinite(log["q"]).all()
-    rule = (log["f"] > cfg.f_stop) | (log["distance"][:, 1] <= cfg.d_stop_L2_m) \
-        | (log["distance"][:, 2] <= cfg.d_stop_EE_m)
-    assert log["stopped"][rule].all()
+    checks = check_log(log, robot, ctrl.config, "spheres")
+    assert checks["moving_under_stop_rule"] == 0                 # a stop rule: exactly zero
+    assert checks["velocity_violations"] == 0                    # eq. (3) and nominal limits
+    assert checks["position_violations"] == 0
     np.testing.assert_array_equal(log["dq"][log["stopped"]], 0.0)
-    assert (np.abs(log["dq"]) <= robot.dq_max * (1 + 1e-12)).all()
-    # eq. (3): A1 and A2 within their scaled limits.
-    lim = robot.dq_max[:2] * (1 - log["f"][:, None])
-    assert (np.abs(log["dq"][:, :2]) <= lim + 1e-12).all()
 
 
 def test_whole_body_lost_stops_with_a_reason(robot):

@@ -45,14 +45,13 @@ def test_nobody_near_qp_equals_analytic_at_every_tick(robot):
 def test_scenarios_are_safe(name, distance):
     """Every scenario, both distance methods: the sweep's invariants hold."""
     from qpavoid.cli import simulate_one
+    from qpavoid.sweep import check_log
     result, robot, config, _ = simulate_one(name, None, "qp", distance, 40.0, 100.0)
-    log, avo = result.log, config.avoidance
-    capsule = log["distance"] if distance == "capsules" else log["distance_other"]
-    moving = np.any(log["dq"] != 0, axis=1)
-    thr = np.array([avo.d_stop_L1_m(), avo.d_stop_L2_m, avo.d_stop_EE_m])
-    assert not np.any(moving[:, None] & (capsule < thr))
+    checks = check_log(result.log, robot, config, distance)
+    assert checks["position_violations"] == checks["velocity_violations"] == 0
+    assert checks["moving_under_stop_rule"] == 0
+    assert checks["moving_below_capsule_threshold"] == 0
     assert result.metrics["joint_velocity_limit_violations"] == 0
-    assert result.metrics["joint_position_limit_violations"] == 0
     assert result.metrics["reached_goal"]
     if name == "test2":
         assert result.metrics["stop_events"][0]["reason"].startswith("f = ")
