@@ -89,3 +89,11 @@ def test_errors_are_reported(tmp_path, capsys):
     assert main(["run", "--out", str(tmp_path / "z")]) == 2
     with pytest.raises(SystemExit):
         main(["run", "free", "--human", str(bad), "--out", str(tmp_path / "w")])
+
+
+def test_public_names():
+    """The names the issues fix are importable from the package."""
+    import qpavoid
+    for name in ("load_robot", "KinectHuman", "sphere_distances", "capsule_distances",
+                 "DistanceTable", "AnalyticController", "QPController"):
+        assert hasattr(qpavoid, name), name
