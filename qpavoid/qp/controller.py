@@ -77,6 +77,7 @@ class QPController(Controller):
                                                  q.elbow_speed_mps)
             self.objectives.append(self.elbow_task)
         self.inequalities = [rep_L2, rep_EE, self.damper]
+        self._hard_rows = slice(2, 2 + self.damper.rows)       # the damper rows of G (after 2 soft)
         self.bounds = [VelocityLimit(), PositionLimit(robot.q_min, robot.q_max, q.position_limit_gain),
                        rep_L2, rep_EE]
         self.backend = make_backend(q, layout.n, 2 + self.damper.rows)
@@ -115,7 +116,8 @@ class QPController(Controller):
         # it, the bounds (joint limits) are then met exactly.
         lb, ub = prob.lb[:nv], prob.ub[:nv]
         excess = max(float(np.max(lb - x[:nv])), float(np.max(x[:nv] - ub)),
-                     float(np.max(prob.G[2:] @ x - prob.h[2:], initial=-np.inf)))
+                     float(np.max(prob.G[self._hard_rows] @ x - prob.h[self._hard_rows],
+                                   initial=-np.inf)))
         if excess > FEASIBILITY_TOL:
             return self.command(tick, None, reason=f"QP solution breaks a hard constraint by "
                                 f"{excess:.2e} ({self.backend.name}: {sol.status})", info=info)
