@@ -59,8 +59,8 @@ def logistic(d, rho: float, alpha: float):
     turns NaN at d = +inf (a part that is not seen): it is 1 at d = −inf, 1/2 at d = ρ/2
     and 0 at d = +inf.
     """
-    x = (np.asarray(d, dtype=float) * (2.0 / rho) - 1.0) * alpha
-    return 0.5 * (1.0 - np.tanh(0.5 * x))
+    # ½ (1 − tanh(x/2)) with x = (2d/ρ − 1) α, folded into one affine map and one tanh.
+    return 0.5 - 0.5 * np.tanh(np.multiply(d, alpha / rho) - 0.5 * alpha)
 
 
 def distance_at_factor(f: float, rho: float, alpha: float) -> float:

@@ -14,7 +14,7 @@ from .ee_task import EndEffectorTask
 from .elbow_task import ElbowClearanceTask
 from .layout import Layout, QPInput
 from .position_limits import PositionLimit
-from .problem import assemble, make_backend
+from .problem import Assembler, make_backend
 from .regularization import Regularization
 from .repulsion import MIN_SPEED_MPS, RepulsionTask
 from .velocity_damper import VelocityDamper
@@ -80,7 +80,8 @@ class QPController(Controller):
         self._hard_rows = slice(2, 2 + self.damper.rows)       # the damper rows of G (after 2 soft)
         self.bounds = [VelocityLimit(), PositionLimit(robot.q_min, robot.q_max, q.position_limit_gain),
                        rep_L2, rep_EE]
-        self.backend = make_backend(q, layout.n, 2 + self.damper.rows)
+        self.assembler = Assembler(self.objectives, self.inequalities, self.bounds, layout.n)
+        self.backend = make_backend(q, layout.n, self.assembler.m)
 
     def problem(self, tick):
         """The QP input and problem of a tick (for inspection and cross-checks)."""
@@ -97,7 +98,7 @@ class QPController(Controller):
                                      v_rep_EE, cfg.sigma_min, cfg.lambda_max)       # eq. (8)
         inp = QPInput(tick, v_rep_L2, v_rep_EE, j, self.config.control_period_s, v_nominal,
                       dq_nominal)
-        return inp, assemble(self.objectives, self.inequalities, self.bounds, self.layout.n, inp)
+        return inp, self.assembler(inp)
 
     def step(self, q, joints, state=None, t: float = 0.0, frame_age_s: float = 0.0) -> Command:
         tick = self.measure(q, joints, state, t, frame_age_s)

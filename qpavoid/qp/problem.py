@@ -64,25 +64,73 @@ class QPSolution:
     iterations: int = -1
 
 
-def assemble(objectives, inequalities, bounds, n: int, inp) -> QPProblem:
-    """Sum the pieces' costs, stack their rows and intersect their bounds."""
-    H = np.zeros((n, n))
-    c = np.zeros(n)
-    for piece in objectives:
-        Hp, cp = piece.compute_qp_objective(inp)
-        H[:len(Hp), :len(Hp)] += Hp
-        c[:len(cp)] += cp
-    rows = [piece.compute_qp_inequalities(inp) for piece in inequalities]
-    G = np.vstack([g for g, _ in rows])
-    h = np.concatenate([hh for _, hh in rows])
-    lb = np.full(n, -np.inf)
-    ub = np.full(n, np.inf)
-    for piece in bounds:
-        lo, hi = piece.compute_qp_bounds(inp)
+class Assembler:
+    """Sums the pieces' costs, stacks their rows and intersects their bounds, each tick.
+
+    Pieces whose ``constant`` attribute is True (their rows never change) are summed once
+    here, so a tick only adds what varies. Rows are written straight into their place.
+
+    Parameters
+    ----------
+    objectives, inequalities, bounds
+        Pieces with ``compute_qp_objective`` / ``compute_qp_inequalities`` /
+        ``compute_qp_bounds``. Objectives and bounds may cover the first k variables only.
+    n
+        Number of variables.
+    inp
+        A sample input, used once to size the inequality rows.
+    """
+
+    def __init__(self, objectives, inequalities, bounds, n: int, inp=None):
+        self.n = n
+        const = [p for p in objectives if getattr(p, "constant", False)]
+        self.objectives = [p for p in objectives if not getattr(p, "constant", False)]
+        self.H0, self.c0 = np.zeros((n, n)), np.zeros(n)
+        for p in const:
+            self._add(self.H0, self.c0, *p.compute_qp_objective(inp))
+        const_b = [p for p in bounds if getattr(p, "constant", False)]
+        self.bounds = [p for p in bounds if not getattr(p, "constant", False)]
+        self.lb0, self.ub0 = np.full(n, -np.inf), np.full(n, np.inf)
+        for p in const_b:
+            self._intersect(self.lb0, self.ub0, *p.compute_qp_bounds(inp))
+        self.inequalities = inequalities
+        self.rows = [p.rows for p in inequalities]
+        self.offsets = np.concatenate([[0], np.cumsum(self.rows)]).tolist()
+        self.m = self.offsets[-1]
+
+    @staticmethod
+    def _add(H, c, Hp, cp):
+        k = len(cp)
+        if k == len(c):
+            H += Hp
+            c += cp
+        else:
+            H[:k, :k] += Hp
+            c[:k] += cp
+
+    @staticmethod
+    def _intersect(lb, ub, lo, hi):
         k = len(lo)
         np.maximum(lb[:k], lo, out=lb[:k])
         np.minimum(ub[:k], hi, out=ub[:k])
-    return QPProblem(H, c, G, h, lb, ub)
+
+    def __call__(self, inp) -> QPProblem:
+        H, c = self.H0.copy(), self.c0.copy()
+        for piece in self.objectives:
+            self._add(H, c, *piece.compute_qp_objective(inp))
+        G = np.empty((self.m, self.n))
+        h = np.empty(self.m)
+        for piece, a, b in zip(self.inequalities, self.offsets, self.offsets[1:]):
+            G[a:b], h[a:b] = piece.compute_qp_inequalities(inp)
+        lb, ub = self.lb0.copy(), self.ub0.copy()
+        for piece in self.bounds:
+            self._intersect(lb, ub, *piece.compute_qp_bounds(inp))
+        return QPProblem(H, c, G, h, lb, ub)
+
+
+def assemble(objectives, inequalities, bounds, n: int, inp) -> QPProblem:
+    """One-shot form of :class:`Assembler` (builds it and assembles ``inp``)."""
+    return Assembler(objectives, inequalities, bounds, n, inp)(inp)
 
 
 #: ProxQP's absolute tolerance: at OSQP's 1e-7 its answers differ from daqp's by up to

@@ -10,6 +10,8 @@ from .layout import Layout, QPInput
 class Regularization:
     """Cost ``ε ‖q̇‖²``: keeps H positive definite whatever the Jacobian's rank."""
 
+    constant = True
+
     def __init__(self, layout: Layout, epsilon: float):
         self.layout, self.epsilon = layout, epsilon
         n, nv = layout.n, layout.nv

@@ -28,6 +28,8 @@ MIN_SPEED_MPS = 1e-4
 class RepulsionTask:
     """Soft "move away at least this fast" for the closest L2 point or the end effector.
 
+    Its cost (on the slack) and bounds (slack ≥ 0) are constant; its one row is not.
+
     Parameters
     ----------
     layout
@@ -39,6 +41,9 @@ class RepulsionTask:
     set_index
         Row of the set in the distance table.
     """
+
+    constant = True    # objective and bounds; the inequality row varies
+    rows = 1
 
     def __init__(self, layout: Layout, which: str, weight: float, set_index: int):
         self.layout, self.which, self.set_index = layout, which, set_index
