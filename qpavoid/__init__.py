@@ -17,7 +17,8 @@ from .analytic import AnalyticController
 from .controller import Command, ControllerConfig
 from .distances import (CapsuleDistance, DistanceTable, SphereDistance, capsule_distances,
                         distance_method, sphere_distances)
-from .errors import InputError, QpavoidError, RobotDescriptionError, SolverError
+from .errors import (IKNotConvergedError, InputError, QpavoidError, RecordingError,
+                     RobotDescriptionError, SolverError)
 from .human import BodyPart, HumanGeometry, JointType, KinectHuman, TrackingState
 from .laws import AvoidanceConfig
 from .qp import QPConfig, QPController
@@ -30,8 +31,8 @@ __version__ = "0.1.0"
 __all__ = [
     "AnalyticController", "ArcPath", "AvoidanceConfig", "Command", "ControllerConfig",
     "QPConfig", "QPController", "SimConfig", "simulate", "inverse_kinematics",
-    "BodyPart", "CapsuleDistance", "ControlSet", "DistanceTable", "HumanGeometry", "InputError",
-    "JointType", "KinectHuman", "Kinematics", "QpavoidError", "Robot", "RobotDescriptionError",
-    "SolverError", "SphereDistance", "TrackingState", "capsule_distances", "distance_method",
-    "load_robot", "sphere_distances",
+    "BodyPart", "CapsuleDistance", "ControlSet", "DistanceTable", "HumanGeometry",
+    "IKNotConvergedError", "InputError", "JointType", "KinectHuman", "Kinematics", "QpavoidError",
+    "RecordingError", "Robot", "RobotDescriptionError", "SolverError", "SphereDistance",
+    "TrackingState", "capsule_distances", "distance_method", "load_robot", "sphere_distances",
 ]

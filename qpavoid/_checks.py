@@ -2,9 +2,21 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .errors import InputError
+
+
+def arg_name(label: str) -> str:
+    """The argument's name in a message label: ``"q (joint angles, rad)"`` -> ``"q"``."""
+    return label.split(" (", 1)[0]
+
+
+def one_line(exc: BaseException) -> str:
+    """A third-party exception's text on one line (never empty)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def as_array(value, shape: tuple[int | None, ...], name: str, *, finite: bool = True) -> np.ndarray:
@@ -17,20 +29,41 @@ def as_array(value, shape: tuple[int | None, ...], name: str, *, finite: bool = 
     shape
         Expected shape; ``None`` entries accept any length.
     name
-        Name of the argument, used in the error message.
+        Label of the argument in the error message, e.g. ``"q (joint angles, rad)"``; the
+        error's ``name`` attribute is its first word(s) before `` (`` (here ``"q"``).
     finite
         If True, NaN or infinite entries are rejected too.
+
+    Raises
+    ------
+    InputError
+        With ``name`` set as above and ``value`` the value given (the converted array for
+        a wrong shape or a non-finite entry).
     """
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise InputError(f"{name} must be numeric, got {type(value).__name__}") from exc
+        raise InputError(f"{name} must be numeric, got {type(value).__name__}",
+                         name=arg_name(name), value=value) from exc
     if arr.shape != shape and (arr.ndim != len(shape) or any(
             s is not None and s != n for s, n in zip(shape, arr.shape))):
         want = str(tuple("N" if s is None else s for s in shape)).replace("'", "")
-        raise InputError(f"{name} must have shape {want}, got {arr.shape}")
+        raise InputError(f"{name} must have shape {want}, got {arr.shape}", name=arg_name(name),
+                         value=arr)
     if finite and not np.isfinite(arr).all():
         bad = np.argwhere(~np.isfinite(arr))[0]
         raise InputError(f"{name} has a non-finite entry at index {tuple(int(i) for i in bad)}: "
-                         f"{arr[tuple(bad)]}")
+                         f"{arr[tuple(bad)]}", name=arg_name(name), value=arr)
     return arr
+
+
+def finite_number(value, name: str, *, positive: bool = False) -> float:
+    """``value`` as a finite float (``> 0`` if ``positive``), else :class:`InputError`."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = float("nan")
+    if not math.isfinite(number) or (positive and number <= 0):
+        kind = "positive and finite" if positive else "a finite number"
+        raise InputError(f"{name} must be {kind}, got {value!r}", name=arg_name(name), value=value)
+    return number

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .controller import Command, Controller
+from .controller import Command, Controller, Tick
 from .laws import ee_repulsive_velocity, l2_joint_velocity, modified_ik, repulsive_velocity
 
 
@@ -41,10 +41,7 @@ class AnalyticController(Controller):
 
     name = "analytic"
 
-    def step(self, q, joints, state=None, t: float = 0.0, frame_age_s: float = 0.0) -> Command:
-        tick = self.measure(q, joints, state, t, frame_age_s)
-        if tick.reason:
-            return self.command(tick, None)
+    def act(self, tick: Tick) -> Command:
         cfg, avo = self.config, self.config.avoidance
         table, kin = tick.table, tick.kin
         j = table.closest_part(self.i_L2)

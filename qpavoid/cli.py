@@ -1,178 +1,221 @@
-"""The ``qpavoid`` command line.
+"""The ``qpavoid`` command line: it parses, calls the library and prints, nothing more.
 
-    qpavoid run SCENARIO --controller analytic --distance spheres --out DIR
-    qpavoid run --human FILE.npz --controller analytic --out DIR
+    qpavoid run SCENARIO [--controller analytic|qp] [--distance spheres|capsules] [--out DIR]
+    qpavoid run --human FILE [...]
+    qpavoid compare [--scenarios NAME ...] [--human FILE ...] [--random N] [--out DIR]
 
-SCENARIO is ``test1``, ``test2`` or ``free`` (generated in code, :mod:`qpavoid.scenarios`);
-``--human FILE`` replays a recording (NPZ or CSV, docs/formats.md) along the paper's task.
-The run writes ``metrics.json``, ``log.npz`` and the paper's figures into DIR.
+Every argument is checked before any work starts; every failure is one line
+``qpavoid: error: ...`` on standard error with exit status 2 (130 when interrupted),
+never a traceback (``QPAVOID_DEBUG=1`` shows one for an internal error).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+from collections.abc import Callable, Sequence
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
+from typing import Any, NoReturn
 
-from .controller import ControllerConfig
+from .compare import compare
 from .errors import QpavoidError
-from .simulation import SimConfig, simulate
+from .io import check_output_dir
+from .jobs import progress_bar
+from .recording import load_recording
+from .runs import CONTROLLERS, DISTANCES, LIMIT_MODES, RunSpec, run_one
+from .scenarios import SCENARIOS
 
-CONTROLLERS = ("analytic", "qp")
-DISTANCES = ("spheres", "capsules")
-
-
-def build_controller(name: str, robot, config: ControllerConfig, solver: str | None = None,
-                     redundant: bool = False):
-    """The controller called ``name`` with the shared ``config``.
-
-    For ``"qp"``: ``solver`` names a qpsolvers solver (a new problem each tick); without
-    it the persistent OSQP problem is used. ``redundant`` turns on the elbow-clearance
-    cost that uses A3 (the robot must then be loaded with all 7 joints).
-    """
-    from .errors import InputError
-    if name == "analytic":
-        if redundant:
-            raise InputError("redundancy mode (--redundant) needs --controller qp")
-        if solver:
-            raise InputError("--solver applies to --controller qp only")
-        from .analytic import AnalyticController
-        return AnalyticController(robot, config=config)
-    if name == "qp":
-        from .qp import QPConfig, QPController
-        qp = QPConfig(backend="qpsolvers" if solver else "persistent", solver=solver or "osqp")
-        if redundant:
-            qp = QPConfig(backend=qp.backend, solver=qp.solver, elbow_weight=REDUNDANT_ELBOW_WEIGHT,
-                          regularization=REDUNDANT_REGULARIZATION)
-        return QPController(robot, config=config, qp=qp)
-    raise InputError(f"unknown controller {name!r}; choose from {list(CONTROLLERS)}")
+DESCRIPTION = ("Collision avoidance between a cobot arm and the person beside it: simulate "
+               "the paper's controller or its QP variant against generated or recorded "
+               "human motion.")
 
 
-#: Redundancy mode (docs/qp.md): weight of the elbow-clearance cost, and a regularisation
-#: large enough to give the end effector's null-space direction curvature (with 1e-7
-#: OSQP cannot reach its tolerance there).
-REDUNDANT_ELBOW_WEIGHT = 0.05
-REDUNDANT_REGULARIZATION = 1e-4
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line, ``qpavoid: error: ...``, exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        where = self.prog.removeprefix("qpavoid").strip()
+        hint = f"; see 'qpavoid {where} --help'" if where else "; see 'qpavoid --help'"
+        self.exit(2, f"qpavoid: error: {message}{hint}\n")
 
 
-def load_motion(scenario: str | None, human_file: str | None, robot):
-    """The human motion of a scenario name or a recording file, and its label."""
-    from .errors import InputError
-    if human_file:
-        from .recording import load_recording
-        return load_recording(human_file), Path(human_file).stem
-    if not scenario:
-        raise InputError("give a SCENARIO (test1, test2, free) or --human FILE")
-    from .scenarios import make_scenario
-    return make_scenario(scenario, robot), scenario
+class HelpFormatter(argparse.HelpFormatter):
+    """Help texts that end with the option's default, where it has a meaningful one."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if default is None or default is False or default == [] or "default" in text:
+            return text
+        shown = " ".join(map(str, default)) if isinstance(default, list) else default
+        return f"{text} (default: {shown})"
 
 
-def simulate_one(scenario, human_file, controller_name, distance, max_time_s=40.0, rate_hz=500.0,
-                 limit_mode="scale", robot_name="iiwa14", solver=None, redundant=False):
-    """Build everything for one run and simulate it; return (result, robot, config, label)."""
-    from .robot import load_robot
-    robot = load_robot(robot_name, locked=() if redundant else None)
-    config = ControllerConfig(distance=distance, limit_mode=limit_mode,
-                              control_period_s=1.0 / rate_hz)
-    controller = build_controller(controller_name, robot, config, solver, redundant)
-    motion, label = load_motion(scenario, human_file, robot)
-    result = simulate(controller, motion, SimConfig(control_rate_hz=rate_hz, max_time_s=max_time_s))
-    result.metrics.update(scenario=label, redundant=bool(redundant),
-                          solver=getattr(getattr(controller, "backend", None), "name", None))
-    return result, robot, config, label
+def _number(kind: type, check: Callable[[Any], bool], what: str) -> Callable[[str], Any]:
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}") from None
+        if not check(value):
+            raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}")
+        return value
+    return parse
 
 
-def run_one(scenario, human_file, controller_name, distance, out, max_time_s=40.0,
-            rate_hz=500.0, plots=True, limit_mode="scale", robot_name="iiwa14", solver=None,
-            redundant=False) -> dict:
-    """Run one simulation and write its files into ``out``; return its metrics."""
-    from . import plots as plotting
-    from .io import write_run
-    result, robot, config, label = simulate_one(scenario, human_file, controller_name, distance,
-                                                max_time_s, rate_hz, limit_mode, robot_name,
-                                                solver, redundant)
-    extra = {}
-    if plots and plotting.available():
-        Path(out).mkdir(parents=True, exist_ok=True)
-        figures = plotting.write_figures(out, result.log, robot, config.avoidance, distance)
-        extra["plots"] = [p.name for p in figures]
-    else:
-        extra["plots"] = []
-        extra["plots_skipped"] = ("disabled by --no-plots" if not plots
-                                  else "matplotlib is not installed (pip install 'qpavoid[plot]')")
-    write_run(out, result, extra)
-    return {**result.metrics, **extra}
+def _positive_finite(x: float) -> bool:
+    return 0.0 < x < float("inf")
 
 
-def _summary(m: dict) -> str:
+positive_float = _number(float, _positive_finite, "a positive finite number")
+count = _number(int, lambda n: n >= 0, "a whole number >= 0")
+workers = _number(int, lambda n: n >= 1, "a whole number >= 1")
+
+
+def _version() -> str:
+    try:
+        return version("qpavoid")
+    except PackageNotFoundError:
+        from . import __version__
+        return __version__
+
+
+def build_parser() -> Parser:
+    """The ``qpavoid`` argument parser."""
+    fmt = HelpFormatter
+    parser = Parser(prog="qpavoid", description=DESCRIPTION, formatter_class=fmt)
+    parser.add_argument("--version", action="version", version=f"qpavoid {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
+                                parser_class=Parser)
+
+    run = sub.add_parser("run", help="simulate one scenario or recording", formatter_class=fmt,
+                         description="Simulate the robot against one scenario or recording and "
+                                     "write metrics.json, log.npz and the figures into --out.")
+    run.add_argument("scenario", nargs="?", metavar="SCENARIO",
+                     help=f"{', '.join(SCENARIOS)} or random:SEED (or give --human FILE)")
+    run.add_argument("--human", metavar="FILE", help="replay a recording (NPZ or CSV, "
+                                                     "docs/formats.md) instead of a scenario")
+    run.add_argument("--controller", choices=CONTROLLERS, default="analytic",
+                     help="the paper's controller or its QP variant")
+    run.add_argument("--distance", choices=DISTANCES, default="spheres",
+                     help="robot-human distances: the paper's spheres or exact capsules")
+    run.add_argument("--limit-mode", choices=LIMIT_MODES, default="scale",
+                     help="analytic controller only: enforce eq. (3) by scaling the whole "
+                          "velocity or clipping each joint")
+    run.add_argument("--solver", metavar="NAME",
+                     help="QP only: a qpsolvers solver (osqp, daqp, proxqp, ...); default: the "
+                          "persistent OSQP problem")
+    run.add_argument("--redundant", action="store_true",
+                     help="QP only: free A3 (7 joints) and keep the elbow away from the person")
+    run.add_argument("--out", metavar="DIR", help="output folder (default: runs/NAME)")
+    _add_common(run)
+    run.set_defaults(parser=run)
+
+    cmp = sub.add_parser("compare", formatter_class=fmt,
+                         help="analytic vs QP, spheres vs capsules, on the same inputs",
+                         description="Run every input with both controllers and both distance "
+                                     "methods; write compare.json, compare.md and one plot "
+                                     "per input into --out.")
+    cmp.add_argument("--out", metavar="DIR", default="runs/compare", help="output folder")
+    cmp.add_argument("--scenarios", nargs="*", metavar="NAME", default=["test1", "test2", "free"],
+                     help="generated scenarios")
+    cmp.add_argument("--human", nargs="*", default=[], metavar="FILE",
+                     help="recordings to replay too")
+    cmp.add_argument("--random", type=count, default=0, metavar="N",
+                     help="also N random hand approaches (seeds SEED .. SEED+N-1)")
+    cmp.add_argument("--seed", type=count, default=0, help="first seed of --random")
+    cmp.add_argument("--workers", type=workers, default=None, metavar="N",
+                     help="parallel processes (default: all cores)")
+    _add_common(cmp)
+    cmp.set_defaults(parser=cmp)
+    return parser
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--max-time", type=positive_float, default=40.0, metavar="S",
+                   help="cap on each run, s (0.1 to 3600)")
+    p.add_argument("--rate", type=positive_float, default=500.0, metavar="HZ",
+                   help="control rate, Hz (30 to 10000)")
+    p.add_argument("--no-plots", action="store_true", help="do not write the figures")
+    p.add_argument("--robot", default="iiwa14", metavar="NAME",
+                   help="robot description: a bundled name or a folder")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+
+
+def _run(args: argparse.Namespace, parser: Parser) -> str:
+    if args.scenario and args.human:
+        parser.error("give either SCENARIO or --human FILE, not both")
+    spec = RunSpec(scenario=args.scenario, human_file=args.human, controller=args.controller,
+                   distance=args.distance, max_time_s=args.max_time, rate_hz=args.rate,
+                   limit_mode=args.limit_mode, robot=args.robot, solver=args.solver,
+                   redundant=args.redundant)
+    out = Path(args.out or Path("runs") / spec.label.replace(":", "-"))
+    check_output_dir(out)
+    if args.human:
+        load_recording(args.human)                # a bad file fails before the run
+    with progress_bar(spec.max_time_s, spec.label, "s", not args.quiet) as bar:
+        def advance(t: float) -> None:
+            bar.update(t - bar.n)
+        m = run_one(spec, out, plots=not args.no_plots, progress=advance)
+    lines = [summary(m)]
+    if m.get("plots_skipped"):
+        lines.append(f"  figures skipped: {m['plots_skipped']}")
+    figures = f" and {len(m['plots'])} figures" if m["plots"] else ""
+    lines.append(f"wrote metrics.json, log.npz{figures} to {out}/")
+    return "\n".join(lines)
+
+
+def _compare(args: argparse.Namespace) -> str:
+    table = compare(args.out, args.scenarios, args.human, args.random, args.seed,
+                    args.max_time, args.rate, not args.no_plots, args.robot,
+                    workers=args.workers, progress=not args.quiet)
+    return f"{table}\nwrote compare.json, compare.md and the plots to {args.out}/"
+
+
+def summary(m: dict) -> str:
+    """A run's metrics as a few readable lines."""
     stops = "; ".join(f"{e['t']:.2f} s: {e['reason']}" for e in m["stop_events"]) or "none"
+    md = m["min_distance_m"]
     return (f"{m['scenario']}: controller {m['controller']}, distances {m['distance_method']}\n"
             f"  reached goal {m['reached_goal']} in {m['duration_s']:.2f} s "
             f"(final error {m['final_position_error_m'] * 1e3:.3f} mm)\n"
-            f"  path error rms {m['rms_path_error_m'] * 1e3:.3f} mm, max {m['max_path_error_m'] * 1e3:.3f} mm\n"
-            f"  min distance spheres {m['min_distance_m']['spheres']:.4f} m, "
-            f"capsules {m['min_distance_m']['capsules']:.4f} m, max f {m['max_f']:.3f}\n"
+            f"  path error rms {m['rms_path_error_m'] * 1e3:.3f} mm, "
+            f"max {m['max_path_error_m'] * 1e3:.3f} mm\n"
+            f"  min distance spheres {md['spheres']:.4f} m, capsules {md['capsules']:.4f} m, "
+            f"max f {m['max_f']:.3f}\n"
             f"  stopped {m['stopped_s']:.2f} s, stops: {stops}\n"
             f"  tick {m['tick_us']['median']:.0f} us median, {m['tick_us']['p99']:.0f} us p99; "
             f"limit violations: velocity {m['joint_velocity_limit_violations']}, "
             f"position {m['joint_position_limit_violations']}")
 
 
-def _add_common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--max-time", type=float, default=40.0, help="cap on the run, s (default 40)")
-    p.add_argument("--rate", type=float, default=500.0, help="control rate, Hz (default 500)")
-    p.add_argument("--no-plots", action="store_true", help="do not write the figures")
-    p.add_argument("--robot", default="iiwa14", help="robot description (name or folder)")
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="qpavoid", description=__doc__.split("\n\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="simulate one scenario or recording")
-    run.add_argument("scenario", nargs="?", help="test1, test2, free or random:SEED")
-    run.add_argument("--human", metavar="FILE", help="replay a recording (NPZ or CSV) instead")
-    run.add_argument("--controller", choices=CONTROLLERS, default="analytic")
-    run.add_argument("--distance", choices=DISTANCES, default="spheres")
-    run.add_argument("--limit-mode", choices=("scale", "clip"), default="scale",
-                     help="how the analytic controller enforces eq. (3)")
-    run.add_argument("--solver", help="QP solver through qpsolvers (osqp, proxqp, daqp, ...); "
-                                      "default: a persistent OSQP problem")
-    run.add_argument("--redundant", action="store_true",
-                     help="QP only: free A3 (7 joints) and keep the elbow away from the person")
-    run.add_argument("--out", required=True, help="output directory")
-    _add_common(run)
-    cmp = sub.add_parser("compare", help="analytic vs QP, spheres vs capsules, on the same inputs")
-    cmp.add_argument("--out", required=True, help="output directory")
-    cmp.add_argument("--scenarios", nargs="*", default=None,
-                     help="generated scenarios (default: test1 test2 free)")
-    cmp.add_argument("--human", nargs="*", default=[], metavar="FILE", help="recordings to replay too")
-    cmp.add_argument("--random", type=int, default=0, metavar="N",
-                     help="also N random hand approaches (seeds --seed .. --seed+N-1)")
-    cmp.add_argument("--seed", type=int, default=0)
-    _add_common(cmp)
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; return the exit status."""
+    parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        if args.command == "run":
-            if args.scenario and args.human:
-                parser.error("give either SCENARIO or --human FILE, not both")
-            m = run_one(args.scenario, args.human, args.controller, args.distance, args.out,
-                        args.max_time, args.rate, not args.no_plots, args.limit_mode, args.robot,
-                        args.solver, args.redundant)
-            print(_summary(m))
-            if m.get("plots_skipped"):
-                print(f"  plots skipped: {m['plots_skipped']}")
-            print(f"  wrote {Path(args.out) / 'metrics.json'}, log.npz"
-                  + (f" and {len(m['plots'])} figures" if m["plots"] else ""))
-        else:
-            from .compare import compare
-            scenarios = ["test1", "test2", "free"] if args.scenarios is None else args.scenarios
-            table = compare(args.out, scenarios, args.human, args.random, args.seed, args.max_time,
-                            args.rate, not args.no_plots, args.robot)
-            print(table)
+        text = _run(args, args.parser) if args.command == "run" else _compare(args)
     except QpavoidError as exc:
-        print(f"qpavoid: error: {exc}", file=sys.stderr)
-        return 2
+        return _fail(f"qpavoid: error: {exc}", 2)
+    except OSError as exc:
+        return _fail(f"qpavoid: error: {exc.strerror or exc}"
+                     + (f": {exc.filename}" if exc.filename else ""), 2)
+    except KeyboardInterrupt:
+        return _fail("qpavoid: interrupted; nothing written", 130)
+    except Exception as exc:                     # a bug: one line, the traceback on request
+        if os.environ.get("QPAVOID_DEBUG"):
+            raise
+        return _fail(f"qpavoid: error: internal error, please report it: "
+                     f"{type(exc).__name__}: {exc} (QPAVOID_DEBUG=1 shows the traceback)", 2)
+    print(text)
     return 0
+
+
+def _fail(line: str, status: int) -> int:
+    print(" ".join(line.split()), file=sys.stderr)
+    return status
 
 
 if __name__ == "__main__":

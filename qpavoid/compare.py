@@ -8,47 +8,37 @@ with the analytic and the QP controller, each with spheres and with capsules, an
 * ``compare_<input>.png``: per named input, both controllers' minimum distance and path
   error over time.
 
-Runs are independent, so they are mapped over a process pool (``workers``, default all
-cores); a sweep over thousands of approaches is the same map over more cases.
+Runs are independent, so they are mapped over a process pool (:func:`qpavoid.jobs.map_jobs`,
+``workers`` default all cores); a sweep over thousands of approaches is the same map over
+more cases.
 """
 
 from __future__ import annotations
 
 import json
-import os
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-CONTROLLERS = ("analytic", "qp")
-DISTANCES = ("spheres", "capsules")
+from . import plots as plotting
+from .errors import InputError
+from .io import check_output_dir, staged_output
+from .jobs import map_jobs
+from .recording import load_recording
+from .robot import load_robot
+from .runs import CONTROLLERS, DISTANCES, RunSpec, simulate_one
+
+Series = dict[str, np.ndarray]
 
 
-@dataclass(frozen=True)
-class Case:
-    """One run: an input (scenario name or recording path), a controller, a method."""
-
-    label: str
-    scenario: str | None
-    human_file: str | None
-    controller: str
-    distance: str
-    max_time_s: float
-    rate_hz: float
-    robot: str
-
-
-def run_case(case: Case) -> tuple[Case, dict, dict]:
+def run_case(spec: RunSpec) -> tuple[RunSpec, dict, Series]:
     """Simulate one case; return its metrics and the time series the plots need."""
-    from .cli import simulate_one
-    result, *_ = simulate_one(case.scenario, case.human_file, case.controller, case.distance,
-                              case.max_time_s, case.rate_hz, robot_name=case.robot)
-    log = result.log
+    run = simulate_one(spec)
+    log = run.sim.log
     series = {"t": log["t"][::10], "min_distance": log["distance"].min(axis=1)[::10],
               "path_error": np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)[::10]}
-    return case, result.metrics, series
+    return spec, run.metrics, series
 
 
 def _row(label, ctrl, dist, m) -> str:
@@ -84,54 +74,80 @@ HEADER = ("| input | controller | distances | goal | time (s) | min d spheres (m
           "limit viol. vel/pos | tick µs median / p99 |\n" + "|---" * 13 + "|")
 
 
-def compare(out: str | Path, scenarios: list[str], human_files: list[str], n_random: int = 0,
-            seed: int = 0, max_time_s: float = 40.0, rate_hz: float = 500.0, plots: bool = True,
-            robot: str = "iiwa14", workers: int | None = None) -> str:
-    """Run the comparison, write its files into ``out``; return the markdown table."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    inputs = [(s, s, None) for s in scenarios]
-    inputs += [(Path(f).stem, None, str(f)) for f in human_files]
-    randoms = [f"random:{seed + k}" for k in range(n_random)]
-    inputs += [(r, r, None) for r in randoms]
-    cases = [Case(label, scen, hf, c, d, max_time_s, rate_hz, robot)
-             for label, scen, hf in inputs for c in CONTROLLERS for d in DISTANCES]
-    workers = workers or os.cpu_count() or 1
-    if workers > 1 and len(cases) > 1:
-        with ProcessPoolExecutor(max_workers=min(workers, len(cases))) as pool:
-            done = list(pool.map(run_case, cases))
-    else:
-        done = [run_case(c) for c in cases]
+def compare_specs(scenarios: Sequence[str], human_files: Sequence[str], n_random: int = 0,
+                  seed: int = 0, max_time_s: float = 40.0, rate_hz: float = 500.0,
+                  robot: str = "iiwa14") -> list[RunSpec]:
+    """Every case of a comparison, checked: each input × controller × distance method.
 
+    Raises
+    ------
+    InputError
+        No input at all, a negative count or seed, a bad scenario name, an unreadable
+        recording (each recording is read once here, so a bad file fails before any run).
+    RobotDescriptionError
+        An unknown robot.
+    """
+    if n_random < 0 or seed < 0:
+        bad = ("--random", n_random) if n_random < 0 else ("--seed", seed)
+        raise InputError(f"{bad[0]} must be a whole number >= 0, got {bad[1]}", name=bad[0],
+                         value=bad[1])
+    if not (scenarios or human_files or n_random):
+        raise InputError("nothing to compare: give --scenarios NAME..., --human FILE... or "
+                         "--random N", name="--scenarios", value=list(scenarios))
+    labels = [Path(f).stem for f in human_files]
+    if len(set(labels)) < len(labels):
+        raise InputError(f"recordings must have distinct file names, got {list(human_files)}",
+                         name="--human", value=list(human_files))
+    load_robot(robot)
+    for f in human_files:
+        load_recording(f)
+    inputs = [dict(scenario=s) for s in scenarios]
+    inputs += [dict(human_file=str(f)) for f in human_files]
+    inputs += [dict(scenario=f"random:{seed + k}") for k in range(n_random)]
+    return [RunSpec(**i, controller=c, distance=d, max_time_s=max_time_s, rate_hz=rate_hz,
+                    robot=robot)  # type: ignore[arg-type]
+            for i in inputs for c in CONTROLLERS for d in DISTANCES]
+
+
+def compare(out: str | Path, scenarios: Sequence[str], human_files: Sequence[str],
+            n_random: int = 0, seed: int = 0, max_time_s: float = 40.0, rate_hz: float = 500.0,
+            plots: bool = True, robot: str = "iiwa14", workers: int | None = None,
+            progress: bool = False) -> str:
+    """Run the comparison, write its files into ``out``; return the markdown table.
+
+    Every case is checked before the first run starts (:func:`compare_specs`); the files
+    appear in ``out`` only when all of them are written.
+    """
+    check_output_dir(out)
+    specs = compare_specs(scenarios, human_files, n_random, seed, max_time_s, rate_hz, robot)
+    done = map_jobs(run_case, specs, workers=workers, progress=progress, desc="compare",
+                    unit="run")
     metrics: dict = {}
     series: dict = {}
-    for case, m, s in done:
-        metrics.setdefault(case.label, {}).setdefault(case.controller, {})[case.distance] = m
-        series[(case.label, case.controller, case.distance)] = s
-    (out / "compare.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    for spec, m, s in done:
+        metrics.setdefault(spec.label, {}).setdefault(spec.controller, {})[spec.distance] = m
+        series[(spec.label, spec.controller, spec.distance)] = s
+    labels = list(dict.fromkeys(spec.label for spec in specs))
+    randoms = [label for label in labels if label.startswith("random:")]
+    named = [label for label in labels if label not in randoms]
 
     lines = [HEADER]
-    for label, _, _ in inputs:
-        if label in randoms:
-            continue
-        for c in CONTROLLERS:
-            for d in DISTANCES:
-                lines.append(_row(label, c, d, metrics[label][c][d]))
+    lines += [_row(label, c, d, metrics[label][c][d])
+              for label in named for c in CONTROLLERS for d in DISTANCES]
     if randoms:
-        for c in CONTROLLERS:
-            for d in DISTANCES:
-                lines.append(_random_row(f"random ×{len(randoms)}", c, d,
-                                         [metrics[r][c][d] for r in randoms]))
+        lines += [_random_row(f"random ×{len(randoms)}", c, d,
+                              [metrics[r][c][d] for r in randoms])
+                  for c in CONTROLLERS for d in DISTANCES]
     table = "\n".join(lines)
-    (out / "compare.md").write_text(
-        "# qpavoid compare\n\nEvery input run with both controllers and both distance methods "
-        f"({rate_hz:g} Hz control, {max_time_s:g} s cap). Limit violations: ticks over a joint "
-        "velocity / position limit.\n\n" + table + "\n")
-    from . import plots as plotting
-    if plots and plotting.available():
-        for label, _, _ in inputs:
-            if label not in randoms:
-                plotting.write_comparison(out / f"compare_{label}.png", label,
+    with staged_output(out) as stage:
+        (stage / "compare.json").write_text(json.dumps(metrics, indent=2) + "\n")
+        (stage / "compare.md").write_text(
+            "# qpavoid compare\n\nEvery input run with both controllers and both distance "
+            f"methods ({rate_hz:g} Hz control, {max_time_s:g} s cap). Limit violations: ticks "
+            "over a joint velocity / position limit.\n\n" + table + "\n")
+        if plots and plotting.available():
+            for label in named:
+                plotting.write_comparison(stage / f"compare_{label}.png", label,
                                           {(c, d): series[(label, c, d)]
                                            for c in CONTROLLERS for d in DISTANCES})
     return table

@@ -5,8 +5,12 @@ path time, and returns a :class:`Command`: joint velocities plus everything need
 why. The shared prelude measures (kinematics, distance table, f of eq. 2, the reference
 pose and twist) and applies the paper's stop rules; the shared epilogue is the last-resort
 layer (never cross a joint position limit, never command a non-finite velocity). Between
-them each controller computes its joint velocities: :class:`~qpavoid.analytic.AnalyticController`
-with eqs. (3)-(9), :class:`~qpavoid.qp.controller.QPController` with one QP.
+them each controller computes its joint velocities (:meth:`Controller.act`):
+:class:`~qpavoid.analytic.AnalyticController` with eqs. (3)-(9),
+:class:`~qpavoid.qp.controller.QPController` with one QP. A numerical failure there (a
+:class:`~qpavoid.errors.SolverError`, or a ``LinAlgError``) stops the robot with the
+error as the reason; it is never raised. Invalid inputs (a wrong shape, a non-finite
+joint angle or path time) raise :class:`~qpavoid.errors.InputError` before any of it.
 """
 
 from __future__ import annotations
@@ -15,8 +19,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._checks import finite_number
 from .distances import DistanceTable, distance_method
-from .errors import InputError
+from .errors import InputError, SolverError
 from .human import HumanGeometry, KinectHuman
 from .laws import AvoidanceConfig, l1_factor, stop_reason
 from .robot import Kinematics, Robot
@@ -117,7 +122,7 @@ class Command:
 
 @dataclass
 class Tick:
-    """The measurements of one tick, shared by the controllers (internal)."""
+    """One tick's measurements (:meth:`Controller.measure`), given to :meth:`Controller.act`."""
 
     q: np.ndarray
     kin: Kinematics
@@ -157,18 +162,23 @@ class Controller:
         self.human = human or KinectHuman()
         self.distances = distance_method(self.config.distance, robot, self.human)
         if self.config.limit_mode not in ("scale", "clip"):
-            raise InputError(f"limit_mode must be 'scale' or 'clip', got {self.config.limit_mode!r}")
+            mode = self.config.limit_mode
+            raise InputError(f"limit_mode must be 'scale' or 'clip', got {mode!r}",
+                             name="limit_mode", value=mode)
         self.K = np.r_[[self.config.gain_position] * 3, [self.config.gain_orientation] * 3]
         self.i_L1, self.i_L2, self.i_EE = (robot.set_index(n) for n in ("L1", "L2", "EE"))
-        self.scaled_cols = self._columns(self.config.scaled_joints)
-        self.l2_cols = self._columns(self.config.l2_joints)
+        self.scaled_cols = self._columns("scaled_joints")
+        self.l2_cols = self._columns("l2_joints")
         self._frame_key: tuple[bytes, bytes | None] | None = None
         self._geometry = None
 
-    def _columns(self, names) -> np.ndarray:
+    def _columns(self, option: str) -> np.ndarray:
+        """Columns of the joints named by the config field ``option``."""
+        names = getattr(self.config, option)
         missing = [n for n in names if n not in self.robot.joint_names]
         if missing:
-            raise InputError(f"joints {missing} are not active joints of {self.robot.joint_names}")
+            raise InputError(f"{option}: joints {missing} are not active joints of "
+                             f"{self.robot.joint_names}", name=option, value=tuple(names))
         return np.array([self.robot.joint_names.index(n) for n in names])
 
     def human_geometry(self, joints, state):
@@ -182,7 +192,14 @@ class Controller:
         return self._geometry
 
     def measure(self, q, joints, state, t: float, frame_age_s: float = 0.0) -> Tick:
-        """Shared prelude: kinematics, distances, f (eq. 2), reference, stop rules."""
+        """Shared prelude: kinematics, distances, f (eq. 2), reference, stop rules.
+
+        Raises
+        ------
+        InputError
+            If ``q``, ``joints`` or ``state`` is malformed or ``t`` is not finite.
+        """
+        t = finite_number(t, "t (path time, s)")
         kin = self.robot.kinematics(q)
         geo = self.human_geometry(joints, state)
         table = self.distances(kin, geo)
@@ -234,7 +251,7 @@ class Controller:
             info=info or {})
 
     def step(self, q, joints, state=None, t: float = 0.0, frame_age_s: float = 0.0) -> Command:
-        """One control tick.
+        """One control tick: :meth:`measure`, then (unless a stop rule holds) :meth:`act`.
 
         Parameters
         ----------
@@ -249,5 +266,27 @@ class Controller:
         frame_age_s
             Age of the human frame, s (now minus its capture time); too old, or NaN, stops
             the robot.
+
+        Raises
+        ------
+        InputError
+            On malformed inputs (see :meth:`measure`). A numerical failure while computing
+            the command is not raised: the robot stops with it as the reason.
+        """
+        tick = self.measure(q, joints, state, t, frame_age_s)
+        if tick.reason:
+            return self.command(tick, None)
+        try:
+            return self.act(tick)
+        except (SolverError, np.linalg.LinAlgError) as exc:
+            info = ({"solver": exc.solver, "status": exc.status} if isinstance(exc, SolverError)
+                    else {"error": type(exc).__name__})
+            return self.command(tick, None, reason=f"numerical failure: {exc}", info=info)
+
+    def act(self, tick: Tick) -> Command:
+        """The command of a tick on which no stop rule holds (each controller's own part).
+
+        It ends with :meth:`command`; it may raise :class:`~qpavoid.errors.SolverError`
+        (or ``LinAlgError``), which :meth:`step` turns into a stop.
         """
         raise NotImplementedError

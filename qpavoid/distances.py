@@ -291,10 +291,10 @@ METHODS = {"spheres": SphereDistance, "capsules": CapsuleDistance}
 
 def distance_method(name: str, robot: Robot, human: KinectHuman):
     """Build the distance method called ``name`` (``"spheres"`` or ``"capsules"``)."""
-    try:
-        return METHODS[name](robot, human)
-    except KeyError:
-        raise InputError(f"unknown distance method {name!r}; choose from {sorted(METHODS)}") from None
+    if name not in METHODS:
+        raise InputError(f"unknown distance method {name!r}; choose from {sorted(METHODS)}",
+                         name="distance", value=name)
+    return METHODS[name](robot, human)
 
 
 def sphere_distances(robot: Robot, q, human: KinectHuman, joints, state=None) -> DistanceTable:

@@ -215,7 +215,8 @@ class KinectHuman:
         arr = as_array(joints, (N_KINECT_JOINTS, 3), "joints (Kinect v2, m)", finite=False)
         if np.any(np.isinf(arr)):
             bad = np.argwhere(np.isinf(arr))[0]
-            raise InputError(f"joints has an infinite coordinate at joint {JointType(bad[0]).name}")
+            raise InputError(f"joints has an infinite coordinate at joint {JointType(bad[0]).name}",
+                             name="joints", value=arr)
         return arr
 
     @staticmethod
@@ -225,12 +226,14 @@ class KinectHuman:
             return None
         arr = np.asarray(state)
         if arr.shape != (N_KINECT_JOINTS,):
-            raise InputError(f"state (Kinect tracking states) must have shape (25,), got {arr.shape}")
+            raise InputError(f"state (Kinect tracking states) must have shape (25,), got "
+                             f"{arr.shape}", name="state", value=arr)
         bad_mask = (arr != 0) & (arr != 1) & (arr != 2)
         if bad_mask.any():
             bad = int(np.flatnonzero(bad_mask)[0])
             raise InputError(f"state[{bad}] ({JointType(bad).name}) is {arr[bad].item()!r}, "
-                             "expected 0 (not tracked), 1 (inferred) or 2 (tracked)")
+                             "expected 0 (not tracked), 1 (inferred) or 2 (tracked)",
+                             name="state", value=arr)
         return arr.astype(np.int8)
 
     def joint_usable(self, joints, state=None) -> np.ndarray:

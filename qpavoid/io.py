@@ -9,15 +9,21 @@ run's summary (:func:`qpavoid.simulation.run_metrics`). Recorded human motion is
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-from .recording import Recording, load_recording, save_csv, save_npz
+from .errors import InputError
+from .recording import Recording, load_recording, read_file, read_npz, save_csv, save_npz
 from .simulation import SimResult
 
-__all__ = ["LOG_KEYS", "Recording", "load_log", "load_recording", "save_csv", "save_npz",
-           "write_run"]
+__all__ = ["LOG_KEYS", "Recording", "check_output_dir", "load_log", "load_recording",
+           "save_csv", "save_npz", "staged_output", "write_run"]
 
 #: The arrays every ``log.npz`` contains.
 LOG_KEYS = ("t", "q", "dq", "joints", "state", "stopped", "f", "distance", "v_rep_L2",
@@ -36,9 +42,58 @@ def write_run(out_dir: str | Path, result: SimResult, extra: dict | None = None)
 
 
 def load_log(path: str | Path) -> dict[str, np.ndarray]:
-    """The arrays of a ``log.npz`` (a run directory or the file itself)."""
+    """The arrays of a ``log.npz`` (a run directory or the file itself).
+
+    Raises
+    ------
+    RecordingError
+        If the file is missing or is not an NPZ archive of numeric arrays.
+    """
     p = Path(path)
     if p.is_dir():
         p = p / "log.npz"
-    with np.load(p) as data:
-        return {k: data[k] for k in data.files}
+    expected = f"expected the log.npz of a run, with arrays {', '.join(LOG_KEYS)}"
+    return read_file(p, lambda f: read_npz(f, None, expected), "run log")
+
+
+def check_output_dir(path: str | Path) -> Path:
+    """``path`` if it is a folder that can be written or created there; else :class:`InputError`.
+
+    Nothing is created: the check runs before a job starts, so that a bad ``--out`` fails in
+    a second, not after the simulation.
+    """
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {str(out)!r} is a file, not a folder", name="--out",
+                         value=str(out))
+    probe = out
+    while not probe.exists():                     # the deepest folder that exists
+        probe = probe.parent
+    if not probe.is_dir():
+        raise InputError(f"--out {str(out)!r}: {str(probe)!r} is a file, not a folder",
+                         name="--out", value=str(out))
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise InputError(f"--out {str(out)!r}: cannot write in {str(probe)!r} (permission "
+                         "denied)", name="--out", value=str(out))
+    return out
+
+
+@contextmanager
+def staged_output(path: str | Path) -> Iterator[Path]:
+    """Write a job's files into a staging folder; move them into ``path`` only on success.
+
+    Yields the staging folder (beside ``path``, so the final move is a rename). If the
+    ``with`` block raises, the staging folder is removed and ``path`` is left as it was.
+    Files already in ``path`` with other names are kept; files of the same name are
+    replaced.
+    """
+    out = check_output_dir(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        yield stage
+        out.mkdir(exist_ok=True)
+        for item in stage.iterdir():
+            os.replace(item, out / item.name)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack
 
+from .errors import SolverError
+
 
 @dataclass(frozen=True)
 class AvoidanceConfig:
@@ -110,10 +112,19 @@ def damped_pinv(J: np.ndarray, sigma_min: float, lambda_max: float) -> np.ndarra
     The damping is zero while the smallest singular value is above ``sigma_min`` (the
     exact inverse, as in the paper) and grows smoothly to ``lambda_max`` at a
     singularity: ``λ² = (1 − (σ_min/sigma_min)²) lambda_max²`` (Nakamura and Hanafusa).
+
+    Raises
+    ------
+    SolverError
+        If the SVD fails (``solver="lapack.dgesdd"``, ``status`` LAPACK's ``info``): it
+        did not converge (info > 0) or ``J`` has a non-finite entry (info < 0). A
+        controller tick turns it into a stop.
     """
     U, s, Vt, info = lapack.dgesdd(J, full_matrices=0)   # numpy's svd costs 2x in overhead
     if info != 0:
-        raise np.linalg.LinAlgError(f"SVD did not converge (LAPACK info {info})")
+        why = "did not converge" if info > 0 else "the matrix has a non-finite entry"
+        raise SolverError(f"SVD of the {J.shape[0]}x{J.shape[1]} Jacobian failed: {why} "
+                          f"(LAPACK dgesdd info {info})", solver="lapack.dgesdd", status=int(info))
     lam2 = 0.0 if s[-1] >= sigma_min else (1.0 - (s[-1] / sigma_min) ** 2) * lambda_max ** 2
     return (Vt.T * (s / (s * s + lam2))) @ U.T
 

@@ -14,7 +14,10 @@ Typical use::
 
 from __future__ import annotations
 
-import tomllib
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10: the same parser, as a package
+    import tomli as tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from importlib import resources
@@ -23,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ._checks import as_array
+from ._checks import as_array, one_line
 from .errors import InputError, RobotDescriptionError
 
 CONFIG_NAME = "control_points.toml"
@@ -97,7 +100,8 @@ class Kinematics:
         ``(1 - s) a + s b`` is exactly ``(1 - s) v_a + s v_b``.
         """
         if self.segment_jacobians is None:
-            raise InputError("kinematics were computed without Jacobians")
+            raise InputError("kinematics were computed without Jacobians", name="jacobians",
+                             value=False)
         ja, jb = self.segment_jacobians[set_index]
         return (1.0 - s) * ja + s * jb
 
@@ -179,7 +183,8 @@ class Robot:
         try:
             return self.set_names.index(name)
         except ValueError:
-            raise InputError(f"unknown control set {name!r}; sets are {self.set_names}") from None
+            raise InputError(f"unknown control set {name!r}; sets are {self.set_names}",
+                             name="set", value=name) from None
 
     def check_q(self, q) -> np.ndarray:
         """Return ``q`` as a float array of shape (nq,) or raise :class:`InputError`."""
@@ -261,7 +266,7 @@ def _description_dir(name: str | Path) -> Path:
     available = sorted(p.name for p in root.iterdir() if (p / CONFIG_NAME).is_file())
     raise RobotDescriptionError(
         f"unknown robot {str(name)!r}: not a folder with {CONFIG_NAME} and not one of the "
-        f"bundled descriptions {available}")
+        f"bundled descriptions {available}", path=path, name="robot", value=str(name))
 
 
 def _carriers(model: pin.Model, frame_id: int) -> set[int]:
@@ -282,15 +287,36 @@ def _add_point_frame(model: pin.Model, data: pin.Data, label: str, names: Sequen
     ids = []
     for n in names:
         if not model.existFrame(n):
-            raise RobotDescriptionError(f"{label}: no frame named {n!r} in the URDF")
+            raise RobotDescriptionError(f"{label}: no frame named {n!r} in the URDF",
+                                        name=label, value=n)
         ids.append(model.getFrameId(n))
     common = set.intersection(*(_carriers(model, i) for i in ids))
     if not common:
-        raise RobotDescriptionError(f"{label}: frames {list(names)} are not on one rigid body")
+        raise RobotDescriptionError(f"{label}: frames {list(names)} are not on one rigid body",
+                                    name=label, value=list(names))
     parent = max(common)  # the deepest body carrying all of them
     centre = np.mean([data.oMf[i].translation for i in ids], axis=0)
     placement = data.oMi[parent].actInv(pin.SE3(np.eye(3), centre))
     return model.addFrame(pin.Frame(label, parent, placement, pin.FrameType.OP_FRAME))
+
+
+#: Keys of a ``[[sets]]`` entry of the control-point file and of its ``capsule`` table.
+SET_KEYS = ("name", "sphere_radius_m", "points", "capsule")
+CAPSULE_KEYS = ("from", "to", "capsule_radius_m")
+
+
+def _check_sets(set_cfgs, path: Path) -> None:
+    """Raise :class:`RobotDescriptionError` unless every ``[[sets]]`` entry has its keys."""
+    for k, sc in enumerate(set_cfgs if isinstance(set_cfgs, list) else [set_cfgs]):
+        sc = sc if isinstance(sc, dict) else {}
+        missing = [key for key in SET_KEYS if key not in sc]
+        cap = sc.get("capsule")
+        if isinstance(cap, dict):
+            missing += [f"capsule.{key}" for key in CAPSULE_KEYS if key not in cap]
+        if missing:
+            raise RobotDescriptionError(f"{path}: [[sets]] entry {k} is missing key(s) "
+                                        f"{', '.join(missing)}", path=path, name=f"sets[{k}]",
+                                        value=missing)
 
 
 def load_robot(name: str | Path = "iiwa14", locked: Mapping[str, float] | Sequence[str] | None = None
@@ -316,20 +342,31 @@ def load_robot(name: str | Path = "iiwa14", locked: Mapping[str, float] | Sequen
         try:
             cfg = tomllib.load(fh)
         except tomllib.TOMLDecodeError as exc:
-            raise RobotDescriptionError(f"{folder / CONFIG_NAME}: {exc}") from exc
+            raise RobotDescriptionError(f"{folder / CONFIG_NAME}: {one_line(exc)}",
+                                        path=folder / CONFIG_NAME) from exc
     try:
         urdf = folder / cfg["urdf"]
         set_cfgs = cfg["sets"]
         ee_name = cfg["end_effector"]
     except KeyError as exc:
-        raise RobotDescriptionError(f"{folder / CONFIG_NAME}: missing key {exc}") from None
-    model = pin.buildModelFromUrdf(str(urdf))
+        raise RobotDescriptionError(f"{folder / CONFIG_NAME}: missing key {exc}",
+                                    path=folder / CONFIG_NAME, name=exc.args[0]) from None
+    _check_sets(set_cfgs, folder / CONFIG_NAME)
+    try:
+        model = pin.buildModelFromUrdf(str(urdf))
+    except (ValueError, RuntimeError, OSError) as exc:   # missing or malformed URDF
+        raise RobotDescriptionError(f"{urdf}: cannot build a model from this URDF: "
+                                    f"{one_line(exc)}", path=urdf) from exc
     default_locked = {k: float(v) for k, v in cfg.get("locked", {}).items()}
     if locked is None:
         locked = default_locked
     elif not isinstance(locked, Mapping):
         locked = {n: default_locked.get(n, 0.0) for n in locked}
-    locked = {str(k): float(v) for k, v in locked.items()}
+    try:
+        locked = {str(k): float(v) for k, v in locked.items()}
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"locked angles must be numbers (rad), got {dict(locked)!r}",
+                         name="locked", value=dict(locked)) from exc
 
     # Operational frames for points and capsule ends, placed at the neutral configuration.
     data = model.createData()
@@ -344,12 +381,14 @@ def load_robot(name: str | Path = "iiwa14", locked: Mapping[str, float] | Sequen
     for label, names in labels:
         _add_point_frame(model, data, label, names)
     if not model.existFrame(ee_name):
-        raise RobotDescriptionError(f"end_effector {ee_name!r} is not a frame of {urdf.name}")
+        raise RobotDescriptionError(f"end_effector {ee_name!r} is not a frame of {urdf.name}",
+                                    path=urdf, name="end_effector", value=ee_name)
 
     if locked:
         for jn in locked:
             if not model.existJointName(jn):
-                raise InputError(f"cannot lock {jn!r}: joints are {list(model.names)[1:]}")
+                raise InputError(f"cannot lock {jn!r}: joints are {list(model.names)[1:]}",
+                                 name="locked", value=jn)
         q_ref = pin.neutral(model)
         for jn, angle in locked.items():
             q_ref[model.joints[model.getJointId(jn)].idx_q] = angle

@@ -27,6 +27,7 @@ from .human import KinectHuman
 from .posture import Operator
 from .robot import Robot
 from .task import ArcPath, inverse_kinematics
+from .errors import InputError
 
 
 def smoothstep(x: float) -> float:
@@ -133,7 +134,6 @@ def _clearance_target(robot: Robot, human: KinectHuman, path: ArcPath, operator:
 def make_scenario(name: str, robot: Robot, path: ArcPath | None = None,
                   human: KinectHuman | None = None, operator: Operator | None = None):
     """The generated motion called ``name`` (``free``, ``test1``, ``test2``, ``random:SEED``)."""
-    from .errors import InputError
     path = path or ArcPath()
     human = human or KinectHuman()
     op = operator or Operator()
@@ -168,9 +168,24 @@ def make_scenario(name: str, robot: Robot, path: ArcPath | None = None,
                                    "right", anchor, _unit([-1.0, 0.5, -0.2]), 0.02, ("L1",),
                                    ("spheres", "capsules"))
         return ScriptedReach(op, "right", ((1.0, None), (4.0, target), (9.0, target), (11.0, None)))
-    if name.startswith("random:") and name[7:].isdigit():
-        return random_approach(np.random.default_rng(int(name[7:])), robot, path)
-    raise InputError(f"unknown scenario {name!r}; choose from {list(SCENARIOS)} or random:SEED")
+    return random_approach(np.random.default_rng(check_scenario_name(name)), robot, path)
+
+
+def check_scenario_name(name: str) -> int | None:
+    """Check that ``name`` is a scenario; return the seed of ``random:SEED`` (else None).
+
+    Raises
+    ------
+    InputError
+        For any other name, or a seed that is not a whole number >= 0.
+    """
+    if name in SCENARIOS:
+        return None
+    seed = name[len("random:"):] if name.startswith("random:") else None
+    if seed is not None and seed.isdigit() and seed.isascii():
+        return int(seed)
+    raise InputError(f"unknown scenario {name!r}; choose from {', '.join(SCENARIOS)} or "
+                     "random:SEED (SEED a whole number >= 0)", name="scenario", value=name)
 
 
 def _unit(v) -> np.ndarray:

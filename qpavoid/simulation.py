@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Callable, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -79,7 +79,8 @@ def _frame_source(motion: HumanMotion):
 
 
 def simulate(controller: Controller, motion: HumanMotion, config: SimConfig | None = None,
-             q0: np.ndarray | None = None) -> SimResult:
+             q0: np.ndarray | None = None,
+             progress: Callable[[float], None] | None = None) -> SimResult:
     """Run the controller in closed loop against ``motion`` along ``controller.path``.
 
     Parameters
@@ -92,6 +93,9 @@ def simulate(controller: Controller, motion: HumanMotion, config: SimConfig | No
         Simulation settings.
     q0
         Start configuration (default: inverse kinematics of the path's start pose).
+    progress
+        Called with the simulated time (s) at every new human frame, e.g. to move a
+        progress bar; ``None`` for none.
 
     Returns
     -------
@@ -136,6 +140,8 @@ def simulate(controller: Controller, motion: HumanMotion, config: SimConfig | No
             joints = np.asarray(joints, dtype=float)
             state = None if state is None else np.asarray(state)
             geo = controller.human.geometry(joints, state)
+            if progress is not None:
+                progress(t)
         t0 = time.perf_counter_ns()
         cmd = controller.step(q, joints, state, tau, t - key / cfg.frame_rate_hz)
         tick_us = (time.perf_counter_ns() - t0) / 1e3

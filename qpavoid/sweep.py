@@ -15,11 +15,14 @@ Each run is checked, tick by tick, for what must never happen:
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Iterable
+from concurrent.futures import Executor
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
+from .jobs import map_jobs
+from .runs import RunSpec, simulate_one
 
 
 @dataclass(frozen=True)
@@ -96,21 +99,21 @@ def check_log(log: dict, robot, config, distance: str) -> dict:
 def check_approach(seed: int, controller: str = "qp", distance: str = "spheres",
                    rate_hz: float = 50.0, max_time_s: float = 25.0) -> ApproachCheck:
     """Simulate the random approach ``seed`` and check the invariants of every tick."""
-    from .cli import simulate_one
-    result, robot, config, _ = simulate_one(f"random:{seed}", None, controller, distance,
-                                            max_time_s, rate_hz)
-    return ApproachCheck(seed, controller, distance, len(result.log["t"]),
-                         **check_log(result.log, robot, config, distance),
-                         stopped_s=result.metrics["stopped_s"],
-                         reached_goal=result.metrics["reached_goal"])
+    run = simulate_one(RunSpec(scenario=f"random:{seed}", controller=controller,
+                               distance=distance, max_time_s=max_time_s, rate_hz=rate_hz))
+    return ApproachCheck(seed, controller, distance, len(run.sim.log["t"]),
+                         **check_log(run.sim.log, run.robot, run.config, distance),
+                         stopped_s=run.metrics["stopped_s"],
+                         reached_goal=run.metrics["reached_goal"])
 
 
-def _check(args) -> ApproachCheck:
+def _check(args: tuple[int, str, str, float, float]) -> ApproachCheck:
     return check_approach(*args)
 
 
-def safety_sweep(seeds, controller: str = "qp", distance: str = "spheres", rate_hz: float = 50.0,
-                 max_time_s: float = 25.0, workers: int | None = None, executor=None
+def safety_sweep(seeds: Iterable[int], controller: str = "qp", distance: str = "spheres",
+                 rate_hz: float = 50.0, max_time_s: float = 25.0, workers: int | None = None,
+                 executor: Executor | None = None, progress: bool = False
                  ) -> list[ApproachCheck]:
     """Check every seed's random approach; in parallel over ``workers`` processes.
 
@@ -126,15 +129,19 @@ def safety_sweep(seeds, controller: str = "qp", distance: str = "spheres", rate_
         Local processes (default: all cores).
     executor
         Any object with ``map`` (e.g. a cluster's executor) to use instead of a local pool.
+    progress
+        Show a progress bar (on a terminal only).
+
+    Returns
+    -------
+    list of ApproachCheck
+        In the order of ``seeds``, whatever the number of workers.
     """
     jobs = [(int(s), controller, distance, rate_hz, max_time_s) for s in seeds]
-    if executor is not None:
-        return list(executor.map(_check, jobs))
-    workers = workers or os.cpu_count() or 1
-    if workers == 1 or len(jobs) == 1:
-        return [_check(j) for j in jobs]
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(_check, jobs, chunksize=max(1, len(jobs) // (4 * workers))))
+    RunSpec(scenario="free", controller=controller, distance=distance, max_time_s=max_time_s,
+            rate_hz=rate_hz)                     # check the settings before any job starts
+    return map_jobs(_check, jobs, workers=workers, executor=executor, progress=progress,
+                    desc="safety sweep", unit="approach")
 
 
 def summarize(checks: list[ApproachCheck]) -> dict:

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from ._checks import as_array
-from .errors import InputError
+from ._checks import as_array, finite_number
+from .errors import IKNotConvergedError
 from .robot import Robot
 
 #: The paper's initial and final end-effector poses (Sect. 3), base frame, m.
@@ -31,8 +31,14 @@ A_FIN = np.array([[0.25, -0.866, 0.433, -0.0476], [0.433, 0.5, 0.75, 0.6105],
 
 
 def orthonormalize(R: np.ndarray) -> np.ndarray:
-    """Nearest rotation matrix (the paper prints its matrices to 3-4 digits)."""
-    U, _, Vt = np.linalg.svd(R)
+    """Nearest rotation matrix (the paper prints its matrices to 3-4 digits).
+
+    Raises
+    ------
+    InputError
+        If ``R`` is not a finite (3, 3) array (the SVD would fail on a non-finite one).
+    """
+    U, _, Vt = np.linalg.svd(as_array(R, (3, 3), "R (rotation matrix)"))
     return U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
 
 
@@ -64,10 +70,11 @@ class ArcPath:
     sagitta_m: float = 0.08
 
     def __post_init__(self):
-        if self.duration_s <= 0:
-            raise InputError(f"duration_s must be positive, got {self.duration_s}")
-        p0 = as_array(np.asarray(self.start)[:3, 3], (3,), "start position")
-        p1 = as_array(np.asarray(self.goal)[:3, 3], (3,), "goal position")
+        finite_number(self.duration_s, "duration_s", positive=True)
+        finite_number(self.sagitta_m, "sagitta_m")
+        start = as_array(self.start, (4, 4), "start (pose)")
+        p0 = start[:3, 3]
+        p1 = as_array(self.goal, (4, 4), "goal (pose)")[:3, 3]
         chord = p1 - p0
         L = np.linalg.norm(chord)
         up = np.array([0.0, 0.0, 1.0])
@@ -88,7 +95,7 @@ class ArcPath:
             geom = dict(kind="arc", centre=centre, radius=R, angle=angle, e1=e1,
                         e2=np.cross(axis, e1))
         object.__setattr__(self, "_geom", geom)
-        object.__setattr__(self, "_rotation", orthonormalize(np.asarray(self.start)[:3, :3]))
+        object.__setattr__(self, "_rotation", orthonormalize(start[:3, :3]))
         pose = np.eye(4)
         pose[:3, :3] = self._rotation
         object.__setattr__(self, "_pose", pose)
@@ -159,23 +166,32 @@ def inverse_kinematics(robot: Robot, target: np.ndarray, q0: np.ndarray | None =
 
     Raises
     ------
-    InputError
+    IKNotConvergedError
         If the target is not reached within ``tol`` (unreachable, or outside the limits
-        on this branch).
+        on this branch); it carries the target, the final residual, the number of
+        iterations and the last iterate. It is an :class:`InputError`.
+    InputError
+        If ``target`` is not a finite (4, 4) array or ``q0`` not a finite (nq,) one.
     """
-    target = as_array(target, (4, 4), "target pose")
+    target = as_array(target, (4, 4), "target (pose)")
     target_se3 = pin.SE3(orthonormalize(target[:3, :3]), target[:3, 3])
     q = ik_seed(robot, target) if q0 is None else robot.check_q(q0).copy()
     model, data = robot.model, robot.data
-    err = np.inf
+    err, q_err = np.inf, q
     for _ in range(max_iter):
         pin.framesForwardKinematics(model, data, q)
         e = pin.log6(data.oMf[robot.ee_frame].actInv(target_se3)).vector
         err = np.linalg.norm(e)
         if err < tol:
             return q
+        q_err = q
         J = pin.computeFrameJacobian(model, data, q, robot.ee_frame, pin.ReferenceFrame.LOCAL)
+        # q and the target are finite, so J is; J Jᵀ + 1e-8 I is then positive definite
+        # and solve() cannot raise LinAlgError.
         step = J.T @ np.linalg.solve(J @ J.T + 1e-8 * np.eye(6), e)
         q = np.clip(q + step, robot.q_min, robot.q_max)
-    raise InputError(f"inverse kinematics did not reach the target position {target[:3, 3]} "
-                     f"(residual {err:.2e} after {max_iter} iterations): unreachable on this branch")
+    x, y, z = target[:3, 3]
+    raise IKNotConvergedError(
+        f"inverse kinematics did not reach the target position ({x:.4g}, {y:.4g}, {z:.4g}) m "
+        f"(residual {err:.2e} > tol {tol:.0e} after {max_iter} iterations): unreachable "
+        "on this branch", target=target, residual=float(err), iterations=max_iter, q=q_err)

@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 import json
+import multiprocessing
+import shutil
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
+import qpavoid
 from qpavoid import plots
 from qpavoid.cli import main
 from qpavoid.io import LOG_KEYS, load_log
@@ -40,12 +45,14 @@ def test_run_writes_metrics_log_and_figures(tmp_path, capsys):
     np.testing.assert_allclose(log["q"][1:], log["q"][:-1] + log["dq"][:-1] * np.diff(log["t"])[:, None],
                                atol=1e-12)
     assert m["duration_s"] == pytest.approx(5.0)
-    if plots.available():
-        for name in ("fig06_f_vs_distance.png", "fig08_distance_L2.png", "fig09_vrep_L2.png",
-                     "fig10_distance_EE.png", "fig11_vrep_EE.png", "fig13_f_and_L1.png",
-                     "fig07_12_snapshots.png"):
+    if plots.available():                         # Test 2's figures: Figs. 6, 12 and 13
+        figures = {"fig06_f_vs_distance.png", "fig13_f_and_L1.png", "fig12_snapshots.png"}
+        assert {p.name for p in out.glob("*.png")} == figures
+        assert set(m["plots"]) == figures
+        for name in figures:
             assert (out / name).stat().st_size > 1000, name
-    assert "reached goal" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "reached goal" in printed and f"to {out}/" in printed.splitlines()[-1]
 
 
 def test_without_matplotlib_plots_are_skipped(tmp_path, monkeypatch, capsys):
@@ -55,7 +62,7 @@ def test_without_matplotlib_plots_are_skipped(tmp_path, monkeypatch, capsys):
     m = json.loads((out / "metrics.json").read_text())
     assert m["plots"] == [] and "matplotlib" in m["plots_skipped"]
     assert not list(out.glob("*.png"))
-    assert "plots skipped" in capsys.readouterr().out
+    assert "figures skipped" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("fmt", ["npz", "csv"])
@@ -93,7 +100,163 @@ def test_errors_are_reported(tmp_path, capsys):
 
 def test_public_names():
     """The names the issues fix are importable from the package."""
-    import qpavoid
     for name in ("load_robot", "KinectHuman", "sphere_distances", "capsule_distances",
                  "DistanceTable", "AnalyticController", "QPController"):
         assert hasattr(qpavoid, name), name
+
+
+def qpavoid_cli(*args: str, cwd) -> subprocess.CompletedProcess:
+    """The installed command line in a subprocess (as a user types it)."""
+    return subprocess.run([sys.executable, "-m", "qpavoid", *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=120)
+
+
+#: Bad inputs a user tried (issue 7), and a word the one-line error must contain.
+BAD_INPUTS = [
+    (["run", "test1", "--out", "afile"], "is a file"),
+    (["run", "test1", "--max-time", "-1"], "--max-time"),
+    (["run", "test1", "--max-time", "nan"], "--max-time"),
+    (["run", "test1", "--max-time", "0"], "--max-time"),
+    (["run", "test1", "--max-time", "0.01"], "--max-time"),
+    (["run", "test1", "--rate", "0"], "--rate"),
+    (["run", "test1", "--rate", "-500"], "--rate"),
+    (["run", "test1", "--rate", "inf"], "--rate"),
+    (["run", "test1", "--rate", "5"], "--rate"),
+    (["compare", "--rate", "0"], "--rate"),
+    (["compare", "--random", "-1"], "--random"),
+    (["compare", "--scenarios"], "nothing to compare"),
+    (["compare", "--seed", "-5"], "--seed"),
+    (["compare", "--workers", "0"], "--workers"),
+    (["compare", "--scenarios", "test1", "nosuch"], "unknown scenario 'nosuch'"),
+    (["run", "--human", "text.npz"], "text.npz"),
+    (["compare", "--scenarios", "--human", "text.npz"], "text.npz"),
+    (["run", "--human", "missing.csv"], "missing.csv"),
+    (["run", "test1", "--human", "text.npz"], "not both"),
+    (["run"], "give a SCENARIO"),
+    (["run", "nosuch"], "unknown scenario 'nosuch'"),
+    (["run", "random:-5"], "random:SEED"),
+    (["run", "test1", "--controller", "qp", "--limit-mode", "clip"], "--limit-mode"),
+    (["run", "test1", "--limit-mode", "clip", "--solver", "daqp"], "--solver"),
+    (["run", "test1", "--redundant"], "--redundant"),
+    (["run", "test1", "--controller", "qp", "--solver", "nosuch"], "'nosuch' is not installed"),
+    (["run", "test1", "--controller", "nosuch"], "--controller"),
+    (["run", "test1", "--robot", "nosuch"], "unknown robot 'nosuch'"),
+    (["nosuch"], "invalid choice"),
+]
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cli")
+    (d / "afile").write_text("")
+    (d / "text.npz").write_text("hello, not an archive\n")
+    return d
+
+
+def run_main(*args: str) -> int:
+    """``main(args)`` in this process; an argparse exit becomes its status."""
+    try:
+        return main(list(args))
+    except SystemExit as exc:
+        return int(exc.code or 0)
+
+
+@pytest.mark.parametrize("args, word", BAD_INPUTS, ids=[" ".join(a) for a, _ in BAD_INPUTS])
+def test_bad_input_is_one_line_and_exit_2(workdir, monkeypatch, capsys, args, word):
+    """Exit 2, one line `qpavoid: error: ...` naming the problem, no traceback, nothing written."""
+    monkeypatch.chdir(workdir)
+    before = sorted(p.name for p in workdir.iterdir())
+    assert run_main(*args) == 2
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("qpavoid: error: "), err
+    assert word in lines[0]
+    assert "Traceback" not in out + err
+    assert sorted(p.name for p in workdir.iterdir()) == before        # no runs/, no --out
+
+
+@pytest.mark.parametrize("args, word", [BAD_INPUTS[0], BAD_INPUTS[5], BAD_INPUTS[15]])
+def test_bad_input_in_a_real_process(workdir, args, word):
+    """The same through `python -m qpavoid` in a subprocess, as a user types it."""
+    r = qpavoid_cli(*args, cwd=workdir)
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.startswith("qpavoid: error: ") and r.stderr.count("\n") == 1
+    assert word in r.stderr and "Traceback" not in r.stderr
+
+
+def test_version_and_help_show_defaults(workdir, capsys):
+    r = qpavoid_cli("--version", cwd=workdir)
+    assert r.returncode == 0 and r.stdout.startswith("qpavoid ")
+    assert run_main("run", "--help") == 0
+    help_text = " ".join(capsys.readouterr().out.split())
+    for option, default in (("--controller", "analytic"), ("--distance", "spheres"),
+                            ("--max-time", "40.0"), ("--rate", "500.0"),
+                            ("--out", "runs/NAME")):
+        assert option in help_text and f"(default: {default})" in help_text, option
+    assert run_main("--help") == 0
+    assert "``" not in capsys.readouterr().out
+
+
+def test_default_out_and_last_line(workdir):
+    """`qpavoid run free` works as typed: it writes runs/free and says so."""
+    r = qpavoid_cli("run", "free", "--max-time", "0.5", "--rate", "100", "--no-plots",
+                    cwd=workdir)
+    assert r.returncode == 0, r.stderr
+    assert (workdir / "runs" / "free" / "metrics.json").is_file()
+    assert r.stdout.strip().splitlines()[-1] == "wrote metrics.json, log.npz to runs/free/"
+    assert r.stderr == ""                          # no progress bar when not on a terminal
+    shutil.rmtree(workdir / "runs")
+
+
+def test_failure_during_a_run_leaves_no_folder(tmp_path, monkeypatch, capsys):
+    """An error after the simulation started: one line, exit 2, no --out folder."""
+    import qpavoid.runs
+
+    def fail(*args, **kwargs):
+        raise qpavoid.SolverError("the solver gave up")
+    monkeypatch.setattr(qpavoid.runs, "simulate", fail)
+    out = tmp_path / "new" / "run"
+    assert main(["run", "free", "--out", str(out)]) == 2
+    assert capsys.readouterr().err == "qpavoid: error: the solver gave up\n"
+    assert not out.exists() and not (tmp_path / "new").exists()
+
+
+def test_failure_while_writing_leaves_no_folder(tmp_path, monkeypatch, capsys):
+    """An error after some files were written: they go too, nothing else is touched."""
+    import qpavoid.runs
+
+    def fail(*args, **kwargs):
+        raise OSError(28, "No space left on device", "log.npz")
+    monkeypatch.setattr(qpavoid.runs, "write_run", fail)
+    out = tmp_path / "run"
+    assert main(["run", "free", "--max-time", "0.5", "--rate", "100", "--out", str(out)]) == 2
+    assert capsys.readouterr().err == "qpavoid: error: No space left on device: log.npz\n"
+    assert list(tmp_path.iterdir()) == []            # figures were written, then removed
+
+
+def test_a_bug_is_one_line_too(tmp_path, monkeypatch, capsys):
+    import qpavoid.runs
+
+    def bug(*args, **kwargs):
+        raise ZeroDivisionError("division by zero")
+    monkeypatch.setattr(qpavoid.runs, "simulate", bug)
+    assert main(["run", "free", "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("qpavoid: error: internal error") and err.count("\n") == 1
+    assert "ZeroDivisionError" in err and not (tmp_path / "x").exists()
+
+
+@pytest.mark.skipif(multiprocessing.get_start_method() != "fork",
+                    reason="the failure is patched into forked workers")
+def test_worker_errors_are_reported_in_one_line(tmp_path, monkeypatch, capsys):
+    """A failure inside a worker process of `compare`: one line, exit 2, nothing written."""
+    import qpavoid.runs
+
+    def fail(*args, **kwargs):
+        raise qpavoid.SolverError("the solver gave up in a worker")
+    monkeypatch.setattr(qpavoid.runs, "simulate", fail)
+    out = tmp_path / "c"
+    assert main(["compare", "--scenarios", "free", "test1", "--workers", "2", "--out", str(out),
+                 "--max-time", "0.2", "--rate", "50"]) == 2
+    assert capsys.readouterr().err == "qpavoid: error: the solver gave up in a worker\n"
+    assert not out.exists()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..controller import Command, Controller, ControllerConfig
+from ..controller import Command, Controller, ControllerConfig, Tick
 from ..human import KinectHuman
 from ..laws import ee_repulsive_velocity, modified_ik, repulsive_velocity
 from ..robot import Robot
@@ -100,10 +100,7 @@ class QPController(Controller):
                       dq_nominal)
         return inp, self.assembler(inp)
 
-    def step(self, q, joints, state=None, t: float = 0.0, frame_age_s: float = 0.0) -> Command:
-        tick = self.measure(q, joints, state, t, frame_age_s)
-        if tick.reason:
-            return self.command(tick, None)
+    def act(self, tick: Tick) -> Command:
         inp, prob = self.problem(tick)
         sol = self.backend.solve(prob)
         info = {"solver": self.backend.name, "status": sol.status, "iterations": sol.iterations}

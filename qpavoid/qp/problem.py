@@ -218,8 +218,8 @@ class PersistentOSQP:
             x = s.solution.x
         else:
             # The public update() discards OSQP's exit flag: check convexity here instead.
-            if np.linalg.eigvalsh(prob.H).min() < -1e-9:
-                return QPSolution(None, False, "the cost is not convex")
+            if not _convex(prob.H):
+                return QPSolution(None, False, "the cost is not convex (or not finite)")
             self._solver.update(q=prob.c, l=l, u=u, Px=Px, Ax=Ax)
             res = self._solver.solve(raise_error=False)
             status_val, status, iters, x = res.info.status_val, res.info.status, res.info.iter, res.x
@@ -241,7 +241,8 @@ class QPSolversBackend:
         import qpsolvers
         if solver not in qpsolvers.available_solvers:
             raise SolverError(f"QP solver {solver!r} is not installed; available: "
-                              f"{sorted(qpsolvers.available_solvers)}")
+                              f"{sorted(qpsolvers.available_solvers)}", solver=solver,
+                              status="not installed")
         self.name, self._qpsolvers = solver, qpsolvers
         self._settings = _osqp_settings(cfg) if solver == "osqp" else {}
         if solver == "proxqp":
@@ -267,4 +268,15 @@ def make_backend(cfg: QPConfig, n: int, m: int):
         return PersistentOSQP(n, m, cfg)
     if cfg.backend == "qpsolvers":
         return QPSolversBackend(cfg.solver, cfg)
-    raise SolverError(f"unknown QP backend {cfg.backend!r}; choose 'persistent' or 'qpsolvers'")
+    raise SolverError(f"unknown QP backend {cfg.backend!r}; choose 'persistent' or 'qpsolvers'",
+                      solver=cfg.backend, status="unknown backend")
+
+
+def _convex(H: np.ndarray) -> bool:
+    """True if ``H`` is finite and positive semidefinite (to -1e-9); never raises."""
+    if not np.isfinite(H).all():       # eigvalsh returns garbage (or raises) on NaN
+        return False
+    try:
+        return bool(np.linalg.eigvalsh(H).min() >= -1e-9)
+    except np.linalg.LinAlgError:      # did not converge
+        return False

@@ -1,0 +1,245 @@
+"""One run, from its description to its files: what the command line, ``compare`` and sweeps share.
+
+A run is described by a :class:`RunSpec` (a frozen dataclass, checked when it is made, so a
+bad value fails before any work starts). :func:`simulate_one` builds the robot, the
+controller and the human motion it names and simulates them; :func:`run_one` does the same
+and writes ``metrics.json``, ``log.npz`` and the figures into a folder.
+
+The names a run can take live in one registry each: :data:`CONTROLLERS`,
+:data:`DISTANCES`, :data:`LIMIT_MODES` and the scenarios of :mod:`qpavoid.scenarios`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import qpsolvers
+
+from . import plots as plotting
+from .analytic import AnalyticController
+from .controller import Controller, ControllerConfig
+from .errors import InputError
+from .io import staged_output, write_run
+from .qp import QPConfig, QPController
+from .recording import load_recording
+from .robot import Robot, load_robot
+from .scenarios import check_scenario_name, make_scenario
+from .simulation import HumanMotion, SimConfig, SimResult, simulate
+
+#: Controllers by name.
+CONTROLLERS = ("analytic", "qp")
+#: Distance methods by name: the paper's spheres (eq. 1) and exact capsules (coal).
+DISTANCES = ("spheres", "capsules")
+#: How the analytic controller enforces eq. (3)'s scaled velocity limits.
+LIMIT_MODES = ("scale", "clip")
+#: QP solvers that come with an extra of ours, and its name (``pip install "qpavoid[solvers]"``).
+SOLVER_EXTRAS = {"daqp": "solvers", "proxqp": "solvers"}
+
+#: Accepted ranges: control rate (Hz) from the camera's 30 Hz to 10 kHz; a run's cap (s)
+#: from a few frames to an hour (an hour at 500 Hz logs 1.8 M ticks, about 1.5 GB).
+RATE_RANGE_HZ = (30.0, 10_000.0)
+MAX_TIME_RANGE_S = (0.1, 3600.0)
+
+#: Redundancy mode (docs/qp.md): weight of the elbow-clearance cost, and a regularisation
+#: large enough to give the end effector's null-space direction curvature (with 1e-7
+#: OSQP cannot reach its tolerance there).
+REDUNDANT_ELBOW_WEIGHT = 0.05
+REDUNDANT_REGULARIZATION = 1e-4
+
+
+def check_range(name: str, value: float, low: float, high: float, unit: str) -> float:
+    """``value`` as a float if it is finite and in ``[low, high]``, else :class:`InputError`."""
+    if not (math.isfinite(value) and low <= value <= high):
+        raise InputError(f"{name} must be between {low:g} and {high:g} {unit}, got {value:g}",
+                         name=name.split()[-1].strip("()"), value=value)
+    return float(value)
+
+
+def check_choice(name: str, value: str, choices: tuple[str, ...]) -> str:
+    """``value`` if it is one of ``choices``, else :class:`InputError`."""
+    if value not in choices:
+        raise InputError(f"unknown {name} {value!r}; choose from {', '.join(choices)}",
+                         name=name, value=value)
+    return value
+
+
+def check_solver(name: str) -> str:
+    """``name`` if qpsolvers has that solver installed; else say which extra brings it."""
+    if name in qpsolvers.available_solvers:
+        return name
+    hint = (f'; install it with pip install "qpavoid[{SOLVER_EXTRAS[name]}]"'
+            if name in SOLVER_EXTRAS else "")
+    raise InputError(f"QP solver {name!r} is not installed (installed: "
+                     f"{', '.join(sorted(qpsolvers.available_solvers))}){hint}",
+                     name="solver", value=name)
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """Everything that defines one run.
+
+    Attributes
+    ----------
+    scenario
+        A generated scenario (``test1``, ``test2``, ``free``, ``random:SEED``); or None
+        with ``human_file``.
+    human_file
+        A recording to replay (NPZ or CSV, docs/formats.md) instead of a scenario.
+    controller
+        ``"analytic"`` (the paper's) or ``"qp"``.
+    distance
+        ``"spheres"`` (the paper's eq. 1) or ``"capsules"`` (exact, coal).
+    max_time_s
+        Cap on the run, s (default 40: the 15 s path plus room for stops).
+    rate_hz
+        Control rate, Hz (default 500: a typical cobot interface rate).
+    limit_mode
+        Analytic controller only: how eq. (3)'s limits are enforced (``scale``, ``clip``).
+    robot
+        A bundled robot description or the folder of one.
+    solver
+        QP only: a qpsolvers solver (a new problem each tick); None for the persistent
+        OSQP problem.
+    redundant
+        QP only: free A3 (7 joints) and keep the elbow away from the person.
+    """
+
+    scenario: str | None = None
+    human_file: str | None = None
+    controller: str = "analytic"
+    distance: str = "spheres"
+    max_time_s: float = 40.0
+    rate_hz: float = 500.0
+    limit_mode: str = "scale"
+    robot: str = "iiwa14"
+    solver: str | None = None
+    redundant: bool = False
+
+    def __post_init__(self) -> None:
+        if self.scenario is None and self.human_file is None:
+            raise InputError("give a SCENARIO (test1, test2, free, random:SEED) or --human FILE",
+                             name="scenario", value=None)
+        if self.scenario is not None and self.human_file is not None:
+            raise InputError("give either SCENARIO or --human FILE, not both", name="scenario",
+                             value=self.scenario)
+        if self.scenario is not None:
+            check_scenario_name(self.scenario)
+        check_choice("controller", self.controller, CONTROLLERS)
+        check_choice("distance method", self.distance, DISTANCES)
+        check_choice("limit mode", self.limit_mode, LIMIT_MODES)
+        check_range("the run's cap (--max-time)", self.max_time_s, *MAX_TIME_RANGE_S, "s")
+        check_range("the control rate (--rate)", self.rate_hz, *RATE_RANGE_HZ, "Hz")
+        if self.controller != "qp":
+            for flag, given in (("--solver", self.solver), ("--redundant", self.redundant)):
+                if given:
+                    raise InputError(f"{flag} needs --controller qp", name=flag,
+                                     value=given)
+        elif self.limit_mode != "scale":
+            raise InputError("--limit-mode needs --controller analytic (the QP enforces "
+                             "eq. (3) as bounds)", name="--limit-mode",
+                             value=self.limit_mode)
+        if self.solver is not None:
+            check_solver(self.solver)
+
+    @property
+    def label(self) -> str:
+        """The run's name: the scenario, or the recording's file stem."""
+        return self.scenario if self.scenario is not None else Path(str(self.human_file)).stem
+
+
+@dataclass
+class RunResult:
+    """A simulated run and what produced it."""
+
+    spec: RunSpec
+    sim: SimResult
+    robot: Robot
+    controller: Controller
+    metrics: dict = field(default_factory=dict)
+
+    @property
+    def config(self) -> ControllerConfig:
+        """The controller's shared configuration."""
+        return self.controller.config
+
+
+def build_controller(spec: RunSpec, robot: Robot) -> Controller:
+    """The controller ``spec`` names, on ``robot``, at the spec's control rate."""
+    config = ControllerConfig(distance=spec.distance, limit_mode=spec.limit_mode,
+                              control_period_s=1.0 / spec.rate_hz)
+    if spec.controller == "analytic":
+        return AnalyticController(robot, config=config)
+    qp = QPConfig(backend="qpsolvers" if spec.solver else "persistent",
+                  solver=spec.solver or "osqp")
+    if spec.redundant:
+        qp = QPConfig(backend=qp.backend, solver=qp.solver, elbow_weight=REDUNDANT_ELBOW_WEIGHT,
+                      regularization=REDUNDANT_REGULARIZATION)
+    return QPController(robot, config=config, qp=qp)
+
+
+def load_motion(spec: RunSpec, robot: Robot) -> HumanMotion:
+    """The human motion ``spec`` names: a generated scenario or a recording."""
+    if spec.human_file is not None:
+        return load_recording(spec.human_file)
+    return make_scenario(str(spec.scenario), robot)
+
+
+def simulate_one(spec: RunSpec, motion: HumanMotion | None = None,
+                 progress: Callable[[float], None] | None = None) -> RunResult:
+    """Build the robot, controller and motion of ``spec`` and simulate them.
+
+    Parameters
+    ----------
+    spec
+        The run.
+    motion
+        The human motion if already loaded (else :func:`load_motion`).
+    progress
+        Called with the simulated time, s, at every human frame.
+    """
+    robot = load_robot(spec.robot, locked=() if spec.redundant else None)
+    controller = build_controller(spec, robot)
+    motion = motion if motion is not None else load_motion(spec, robot)
+    sim = simulate(controller, motion,
+                   SimConfig(control_rate_hz=spec.rate_hz, max_time_s=spec.max_time_s),
+                   progress=progress)
+    metrics = dict(sim.metrics)
+    metrics.update(scenario=spec.label, redundant=bool(spec.redundant),
+                   solver=getattr(getattr(controller, "backend", None), "name", None))
+    return RunResult(spec, sim, robot, controller, metrics)
+
+
+def write_outputs(run: RunResult, out: str | Path, plots: bool = True) -> dict:
+    """Write ``metrics.json``, ``log.npz`` and (with ``plots``) the figures of ``run``.
+
+    The files are written into a staging folder first and moved into ``out`` only when
+    all of them are written, so a failure leaves no half-written ``out``.
+
+    Returns
+    -------
+    dict
+        The metrics written, with ``plots`` (figure file names) and, when figures were not
+        drawn, ``plots_skipped`` (why).
+    """
+    extra: dict = {"plots": []}
+    if not plots:
+        extra["plots_skipped"] = "disabled by --no-plots"
+    elif not plotting.available():
+        extra["plots_skipped"] = "matplotlib is not installed (pip install 'qpavoid[plot]')"
+    with staged_output(out) as stage:
+        if plots and plotting.available():
+            figures = plotting.write_figures(
+                stage, run.sim.log, run.robot, run.config.avoidance, run.spec.distance,
+                scenario=run.spec.label, controller=run.spec.controller)
+            extra["plots"] = [p.name for p in figures]
+        write_run(stage, run.sim, {**run.metrics, **extra})
+    return {**run.metrics, **extra}
+
+
+def run_one(spec: RunSpec, out: str | Path, plots: bool = True,
+            progress: Callable[[float], None] | None = None) -> dict:
+    """Simulate ``spec`` and write its files into ``out``; return its metrics."""
+    return write_outputs(simulate_one(spec, progress=progress), out, plots)
