@@ -55,8 +55,14 @@ def main() -> None:
     cfg = ControllerConfig(control_period_s=0.01)
     log = simulate(QPController(robot, config=cfg), make_scenario("test1", robot),
                    SimConfig(control_rate_hz=100)).log
-    states = [(log["q"][k], log["joints"][k], log["state"][k], log["tau"][k])
-              for k in range(len(log["t"]))]
+    # One HumanFrame object per camera frame, shared by the ticks that see it (as in the
+    # simulation): a controller builds a frame's geometry once.
+    frames: dict[bytes, qpavoid.HumanFrame] = {}
+    for k in range(len(log["t"])):
+        key = log["joints"][k].tobytes() + log["state"][k].tobytes()
+        frames.setdefault(key, qpavoid.HumanFrame.check(log["joints"][k], log["state"][k]))
+    states = [(log["q"][k], frames[log["joints"][k].tobytes() + log["state"][k].tobytes()], None,
+               log["tau"][k]) for k in range(len(log["t"]))]
     rows: dict[str, np.ndarray] = {}
 
     analytic = AnalyticController(robot, config=cfg)
@@ -73,19 +79,19 @@ def main() -> None:
     human = qpavoid.KinectHuman()
     spheres, capsules = qpavoid.SphereDistance(robot, human), qpavoid.CapsuleDistance(robot, human)
     kins = [robot.kinematics(s[0]) for s in states]
-    geos = [human.geometry(s[1], s[2]) for s in states]
+    geos = [human.geometry(s[1]) for s in states]
     idx = list(range(len(states)))
     rows["  kinematics + Jacobians (Pinocchio)"] = timed(lambda k: robot.kinematics(states[k][0]), idx,
                                                           args.repeat)
     rows["  human geometry (once per camera frame)"] = timed(
-        lambda k: human.geometry(states[k][1], states[k][2]), idx, args.repeat)
+        lambda k: human.geometry(states[k][1]), idx, args.repeat)
     rows["  sphere table (eq. 1)"] = timed(lambda k: spheres(kins[k], geos[k]), idx, args.repeat)
     rows["  capsule table (coal)"] = timed(lambda k: capsules(kins[k], geos[k]), idx, args.repeat)
     ticks = [qp.measure(*s) for s in states]
     ticks = [t for t in ticks if not t.reason]
     rows["  shared prelude (measure)"] = timed(lambda s: qp.measure(*s), states, args.repeat)
     rows["  QP assembly (all pieces)"] = timed(lambda t: qp.problem(t), ticks, args.repeat)
-    problems = [qp.problem(t)[1] for t in ticks]
+    problems = [qp.problem(t) for t in ticks]
     rows["  QP solve, persistent OSQP"] = timed(lambda p: qp.backend.solve(p), problems, args.repeat)
 
     table = ["| path | median (µs) | p99 (µs) |", "|---|---|---|"]

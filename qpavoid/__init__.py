@@ -13,12 +13,13 @@ The modules follow the data flow of one control tick:
   :mod:`qpavoid.io`, :mod:`qpavoid.compare`, :mod:`qpavoid.sweep`, :mod:`qpavoid.cli`
 """
 
-from .analytic import AnalyticController
+from .analytic import AnalyticConfig, AnalyticController
 from .controller import Command, ControllerConfig
 from .distances import (CapsuleDistance, DistanceTable, SphereDistance, capsule_distances,
                         distance_method, sphere_distances)
 from .errors import (IKNotConvergedError, InputError, QpavoidError, RecordingError,
                      RobotDescriptionError, SolverError)
+from .frames import HumanFrame
 from .human import BodyPart, HumanGeometry, JointType, KinectHuman, TrackingState
 from .laws import AvoidanceConfig
 from .qp import QPConfig, QPController
@@ -29,9 +30,9 @@ from .task import ArcPath, inverse_kinematics
 __version__ = "0.1.0"
 
 __all__ = [
-    "AnalyticController", "ArcPath", "AvoidanceConfig", "Command", "ControllerConfig",
+    "AnalyticConfig", "AnalyticController", "ArcPath", "AvoidanceConfig", "Command", "ControllerConfig",
     "QPConfig", "QPController", "SimConfig", "simulate", "inverse_kinematics",
-    "BodyPart", "CapsuleDistance", "ControlSet", "DistanceTable", "HumanGeometry",
+    "BodyPart", "CapsuleDistance", "ControlSet", "DistanceTable", "HumanFrame", "HumanGeometry",
     "IKNotConvergedError", "InputError", "JointType", "KinectHuman", "Kinematics", "QpavoidError",
     "RecordingError", "Robot", "RobotDescriptionError", "SolverError", "SphereDistance",
     "TrackingState", "capsule_distances", "distance_method", "load_robot", "sphere_distances",

@@ -4,8 +4,43 @@ from __future__ import annotations
 
 import numpy as np
 
-from .controller import Command, Controller, Tick
-from .laws import ee_repulsive_velocity, l2_joint_velocity, modified_ik, repulsive_velocity
+from dataclasses import dataclass
+
+from .controller import Command, Controller, ControllerConfig, Tick, joint_columns
+from .errors import InputError
+from .human import KinectHuman
+from .laws import l2_joint_velocity, modified_ik
+from .robot import Robot
+from .task import ArcPath
+
+
+#: How eq. (3)'s scaled limits can be enforced (:func:`enforce_limits`).
+LIMIT_MODES = ("scale", "clip")
+
+
+@dataclass(frozen=True)
+class AnalyticConfig:
+    """Settings of the paper's controller only (shared ones: :class:`ControllerConfig`).
+
+    Attributes
+    ----------
+    limit_mode
+        How the velocity limits of eq. (3) are enforced: ``"scale"`` shrinks the whole
+        joint velocity vector (the direction, hence the path, is kept and the path clock
+        slows by the same factor; the default, because it keeps the path), ``"clip"``
+        saturates each joint on its own (the clock runs on; the direction changes).
+    l2_joints
+        Joints of the 3×3 Jacobian of eq. (6) and of ``q̇(1:3)`` in eq. (9): the
+        paper's A1, A2 and A4 (A3 is locked).
+    """
+
+    limit_mode: str = "scale"
+    l2_joints: tuple[str, ...] = ("A1", "A2", "A4")
+
+    def __post_init__(self) -> None:
+        if self.limit_mode not in LIMIT_MODES:
+            raise InputError(f"limit_mode must be 'scale' or 'clip', got {self.limit_mode!r}",
+                             name="limit_mode", value=self.limit_mode)
 
 
 def enforce_limits(dq: np.ndarray, limits: np.ndarray, mode: str) -> tuple[np.ndarray, float]:
@@ -37,22 +72,32 @@ class AnalyticController(Controller):
     4. eq. (9): ``q̇(A1, A2, A4) += q̇_L2``;
     5. eq. (3): the limits of A1 and A2 scaled by (1 − f), enforced as configured
        (:func:`enforce_limits`).
+
+    Parameters
+    ----------
+    robot, path, config, human
+        As for :class:`~qpavoid.controller.Controller`.
+    analytic
+        This controller's own settings (:class:`AnalyticConfig`).
     """
 
     name = "analytic"
 
+    def __init__(self, robot: Robot, path: ArcPath | None = None,
+                 config: ControllerConfig | None = None, human: KinectHuman | None = None,
+                 analytic: AnalyticConfig | None = None):
+        super().__init__(robot, path, config, human)
+        self.analytic = analytic or AnalyticConfig()
+        self.l2_cols = joint_columns(robot, self.analytic.l2_joints, "l2_joints")
+
     def act(self, tick: Tick) -> Command:
-        cfg, avo = self.config, self.config.avoidance
-        table, kin = tick.table, tick.kin
-        j = table.closest_part(self.i_L2)
-        v_rep_L2 = repulsive_velocity(table.distance[self.i_L2, j], table.vector[self.i_L2, j], avo)
+        cfg = self.config
         dq_L2 = np.zeros(3)
-        if v_rep_L2.any():
-            J_L2 = table.robot_jacobian(kin, self.i_L2, j)[:, self.l2_cols]
-            dq_L2 = l2_joint_velocity(J_L2, v_rep_L2, cfg.sigma_min, cfg.lambda_max)     # eq. (6)
-        v_rep_EE = ee_repulsive_velocity(table.distance[self.i_EE], table.vector[self.i_EE], avo)
-        dq = modified_ik(kin.ee_jacobian, tick.ref_twist, self.K, tick.error, v_rep_EE,
-                         cfg.sigma_min, cfg.lambda_max)                                    # eq. (8)
-        dq[self.l2_cols] += dq_L2                                                          # eq. (9)
-        dq, scale = enforce_limits(dq, tick.limits, cfg.limit_mode)                         # eq. (3)
-        return self.command(tick, dq, scale, v_rep_L2, v_rep_EE)
+        if tick.v_rep_L2.any():
+            J_L2 = tick.table.robot_jacobian(tick.kin, self.i_L2, tick.L2_part)[:, self.l2_cols]
+            dq_L2 = l2_joint_velocity(J_L2, tick.v_rep_L2, cfg.sigma_min, cfg.lambda_max)  # (6)
+        dq = modified_ik(tick.kin.ee_jacobian, tick.ref_twist, self.K, tick.error,
+                         tick.v_rep_EE, cfg.sigma_min, cfg.lambda_max)                  # eq. (8)
+        dq[self.l2_cols] += dq_L2                                                       # eq. (9)
+        dq, scale = enforce_limits(dq, tick.limits, self.analytic.limit_mode)           # eq. (3)
+        return self.command(tick, dq, scale, tick.v_rep_L2, tick.v_rep_EE)

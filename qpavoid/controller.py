@@ -22,8 +22,10 @@ import numpy as np
 from ._checks import finite_number
 from .distances import DistanceTable, distance_method
 from .errors import InputError, SolverError
+from .frames import HumanFrame
 from .human import HumanGeometry, KinectHuman
-from .laws import AvoidanceConfig, l1_factor, stop_reason
+from .laws import (AvoidanceConfig, ee_repulsive_velocity, l1_factor, repulsive_velocity,
+                   scaled_velocity_limits, stop_reason)
 from .robot import Kinematics, Robot
 from .task import ArcPath, pose_error
 
@@ -43,18 +45,11 @@ class ControllerConfig:
     sigma_min, lambda_max
         Damped inverse of eqs. (6) and (8): no damping while the smallest singular value
         is above ``sigma_min``; damping up to ``lambda_max`` at a singularity.
-    limit_mode
-        How the velocity limits of eq. (3) are enforced by the analytic controller:
-        ``"scale"`` shrinks the whole joint velocity vector (the direction, hence the
-        path, is kept and the path clock slows by the same factor), ``"clip"`` saturates
-        each joint on its own (the path clock runs on; the direction changes).
     control_period_s
         Period of the control loop, s: a command that would carry a joint past its
         position limit within one period stops the robot instead.
     scaled_joints
         Joints whose limits eq. (3) scales by (1 − f): the two that move L1.
-    l2_joints
-        Joints of the 3×3 Jacobian of eq. (6) and of ``q̇(1:3)`` in eq. (9).
     require_human
         Stop when no body part is tracked at all (the safe reading of "nobody seen").
     max_frame_age_s
@@ -67,10 +62,8 @@ class ControllerConfig:
     gain_orientation: float = 5.0
     sigma_min: float = 0.02
     lambda_max: float = 0.05
-    limit_mode: str = "scale"
     control_period_s: float = 0.002
     scaled_joints: tuple[str, ...] = ("A1", "A2")
-    l2_joints: tuple[str, ...] = ("A1", "A2", "A4")
     require_human: bool = True
     max_frame_age_s: float = 0.1
 
@@ -122,19 +115,54 @@ class Command:
 
 @dataclass
 class Tick:
-    """One tick's measurements (:meth:`Controller.measure`), given to :meth:`Controller.act`."""
+    """One tick's measurements (:meth:`Controller.measure`), given to :meth:`Controller.act`.
+
+    Attributes
+    ----------
+    q
+        (nq,) joint angles, rad.
+    kin
+        Kinematics at ``q`` (points, Jacobians, end-effector placement).
+    frame, human
+        The human frame and its geometry.
+    table
+        The distance table (sets × parts) of the configured method.
+    distance
+        (S,) minimum distance per set, m.
+    f
+        The L1 factor of eq. (2).
+    limits
+        (nv,) joint velocity limits of eq. (3), rad/s.
+    L2_part
+        Column of the human part closest to L2.
+    v_rep_L2, v_rep_EE
+        (3,) repulsive velocities of eqs. (4)-(5) and (7), m/s.
+    ref_pose, ref_twist
+        The planned end-effector pose (4, 4) and twist (6,) at the path time.
+    error
+        (6,) pose error e of eq. (8).
+    task_twist
+        (6,) ``v_PL + K e``: eq. (8)'s target without the EE repulsion.
+    reason
+        Why a stop rule holds ("" if none).
+    """
 
     q: np.ndarray
     kin: Kinematics
+    frame: HumanFrame
+    human: HumanGeometry
     table: DistanceTable
     distance: np.ndarray
     f: float
     limits: np.ndarray
+    L2_part: int
+    v_rep_L2: np.ndarray
+    v_rep_EE: np.ndarray
     ref_pose: np.ndarray
     ref_twist: np.ndarray
     error: np.ndarray
+    task_twist: np.ndarray
     reason: str
-    human: HumanGeometry
 
 
 class Controller:
@@ -161,34 +189,23 @@ class Controller:
         self.config = config or ControllerConfig()
         self.human = human or KinectHuman()
         self.distances = distance_method(self.config.distance, robot, self.human)
-        if self.config.limit_mode not in ("scale", "clip"):
-            mode = self.config.limit_mode
-            raise InputError(f"limit_mode must be 'scale' or 'clip', got {mode!r}",
-                             name="limit_mode", value=mode)
         self.K = np.r_[[self.config.gain_position] * 3, [self.config.gain_orientation] * 3]
         self.i_L1, self.i_L2, self.i_EE = (robot.set_index(n) for n in ("L1", "L2", "EE"))
-        self.scaled_cols = self._columns("scaled_joints")
-        self.l2_cols = self._columns("l2_joints")
-        self._frame_key: tuple[bytes, bytes | None] | None = None
-        self._geometry = None
+        self.scaled_cols = joint_columns(robot, self.config.scaled_joints, "scaled_joints")
+        self._frame: HumanFrame | None = None
+        self._geometry: HumanGeometry | None = None
 
-    def _columns(self, option: str) -> np.ndarray:
-        """Columns of the joints named by the config field ``option``."""
-        names = getattr(self.config, option)
-        missing = [n for n in names if n not in self.robot.joint_names]
-        if missing:
-            raise InputError(f"{option}: joints {missing} are not active joints of "
-                             f"{self.robot.joint_names}", name=option, value=tuple(names))
-        return np.array([self.robot.joint_names.index(n) for n in names])
+    def geometry(self, frame: HumanFrame) -> HumanGeometry:
+        """The human geometry of ``frame``, built once per frame object.
 
-    def human_geometry(self, joints, state):
-        """The human geometry of a frame, recomputed only when the frame's bytes change."""
-        joints = np.ascontiguousarray(joints, dtype=float)
-        state_arr = None if state is None else np.ascontiguousarray(state, dtype=np.int8)
-        key = (joints.tobytes(), None if state_arr is None else state_arr.tobytes())
-        if key != self._frame_key:
-            self._geometry = self.human.geometry(joints, state_arr)
-            self._frame_key = key
+        The caller tells a new frame by passing a new :class:`HumanFrame` (the simulation
+        and the live input make one per camera frame); the same object again reuses the
+        geometry, with no copying or hashing.
+        """
+        if frame is not self._frame:
+            self._geometry = self.human.geometry(frame)
+            self._frame = frame
+        assert self._geometry is not None
         return self._geometry
 
     def measure(self, q, joints, state, t: float, frame_age_s: float = 0.0) -> Tick:
@@ -201,13 +218,18 @@ class Controller:
         """
         t = finite_number(t, "t (path time, s)")
         kin = self.robot.kinematics(q)
-        geo = self.human_geometry(joints, state)
+        frame = HumanFrame.check(joints, state)
+        geo = self.geometry(frame)
         table = self.distances(kin, geo)
         dmin = table.min_per_set()
         cfg = self.config.avoidance
-        f = float(l1_factor(dmin[self.i_L1], cfg))
-        limits = self.robot.dq_max.copy()
-        limits[self.scaled_cols] *= 1.0 - f                                           # eq. (3)
+        f = float(l1_factor(dmin[self.i_L1], cfg))                                   # eq. (2)
+        limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)      # eq. (3)
+        j = table.closest_part(self.i_L2)
+        v_rep_L2 = repulsive_velocity(table.distance[self.i_L2, j], table.vector[self.i_L2, j],
+                                      cfg)                                       # eqs. (4)-(5)
+        v_rep_EE = ee_repulsive_velocity(table.distance[self.i_EE], table.vector[self.i_EE],
+                                         cfg)                                            # eq. (7)
         ref_pose, ref_twist = self.path.reference(t)
         error = pose_error(ref_pose, kin.ee_placement)
         if not frame_age_s <= self.config.max_frame_age_s:
@@ -217,7 +239,8 @@ class Controller:
             reason = "no body part of the operator is tracked"
         else:
             reason = stop_reason(f, dmin[self.i_L2], dmin[self.i_EE], cfg) or ""
-        return Tick(kin.q, kin, table, dmin, f, limits, ref_pose, ref_twist, error, reason, geo)
+        return Tick(kin.q, kin, frame, geo, table, dmin, f, limits, j, v_rep_L2, v_rep_EE,
+                    ref_pose, ref_twist, error, ref_twist + self.K * error, reason)
 
     def command(self, tick: Tick, dq: np.ndarray | None, time_scale: float = 1.0,
                 v_rep_L2: np.ndarray | None = None, v_rep_EE: np.ndarray | None = None,
@@ -290,3 +313,18 @@ class Controller:
         (or ``LinAlgError``), which :meth:`step` turns into a stop.
         """
         raise NotImplementedError
+
+
+def joint_columns(robot: Robot, names: tuple[str, ...], option: str) -> np.ndarray:
+    """Columns of the joints ``names`` among the robot's active joints.
+
+    Raises
+    ------
+    InputError
+        If a name is not an active joint (``option`` names the setting at fault).
+    """
+    missing = [n for n in names if n not in robot.joint_names]
+    if missing:
+        raise InputError(f"{option}: joints {missing} are not active joints of "
+                         f"{robot.joint_names}", name=option, value=tuple(names))
+    return np.array([robot.joint_names.index(n) for n in names])

@@ -14,53 +14,15 @@ distances (distance +inf), so a lost limb never becomes a NaN command.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import IntEnum
 
 import numpy as np
 
-from ._checks import as_array
-from .errors import InputError
+from .frames import N_KINECT_JOINTS, HumanFrame, JointType, TrackingState, check_joints
+
+__all__ = ["N_KINECT_JOINTS", "UPPER_BODY", "BodyPart", "HumanFrame", "HumanGeometry",
+           "JointType", "KinectHuman", "TrackingState"]
 
 
-class JointType(IntEnum):
-    """Kinect v2 joint indices (``JointType`` order of the SDK)."""
-
-    SpineBase = 0
-    SpineMid = 1
-    Neck = 2
-    Head = 3
-    ShoulderLeft = 4
-    ElbowLeft = 5
-    WristLeft = 6
-    HandLeft = 7
-    ShoulderRight = 8
-    ElbowRight = 9
-    WristRight = 10
-    HandRight = 11
-    HipLeft = 12
-    KneeLeft = 13
-    AnkleLeft = 14
-    FootLeft = 15
-    HipRight = 16
-    KneeRight = 17
-    AnkleRight = 18
-    FootRight = 19
-    SpineShoulder = 20
-    HandTipLeft = 21
-    ThumbLeft = 22
-    HandTipRight = 23
-    ThumbRight = 24
-
-
-class TrackingState(IntEnum):
-    """Kinect v2 tracking state of a joint."""
-
-    NotTracked = 0
-    Inferred = 1
-    Tracked = 2
-
-
-N_KINECT_JOINTS = 25
 J = JointType
 
 #: Order of the Kinect joints among the model points (spine up, then left and right arm).
@@ -210,40 +172,18 @@ class KinectHuman:
         return self.point_part.shape[0]
 
     @staticmethod
-    def check_joints(joints) -> np.ndarray:
+    def check_joints(joints: object) -> np.ndarray:
         """(25, 3) float array of Kinect joints; NaN allowed (= not usable), inf is not."""
-        arr = as_array(joints, (N_KINECT_JOINTS, 3), "joints (Kinect v2, m)", finite=False)
-        if np.any(np.isinf(arr)):
-            bad = np.argwhere(np.isinf(arr))[0]
-            raise InputError(f"joints has an infinite coordinate at joint {JointType(bad[0]).name}",
-                             name="joints", value=arr)
-        return arr
+        return check_joints(joints)
 
     @staticmethod
-    def check_state(state) -> np.ndarray | None:
-        """(25,) int tracking states in {0, 1, 2}, or None (all tracked)."""
-        if state is None:
-            return None
-        arr = np.asarray(state)
-        if arr.shape != (N_KINECT_JOINTS,):
-            raise InputError(f"state (Kinect tracking states) must have shape (25,), got "
-                             f"{arr.shape}", name="state", value=arr)
-        bad_mask = (arr != 0) & (arr != 1) & (arr != 2)
-        if bad_mask.any():
-            bad = int(np.flatnonzero(bad_mask)[0])
-            raise InputError(f"state[{bad}] ({JointType(bad).name}) is {arr[bad].item()!r}, "
-                             "expected 0 (not tracked), 1 (inferred) or 2 (tracked)",
-                             name="state", value=arr)
-        return arr.astype(np.int8)
+    def check_state(state: object) -> np.ndarray | None:
+        """(25,) int8 tracking states in {0, 1, 2}, or None (all tracked)."""
+        return None if state is None else HumanFrame.check(np.zeros((25, 3)), state).state
 
-    def joint_usable(self, joints, state=None) -> np.ndarray:
+    def joint_usable(self, joints: object, state: object = None) -> np.ndarray:
         """(25,) True where a joint has finite coordinates and is not NotTracked."""
-        joints = self.check_joints(joints)
-        state = self.check_state(state)
-        ok = np.all(np.isfinite(joints), axis=1)
-        if state is not None:
-            ok &= state != TrackingState.NotTracked
-        return ok
+        return HumanFrame.check(joints, state).usable
 
     def points(self, joints, state=None) -> np.ndarray:
         """The model points (21, 3) from (25, 3) Kinect joints, m.
@@ -254,10 +194,15 @@ class KinectHuman:
         """
         return self.geometry(joints, state).points
 
-    def geometry(self, joints, state=None) -> HumanGeometry:
-        """Points, capsules and their usability at one frame."""
-        usable = self.joint_usable(joints, state)
-        clean = np.where(usable[:, None], np.asarray(joints, dtype=float), np.nan)
+    def geometry(self, joints: object, state: object = None) -> HumanGeometry:
+        """Points, capsules and their usability at one frame.
+
+        ``joints`` is a :class:`~qpavoid.frames.HumanFrame` (already checked: used as is)
+        or (25, 3) joints with optional (25,) states (checked here).
+        """
+        frame = HumanFrame.check(joints, state)
+        usable = frame.usable
+        clean = np.where(usable[:, None], frame.joints, np.nan)
         mids = 0.5 * (clean[self._mid_ids[:, 0]] + clean[self._mid_ids[:, 1]])
         points = np.concatenate([clean[self.joint_ids], mids])
         point_valid = ~np.isnan(points[:, 0])
@@ -267,5 +212,6 @@ class KinectHuman:
         first = ok.argmax(axis=1)
         last = ok.shape[1] - 1 - ok[:, ::-1].argmax(axis=1)
         rows = np.arange(len(self.parts))
-        segments = np.stack([clean[self._chains[rows, first]], clean[self._chains[rows, last]]], axis=1)
+        segments = np.stack([clean[self._chains[rows, first]], clean[self._chains[rows, last]]],
+                            axis=1)
         return HumanGeometry(points, point_valid, segments, ok.any(axis=1))

@@ -75,9 +75,30 @@ def l1_factor(d_L1, cfg: AvoidanceConfig):
     return logistic(d_L1, cfg.rho_L1_m, cfg.alpha_L1)
 
 
-def scaled_velocity_limits(dq_max: np.ndarray, f: float) -> np.ndarray:
-    """Eq. (3): joint velocity limits scaled by (1 − f) (rad/s, symmetric ±)."""
-    return np.asarray(dq_max, dtype=float) * (1.0 - f)
+def scaled_velocity_limits(dq_max: np.ndarray, f: float | np.ndarray,
+                           joints: np.ndarray | None = None) -> np.ndarray:
+    """Eq. (3): joint velocity limits with those of ``joints`` scaled by (1 − f), rad/s (±).
+
+    Parameters
+    ----------
+    dq_max
+        (nv,) nominal joint velocity limits, rad/s.
+    f
+        The L1 factor of eq. (2): a number, or (T,) for T ticks at once.
+    joints
+        Columns scaled (the joints that move L1: A1 and A2); None scales all.
+
+    Returns
+    -------
+    np.ndarray
+        (nv,) limits, or (T, nv) for (T,) ``f``.
+    """
+    f = np.asarray(f, dtype=float)
+    limits = np.repeat(np.asarray(dq_max, dtype=float)[None], f.size, axis=0).reshape(
+        *f.shape, -1)
+    cols = slice(None) if joints is None else joints
+    limits[..., cols] *= (1.0 - f)[..., None]
+    return limits
 
 
 def repulsive_speed(d, cfg: AvoidanceConfig):
@@ -162,10 +183,29 @@ def modified_ik(J: np.ndarray, v_pl: np.ndarray, K: np.ndarray, e: np.ndarray, v
     return damped_pinv(J, sigma_min, lambda_max) @ target
 
 
+def stop_rule_holds(f: float | np.ndarray, d_L2: float | np.ndarray, d_EE: float | np.ndarray,
+                    cfg: AvoidanceConfig) -> bool | np.ndarray:
+    """The paper's stop rules (Sect. 5.4), element-wise: f > 0.8, d_L2 <= 0.05 m or d_EE <= 0.05 m.
+
+    Works on numbers or on arrays of ticks (checkers use it on whole logs).
+    """
+    return ((np.asarray(f) > cfg.f_stop) | (np.asarray(d_L2) <= cfg.d_stop_L2_m)
+            | (np.asarray(d_EE) <= cfg.d_stop_EE_m))
+
+
+def stop_distances(cfg: AvoidanceConfig) -> np.ndarray:
+    """(3,) the distance of each set (L1, L2, EE) at which the paper's rules stop the robot, m.
+
+    For L1 the distance where f reaches ``f_stop`` (eq. 2 inverted, 0.0423 m by default).
+    """
+    return np.array([cfg.d_stop_L1_m(), cfg.d_stop_L2_m, cfg.d_stop_EE_m])
+
+
 def stop_reason(f: float, d_L2: float, d_EE: float, cfg: AvoidanceConfig) -> str | None:
     """The paper's stop rules (Sect. 5.4): a reason to stop, or None.
 
-    Stop if f > 0.8, or if L2 or EE is 0.05 m or closer to the operator.
+    Stop if f > 0.8, or if L2 or EE is 0.05 m or closer to the operator
+    (:func:`stop_rule_holds` for arrays).
     """
     if f > cfg.f_stop:
         return f"f = {f:.3f} > {cfg.f_stop} (L1)"

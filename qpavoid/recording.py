@@ -25,7 +25,7 @@ import numpy as np
 
 from ._checks import as_array, finite_number, one_line
 from .errors import InputError, RecordingError
-from .human import N_KINECT_JOINTS, JointType
+from .frames import N_KINECT_JOINTS, HumanFrame, JointType, check_joints, check_states
 
 T = TypeVar("T")
 
@@ -36,7 +36,6 @@ NPZ_ARRAYS: tuple[str, ...] = ("t", "joints", "state")
 CSV_JOINT_FIELDS: tuple[str, ...] = ("x", "y", "z", "state")
 
 #: Valid tracking states: 0 not tracked, 1 inferred, 2 tracked.
-VALID_STATES: tuple[int, ...] = (0, 1, 2)
 
 #: Where the file formats are described (named by every file-format error).
 FORMATS_DOC = "docs/formats.md"
@@ -84,8 +83,8 @@ class Recording:
 
     def __post_init__(self) -> None:
         t = _check_times(self.t)
-        joints = _check_joints(self.joints, t)
-        state = _check_states(self.state, t)
+        joints = check_joints(self.joints, t)
+        state = check_states(self.state, t)
         for name, arr in (("t", t), ("joints", joints), ("state", state)):
             arr = np.array(arr, copy=True)
             arr.setflags(write=False)
@@ -126,7 +125,7 @@ class Recording:
                              f"t[0]={float(self.t[0])!r} s", name="time_s", value=time_s)
         return index
 
-    def frame_at(self, time_s: float) -> tuple[np.ndarray, np.ndarray]:
+    def frame_at(self, time_s: float) -> HumanFrame:
         """Joints and states shown at ``time_s``: the last frame with ``t <= time_s``.
 
         Never returns a frame from the future; after the last frame, the last frame is
@@ -139,10 +138,9 @@ class Recording:
 
         Returns
         -------
-        joints : np.ndarray
-            (25, 3) joint positions in the robot base frame, m (a copy; NaN = not usable).
-        state : np.ndarray
-            (25,) int8 tracking states (a copy).
+        HumanFrame
+            ``joints`` (25, 3) in the robot base frame, m (NaN = not usable) and ``state``
+            (25,) int8: copies, checked when the recording was made.
 
         Raises
         ------
@@ -150,7 +148,7 @@ class Recording:
             If ``time_s`` is not finite or is before the first frame.
         """
         index = self.index_at(time_s)
-        return self.joints[index].copy(), self.state[index].copy()
+        return HumanFrame(self.joints[index].copy(), self.state[index].copy())
 
 
 def _check_times(t) -> np.ndarray:
@@ -171,39 +169,6 @@ def _check_times(t) -> np.ndarray:
                          f"t[{i}]={float(arr[i])!r} s is not after t[{i - 1}]="
                          f"{float(arr[i - 1])!r} s", name="t", value=arr)
     return arr
-
-
-def _check_joints(joints, t: np.ndarray) -> np.ndarray:
-    """(N, 25, 3) float joints, m; NaN allowed (not usable), infinite values rejected."""
-    n = t.shape[0]
-    arr = as_array(joints, (n, N_KINECT_JOINTS, 3), "joints (robot base frame, m)", finite=False)
-    if np.any(np.isinf(arr)):
-        frame, joint, axis = (int(i) for i in np.argwhere(np.isinf(arr))[0])
-        raise InputError(f"joints has an infinite coordinate at frame {frame} "
-                         f"(t={float(t[frame])!r} s), joint {JointType(joint).name}, axis "
-                         f"{'xyz'[axis]}: {float(arr[frame, joint, axis])!r}", name="joints",
-                         value=arr)
-    return arr
-
-
-def _check_states(state, t: np.ndarray) -> np.ndarray:
-    """(N, 25) int8 tracking states in {0, 1, 2}."""
-    n = t.shape[0]
-    arr = as_array(state, (n, N_KINECT_JOINTS), "state (tracking states)", finite=False)
-    bad_mask = ~np.isin(arr, VALID_STATES)
-    if np.any(bad_mask):
-        frame, joint = (int(i) for i in np.argwhere(bad_mask)[0])
-        raise InputError(f"state[{frame}, {joint}] ({JointType(joint).name} at "
-                         f"t={float(t[frame])!r} s) is {_number_text(arr[frame, joint])}, "
-                         "expected 0 (not tracked), 1 (inferred) or 2 (tracked)", name="state",
-                         value=arr)
-    return arr.astype(np.int8)
-
-
-def _number_text(value: float) -> str:
-    """``3`` for an integral value, else the float's repr (``1.5``, ``nan``)."""
-    value = float(value)
-    return str(int(value)) if value.is_integer() else repr(value)
 
 
 def csv_header() -> list[str]:

@@ -19,7 +19,7 @@ from pathlib import Path
 import qpsolvers
 
 from . import plots as plotting
-from .analytic import AnalyticController
+from .analytic import LIMIT_MODES, AnalyticConfig, AnalyticController
 from .controller import Controller, ControllerConfig
 from .errors import InputError
 from .io import staged_output, write_run
@@ -33,8 +33,6 @@ from .simulation import HumanMotion, SimConfig, SimResult, simulate
 CONTROLLERS = ("analytic", "qp")
 #: Distance methods by name: the paper's spheres (eq. 1) and exact capsules (coal).
 DISTANCES = ("spheres", "capsules")
-#: How the analytic controller enforces eq. (3)'s scaled velocity limits.
-LIMIT_MODES = ("scale", "clip")
 #: QP solvers that come with an extra of ours, and its name (``pip install "qpavoid[solvers]"``).
 SOLVER_EXTRAS = {"daqp": "solvers", "proxqp": "solvers"}
 
@@ -168,10 +166,10 @@ class RunResult:
 
 def build_controller(spec: RunSpec, robot: Robot) -> Controller:
     """The controller ``spec`` names, on ``robot``, at the spec's control rate."""
-    config = ControllerConfig(distance=spec.distance, limit_mode=spec.limit_mode,
-                              control_period_s=1.0 / spec.rate_hz)
+    config = ControllerConfig(distance=spec.distance, control_period_s=1.0 / spec.rate_hz)
     if spec.controller == "analytic":
-        return AnalyticController(robot, config=config)
+        return AnalyticController(robot, config=config,
+                                  analytic=AnalyticConfig(limit_mode=spec.limit_mode))
     qp = QPConfig(backend="qpsolvers" if spec.solver else "persistent",
                   solver=spec.solver or "osqp")
     if spec.redundant:

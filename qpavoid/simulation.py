@@ -30,6 +30,7 @@ import numpy as np
 import pinocchio as pin
 
 from .controller import Controller
+from .frames import HumanFrame
 from .distances import distance_method
 from .task import inverse_kinematics
 
@@ -37,7 +38,9 @@ from .task import inverse_kinematics
 class HumanMotion(Protocol):
     """Anything that gives the Kinect frame at a time: generated scenarios, recordings."""
 
-    def frame_at(self, t: float) -> tuple[np.ndarray, np.ndarray]: ...
+    def frame_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """The frame shown at time t: a :class:`HumanFrame`, or (joints (25, 3), state (25,))."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -72,10 +75,18 @@ class SimResult:
     metrics: dict = field(default_factory=dict)
 
 
-def _frame_source(motion: HumanMotion):
-    """``f(t)`` giving the motion's frame at run time t, recordings replayed from t[0]."""
+def _frame_source(motion: HumanMotion) -> Callable[[float], HumanFrame]:
+    """``f(t)`` giving the motion's frame at run time t, recordings replayed from t[0].
+
+    A motion that returns plain ``(joints, state)`` has its frames checked here, where
+    they enter the library; a :class:`HumanFrame` (a recording's) was checked already.
+    """
     t0 = float(np.asarray(getattr(motion, "t", [0.0]))[0])
-    return lambda t: motion.frame_at(t0 + t)
+
+    def frame_at(t: float) -> HumanFrame:
+        frame = motion.frame_at(t0 + t)
+        return frame if isinstance(frame, HumanFrame) else HumanFrame.check(*frame)
+    return frame_at
 
 
 def simulate(controller: Controller, motion: HumanMotion, config: SimConfig | None = None,
@@ -129,23 +140,21 @@ def simulate(controller: Controller, motion: HumanMotion, config: SimConfig | No
     }
     stop_events = []
     vel_violations = pos_violations = 0
-    tau, was_stopped, frame_key, geo, joints, state = 0.0, False, None, None, None, None
+    tau, was_stopped, frame_key = 0.0, False, None
+    human: HumanFrame
     reached, n = False, 0
     for k in range(n_max):
         t = k * dt
         key = math.floor(t * cfg.frame_rate_hz + 1e-9)
         if key != frame_key:
             frame_key = key
-            joints, state = frame(key / cfg.frame_rate_hz)
-            joints = np.asarray(joints, dtype=float)
-            state = None if state is None else np.asarray(state)
-            geo = controller.human.geometry(joints, state)
+            human = frame(key / cfg.frame_rate_hz)
             if progress is not None:
                 progress(t)
         t0 = time.perf_counter_ns()
-        cmd = controller.step(q, joints, state, tau, t - key / cfg.frame_rate_hz)
+        cmd = controller.step(q, human, None, tau, t - key / cfg.frame_rate_hz)
         tick_us = (time.perf_counter_ns() - t0) / 1e3
-        other_table = other(robot.kinematics(q, jacobians=False), geo)
+        other_table = other(robot.kinematics(q, jacobians=False), controller.geometry(human))
 
         dq = cmd.dq
         if np.any(np.abs(dq) > robot.dq_max * (1 + 1e-9)):
@@ -158,8 +167,7 @@ def simulate(controller: Controller, motion: HumanMotion, config: SimConfig | No
         was_stopped = cmd.stopped
 
         log["t"][k], log["q"][k], log["dq"][k] = t, q, dq
-        log["joints"][k] = joints
-        log["state"][k] = 2 if state is None else state
+        log["joints"][k], log["state"][k] = human
         log["stopped"][k], log["f"][k] = cmd.stopped, cmd.f
         log["distance"][k], log["distance_other"][k] = cmd.distance, other_table.min_per_set()
         log["v_rep_L2"][k], log["v_rep_EE"][k] = cmd.v_rep_L2, cmd.v_rep_EE

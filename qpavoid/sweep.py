@@ -21,7 +21,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from .controller import joint_columns
 from .jobs import map_jobs
+from .laws import scaled_velocity_limits, stop_distances, stop_rule_holds
 from .runs import RunSpec, simulate_one
 
 
@@ -75,14 +77,14 @@ def check_log(log: dict, robot, config, distance: str) -> dict:
     ``min_capsule_distance_moving_m`` (per set, m).
     """
     avo = config.avoidance
-    capsule = log["distance"] if distance == "capsules" else log["distance_other"]
-    threshold = np.array([avo.d_stop_L1_m(), avo.d_stop_L2_m, avo.d_stop_EE_m])
+    sets = [robot.set_index(name) for name in ("L1", "L2", "EE")]    # the paper's three sets
+    capsule = (log["distance"] if distance == "capsules" else log["distance_other"])[:, sets]
+    threshold = stop_distances(avo)
     moving = np.any(log["dq"] != 0.0, axis=1)
-    rule = ((log["f"] > avo.f_stop) | (log["distance"][:, 1] <= avo.d_stop_L2_m)
-            | (log["distance"][:, 2] <= avo.d_stop_EE_m))
-    limits = np.tile(robot.dq_max, (len(moving), 1))
-    cols = [robot.joint_names.index(n) for n in config.scaled_joints]
-    limits[:, cols] *= (1.0 - log["f"])[:, None]
+    seen = log["distance"][:, sets]
+    rule = stop_rule_holds(log["f"], seen[:, 1], seen[:, 2], avo)
+    cols = joint_columns(robot, config.scaled_joints, "scaled_joints")
+    limits = scaled_velocity_limits(robot.dq_max, log["f"], cols)                     # eq. (3)
     over = np.any(np.abs(log["dq"]) > limits * (1 + 1e-9) + 1e-12, axis=1)
     outside = np.any((log["q"] > robot.q_max) | (log["q"] < robot.q_min), axis=1)
     below = np.any(capsule < threshold, axis=1)

@@ -21,7 +21,7 @@ from qpavoid.errors import (IKNotConvergedError, InputError, QpavoidError, Recor
 from qpavoid.io import load_log
 from qpavoid.posture import Operator
 from qpavoid.qp.config import QPConfig
-from qpavoid.qp.problem import make_backend
+from qpavoid.qp.backends import make_backend
 from qpavoid.recording import Recording, csv_header, load_recording, save_csv
 from qpavoid.scenarios import make_scenario
 from qpavoid.task import A_IN, ArcPath, inverse_kinematics, orthonormalize
@@ -248,7 +248,7 @@ def test_unknown_names(robot):
     assert one_line(info.value) == ("unknown distance method 'boxes'; choose from ['capsules', "
                                     "'spheres']")
     with pytest.raises(InputError) as info:
-        qpavoid.AnalyticController(robot, config=qpavoid.ControllerConfig(limit_mode="wrap"))
+        qpavoid.AnalyticConfig(limit_mode="wrap")
     assert (info.value.name, info.value.value) == ("limit_mode", "wrap")
     with pytest.raises(InputError) as info:
         robot.set_index("L3")

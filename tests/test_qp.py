@@ -15,7 +15,7 @@ from qpavoid.controller import ControllerConfig
 from qpavoid.human import JointType
 from qpavoid.qp import QPConfig, QPController
 from qpavoid.qp.elbow_task import ElbowClearanceTask
-from qpavoid.qp.problem import PersistentOSQP, QPProblem, QPSolversBackend
+from qpavoid.qp import Bounds, PersistentOSQP, QPProblem, QPSolversBackend
 from qpavoid.qp.velocity_limits import VelocityLimit
 from qpavoid.runs import RunSpec, simulate_one
 from qpavoid.scenarios import make_scenario
@@ -94,7 +94,7 @@ def recorded_problems(robot):
     for k in range(0, len(log["t"]), 3):
         tick = probe.measure(log["q"][k], log["joints"][k], log["state"][k], log["tau"][k])
         if not tick.reason:
-            problems.append(probe.problem(tick)[1])
+            problems.append(probe.problem(tick))
     return problems
 
 
@@ -148,8 +148,8 @@ def test_iteration_limit_stops_the_robot(robot):
 def test_infeasible_problem_stops_the_robot(robot, monkeypatch, backend):
     path, q = _start(robot)
     monkeypatch.setattr(VelocityLimit, "compute_qp_bounds",
-                        lambda self, inp: (np.full(len(inp.tick.limits), 1.0),
-                                           np.full(len(inp.tick.limits), -1.0)))
+                        lambda self, tick, dt: Bounds(np.full(self.variables.n, 1.0),
+                                                      np.full(self.variables.n, -1.0)))
     ctrl = QPController(robot, path, qp=QPConfig(backend=backend, solver="daqp"))
     from qpavoid.posture import Operator
     cmd = ctrl.step(q, Operator().rest(), None, 1.0)
@@ -182,14 +182,13 @@ def test_redundancy_moves_the_elbow_away_keeping_the_end_effector(robot7):
         for weight in (0.0, 0.05):
             ctrl = QPController(robot7, path, qp=QPConfig(elbow_weight=weight, regularization=1e-4))
             tick = ctrl.measure(q, joints, None, 5.0)
-            inp, _ = ctrl.problem(tick)
             cmd = ctrl.step(q, joints, None, 5.0)
             assert not cmd.stopped
             radii = np.where(ctrl.human.point_part, ctrl.human.sphere_radii, 0).max(axis=1)
-            d, n = ElbowClearanceTask(ctrl.layout, 3, robot7.sphere_radii[3], radii, 1, 0.4,
-                                      0.1).clearance(inp)
+            d, n = ElbowClearanceTask(ctrl.variables, 3, robot7.sphere_radii[3], radii, 1, 0.4,
+                                      0.1).clearance(tick)
             speeds.append(n @ tick.kin.point_jacobians[3] @ cmd.dq)
-            residual = tick.kin.ee_jacobian @ cmd.dq - ctrl.ee_task.target(inp)
+            residual = tick.kin.ee_jacobian @ cmd.dq - ctrl.ee_task.target(tick)
             assert np.abs(residual).max() < 1e-3                # the end effector keeps its path
         assert speeds[1] > speeds[0] + 0.03                    # m/s: the elbow moves away
 

@@ -1,14 +1,20 @@
-"""The QP controller (issue 4): the paper's laws as costs and constraints of one QP.
+"""The QP controller: the paper's laws as costs and constraints of one QP per tick.
 
-One file per piece, as in pink and mink: :mod:`.ee_task` (eq. 8), :mod:`.repulsion`
+One file per piece, as in pink and mink, each returning full-width blocks
+(:mod:`.pieces`: ``Objective(H, c)``, ``Constraint(G, h)``, ``Bounds(lb, ub)``) over the
+named variables of :mod:`.variables`: :mod:`.ee_task` (eq. 8), :mod:`.repulsion`
 (eqs. 4-7), :mod:`.regularization`, :mod:`.elbow_task` (redundancy), :mod:`.velocity_limits`
-(eq. 3), :mod:`.position_limits`, :mod:`.velocity_damper`; each returns its own rows.
-:mod:`.problem` assembles and solves them; :mod:`.controller` composes them.
+(eq. 3), :mod:`.position_limits`, :mod:`.velocity_damper`. :mod:`.problem` assembles them,
+:mod:`.backends` solves, :mod:`.controller` composes.
 """
 
+from .backends import PersistentOSQP, QPSolversBackend, make_backend
 from .config import QPConfig
 from .controller import QPController
-from .problem import PersistentOSQP, QPProblem, QPSolution, QPSolversBackend, assemble
+from .pieces import Bounds, Constraint, Objective, QPPiece
+from .problem import Assembler, QPProblem, QPSolution
+from .variables import Variables
 
-__all__ = ["PersistentOSQP", "QPConfig", "QPController", "QPProblem", "QPSolution",
-           "QPSolversBackend", "assemble"]
+__all__ = ["Assembler", "Bounds", "Constraint", "Objective", "PersistentOSQP", "QPConfig",
+           "QPController", "QPPiece", "QPProblem", "QPSolution", "QPSolversBackend",
+           "Variables", "make_backend"]

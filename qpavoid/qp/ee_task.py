@@ -4,40 +4,46 @@ from __future__ import annotations
 
 import numpy as np
 
-from .layout import Layout, QPInput
+from ..controller import Tick
+from .pieces import Objective, QPPiece
+from .variables import Variables
 
 
-class EndEffectorTask:
+class EndEffectorTask(QPPiece):
     """Cost ``‖W (J q̇ − v*)‖²`` with ``v* = v_PL + K e + [v_EE; 0]`` (eq. 8).
 
     ``J`` is the (6, nv) end-effector Jacobian (twist ``[v; ω]`` in the base frame),
     ``W = diag(w_p, w_p, w_p, w_o, w_o, w_o)``. Expanded, up to a constant:
     ``q̇ᵀ (JᵀW²J) q̇ − 2 (JᵀW²v*)ᵀ q̇``, so with the ``½ xᵀHx + cᵀx`` convention
-    ``H = 2 JᵀW²J`` and ``c = −2 JᵀW²v*``.
+    ``H = 2 JᵀW²J`` and ``c = −2 JᵀW²v*`` on the joint velocities (0 on the slacks).
 
     Parameters
     ----------
-    layout
+    variables
         The QP's variables.
-    K
-        (6,) diagonal gain of eq. (8), 1/s.
     weight_position, weight_orientation
         w_p (per m/s) and w_o (per rad/s).
     """
 
-    def __init__(self, layout: Layout, K: np.ndarray, weight_position: float, weight_orientation: float):
-        self.layout, self.K = layout, np.asarray(K, dtype=float)
+    name = "ee_task"
+
+    def __init__(self, variables: Variables, weight_position: float, weight_orientation: float):
+        self.variables = variables
         self.w2 = np.r_[[weight_position ** 2] * 3, [weight_orientation ** 2] * 3]
 
-    def target(self, inp: QPInput) -> np.ndarray:
+    @staticmethod
+    def target(tick: Tick) -> np.ndarray:
         """v* of eq. (8): planned twist + K e + the EE repulsion (linear part), (6,)."""
-        t = inp.tick
-        v = t.ref_twist + self.K * t.error
-        v[:3] += inp.v_rep_EE
+        v = tick.task_twist.copy()
+        v[:3] += tick.v_rep_EE
         return v
 
-    def compute_qp_objective(self, inp: QPInput) -> tuple[np.ndarray, np.ndarray]:
-        """(H, c) over the joint velocities (nv, nv), (nv,)."""
-        J = inp.tick.kin.ee_jacobian
+    def compute_qp_objective(self, tick: Tick | None, dt: float) -> Objective:
+        assert tick is not None
+        n, dq = self.variables.n, self.variables.dq
+        J = tick.kin.ee_jacobian
         JW = J.T * self.w2
-        return 2.0 * JW @ J, -2.0 * JW @ self.target(inp)
+        H, c = np.zeros((n, n)), np.zeros(n)
+        H[dq, dq] = 2.0 * JW @ J
+        c[dq] = -2.0 * JW @ self.target(tick)
+        return Objective(H, c)

@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from ..laws import logistic
-from .layout import Layout, QPInput
+from ..controller import Tick
+from .pieces import Objective, QPPiece
+from .variables import Variables
 
 
-class ElbowClearanceTask:
+class ElbowClearanceTask(QPPiece):
     """Cost ``w (nᵀ J_e q̇ − v)²`` on the elbow point (A4 for the iiwa).
 
     ``d`` and ``n`` are the sphere distance and unit direction from the closest usable
@@ -21,7 +23,7 @@ class ElbowClearanceTask:
 
     Parameters
     ----------
-    layout
+    variables
         The QP's variables.
     point
         Index of the elbow among the robot's control points.
@@ -33,30 +35,34 @@ class ElbowClearanceTask:
         w, ρ, v_el and α.
     """
 
-    def __init__(self, layout: Layout, point: int, robot_radius_m: float, human_radii_m: np.ndarray,
-                 weight: float, influence_m: float, speed_mps: float, alpha: float = 9.0):
-        self.layout, self.point, self.weight = layout, point, weight
+    name = "elbow_task"
+
+    def __init__(self, variables: Variables, point: int, robot_radius_m: float,
+                 human_radii_m: np.ndarray, weight: float, influence_m: float, speed_mps: float,
+                 alpha: float = 9.0):
+        self.variables, self.point, self.weight = variables, point, weight
         self.radii = robot_radius_m + np.asarray(human_radii_m, dtype=float)
         self.rho, self.speed, self.alpha = influence_m, speed_mps, alpha
 
-    def clearance(self, inp: QPInput) -> tuple[float, np.ndarray]:
+    def clearance(self, tick: Tick) -> tuple[float, np.ndarray]:
         """Distance (m) and unit direction human → elbow (zero if nobody is seen)."""
-        geo = inp.tick.human
-        diff = inp.tick.kin.points[self.point] - geo.filled_points
+        geo = tick.human
+        diff = tick.kin.points[self.point] - geo.filled_points
         d = np.sqrt(np.einsum("mk,mk->m", diff, diff)) - self.radii + geo.point_penalty
         k = int(np.argmin(d))
         if not np.isfinite(d[k]):
             return float("inf"), np.zeros(3)
         return float(d[k]), diff[k] / max(np.linalg.norm(diff[k]), 1e-12)
 
-    def compute_qp_objective(self, inp: QPInput) -> tuple[np.ndarray, np.ndarray]:
-        n_var, nv = self.layout.n, self.layout.nv
+    def compute_qp_objective(self, tick: Tick | None, dt: float) -> Objective:
+        assert tick is not None
+        n_var, dq = self.variables.n, self.variables.dq
         H, c = np.zeros((n_var, n_var)), np.zeros(n_var)
-        d, n = self.clearance(inp)
+        d, n = self.clearance(tick)
         if not np.isfinite(d):
-            return H, c
+            return Objective(H, c)
         v = self.speed * float(logistic(d, self.rho, self.alpha))
-        a = n @ inp.tick.kin.point_jacobians[self.point]                      # (nv,)
-        H[:nv, :nv] = 2.0 * self.weight * np.outer(a, a)
-        c[:nv] = -2.0 * self.weight * v * a
-        return H, c
+        a = n @ tick.kin.point_jacobians[self.point]                          # (nv,)
+        H[dq, dq] = 2.0 * self.weight * np.outer(a, a)
+        c[dq] = -2.0 * self.weight * v * a
+        return Objective(H, c)

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .layout import QPInput
+from ..controller import Tick
+from .pieces import Bounds, QPPiece, free_bounds
+from .variables import Variables
 
 
-class PositionLimit:
+class PositionLimit(QPPiece):
     """Bounds ``γ (q_min − q) / dt ≤ q̇ ≤ γ (q_max − q) / dt``.
 
     After one period of length dt, ``q_max − q`` shrinks at most by the factor (1 − γ), so
@@ -15,16 +17,25 @@ class PositionLimit:
 
     Parameters
     ----------
+    variables
+        The QP's variables.
     q_min, q_max
         Position limits, rad.
     gain
         γ in (0, 1].
     """
 
-    def __init__(self, q_min: np.ndarray, q_max: np.ndarray, gain: float):
+    name = "position_limits"
+
+    def __init__(self, variables: Variables, q_min: np.ndarray, q_max: np.ndarray,
+                 gain: float):
+        self.variables = variables
         self.q_min, self.q_max, self.gain = q_min, q_max, gain
 
-    def compute_qp_bounds(self, inp: QPInput) -> tuple[np.ndarray, np.ndarray]:
-        k = self.gain / inp.dt
-        q = inp.tick.q
-        return k * (self.q_min - q), k * (self.q_max - q)
+    def compute_qp_bounds(self, tick: Tick | None, dt: float) -> Bounds:
+        assert tick is not None
+        k = self.gain / dt
+        lb, ub = free_bounds(self.variables.n)
+        lb[self.variables.dq] = k * (self.q_min - tick.q)
+        ub[self.variables.dq] = k * (self.q_max - tick.q)
+        return Bounds(lb, ub)

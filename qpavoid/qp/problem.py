@@ -1,38 +1,44 @@
-"""Assembling and solving the QP: the one place where pieces become a problem.
+"""Assembling the QP: the one place where pieces become a problem.
 
-Each tick the pieces (tasks, limits, barriers) give their rows and the problem
+Each tick every piece (task, limit, barrier: :mod:`.pieces`) gives its full-width cost,
+rows and bounds, and the assembler makes the problem
 
-    minimise    ½ xᵀ H x + cᵀ x
-    subject to  G x ≤ h
-                lb ≤ x ≤ ub
+    minimise    ½ xᵀ H x + cᵀ x          H = Σ H_piece,  c = Σ c_piece
+    subject to  G x ≤ h                  G, h: the pieces' rows stacked in piece order
+                lb ≤ x ≤ ub              lb = max lb_piece,  ub = min ub_piece
 
-over ``x = [q̇; s_L2; s_EE]`` is solved by one of two backends that give the same
-answer to the documented tolerance (docs/qp.md):
-
-* :class:`PersistentOSQP` sets one ``osqp.OSQP`` problem up once with a fixed sparsity
-  pattern (dense blocks: every G row exists every tick, inactive rows have h = +inf) and
-  only ``update()``s its numbers each tick, warm started;
-* :class:`QPSolversBackend` builds a new problem each tick through qpsolvers, with any
-  installed solver, for portability and cross-checking.
-
-A solution is returned with ``found = False`` (and a reason) unless the solver reports
-success; the controller then stops the robot.
+over ``x = [q̇; slacks]`` (:class:`~qpavoid.qp.variables.Variables`). The rows of each
+piece are found by its name (:attr:`QPProblem.rows`), never by position. Pieces whose cost
+or bounds are constant are summed once, at construction. The backends that solve it are
+in :mod:`.backends`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
 
-from ..errors import SolverError
-from .config import QPConfig
+from ..controller import Tick
+from .pieces import QPPiece, free_bounds
 
 
 @dataclass(frozen=True)
 class QPProblem:
-    """The dense matrices of one tick's QP (see the module docstring)."""
+    """The dense matrices of one tick's QP (see the module docstring).
+
+    Attributes
+    ----------
+    H, c
+        (n, n) and (n,): the cost ``½ xᵀ H x + cᵀ x``.
+    G, h
+        (m, n) and (m,): the rows ``G x ≤ h`` (``h = +inf`` for an inactive row).
+    lb, ub
+        (n,) bounds.
+    rows
+        The rows of each piece that has any, by the piece's name.
+    """
 
     H: np.ndarray
     c: np.ndarray
@@ -40,6 +46,7 @@ class QPProblem:
     h: np.ndarray
     lb: np.ndarray
     ub: np.ndarray
+    rows: Mapping[str, slice] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -65,218 +72,58 @@ class QPSolution:
 
 
 class Assembler:
-    """Sums the pieces' costs, stacks their rows and intersects their bounds, each tick.
-
-    Pieces whose ``constant`` attribute is True (their rows never change) are summed once
-    here, so a tick only adds what varies. Rows are written straight into their place.
+    """Visits each piece once per tick and sums, stacks and intersects what it gives.
 
     Parameters
     ----------
-    objectives, inequalities, bounds
-        Pieces with ``compute_qp_objective`` / ``compute_qp_inequalities`` /
-        ``compute_qp_bounds``. Objectives and bounds may cover the first k variables only.
     n
         Number of variables.
-    inp
-        A sample input, used once to size the inequality rows.
+    pieces
+        The tasks, limits and barriers, in order (their rows are stacked in this order).
     """
 
-    def __init__(self, objectives, inequalities, bounds, n: int, inp=None):
-        self.n = n
-        const = [p for p in objectives if getattr(p, "constant", False)]
-        self.objectives = [p for p in objectives if not getattr(p, "constant", False)]
+    def __init__(self, n: int, pieces: Sequence[QPPiece]):
+        self.n, self.pieces = n, tuple(pieces)
+        names = [p.name for p in self.pieces]
+        if len(set(names)) < len(names):
+            raise ValueError(f"QP pieces need distinct names, got {names}")
         self.H0, self.c0 = np.zeros((n, n)), np.zeros(n)
-        for p in const:
-            self._add(self.H0, self.c0, *p.compute_qp_objective(inp))
-        const_b = [p for p in bounds if getattr(p, "constant", False)]
-        self.bounds = [p for p in bounds if not getattr(p, "constant", False)]
-        self.lb0, self.ub0 = np.full(n, -np.inf), np.full(n, np.inf)
-        for p in const_b:
-            self._intersect(self.lb0, self.ub0, *p.compute_qp_bounds(inp))
-        self.inequalities = inequalities
-        self.rows = [p.rows for p in inequalities]
-        self.offsets = np.concatenate([[0], np.cumsum(self.rows)]).tolist()
-        self.m = self.offsets[-1]
+        self.lb0, self.ub0 = free_bounds(n)
+        for p in self.pieces:
+            if p.constant_objective:
+                obj = p.compute_qp_objective(None, 0.0)
+                if obj is not None:
+                    self.H0 += obj.H
+                    self.c0 += obj.c
+            if p.constant_bounds:
+                b = p.compute_qp_bounds(None, 0.0)
+                if b is not None:
+                    np.maximum(self.lb0, b.lb, out=self.lb0)
+                    np.minimum(self.ub0, b.ub, out=self.ub0)
+        self._objectives = [p for p in self.pieces if not p.constant_objective]
+        self._bounds = [p for p in self.pieces if not p.constant_bounds]
+        self._rows = [p for p in self.pieces if p.rows]
+        offsets = np.cumsum([0] + [p.rows for p in self._rows]).tolist()
+        self.rows = {p.name: slice(a, b) for p, a, b in zip(self._rows, offsets, offsets[1:])}
+        self.m = offsets[-1]
 
-    @staticmethod
-    def _add(H, c, Hp, cp):
-        k = len(cp)
-        if k == len(c):
-            H += Hp
-            c += cp
-        else:
-            H[:k, :k] += Hp
-            c[:k] += cp
-
-    @staticmethod
-    def _intersect(lb, ub, lo, hi):
-        k = len(lo)
-        np.maximum(lb[:k], lo, out=lb[:k])
-        np.minimum(ub[:k], hi, out=ub[:k])
-
-    def __call__(self, inp) -> QPProblem:
+    def __call__(self, tick: Tick, dt: float) -> QPProblem:
+        """The problem of ``tick`` with control period ``dt`` (s)."""
         H, c = self.H0.copy(), self.c0.copy()
-        for piece in self.objectives:
-            self._add(H, c, *piece.compute_qp_objective(inp))
-        G = np.empty((self.m, self.n))
-        h = np.empty(self.m)
-        for piece, a, b in zip(self.inequalities, self.offsets, self.offsets[1:]):
-            G[a:b], h[a:b] = piece.compute_qp_inequalities(inp)
+        for p in self._objectives:
+            obj = p.compute_qp_objective(tick, dt)
+            if obj is not None:
+                H += obj.H
+                c += obj.c
+        G, h = np.empty((self.m, self.n)), np.empty(self.m)
+        for p in self._rows:
+            con = p.compute_qp_inequalities(tick, dt)
+            assert con is not None, p.name
+            G[self.rows[p.name]], h[self.rows[p.name]] = con.G, con.h
         lb, ub = self.lb0.copy(), self.ub0.copy()
-        for piece in self.bounds:
-            self._intersect(lb, ub, *piece.compute_qp_bounds(inp))
-        return QPProblem(H, c, G, h, lb, ub)
-
-
-def assemble(objectives, inequalities, bounds, n: int, inp) -> QPProblem:
-    """One-shot form of :class:`Assembler` (builds it and assembles ``inp``)."""
-    return Assembler(objectives, inequalities, bounds, n, inp)(inp)
-
-
-#: ProxQP's absolute tolerance: at OSQP's 1e-7 its answers differ from daqp's by up to
-#: 4e-5 rad/s on recorded ticks; at 1e-9 by less than 1e-6 (docs/qp.md).
-PROXQP_EPS_ABS = 1e-9
-
-
-def _osqp_settings(cfg: QPConfig) -> dict:
-    return dict(eps_abs=cfg.eps_abs, eps_rel=cfg.eps_rel, max_iter=cfg.max_iter,
-                polishing=cfg.polish, verbose=False)
-
-
-class PersistentOSQP:
-    """One OSQP problem for the controller's lifetime, updated and warm started each tick.
-
-    OSQP's form is ``min ½xᵀPx + qᵀx, l ≤ Ax ≤ u``: here ``A = [I; G]``,
-    ``l = [lb; −inf]``, ``u = [ub; h]``. P (upper triangle) and A have a fixed dense
-    pattern, so each tick is ``update(q, l, u, Px, Ax)`` and ``solve()``.
-
-    Parameters
-    ----------
-    n
-        Number of variables.
-    m
-        Number of G rows.
-    cfg
-        Tolerances and iteration cap.
-    """
-
-    name = "osqp-persistent"
-
-    def __init__(self, n: int, m: int, cfg: QPConfig):
-        import osqp
-        self.n, self.m = n, m
-        # CSC patterns: P upper triangle column by column; A = [I; G] with every G entry.
-        rows_p = [r for j in range(n) for r in range(j + 1)]
-        cols_p = [j for j in range(n) for _ in range(j + 1)]
-        self._p_idx = np.array(rows_p) * n + np.array(cols_p)
-        a_rows = [[j] + list(range(n, n + m)) for j in range(n)]
-        self._a_idx = np.array([r * n + j for j in range(n) for r in a_rows[j]])
-        P = sp.csc_matrix((np.ones(len(rows_p)), (rows_p, cols_p)), shape=(n, n))
-        A = sp.csc_matrix((np.ones(len(self._a_idx)),
-                           ([r for j in range(n) for r in a_rows[j]],
-                            [j for j in range(n) for _ in a_rows[j]])), shape=(n + m, n))
-        self._M = np.zeros((n + m, n))
-        self._M[:n] = np.eye(n)
-        self._l = np.full(n + m, -np.inf)
-        self._u = np.full(n + m, np.inf)
-        self._solver = osqp.OSQP()
-        # The numbers here are placeholders (P must be positive semidefinite for setup);
-        # only the pattern matters: every tick replaces all of them.
-        P.data[:] = np.eye(n)[rows_p, cols_p]
-        self._solver.setup(P, np.zeros(n), A, self._l, self._u, **_osqp_settings(cfg))
-        self._solved = osqp.SolverStatus.OSQP_SOLVED
-        self._infinity = float(self._solver.constant("OSQP_INFTY"))
-        # osqp's Python layer costs 5-8 times its C solve on a problem this small (it
-        # rebuilds an info namespace per solve and caches data for derivatives per update):
-        # where the compiled solver object offers the calls that layer makes, use them.
-        native = getattr(self._solver, "_solver", None)
-        self._native = native if all(hasattr(native, a) for a in
-                                     ("update_data_vec", "update_data_mat", "solve", "info",
-                                      "solution")) else None
-
-    def solve(self, prob: QPProblem) -> QPSolution:
-        n, inf = self.n, self._infinity
-        self._M[n:] = prob.G
-        self._l[:n], self._u[:n], self._u[n:] = prob.lb, prob.ub, prob.h
-        l, u = np.maximum(self._l, -inf), np.minimum(self._u, inf)
-        # OSQP rejects l > u (or a non-convex P) in an update by keeping the *previous*
-        # data, after which solve() reports "solved" for that old problem: never let it.
-        if np.any(l > u):
-            k = int(np.argmax(l > u))
-            return QPSolution(None, False, f"infeasible bounds: l > u in row {k} "
-                                           f"({l[k]:.4g} > {u[k]:.4g})")
-        Px, Ax = prob.H.ravel()[self._p_idx], self._M.ravel()[self._a_idx]
-        if self._native is not None:
-            s = self._native
-            flag = s.update_data_vec(q=prob.c, l=l, u=u) or s.update_data_mat(
-                P_x=Px, P_i=None, A_x=Ax, A_i=None)
-            if flag:
-                return QPSolution(None, False, f"OSQP rejected the update (exit flag {flag})")
-            s.solve()
-            info = s.info
-            status_val, status, iters = info.status_val, info.status, info.iter
-            x = s.solution.x
-        else:
-            # The public update() discards OSQP's exit flag: check convexity here instead.
-            if not _convex(prob.H):
-                return QPSolution(None, False, "the cost is not convex (or not finite)")
-            self._solver.update(q=prob.c, l=l, u=u, Px=Px, Ax=Ax)
-            res = self._solver.solve(raise_error=False)
-            status_val, status, iters, x = res.info.status_val, res.info.status, res.info.iter, res.x
-        found = status_val == self._solved
-        return QPSolution(np.array(x) if found else None, found, str(status), int(iters))
-
-    def update_settings(self, **settings) -> None:
-        """Change OSQP settings (e.g. ``max_iter``) of the live problem."""
-        self._solver.update_settings(**settings)
-
-
-class QPSolversBackend:
-    """A new problem each tick through qpsolvers (any installed solver).
-
-    Rows with h = +inf are dropped (not every solver accepts infinite bounds).
-    """
-
-    def __init__(self, solver: str, cfg: QPConfig):
-        import qpsolvers
-        if solver not in qpsolvers.available_solvers:
-            raise SolverError(f"QP solver {solver!r} is not installed; available: "
-                              f"{sorted(qpsolvers.available_solvers)}", solver=solver,
-                              status="not installed")
-        self.name, self._qpsolvers = solver, qpsolvers
-        self._settings = _osqp_settings(cfg) if solver == "osqp" else {}
-        if solver == "proxqp":
-            self._settings = dict(eps_abs=PROXQP_EPS_ABS, eps_rel=0.0)
-
-    def solve(self, prob: QPProblem) -> QPSolution:
-        keep = np.isfinite(prob.h)
-        H, G = prob.H, prob.G[keep]
-        if self.name == "osqp":          # it wants sparse matrices (and warns otherwise)
-            H, G = sp.csc_matrix(H), sp.csc_matrix(G)
-        problem = self._qpsolvers.Problem(H, prob.c, G, prob.h[keep], lb=prob.lb, ub=prob.ub)
-        try:
-            sol = self._qpsolvers.solve_problem(problem, solver=self.name, **self._settings)
-        except Exception as exc:   # a solver's own failure must stop the robot, not crash
-            return QPSolution(None, False, f"{type(exc).__name__}: {exc}")
-        found = bool(sol.found) and sol.x is not None and np.all(np.isfinite(sol.x))
-        return QPSolution(sol.x if found else None, found, "solved" if found else "not solved")
-
-
-def make_backend(cfg: QPConfig, n: int, m: int):
-    """The backend named by ``cfg.backend``."""
-    if cfg.backend == "persistent":
-        return PersistentOSQP(n, m, cfg)
-    if cfg.backend == "qpsolvers":
-        return QPSolversBackend(cfg.solver, cfg)
-    raise SolverError(f"unknown QP backend {cfg.backend!r}; choose 'persistent' or 'qpsolvers'",
-                      solver=cfg.backend, status="unknown backend")
-
-
-def _convex(H: np.ndarray) -> bool:
-    """True if ``H`` is finite and positive semidefinite (to -1e-9); never raises."""
-    if not np.isfinite(H).all():       # eigvalsh returns garbage (or raises) on NaN
-        return False
-    try:
-        return bool(np.linalg.eigvalsh(H).min() >= -1e-9)
-    except np.linalg.LinAlgError:      # did not converge
-        return False
+        for p in self._bounds:
+            b = p.compute_qp_bounds(tick, dt)
+            if b is not None:
+                np.maximum(lb, b.lb, out=lb)
+                np.minimum(ub, b.ub, out=ub)
+        return QPProblem(H, c, G, h, lb, ub, self.rows)

@@ -4,23 +4,34 @@ from __future__ import annotations
 
 import numpy as np
 
-from .layout import Layout, QPInput
+from ..controller import Tick
+from .pieces import Objective, QPPiece, readonly
+from .variables import Variables
 
 
-class Regularization:
-    """Cost ``ε ‖q̇‖²``: keeps H positive definite whatever the Jacobian's rank."""
+class Regularization(QPPiece):
+    """Cost ``ε ‖q̇‖²``: keeps H positive definite whatever the Jacobian's rank (constant).
 
-    constant = True
+    Parameters
+    ----------
+    variables
+        The QP's variables.
+    epsilon
+        ε, per (rad/s)².
+    """
 
-    def __init__(self, layout: Layout, epsilon: float):
-        self.layout, self.epsilon = layout, epsilon
-        n, nv = layout.n, layout.nv
-        self._H = np.zeros((n, n))
-        self._H[np.arange(nv), np.arange(nv)] = 2.0 * epsilon
-        self._c = np.zeros(n)
-        self._H.setflags(write=False)
-        self._c.setflags(write=False)
+    name = "regularization"
+    constant_objective = True
 
-    def compute_qp_objective(self, inp: QPInput) -> tuple[np.ndarray, np.ndarray]:
-        """(H, c): ``2ε I`` on the joint velocities, 0 elsewhere (constant)."""
-        return self._H, self._c
+    def __init__(self, variables: Variables, epsilon: float):
+        n = variables.n
+        self.epsilon = epsilon
+        H = np.zeros((n, n))
+        idx = np.arange(variables.nv)
+        H[idx, idx] = 2.0 * epsilon
+        self._objective = Objective(H, np.zeros(n))
+        readonly(H, self._objective.c)
+
+    def compute_qp_objective(self, tick: Tick | None, dt: float) -> Objective:
+        """``2ε I`` on the joint velocities, 0 elsewhere."""
+        return self._objective

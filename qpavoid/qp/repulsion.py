@@ -1,87 +1,134 @@
-"""The paper's repulsive velocities (eqs. 4-7) as soft constraints with a slack.
+"""The paper's repulsive velocities (eqs. 4-7) as soft rows with a slack.
 
 In the paper the repulsion is *added* to the motion the task asks for: eq. (8) puts v_EE
 into the end effector's target, and eq. (9) adds to the joints the velocity that moves
-the closest L2 point at v_rep,L2 on top of eq. (8)'s motion. As a QP cost: the point's
-speed along the repulsion direction u should be at least its nominal speed plus the
+the closest L2 point at v_rep,L2 on top of eq. (8)'s motion. As a QP: the point's speed
+along the repulsion direction u = v / |v| should be at least its nominal speed plus the
 law's speed,
 
-    uᵀ J_p q̇ + s ≥ uᵀ v_nominal + |v|,   s ≥ 0,   cost w s²,
+    uᵀ J_p q̇ + s ≥ uᵀ ṗ_nominal + |v|,   s ≥ 0,   cost w s²,
 
-i.e. ``−uᵀ J_p q̇ − s ≤ −(uᵀ v_nominal + |v|)``. For the end effector v_nominal is
-v_PL + K e (eq. 8 without v_EE); for the L2 point it is J_p q̇₈ with q̇₈ eq. (8)'s joint
-velocities. Moving away faster costs nothing; falling short costs w s². Where the task
-can be met the row costs nothing either, so it only acts against other constraints.
-The row is always present (fixed structure); below ``MIN_SPEED_MPS`` its bound is +inf.
+written as the row ``−uᵀ J_p q̇ − s ≤ −(uᵀ ṗ_nominal + |v|)``. For the end effector
+(:class:`EERepulsionTask`, eq. 7) ṗ_nominal is the linear part of v_PL + K e (eq. 8
+without v_EE); for the closest L2 point (:class:`L2RepulsionTask`, eqs. 4-6) it is
+J_p q̇₈ with q̇₈ eq. (8)'s joint velocities. Moving away faster costs nothing; falling
+short costs w s². Where the task can be met the row costs nothing either, so it only acts
+against other constraints. The row is always present (fixed structure); below
+:data:`MIN_SPEED_MPS` its bound is +inf.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .layout import Layout, QPInput
+from ..controller import Tick
+from ..laws import modified_ik
+from .pieces import Bounds, Constraint, Objective, QPPiece, free_bounds, readonly
+from .variables import Variables
 
 #: Repulsive speeds below this are treated as none (m/s): 0.1 mm/s.
 MIN_SPEED_MPS = 1e-4
 
 
-class RepulsionTask:
-    """Soft "move away at least this fast" for the closest L2 point or the end effector.
+class RepulsionTask(QPPiece):
+    """Soft "move away at least this fast" for one robot point: cost, row and bound.
 
-    Its cost (on the slack) and bounds (slack ≥ 0) are constant; its one row is not.
+    Its cost ``w s²`` and bound ``s ≥ 0`` on its slack are constant; its one row is not.
+    Subclasses say which point, how fast (:meth:`velocity`) and from what nominal motion
+    (:meth:`motion`).
 
     Parameters
     ----------
-    layout
-        The QP's variables.
-    which
-        ``"L2"`` (eqs. 4-6, the closest L2 point) or ``"EE"`` (eq. 7, the end effector).
+    variables
+        The QP's variables (the slack is found by :attr:`name`).
     weight
         w, per m/s of shortfall.
-    set_index
-        Row of the set in the distance table.
     """
 
-    constant = True    # objective and bounds; the inequality row varies
     rows = 1
+    constant_objective = True
+    constant_bounds = True
 
-    def __init__(self, layout: Layout, which: str, weight: float, set_index: int):
-        self.layout, self.which, self.set_index = layout, which, set_index
-        self.slack = layout.slack_L2 if which == "L2" else layout.slack_EE
-        self.weight = weight
-        n = layout.n
-        self._H = np.zeros((n, n))
-        self._H[self.slack, self.slack] = 2.0 * weight
-        self._c = np.zeros(n)
-        self._lb = np.full(n, -np.inf)
-        self._lb[self.slack] = 0.0
-        self._ub = np.full(n, np.inf)
-        for a in (self._H, self._c, self._lb, self._ub):
-            a.setflags(write=False)
+    def __init__(self, variables: Variables, weight: float):
+        self.variables, self.weight = variables, weight
+        self.slack = variables.slack(self.name)
+        n = variables.n
+        H = np.zeros((n, n))
+        H[self.slack, self.slack] = 2.0 * weight
+        self._objective = Objective(H, np.zeros(n))
+        lb, ub = free_bounds(n)
+        lb[self.slack] = 0.0
+        self._bounds = Bounds(lb, ub)
+        readonly(H, self._objective.c, lb, ub)
 
-    def compute_qp_objective(self, inp: QPInput) -> tuple[np.ndarray, np.ndarray]:
-        """(H, c) over the whole x: ``w s²`` on the slack (constant)."""
-        return self._H, self._c
+    def velocity(self, tick: Tick) -> np.ndarray:
+        """The law's repulsive velocity v of the point, m/s (3,)."""
+        raise NotImplementedError
 
-    def compute_qp_bounds(self, inp: QPInput) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds over the whole x: the slack is non-negative (constant)."""
-        return self._lb, self._ub
+    def motion(self, tick: Tick) -> tuple[np.ndarray, np.ndarray]:
+        """The point's Jacobian J_p (3, nv) and its nominal velocity ṗ_nominal (3,), m/s."""
+        raise NotImplementedError
 
-    def compute_qp_inequalities(self, inp: QPInput) -> tuple[np.ndarray, np.ndarray]:
-        """One row ``(G, h)`` over the whole x: ``−uᵀ J_p q̇ − s ≤ −|v|``."""
-        n, nv = self.layout.n, self.layout.nv
-        G = np.zeros((1, n))
+    def compute_qp_objective(self, tick: Tick | None, dt: float) -> Objective:
+        """``w s²`` on the slack."""
+        return self._objective
+
+    def compute_qp_bounds(self, tick: Tick | None, dt: float) -> Bounds:
+        """``s ≥ 0``."""
+        return self._bounds
+
+    def compute_qp_inequalities(self, tick: Tick, dt: float) -> Constraint:
+        """One row: ``−uᵀ J_p q̇ − s ≤ −(uᵀ ṗ_nominal + |v|)``."""
+        G = np.zeros((1, self.variables.n))
         G[0, self.slack] = -1.0
-        v = inp.v_rep_L2 if self.which == "L2" else inp.v_rep_EE
+        v = self.velocity(tick)
         speed = float(np.sqrt(v @ v))
         if speed < MIN_SPEED_MPS:
-            return G, np.array([np.inf])
+            return Constraint(G, np.array([np.inf]))
         u = v / speed
-        if self.which == "L2":
-            Jp = inp.tick.table.robot_jacobian(inp.tick.kin, self.set_index, inp.L2_part)
-            nominal = u @ (Jp @ inp.dq_nominal)
-        else:
-            Jp = inp.tick.kin.ee_jacobian[:3]
-            nominal = u @ inp.v_nominal[:3]
-        G[0, :nv] = -u @ Jp
-        return G, np.array([-(nominal + speed)])
+        Jp, nominal = self.motion(tick)
+        G[0, self.variables.dq] = -u @ Jp
+        return Constraint(G, np.array([-(u @ nominal + speed)]))
+
+
+class L2RepulsionTask(RepulsionTask):
+    """Eqs. (4)-(6): the L2 point closest to the person moves away at v_rep,L2.
+
+    Parameters
+    ----------
+    variables, weight
+        As for :class:`RepulsionTask`.
+    set_index
+        Row of L2 in the distance table.
+    K, sigma_min, lambda_max
+        Eq. (8)'s gain and damped inverse, for the point's nominal velocity J_p q̇₈.
+    """
+
+    name = "repulsion_L2"
+
+    def __init__(self, variables: Variables, weight: float, set_index: int, K: np.ndarray,
+                 sigma_min: float, lambda_max: float):
+        super().__init__(variables, weight)
+        self.set_index, self.K = set_index, K
+        self.sigma_min, self.lambda_max = sigma_min, lambda_max
+
+    def velocity(self, tick: Tick) -> np.ndarray:
+        return tick.v_rep_L2
+
+    def motion(self, tick: Tick) -> tuple[np.ndarray, np.ndarray]:
+        Jp = tick.table.robot_jacobian(tick.kin, self.set_index, tick.L2_part)
+        dq8 = modified_ik(tick.kin.ee_jacobian, tick.ref_twist, self.K, tick.error,
+                          tick.v_rep_EE, self.sigma_min, self.lambda_max)          # eq. (8)
+        return Jp, Jp @ dq8
+
+
+class EERepulsionTask(RepulsionTask):
+    """Eq. (7): the end effector moves away at v_EE, on top of v_PL + K e."""
+
+    name = "repulsion_EE"
+
+    def velocity(self, tick: Tick) -> np.ndarray:
+        return tick.v_rep_EE
+
+    def motion(self, tick: Tick) -> tuple[np.ndarray, np.ndarray]:
+        return tick.kin.ee_jacobian[:3], tick.task_twist[:3]

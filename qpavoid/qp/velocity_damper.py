@@ -16,15 +16,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from .layout import Layout, QPInput
+from ..controller import Tick
+from .pieces import Constraint, QPPiece
+from .variables import Variables
 
 
-class VelocityDamper:
-    """All set × part damper rows.
+class VelocityDamper(QPPiece):
+    """All set × part damper rows (hard: a solution must meet them to be applied).
 
     Parameters
     ----------
-    layout
+    variables
         The QP's variables.
     d_stop
         (S,) stop distance of each robot set, m.
@@ -36,18 +38,20 @@ class VelocityDamper:
         Number of human parts (table columns).
     """
 
-    def __init__(self, layout: Layout, d_stop: np.ndarray, influence_m: float, gain_mps: float,
-                 n_parts: int):
-        self.layout = layout
+    name = "velocity_damper"
+
+    def __init__(self, variables: Variables, d_stop: np.ndarray, influence_m: float,
+                 gain_mps: float, n_parts: int):
+        self.variables = variables
         self.d_stop = np.repeat(np.asarray(d_stop, dtype=float), n_parts)
         self.influence_m, self.gain = influence_m, gain_mps
         self.rows = len(self.d_stop)
 
-    def compute_qp_inequalities(self, inp: QPInput) -> tuple[np.ndarray, np.ndarray]:
-        """(rows, n) G and (rows,) h."""
-        table, kin = inp.tick.table, inp.tick.kin
+    def compute_qp_inequalities(self, tick: Tick, dt: float) -> Constraint:
+        """(rows, n) G and (rows,) h, one row per set × part pair."""
+        table, kin = tick.table, tick.kin
         d = table.distance.ravel()
-        G = np.zeros((self.rows, self.layout.n))
+        G = np.zeros((self.rows, self.variables.n))
         h = np.full(self.rows, np.inf)
         active = np.flatnonzero(d < self.influence_m)
         if len(active):
@@ -59,7 +63,7 @@ class VelocityDamper:
                 s = table.robot_s.ravel()[active][:, None, None]                      # capsules
                 Jp = (1.0 - s) * kin.segment_jacobians[i, 0] + s * kin.segment_jacobians[i, 1]
             n = table.vector.reshape(-1, 3)[active]
-            G[active, :self.layout.nv] = -np.einsum("ak,akv->av", n, Jp)
+            G[active, self.variables.dq] = -np.einsum("ak,akv->av", n, Jp)
             ds = self.d_stop[active]
             h[active] = self.gain * (d[active] - ds) / (self.influence_m - ds)
-        return G, h
+        return Constraint(G, h)

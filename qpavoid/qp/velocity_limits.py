@@ -2,17 +2,25 @@
 
 from __future__ import annotations
 
-import numpy as np
+from ..controller import Tick
+from .pieces import Bounds, QPPiece, free_bounds
+from .variables import Variables
 
-from .layout import QPInput
 
-
-class VelocityLimit:
+class VelocityLimit(QPPiece):
     """Bounds ``−q̇_max,r ≤ q̇ ≤ q̇_max,r`` with ``q̇_max,r`` of eq. (3) (rad/s).
 
-    The shared prelude already scaled the limits of the L1 joints (A1, A2) by (1 − f).
+    The shared prelude computed the limits (:func:`~qpavoid.laws.scaled_velocity_limits`):
+    the L1 joints (A1, A2) scaled by (1 − f).
     """
 
-    def compute_qp_bounds(self, inp: QPInput) -> tuple[np.ndarray, np.ndarray]:
-        lim = inp.tick.limits
-        return -lim, lim
+    name = "velocity_limits"
+
+    def __init__(self, variables: Variables):
+        self.variables = variables
+
+    def compute_qp_bounds(self, tick: Tick | None, dt: float) -> Bounds:
+        assert tick is not None
+        lb, ub = free_bounds(self.variables.n)
+        lb[self.variables.dq], ub[self.variables.dq] = -tick.limits, tick.limits
+        return Bounds(lb, ub)

@@ -1,0 +1,171 @@
+"""Solving the QP: a persistent OSQP problem, or any solver through qpsolvers.
+
+Both backends give the same answer to the documented tolerance (docs/qp.md):
+
+* :class:`PersistentOSQP` sets one ``osqp.OSQP`` problem up once with a fixed sparsity
+  pattern (dense blocks: every G row exists every tick, inactive rows have h = +inf) and
+  only ``update()``s its numbers each tick, warm started;
+* :class:`QPSolversBackend` builds a new problem each tick through qpsolvers, with any
+  installed solver, for portability and cross-checking.
+
+A solution is returned with ``found = False`` (and a reason) unless the solver reports
+success; the controller then stops the robot.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import osqp
+import qpsolvers
+import scipy.sparse as sp
+
+from ..errors import SolverError
+from .config import QPConfig
+from .problem import QPProblem, QPSolution
+
+
+#: ProxQP's absolute tolerance: at OSQP's 1e-7 its answers differ from daqp's by up to
+#: 4e-5 rad/s on recorded ticks; at 1e-9 by less than 1e-6 (docs/qp.md).
+PROXQP_EPS_ABS = 1e-9
+
+
+def _osqp_settings(cfg: QPConfig) -> dict:
+    return dict(eps_abs=cfg.eps_abs, eps_rel=cfg.eps_rel, max_iter=cfg.max_iter,
+                polishing=cfg.polish, verbose=False)
+
+
+class PersistentOSQP:
+    """One OSQP problem for the controller's lifetime, updated and warm started each tick.
+
+    OSQP's form is ``min ½xᵀPx + qᵀx, l ≤ Ax ≤ u``: here ``A = [I; G]``,
+    ``l = [lb; −inf]``, ``u = [ub; h]``. P (upper triangle) and A have a fixed dense
+    pattern, so each tick is ``update(q, l, u, Px, Ax)`` and ``solve()``.
+
+    Parameters
+    ----------
+    n
+        Number of variables.
+    m
+        Number of G rows.
+    cfg
+        Tolerances and iteration cap.
+    """
+
+    name = "osqp-persistent"
+
+    def __init__(self, n: int, m: int, cfg: QPConfig):
+        self.n, self.m = n, m
+        # CSC patterns: P upper triangle column by column; A = [I; G] with every G entry.
+        rows_p = [r for j in range(n) for r in range(j + 1)]
+        cols_p = [j for j in range(n) for _ in range(j + 1)]
+        self._p_idx = np.array(rows_p) * n + np.array(cols_p)
+        a_rows = [[j] + list(range(n, n + m)) for j in range(n)]
+        self._a_idx = np.array([r * n + j for j in range(n) for r in a_rows[j]])
+        P = sp.csc_matrix((np.ones(len(rows_p)), (rows_p, cols_p)), shape=(n, n))
+        A = sp.csc_matrix((np.ones(len(self._a_idx)),
+                           ([r for j in range(n) for r in a_rows[j]],
+                            [j for j in range(n) for _ in a_rows[j]])), shape=(n + m, n))
+        self._M = np.zeros((n + m, n))
+        self._M[:n] = np.eye(n)
+        self._l = np.full(n + m, -np.inf)
+        self._u = np.full(n + m, np.inf)
+        self._solver = osqp.OSQP()
+        # The numbers here are placeholders (P must be positive semidefinite for setup);
+        # only the pattern matters: every tick replaces all of them.
+        P.data[:] = np.eye(n)[rows_p, cols_p]
+        self._solver.setup(P, np.zeros(n), A, self._l, self._u, **_osqp_settings(cfg))
+        self._solved = osqp.SolverStatus.OSQP_SOLVED
+        self._infinity = float(self._solver.constant("OSQP_INFTY"))
+        # osqp's Python layer costs 5-8 times its C solve on a problem this small (it
+        # rebuilds an info namespace per solve and caches data for derivatives per update):
+        # where the compiled solver object offers the calls that layer makes, use them.
+        native = getattr(self._solver, "_solver", None)
+        self._native = native if all(hasattr(native, a) for a in
+                                     ("update_data_vec", "update_data_mat", "solve", "info",
+                                      "solution")) else None
+
+    def solve(self, prob: QPProblem) -> QPSolution:
+        n, inf = self.n, self._infinity
+        self._M[n:] = prob.G
+        self._l[:n], self._u[:n], self._u[n:] = prob.lb, prob.ub, prob.h
+        l, u = np.maximum(self._l, -inf), np.minimum(self._u, inf)
+        # OSQP rejects l > u (or a non-convex P) in an update by keeping the *previous*
+        # data, after which solve() reports "solved" for that old problem: never let it.
+        if np.any(l > u):
+            k = int(np.argmax(l > u))
+            return QPSolution(None, False, f"infeasible bounds: l > u in row {k} "
+                                           f"({l[k]:.4g} > {u[k]:.4g})")
+        Px, Ax = prob.H.ravel()[self._p_idx], self._M.ravel()[self._a_idx]
+        if self._native is not None:
+            s = self._native
+            flag = s.update_data_vec(q=prob.c, l=l, u=u) or s.update_data_mat(
+                P_x=Px, P_i=None, A_x=Ax, A_i=None)
+            if flag:
+                return QPSolution(None, False, f"OSQP rejected the update (exit flag {flag})")
+            s.solve()
+            info = s.info
+            status_val, status, iters = info.status_val, info.status, info.iter
+            x = s.solution.x
+        else:
+            # The public update() discards OSQP's exit flag: check convexity here instead.
+            if not _convex(prob.H):
+                return QPSolution(None, False, "the cost is not convex (or not finite)")
+            self._solver.update(q=prob.c, l=l, u=u, Px=Px, Ax=Ax)
+            res = self._solver.solve(raise_error=False)
+            status_val, status, iters, x = res.info.status_val, res.info.status, res.info.iter, res.x
+        found = status_val == self._solved
+        return QPSolution(np.array(x) if found else None, found, str(status), int(iters))
+
+    def update_settings(self, **settings) -> None:
+        """Change OSQP settings (e.g. ``max_iter``) of the live problem."""
+        self._solver.update_settings(**settings)
+
+
+class QPSolversBackend:
+    """A new problem each tick through qpsolvers (any installed solver).
+
+    Rows with h = +inf are dropped (not every solver accepts infinite bounds).
+    """
+
+    def __init__(self, solver: str, cfg: QPConfig):
+        if solver not in qpsolvers.available_solvers:
+            raise SolverError(f"QP solver {solver!r} is not installed; available: "
+                              f"{sorted(qpsolvers.available_solvers)}", solver=solver,
+                              status="not installed")
+        self.name, self._qpsolvers = solver, qpsolvers
+        self._settings = _osqp_settings(cfg) if solver == "osqp" else {}
+        if solver == "proxqp":
+            self._settings = dict(eps_abs=PROXQP_EPS_ABS, eps_rel=0.0)
+
+    def solve(self, prob: QPProblem) -> QPSolution:
+        keep = np.isfinite(prob.h)
+        H, G = prob.H, prob.G[keep]
+        if self.name == "osqp":          # it wants sparse matrices (and warns otherwise)
+            H, G = sp.csc_matrix(H), sp.csc_matrix(G)
+        problem = self._qpsolvers.Problem(H, prob.c, G, prob.h[keep], lb=prob.lb, ub=prob.ub)
+        try:
+            sol = self._qpsolvers.solve_problem(problem, solver=self.name, **self._settings)
+        except Exception as exc:   # a solver's own failure must stop the robot, not crash
+            return QPSolution(None, False, f"{type(exc).__name__}: {exc}")
+        found = bool(sol.found) and sol.x is not None and np.all(np.isfinite(sol.x))
+        return QPSolution(sol.x if found else None, found, "solved" if found else "not solved")
+
+
+def make_backend(cfg: QPConfig, n: int, m: int):
+    """The backend named by ``cfg.backend``."""
+    if cfg.backend == "persistent":
+        return PersistentOSQP(n, m, cfg)
+    if cfg.backend == "qpsolvers":
+        return QPSolversBackend(cfg.solver, cfg)
+    raise SolverError(f"unknown QP backend {cfg.backend!r}; choose 'persistent' or 'qpsolvers'",
+                      solver=cfg.backend, status="unknown backend")
+
+
+def _convex(H: np.ndarray) -> bool:
+    """True if ``H`` is finite and positive semidefinite (to -1e-9); never raises."""
+    if not np.isfinite(H).all():       # eigvalsh returns garbage (or raises) on NaN
+        return False
+    try:
+        return bool(np.linalg.eigvalsh(H).min() >= -1e-9)
+    except np.linalg.LinAlgError:      # did not converge
+        return False

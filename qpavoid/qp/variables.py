@@ -1,0 +1,40 @@
+"""The QP's variables, by name: joint velocities and the slacks of the soft rows."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+#: The slacks of the two repulsion rows (eqs. 4-7), in order after the joint velocities.
+REPULSION_SLACKS = ("repulsion_L2", "repulsion_EE")
+
+
+@dataclass(frozen=True)
+class Variables:
+    """``x = [q̇ (nv); slacks]``: joint velocities (rad/s), then one slack per soft row (m/s).
+
+    Pieces find their columns by name (:attr:`dq`, :meth:`slack`), never by position.
+
+    Attributes
+    ----------
+    nv
+        Number of joint velocities.
+    slacks
+        Names of the slack variables, in order.
+    """
+
+    nv: int
+    slacks: tuple[str, ...] = REPULSION_SLACKS
+
+    @property
+    def n(self) -> int:
+        """Number of variables."""
+        return self.nv + len(self.slacks)
+
+    @property
+    def dq(self) -> slice:
+        """The joint velocities' columns."""
+        return slice(0, self.nv)
+
+    def slack(self, name: str) -> int:
+        """The column of the slack called ``name``."""
+        return self.nv + self.slacks.index(name)
