@@ -15,10 +15,22 @@ The modules follow the data flow of one control tick:
 
 from .analytic import AnalyticConfig, AnalyticController
 from .controller import Command, ControllerConfig
-from .distances import (CapsuleDistance, DistanceTable, SphereDistance, capsule_distances,
-                        distance_method, sphere_distances)
-from .errors import (IKNotConvergedError, InputError, QpavoidError, RecordingError,
-                     RobotDescriptionError, SolverError)
+from .distances import (
+                        CapsuleDistance,
+                        DistanceTable,
+                        SphereDistance,
+                        capsule_distances,
+                        distance_method,
+                        sphere_distances,
+)
+from .errors import (
+                        IKNotConvergedError,
+                        InputError,
+                        QpavoidError,
+                        RecordingError,
+                        RobotDescriptionError,
+                        SolverError,
+)
 from .frames import HumanFrame
 from .human import BodyPart, HumanGeometry, JointType, KinectHuman, TrackingState
 from .laws import AvoidanceConfig

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from dataclasses import dataclass
+
+import numpy as np
 
 from .controller import Command, Controller, ControllerConfig, Tick, joint_columns
 from .errors import InputError
@@ -12,7 +12,6 @@ from .human import KinectHuman
 from .laws import l2_joint_velocity, modified_ik
 from .robot import Robot
 from .task import ArcPath
-
 
 #: How eq. (3)'s scaled limits can be enforced (:func:`enforce_limits`).
 LIMIT_MODES = ("scale", "clip")

@@ -19,6 +19,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any, NoReturn
 
+from . import __version__
 from .compare import compare
 from .errors import QpavoidError
 from .io import check_output_dir
@@ -77,8 +78,7 @@ workers = _number(int, lambda n: n >= 1, "a whole number >= 1")
 def _version() -> str:
     try:
         return version("qpavoid")
-    except PackageNotFoundError:
-        from . import __version__
+    except PackageNotFoundError:                 # running from a source tree
         return __version__
 
 

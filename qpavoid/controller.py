@@ -15,154 +15,25 @@ joint angle or path time) raise :class:`~qpavoid.errors.InputError` before any o
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from ._checks import finite_number
-from .distances import DistanceTable, distance_method
+from .distances import distance_method
 from .errors import InputError, SolverError
 from .frames import HumanFrame
 from .human import HumanGeometry, KinectHuman
-from .laws import (AvoidanceConfig, ee_repulsive_velocity, l1_factor, repulsive_velocity,
-                   scaled_velocity_limits, stop_reason)
-from .robot import Kinematics, Robot
+from .laws import (
+    ee_repulsive_velocity,
+    l1_factor,
+    repulsive_velocity,
+    scaled_velocity_limits,
+    stop_reason,
+)
+from .robot import Robot
 from .task import ArcPath, pose_error
+from .tick import Command, ControllerConfig, Tick
 
-
-@dataclass(frozen=True)
-class ControllerConfig:
-    """Settings shared by the controllers.
-
-    Attributes
-    ----------
-    distance
-        Distance method: ``"spheres"`` (paper eq. 1) or ``"capsules"`` (exact, coal).
-    avoidance
-        Constants of the avoidance laws (eqs. 2-7) and the stop rules.
-    gain_position, gain_orientation
-        Diagonal of K in eq. (8) for the position and orientation error, 1/s.
-    sigma_min, lambda_max
-        Damped inverse of eqs. (6) and (8): no damping while the smallest singular value
-        is above ``sigma_min``; damping up to ``lambda_max`` at a singularity.
-    control_period_s
-        Period of the control loop, s: a command that would carry a joint past its
-        position limit within one period stops the robot instead.
-    scaled_joints
-        Joints whose limits eq. (3) scales by (1 − f): the two that move L1.
-    require_human
-        Stop when no body part is tracked at all (the safe reading of "nobody seen").
-    max_frame_age_s
-        Stop when the human frame is older than this, s (default: 3 Kinect frames).
-    """
-
-    distance: str = "spheres"
-    avoidance: AvoidanceConfig = field(default_factory=AvoidanceConfig)
-    gain_position: float = 5.0
-    gain_orientation: float = 5.0
-    sigma_min: float = 0.02
-    lambda_max: float = 0.05
-    control_period_s: float = 0.002
-    scaled_joints: tuple[str, ...] = ("A1", "A2")
-    require_human: bool = True
-    max_frame_age_s: float = 0.1
-
-
-@dataclass(frozen=True)
-class Command:
-    """One tick's output.
-
-    Attributes
-    ----------
-    dq
-        (nv,) commanded joint velocities, rad/s; exactly zero when stopped.
-    stopped
-        True if a stop rule (or the last-resort layer) holds.
-    reason
-        Why the robot stops ("" while it moves).
-    time_scale
-        Rate in [0, 1] at which the path clock should advance (0 when stopped).
-    f
-        The L1 factor of eq. (2).
-    distance
-        (S,) minimum distance per robot set (L1, L2, EE), m, of the method in use.
-    table
-        The full distance table.
-    v_rep_L2, v_rep_EE
-        (3,) repulsive velocities of eqs. (5) and (7), m/s.
-    limits
-        (nv,) joint velocity limits in force this tick (eq. 3), rad/s.
-    ee_pos, ee_ref
-        (3,) end-effector position and its reference, m.
-    info
-        Controller-specific extras (e.g. solver status and iterations).
-    """
-
-    dq: np.ndarray
-    stopped: bool
-    reason: str
-    time_scale: float
-    f: float
-    distance: np.ndarray
-    table: DistanceTable
-    v_rep_L2: np.ndarray
-    v_rep_EE: np.ndarray
-    limits: np.ndarray
-    ee_pos: np.ndarray
-    ee_ref: np.ndarray
-    info: dict = field(default_factory=dict)
-
-
-@dataclass
-class Tick:
-    """One tick's measurements (:meth:`Controller.measure`), given to :meth:`Controller.act`.
-
-    Attributes
-    ----------
-    q
-        (nq,) joint angles, rad.
-    kin
-        Kinematics at ``q`` (points, Jacobians, end-effector placement).
-    frame, human
-        The human frame and its geometry.
-    table
-        The distance table (sets × parts) of the configured method.
-    distance
-        (S,) minimum distance per set, m.
-    f
-        The L1 factor of eq. (2).
-    limits
-        (nv,) joint velocity limits of eq. (3), rad/s.
-    L2_part
-        Column of the human part closest to L2.
-    v_rep_L2, v_rep_EE
-        (3,) repulsive velocities of eqs. (4)-(5) and (7), m/s.
-    ref_pose, ref_twist
-        The planned end-effector pose (4, 4) and twist (6,) at the path time.
-    error
-        (6,) pose error e of eq. (8).
-    task_twist
-        (6,) ``v_PL + K e``: eq. (8)'s target without the EE repulsion.
-    reason
-        Why a stop rule holds ("" if none).
-    """
-
-    q: np.ndarray
-    kin: Kinematics
-    frame: HumanFrame
-    human: HumanGeometry
-    table: DistanceTable
-    distance: np.ndarray
-    f: float
-    limits: np.ndarray
-    L2_part: int
-    v_rep_L2: np.ndarray
-    v_rep_EE: np.ndarray
-    ref_pose: np.ndarray
-    ref_twist: np.ndarray
-    error: np.ndarray
-    task_twist: np.ndarray
-    reason: str
+__all__ = ["Command", "Controller", "ControllerConfig", "Tick", "joint_columns"]
 
 
 class Controller:

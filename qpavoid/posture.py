@@ -14,12 +14,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .geometry import unit
 from .human import JointType as J
 
 #: Per-side joint chains (shoulder, elbow, wrist, hand, hand tip, thumb).
 ARM = {
     "left": (J.ShoulderLeft, J.ElbowLeft, J.WristLeft, J.HandLeft, J.HandTipLeft, J.ThumbLeft),
-    "right": (J.ShoulderRight, J.ElbowRight, J.WristRight, J.HandRight, J.HandTipRight, J.ThumbRight),
+    "right": (J.ShoulderRight, J.ElbowRight, J.WristRight, J.HandRight, J.HandTipRight,
+              J.ThumbRight),
+}
+#: Per-side leg chains (hip, knee, ankle, foot).
+LEG = {
+    "left": (J.HipLeft, J.KneeLeft, J.AnkleLeft, J.FootLeft),
+    "right": (J.HipRight, J.KneeRight, J.AnkleRight, J.FootRight),
 }
 
 #: Joints that move with the upper body when the operator leans.
@@ -66,15 +73,13 @@ class Operator:
             hand = np.array([sh[0] - sign * 0.08, y - 0.30, 0.06])
             j[ARM[side][0]] = sh
             self._place_arm(j, side, hand)
-        hip = 0.1
-        for side, sign in (("left", 1.0), ("right", -1.0)):
-            hx = x + sign * hip
-            chain = ((J.HipLeft, J.KneeLeft, J.AnkleLeft, J.FootLeft) if side == "left"
-                     else (J.HipRight, J.KneeRight, J.AnkleRight, J.FootRight))
-            j[chain[0]] = (hx, y + 0.05, -0.25)
-            j[chain[1]] = (hx, y - 0.35, -0.25)
-            j[chain[2]] = (hx, y - 0.35, -0.70)
-            j[chain[3]] = (hx, y - 0.45, -0.72)
+            # Seated: thighs forward along -y, shins down, hips 0.1 m either side.
+            hx = x + sign * 0.1
+            hip, knee, ankle, foot = LEG[side]
+            j[hip] = (hx, y + 0.05, -0.25)
+            j[knee] = (hx, y - 0.35, -0.25)
+            j[ankle] = (hx, y - 0.35, -0.70)
+            j[foot] = (hx, y - 0.45, -0.72)
         return j
 
     def reach(self, joints: np.ndarray, side: str, target) -> np.ndarray:
@@ -111,12 +116,12 @@ class Operator:
         wrist = hand - c * u
         sw = wrist - s
         L = np.clip(np.linalg.norm(sw), abs(a - b) + 1e-6, a + b - 1e-6)
-        n = sw / max(np.linalg.norm(sw), 1e-9)
+        n = unit(sw, floor=1e-9)
         down = np.array([0.0, 0.0, -1.0])
         m = down - (down @ n) * n
         if np.linalg.norm(m) < 1e-6:
             m = np.array([1.0, 0.0, 0.0]) - n[0] * n
-        m /= np.linalg.norm(m)
+        m = unit(m)
         cos_t = (a * a + L * L - b * b) / (2 * a * L)
         t = np.arccos(np.clip(cos_t, -1.0, 1.0))
         j[e_id] = s + a * (np.cos(t) * n + np.sin(t) * m)
@@ -142,7 +147,8 @@ def random_posture(rng: np.random.Generator, robot_points: np.ndarray,
         Standard deviation of the hand target around the robot point, m.
     """
     op = operator or Operator()
-    op = Operator(x_m=op.x_m + rng.uniform(-0.15, 0.15), distance_m=op.distance_m + rng.uniform(-0.15, 0.1))
+    op = Operator(x_m=op.x_m + rng.uniform(-0.15, 0.15),
+                  distance_m=op.distance_m + rng.uniform(-0.15, 0.1))
     joints = op.rest()
     side = "right" if rng.random() < 0.5 else "left"
     target = robot_points[rng.integers(len(robot_points))] + rng.normal(0.0, spread_m, 3)

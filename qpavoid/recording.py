@@ -14,41 +14,29 @@ once the recording has ended (:meth:`Recording.frame_at`).
 
 from __future__ import annotations
 
-import codecs
 import csv
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TypeVar
 
 import numpy as np
 
-from ._checks import as_array, finite_number, one_line
+from ._checks import as_array, finite_number
 from .errors import InputError, RecordingError
-from .frames import N_KINECT_JOINTS, HumanFrame, JointType, check_joints, check_states
+from .frames import N_KINECT_JOINTS, HumanFrame, check_joints, check_states
+from .recording_files import (
+    CSV_EXPECTED,
+    CSV_JOINT_FIELDS,
+    FORMATS_DOC,
+    NPZ_ARRAYS,
+    NPZ_EXPECTED,
+    csv_header,
+    read_csv_table,
+    read_file,
+    read_npz,
+)
 
-T = TypeVar("T")
-
-#: Names of the arrays of an NPZ recording.
-NPZ_ARRAYS: tuple[str, ...] = ("t", "joints", "state")
-
-#: Column suffixes of one joint in a CSV recording, in column order.
-CSV_JOINT_FIELDS: tuple[str, ...] = ("x", "y", "z", "state")
-
-#: Valid tracking states: 0 not tracked, 1 inferred, 2 tracked.
-
-#: Where the file formats are described (named by every file-format error).
-FORMATS_DOC = "docs/formats.md"
-
-#: What an NPZ recording must be, for error messages.
-NPZ_EXPECTED = ("expected a NumPy .npz archive with arrays t (N,), joints (N, 25, 3) and "
-                "state (N, 25)")
-
-#: What a CSV recording must be, for error messages.
-CSV_EXPECTED = ("expected a UTF-8 CSV file: the header row t,SpineBase_x,SpineBase_y,"
-                "SpineBase_z,SpineBase_state,...,ThumbRight_state (101 columns), then one row "
-                "of numbers per frame")
-
+__all__ = ["Recording", "csv_header", "load_recording", "read_file", "read_npz", "save_csv",
+           "save_npz"]
 
 @dataclass(frozen=True, eq=False)
 class Recording:
@@ -171,18 +159,6 @@ def _check_times(t) -> np.ndarray:
     return arr
 
 
-def csv_header() -> list[str]:
-    """The 101 column names of a CSV recording.
-
-    Returns
-    -------
-    list of str
-        ``t`` then ``<Joint>_x, <Joint>_y, <Joint>_z, <Joint>_state`` for each Kinect v2
-        joint in :class:`~qpavoid.human.JointType` order.
-    """
-    return ["t"] + [f"{joint.name}_{field}" for joint in JointType for field in CSV_JOINT_FIELDS]
-
-
 def load_recording(path: str | Path) -> Recording:
     """Read a recording, choosing the format by the file suffix.
 
@@ -214,191 +190,17 @@ def load_recording(path: str | Path) -> Recording:
     return read_file(path, reader, "recording", f"see {FORMATS_DOC}")
 
 
-def read_file(path: Path, reader: Callable[[Path], T], what: str, hint: str = "") -> T:
-    """``reader(path)``, with every failure to read ``path`` as a :class:`RecordingError`.
-
-    Parameters
-    ----------
-    path
-        The file.
-    reader
-        Reads and validates it; raises :class:`InputError` (without the path) on bad
-        content.
-    what
-        What the file is, for messages (``"recording"``).
-    hint
-        Appended to content errors (e.g. where the format is described).
-    """
-    if not path.exists():
-        raise RecordingError(f"{what} file not found: {str(path)!r}", path=path)
-    if path.is_dir():
-        raise RecordingError(f"{str(path)!r} is a folder, not a {what} file", path=path)
-    if not path.is_file():
-        raise RecordingError(f"{str(path)!r} is not a regular file (expected a {what} file)",
-                             path=path)
-    try:
-        return reader(path)
-    except InputError as exc:      # bad content (RecordingError included): name the file
-        tail = f"; {hint}" if hint else ""
-        raise RecordingError(f"{path}: {exc}{tail}", path=path, name=exc.name,
-                             value=exc.value) from exc
-    except OSError as exc:         # permission denied, vanished, a special file...
-        raise RecordingError(f"{path}: cannot read the {what} file "
-                             f"({exc.strerror or one_line(exc)})", path=path) from exc
-
-
-def _file_kind(path: Path) -> str:
-    """What the first bytes of ``path`` look like: ``"empty"``, ``"zip"``, ``"npy"``,
-    ``"text"`` or ``"binary"``."""
-    with path.open("rb") as handle:
-        head = handle.read(4096)
-    if not head:
-        return "empty"
-    if head.startswith((b"PK\x03\x04", b"PK\x05\x06")):
-        return "zip"
-    if head.startswith(b"\x93NUMPY"):
-        return "npy"
-    try:                           # a multi-byte character may be cut at the end: not final
-        codecs.getincrementaldecoder("utf-8")().decode(head, final=False)
-    except UnicodeDecodeError:
-        return "binary"
-    return "binary" if b"\x00" in head else "text"
-
-
-#: How :func:`_file_kind`'s answers read in messages.
-_KIND_TEXT = {"empty": "the file is empty", "zip": "it is a ZIP archive",
-              "npy": "it is a single .npy array", "text": "it is a text file",
-              "binary": "it is binary data"}
-
-
 def _load_npz(path: Path) -> Recording:
     """Read an NPZ recording (arrays ``t``, ``joints``, ``state``; others are ignored)."""
     arrays = read_npz(path, NPZ_ARRAYS, NPZ_EXPECTED)
     return Recording(**arrays)
 
 
-def read_npz(path: Path, names: Sequence[str] | None, expected: str) -> dict[str, np.ndarray]:
-    """Arrays of an NPZ file by name (``names``, or all if None); no pickled objects.
-
-    Raises
-    ------
-    RecordingError
-        Without the path (:func:`read_file` adds it): the file is not an NPZ archive, an
-        array is missing, holds Python objects or cannot be read. ``expected`` (what the
-        file should be) ends the message.
-    """
-    kind = _file_kind(path)
-    if kind != "zip":
-        raise RecordingError(f"not a readable NPZ archive ({_KIND_TEXT[kind]}); {expected}")
-    try:
-        # Our own handle: numpy leaks the one it opens when the archive is damaged.
-        with path.open("rb") as handle, np.load(handle, allow_pickle=False) as data:
-            members = set(data.zip.namelist())
-            found = [name for name in data.files if f"{name}.npy" in members]
-            if not found:
-                others = ", ".join(data.files[:5]) or "none"
-                raise RecordingError(f"not a readable NPZ archive (a ZIP archive without .npy "
-                                     f"arrays; members: {others}); {expected}")
-            missing = [name for name in names or () if name not in found]
-            if missing:
-                raise RecordingError(
-                    f"NPZ file has no array {', '.join(map(repr, missing))} (found: "
-                    f"{', '.join(map(repr, found))}); {expected}", name=missing[0])
-            return {name: _npz_array(data, name, expected) for name in names or found}
-    except RecordingError:
-        raise
-    except Exception as exc:       # zipfile, zlib, numpy's format parser: a damaged file
-        raise RecordingError(f"not a readable NPZ archive (damaged: {one_line(exc)}); "
-                             f"{expected}") from exc
-
-
-def _npz_array(data, name: str, expected: str) -> np.ndarray:
-    """Member ``name`` of an open NPZ file, refusing pickled objects with a clear message."""
-    try:
-        arr = data[name]
-    except ValueError as exc:
-        if "allow_pickle" not in str(exc):
-            raise
-        raise RecordingError(f"array {name!r} holds Python objects (pickled data, never "
-                             f"loaded); {expected}", name=name) from None
-    if not isinstance(arr, np.ndarray):        # a member named .npy that is not one
-        raise RecordingError(f"member {name + '.npy'!r} is not a .npy array; {expected}",
-                             name=name)
-    return arr
-
-
 def _load_csv(path: Path) -> Recording:
     """Read a CSV recording (header row, then one row of 101 numbers per frame)."""
-    kind = _file_kind(path)
-    if kind != "text":
-        raise RecordingError(f"not a CSV text file ({_KIND_TEXT[kind]}); {CSV_EXPECTED}")
-    names = csv_header()
-    try:
-        with path.open("r", encoding="utf-8-sig", newline="") as handle:
-            rows = csv.reader(handle)
-            _check_csv_header(next(rows, None), names)
-            values = [_parse_csv_row(row, line, names) for line, row in enumerate(rows, start=2)
-                      if any(cell.strip() for cell in row)]
-    except UnicodeDecodeError as exc:      # past the first 4 kB that _file_kind looked at
-        raise RecordingError(f"not a CSV text file (invalid UTF-8: {one_line(exc)}); "
-                             f"{CSV_EXPECTED}") from exc
-    except csv.Error as exc:               # a NUL byte, a field too long...
-        raise RecordingError(f"not a readable CSV file ({one_line(exc)}); {CSV_EXPECTED}") from exc
-    data = np.array(values, dtype=float).reshape(len(values), len(names))
+    data = read_csv_table(path, csv_header(), CSV_EXPECTED)
     per_joint = data[:, 1:].reshape(-1, N_KINECT_JOINTS, len(CSV_JOINT_FIELDS))
     return Recording(t=data[:, 0], joints=per_joint[:, :, :3], state=per_joint[:, :, 3])
-
-
-def _check_csv_header(header: list[str] | None, expected: list[str]) -> None:
-    """Raise RecordingError unless ``header`` is exactly ``expected`` (:func:`csv_header`)."""
-    if header is None:
-        raise RecordingError(f"the CSV file has no header row; {CSV_EXPECTED}", name="header")
-    found = [cell.strip() for cell in header]
-    if found == expected:
-        return
-
-    def fail(problem: str) -> RecordingError:
-        return RecordingError(f"CSV header {problem}", name="header", value=found)
-
-    missing = [name for name in expected if name not in found]
-    if len(missing) == len(expected):
-        shown = ",".join(found[:3]) + (",..." if len(found) > 3 else "")
-        count = f"{len(found)} column" + ("s" if len(found) != 1 else "")
-        raise fail(f"not found: the first row is {shown!r} ({count}); {CSV_EXPECTED}")
-    if missing:
-        more = len(missing) - 5
-        shown = ", ".join(missing[:5]) + (f" and {more} more" if more > 0 else "")
-        raise fail(f"is missing column(s) {shown}")
-    unknown = [name for name in found if name not in expected]
-    if unknown:
-        raise fail(f"has unknown column(s) {', '.join(map(repr, unknown))}")
-    for i, (got, want) in enumerate(zip(found, expected)):
-        if got != want:
-            raise fail(f"column {i} is {got!r}, expected {want!r} (columns must be t then "
-                       "<Joint>_x,_y,_z,_state in JointType order)")
-    raise fail(f"has {len(found)} columns, expected {len(expected)} (a column is repeated)")
-
-
-def _parse_csv_row(row: list[str], line: int, names: list[str]) -> list[float]:
-    """Floats of one CSV data row; ``line`` is its 1-based line number for messages."""
-    if len(row) != len(names):
-        raise RecordingError(f"CSV line {line} has {len(row)} values, expected {len(names)}",
-                             name="line", value=line)
-    try:
-        return [float(cell) for cell in row]
-    except ValueError:
-        col = next(i for i, cell in enumerate(row) if not _is_float(cell))
-        raise RecordingError(f"CSV line {line}, column {names[col]!r}: {row[col]!r} is not a "
-                             "number", name=names[col], value=row[col]) from None
-
-
-def _is_float(text: str) -> bool:
-    """True if ``float(text)`` succeeds."""
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def save_npz(path: str | Path, rec: Recording) -> None:

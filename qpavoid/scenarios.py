@@ -20,20 +20,17 @@ near, :func:`nominal_configurations`), so they stay right if the path or radii c
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 
-from .human import KinectHuman
-from .posture import Operator
-from .robot import Robot
-from .task import ArcPath, inverse_kinematics
+from .distances import distance_method
 from .errors import InputError
-
-
-def smoothstep(x: float) -> float:
-    """Quintic 0 → 1 on [0, 1] with zero velocity and acceleration at both ends."""
-    x = min(max(x, 0.0), 1.0)
-    return x ** 3 * (10 - 15 * x + 6 * x * x)
+from .geometry import unit
+from .human import KinectHuman
+from .posture import ARM, Operator
+from .robot import Robot
+from .task import ArcPath, inverse_kinematics, smoothstep
 
 
 @dataclass(frozen=True)
@@ -49,8 +46,8 @@ class ScriptedReach:
     keyframes
         ``(t_s, target)`` pairs in increasing time; ``target`` (3,) m is where the hand
         is at that time (``None`` = its rest position). Between keyframes the hand moves
-        on a straight line with the quintic time law; before the first and after the last
-        it holds.
+        on a straight line with the quintic time law (:func:`~qpavoid.task.quintic`);
+        before the first and after the last it holds.
     """
 
     operator: Operator
@@ -63,7 +60,7 @@ class ScriptedReach:
         pts = [(tk, rest if p is None else np.asarray(p, dtype=float)) for tk, p in self.keyframes]
         if t <= pts[0][0]:
             return pts[0][1]
-        for (t0, p0), (t1, p1) in zip(pts, pts[1:]):
+        for (t0, p0), (t1, p1) in pairwise(pts):
             if t <= t1:
                 return p0 + smoothstep((t - t0) / (t1 - t0)) * (p1 - p0)
         return pts[-1][1]
@@ -91,8 +88,17 @@ class Working:
         return joints, np.full(25, 2, dtype=np.int8)
 
 
+def reach_and_return(operator: Operator, side: str, target: np.ndarray,
+                     times: tuple[float, float, float, float]) -> ScriptedReach:
+    """The ``side`` hand leaves its rest at ``times[0]``, is at ``target`` at ``times[1]``,
+    holds it until ``times[2]`` and is back at rest at ``times[3]`` (s)."""
+    leave, arrive, hold_until, back = times
+    return ScriptedReach(operator, side, ((leave, None), (arrive, target), (hold_until, target),
+                                          (back, None)))
+
+
 def _hand_joint(side: str) -> int:
-    from .posture import ARM
+    """Kinect index of the ``side`` hand."""
     return int(ARM[side][3])
 
 
@@ -112,9 +118,9 @@ def _clearance_target(robot: Robot, human: KinectHuman, path: ArcPath, operator:
     """Hand target ``anchor + s·direction`` whose distance to ``sets`` over the nominal
     motion is ``clearance_m`` at its closest, by every one of the distance ``methods``
     (the largest of them; bisection on s)."""
-    from .distances import distance_method
     times = np.linspace(0, path.duration_s, 61)
-    kins = [robot.kinematics(q, jacobians=False) for q in nominal_configurations(robot, path, times)]
+    kins = [robot.kinematics(q, jacobians=False)
+            for q in nominal_configurations(robot, path, times)]
     tables = [distance_method(m, robot, human) for m in methods]
     rows = [robot.set_index(n) for n in sets]
     hand = human.part_names.index(f"{side}_hand")
@@ -149,11 +155,11 @@ def make_scenario(name: str, robot: Robot, path: ArcPath | None = None,
         P = robot.control_points(nominal_configurations(robot, path, np.array([tc]))[0])
         wrist = P[robot.sets[robot.set_index("L2")].points[-1]]
         flange = P[robot.sets[robot.set_index("EE")].points[-1]]
-        axis = _unit(flange - wrist)
+        axis = unit(flange - wrist)
         towards = np.array([0.0, 1.0, 0.3])                  # the operator's side, above
         target = _clearance_target(robot, human, path, op, "right", 0.5 * (wrist + flange),
-                                   _unit(towards - (towards @ axis) * axis), 0.04, ("L2", "EE"))
-        return ScriptedReach(op, "right", ((2.0, None), (5.0, target), (11.0, target), (14.0, None)))
+                                   unit(towards - (towards @ axis) * axis), 0.04, ("L2", "EE"))
+        return reach_and_return(op, "right", target, (2.0, 5.0, 11.0, 14.0))
     if name == "test2":
         # Towards A3 (the lower half of L1) of the robot's start configuration, from the
         # operator's right and below L2 (which lies between the operator and L1), to
@@ -165,9 +171,9 @@ def make_scenario(name: str, robot: Robot, path: ArcPath | None = None,
         q0 = inverse_kinematics(robot, path.reference(0.0)[0])
         anchor = robot.control_points(q0)[1]
         target = _clearance_target(robot, human, ArcPath(path.start, path.start, 1.0, 0.0), op,
-                                   "right", anchor, _unit([-1.0, 0.5, -0.2]), 0.02, ("L1",),
+                                   "right", anchor, unit([-1.0, 0.5, -0.2]), 0.02, ("L1",),
                                    ("spheres", "capsules"))
-        return ScriptedReach(op, "right", ((1.0, None), (4.0, target), (9.0, target), (11.0, None)))
+        return reach_and_return(op, "right", target, (1.0, 4.0, 9.0, 11.0))
     return random_approach(np.random.default_rng(check_scenario_name(name)), robot, path)
 
 
@@ -186,11 +192,6 @@ def check_scenario_name(name: str) -> int | None:
         return int(seed)
     raise InputError(f"unknown scenario {name!r}; choose from {', '.join(SCENARIOS)} or "
                      "random:SEED (SEED a whole number >= 0)", name="scenario", value=name)
-
-
-def _unit(v) -> np.ndarray:
-    v = np.asarray(v, dtype=float)
-    return v / np.linalg.norm(v)
 
 
 SCENARIOS = ("test1", "test2", "free")
@@ -214,13 +215,12 @@ def random_approach(rng: np.random.Generator, robot: Robot, path: ArcPath | None
     k = rng.integers(len(times))
     P = robot.control_points(nominal[k])
     side = "right" if rng.random() < 0.7 else "left"
-    direction = _unit(rng.normal(size=3) + np.array([0.0, 1.5, 0.3]))
+    direction = unit(rng.normal(size=3) + np.array([0.0, 1.5, 0.3]))
     target = P[rng.integers(len(P))] + rng.uniform(0.0, 0.1) * direction
     rest = op.rest()[_hand_joint(side)]
     peak = rng.uniform(0.3, max_speed_mps)
     travel = np.linalg.norm(target - rest) * 1.875 / peak
     start = max(0.0, times[k] - travel + rng.uniform(-3.0, 2.0))
     hold = rng.uniform(1.0, 4.0)
-    return ScriptedReach(op, side, ((start, None), (start + travel, target),
-                                    (start + travel + hold, target),
-                                    (start + 2 * travel + hold, None)))
+    return reach_and_return(op, side, target, (start, start + travel, start + travel + hold,
+                                               start + 2 * travel + hold))

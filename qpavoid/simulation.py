@@ -30,8 +30,8 @@ import numpy as np
 import pinocchio as pin
 
 from .controller import Controller
-from .frames import HumanFrame
 from .distances import distance_method
+from .frames import HumanFrame
 from .task import inverse_kinematics
 
 

@@ -21,6 +21,7 @@ import pinocchio as pin
 
 from ._checks import as_array, finite_number
 from .errors import IKNotConvergedError
+from .geometry import unit
 from .robot import Robot
 
 #: The paper's initial and final end-effector poses (Sect. 3), base frame, m.
@@ -43,9 +44,21 @@ def orthonormalize(R: np.ndarray) -> np.ndarray:
 
 
 def quintic(tau: float) -> tuple[float, float]:
-    """Time law σ(τ) = 10τ³ − 15τ⁴ + 6τ⁵ and dσ/dτ, τ clipped to [0, 1]."""
+    """Time law σ(τ) = 10τ³ − 15τ⁴ + 6τ⁵ and dσ/dτ, τ clipped to [0, 1].
+
+    The quintic polynomial from 0 to 1 with zero velocity and acceleration at both ends:
+    the minimum-jerk profile of Flash and Hogan, "The coordination of arm movements",
+    J. Neurosci. 5(7), 1985. The planned path (:class:`ArcPath`) and the scripted hand
+    reaches (:mod:`qpavoid.scenarios`) both move with it.
+    """
     t = min(max(tau, 0.0), 1.0)
     return t ** 3 * (10 - 15 * t + 6 * t * t), 30 * t * t * (1 - t) ** 2
+
+
+def smoothstep(x: float) -> float:
+    """σ(x) of :func:`quintic` alone: 0 → 1 on [0, 1], zero velocity and acceleration at
+    both ends."""
+    return quintic(x)[0]
 
 
 @dataclass(frozen=True)
@@ -82,12 +95,11 @@ class ArcPath:
         if np.linalg.norm(n) < 1e-9 or L < 1e-9 or self.sagitta_m <= 0:
             geom = dict(kind="line", p0=p0, chord=chord)
         else:
-            n /= np.linalg.norm(n)
+            n = unit(n)
             s = self.sagitta_m
             R = (L * L / 4 + s * s) / (2 * s)
             centre = 0.5 * (p0 + p1) + (s - R) * n
-            axis = np.cross(p0 - centre, p1 - centre)
-            axis /= np.linalg.norm(axis)
+            axis = unit(np.cross(p0 - centre, p1 - centre))
             angle = 2 * np.arcsin(min(L / (2 * R), 1.0))
             if s > R:  # more than a half circle
                 angle = 2 * np.pi - angle

@@ -23,7 +23,6 @@ from ..errors import SolverError
 from .config import QPConfig
 from .problem import QPProblem, QPSolution
 
-
 #: ProxQP's absolute tolerance: at OSQP's 1e-7 its answers differ from daqp's by up to
 #: 4e-5 rad/s on recorded ticks; at 1e-9 by less than 1e-6 (docs/qp.md).
 PROXQP_EPS_ABS = 1e-9

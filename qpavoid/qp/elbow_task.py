@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..laws import logistic
 from ..controller import Tick
+from ..laws import logistic
 from .pieces import Objective, QPPiece
 from .variables import Variables
 

@@ -1,0 +1,99 @@
+"""The result of every distance method: one table of robot-set x human-part distances.
+
+Its witness points lie on the surfaces of the two shapes (for spheres: the sphere centres
+moved by their radius along the direction), so that
+``distance == (robot_point - human_point) @ vector`` in both methods. A part with no
+usable point has distance +inf, a zero vector and NaN witness points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from .robot import Kinematics
+
+#: Direction used when two witness points coincide (deep penetration): straight up, m.
+FALLBACK_DIRECTION = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass(frozen=True)
+class DistanceTable:
+    """Distances between every robot set (rows) and human part (columns).
+
+    Attributes
+    ----------
+    method
+        ``"spheres"`` or ``"capsules"``.
+    distance
+        (S, K) signed distance, m (eq. 1); negative = penetration; +inf = part not seen.
+    vector
+        (S, K, 3) unit direction from the human to the robot at the closest pair.
+    robot_index
+        (S, K) index of the robot control point that realised the minimum (spheres; the
+        point whose Jacobian eq. (6) uses), -1 for capsules and for parts not seen.
+    robot_s
+        (S, K) parameter in [0, 1] along the set's capsule axis of the robot point
+        (capsules), NaN for spheres.
+    human_index
+        (S, K) index of the human model point (spheres), -1 for capsules.
+    set_names, part_names
+        Row and column labels.
+    robot_point, human_point
+        (S, K, 3) witness points on the robot and human surfaces, base frame, m (NaN for
+        parts not seen). For spheres they are computed on first access.
+    """
+
+    method: str
+    distance: np.ndarray
+    vector: np.ndarray
+    robot_index: np.ndarray
+    robot_s: np.ndarray
+    human_index: np.ndarray
+    set_names: tuple[str, ...]
+    part_names: tuple[str, ...]
+    _witness: tuple = field(repr=False, default=())
+
+    @cached_property
+    def robot_point(self) -> np.ndarray:
+        return self._witnesses[0]
+
+    @cached_property
+    def human_point(self) -> np.ndarray:
+        return self._witnesses[1]
+
+    @cached_property
+    def _witnesses(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.method == "capsules":
+            return self._witness
+        # spheres: the centres moved by their radii along the direction.
+        P, H, r_robot, r_human = self._witness
+        shape = self.distance.shape
+        v = self.vector.reshape(-1, 3)
+        p_idx, m_idx = self.robot_index.ravel(), self.human_index.ravel()
+        rp = P[p_idx] - r_robot[:, None] * v
+        hp = H[m_idx] + r_human[:, None] * v
+        rp[p_idx < 0] = np.nan
+        hp[p_idx < 0] = np.nan
+        return rp.reshape(*shape, 3), hp.reshape(*shape, 3)
+
+    def min_per_set(self) -> np.ndarray:
+        """(S,) minimum distance of each robot set over all parts, m."""
+        return self.distance.min(axis=1)
+
+    def closest_part(self, set_index: int) -> int:
+        """Column of the part closest to robot set ``set_index``."""
+        return int(np.argmin(self.distance[set_index]))
+
+    def robot_jacobian(self, kin: Kinematics, set_index: int, part: int) -> np.ndarray:
+        """(3, nv) Jacobian of the robot point of pair (set, part) at ``kin``.
+
+        For spheres, the Jacobian of the control point that realised the minimum (the
+        sphere centre, as in eq. 6); for capsules, that of the closest point on the axis.
+        """
+        k = self.robot_index[set_index, part]
+        if k >= 0:
+            return kin.point_jacobians[k]
+        return kin.segment_point_jacobian(set_index, float(self.robot_s[set_index, part]))

@@ -1,0 +1,40 @@
+"""Vector helpers shared by the modules (the lowest module: it imports only numpy)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Norm below which :func:`unit` returns its ``fallback`` direction.
+TINY = 1e-12
+
+
+def unit(v, fallback=None, *, norm=None, floor: float = 0.0) -> np.ndarray:
+    """Unit vector(s) ``v / ‖v‖`` along the last axis.
+
+    Parameters
+    ----------
+    v
+        A vector (n,) or a stack of them (..., n).
+    fallback
+        Direction (n,) returned where ``‖v‖ < TINY``; ``None`` (default): no check.
+    norm
+        ``‖v‖`` (shape ``v.shape[:-1]``) if the caller has it already.
+    floor
+        Divide by ``max(‖v‖, floor)``: a vector shorter than ``floor`` is scaled by
+        ``1 / floor`` instead of blowing up (used without ``fallback``).
+
+    Returns
+    -------
+    numpy.ndarray
+        Same shape as ``v``, float.
+    """
+    v = np.asarray(v, dtype=float)
+    if norm is None:
+        norm = np.linalg.norm(v) if v.ndim == 1 else np.linalg.norm(v, axis=-1)
+    norm = np.asarray(norm, dtype=float)
+    if fallback is None:
+        return v / np.maximum(norm, floor)[..., None]
+    small = norm < TINY
+    out = v / np.where(small, 1.0, norm)[..., None]
+    out[small] = fallback
+    return out
