@@ -53,27 +53,43 @@ def main() -> None:
 
     robot = qpavoid.load_robot()
     cfg = ControllerConfig(control_period_s=0.01)
-    log = simulate(QPController(robot, config=cfg), make_scenario("test1", robot),
-                   SimConfig(control_rate_hz=100)).log
+    log = simulate(
+        QPController(robot, config=cfg),
+        make_scenario("test1", robot),
+        SimConfig(control_rate_hz=100),
+    ).log
     # One HumanFrame object per camera frame, shared by the ticks that see it (as in the
     # simulation): a controller builds a frame's geometry once.
     frames: dict[bytes, qpavoid.HumanFrame] = {}
     for k in range(len(log["t"])):
         key = log["joints"][k].tobytes() + log["state"][k].tobytes()
         frames.setdefault(key, qpavoid.HumanFrame.check(log["joints"][k], log["state"][k]))
-    states = [(log["q"][k], frames[log["joints"][k].tobytes() + log["state"][k].tobytes()], None,
-               log["tau"][k]) for k in range(len(log["t"]))]
+    states = [
+        (
+            log["q"][k],
+            frames[log["joints"][k].tobytes() + log["state"][k].tobytes()],
+            None,
+            log["tau"][k],
+        )
+        for k in range(len(log["t"]))
+    ]
     rows: dict[str, np.ndarray] = {}
 
     analytic = AnalyticController(robot, config=cfg)
     rows["analytic tick (eqs. 2-9)"] = timed(lambda s: analytic.step(*s), states, args.repeat)
     for name in sorted(qpsolvers.available_solvers):
         ctrl = QPController(robot, config=cfg, qp=QPConfig(backend="qpsolvers", solver=name))
-        rows[f"QP tick, qpsolvers + {name}"] = timed(lambda s, c=ctrl: c.step(*s), states, args.repeat)
+        rows[f"QP tick, qpsolvers + {name}"] = timed(
+            lambda s, c=ctrl: c.step(*s), states, args.repeat
+        )
     qp = QPController(robot, config=cfg)
     rows["QP tick, persistent OSQP"] = timed(lambda s: qp.step(*s), states, args.repeat)
-    qp_caps = QPController(robot, config=ControllerConfig(distance="capsules", control_period_s=0.01))
-    rows["QP tick, persistent OSQP, capsules"] = timed(lambda s: qp_caps.step(*s), states, args.repeat)
+    qp_caps = QPController(
+        robot, config=ControllerConfig(distance="capsules", control_period_s=0.01)
+    )
+    rows["QP tick, persistent OSQP, capsules"] = timed(
+        lambda s: qp_caps.step(*s), states, args.repeat
+    )
 
     # Parts of the persistent QP tick.
     human = qpavoid.KinectHuman()
@@ -81,10 +97,12 @@ def main() -> None:
     kins = [robot.kinematics(s[0]) for s in states]
     geos = [human.geometry(s[1]) for s in states]
     idx = list(range(len(states)))
-    rows["  kinematics + Jacobians (Pinocchio)"] = timed(lambda k: robot.kinematics(states[k][0]), idx,
-                                                          args.repeat)
+    rows["  kinematics + Jacobians (Pinocchio)"] = timed(
+        lambda k: robot.kinematics(states[k][0]), idx, args.repeat
+    )
     rows["  human geometry (once per camera frame)"] = timed(
-        lambda k: human.geometry(states[k][1]), idx, args.repeat)
+        lambda k: human.geometry(states[k][1]), idx, args.repeat
+    )
     rows["  sphere table (eq. 1)"] = timed(lambda k: spheres(kins[k], geos[k]), idx, args.repeat)
     rows["  capsule table (coal)"] = timed(lambda k: capsules(kins[k], geos[k]), idx, args.repeat)
     ticks = [qp.measure(*s) for s in states]
@@ -92,7 +110,9 @@ def main() -> None:
     rows["  shared prelude (measure)"] = timed(lambda s: qp.measure(*s), states, args.repeat)
     rows["  QP assembly (all pieces)"] = timed(lambda t: qp.problem(t), ticks, args.repeat)
     problems = [qp.problem(t) for t in ticks]
-    rows["  QP solve, persistent OSQP"] = timed(lambda p: qp.backend.solve(p), problems, args.repeat)
+    rows["  QP solve, persistent OSQP"] = timed(
+        lambda p: qp.backend.solve(p), problems, args.repeat
+    )
 
     table = ["| path | median (µs) | p99 (µs) |", "|---|---|---|"]
     table += [f"| {k} | {np.median(v):.0f} | {np.percentile(v, 99):.0f} |" for k, v in rows.items()]
@@ -101,8 +121,14 @@ def main() -> None:
     print("\n".join(table))
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({k: {"median_us": float(np.median(v)), "p99_us": float(np.percentile(v, 99))}
-                       for k, v in rows.items()}, fh, indent=2)
+            json.dump(
+                {
+                    k: {"median_us": float(np.median(v)), "p99_us": float(np.percentile(v, 99))}
+                    for k, v in rows.items()
+                },
+                fh,
+                indent=2,
+            )
 
 
 if __name__ == "__main__":

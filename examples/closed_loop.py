@@ -7,9 +7,12 @@ from qpavoid.scenarios import make_scenario
 from qpavoid.simulation import SimConfig, simulate
 
 robot = load_robot("iiwa14")
-motion = make_scenario("test1", robot)            # the right hand comes beside the wrist
+motion = make_scenario("test1", robot)  # the right hand comes beside the wrist
 for controller in (AnalyticController(robot), QPController(robot)):
     m = simulate(controller, motion, SimConfig(control_rate_hz=500)).metrics
-    print(f"{controller.name:8s} goal {m['reached_goal']}, path error {m['rms_path_error_m'] * 1e3:.2f} mm "
-          f"rms, min distance {m['min_distance_m']['spheres']:.3f} m, stops {len(m['stop_events'])}, "
-          f"tick {m['tick_us']['median']:.0f} us")
+    print(
+        f"{controller.name:8s} goal {m['reached_goal']}, "
+        f"path error {m['rms_path_error_m'] * 1e3:.2f} mm "
+        f"rms, min distance {m['min_distance_m']['spheres']:.3f} m, stops {len(m['stop_events'])}, "
+        f"tick {m['tick_us']['median']:.0f} us"
+    )

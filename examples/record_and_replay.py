@@ -10,7 +10,7 @@ from qpavoid.simulation import simulate
 
 robot = load_robot("iiwa14")
 motion = make_scenario("test2", robot)
-t = np.arange(0.0, 12.0, 1 / 30)                          # 30 Hz, like a Kinect v2
+t = np.arange(0.0, 12.0, 1 / 30)  # 30 Hz, like a Kinect v2
 frames = [motion.frame_at(x) for x in t]
 rec = Recording(t, np.array([f[0] for f in frames]), np.array([f[1] for f in frames]))
 save_npz("test2.npz", rec)

@@ -19,7 +19,9 @@ def one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
-def as_array(value, shape: tuple[int | None, ...], name: str, *, finite: bool = True) -> np.ndarray:
+def as_array(
+    value: object, shape: tuple[int | None, ...], name: str, *, finite: bool = True
+) -> np.ndarray:
     """Return ``value`` as a float array of ``shape`` (``None`` = any size) or raise InputError.
 
     Parameters
@@ -43,24 +45,32 @@ def as_array(value, shape: tuple[int | None, ...], name: str, *, finite: bool = 
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise InputError(f"{name} must be numeric, got {type(value).__name__}",
-                         name=arg_name(name), value=value) from exc
-    if arr.shape != shape and (arr.ndim != len(shape) or any(
-            s is not None and s != n for s, n in zip(shape, arr.shape))):
+        raise InputError(
+            f"{name} must be numeric, got {type(value).__name__}", name=arg_name(name), value=value
+        ) from exc
+    if arr.shape != shape and (
+        arr.ndim != len(shape)
+        or any(s is not None and s != n for s, n in zip(shape, arr.shape, strict=True))
+    ):
         want = str(tuple("N" if s is None else s for s in shape)).replace("'", "")
-        raise InputError(f"{name} must have shape {want}, got {arr.shape}", name=arg_name(name),
-                         value=arr)
+        raise InputError(
+            f"{name} must have shape {want}, got {arr.shape}", name=arg_name(name), value=arr
+        )
     if finite and not np.isfinite(arr).all():
         bad = np.argwhere(~np.isfinite(arr))[0]
-        raise InputError(f"{name} has a non-finite entry at index {tuple(int(i) for i in bad)}: "
-                         f"{arr[tuple(bad)]}", name=arg_name(name), value=arr)
+        raise InputError(
+            f"{name} has a non-finite entry at index {tuple(int(i) for i in bad)}: "
+            f"{arr[tuple(bad)]}",
+            name=arg_name(name),
+            value=arr,
+        )
     return arr
 
 
-def finite_number(value, name: str, *, positive: bool = False) -> float:
+def finite_number(value: object, name: str, *, positive: bool = False) -> float:
     """``value`` as a finite float (``> 0`` if ``positive``), else :class:`InputError`."""
     try:
-        number = float(value)
+        number = float(value)  # type: ignore[arg-type]  # anything float() accepts
     except (TypeError, ValueError):
         number = float("nan")
     if not math.isfinite(number) or (positive and number <= 0):

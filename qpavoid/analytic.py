@@ -38,8 +38,11 @@ class AnalyticConfig:
 
     def __post_init__(self) -> None:
         if self.limit_mode not in LIMIT_MODES:
-            raise InputError(f"limit_mode must be 'scale' or 'clip', got {self.limit_mode!r}",
-                             name="limit_mode", value=self.limit_mode)
+            raise InputError(
+                f"limit_mode must be 'scale' or 'clip', got {self.limit_mode!r}",
+                name="limit_mode",
+                value=self.limit_mode,
+            )
 
 
 def enforce_limits(dq: np.ndarray, limits: np.ndarray, mode: str) -> tuple[np.ndarray, float]:
@@ -82,9 +85,14 @@ class AnalyticController(Controller):
 
     name = "analytic"
 
-    def __init__(self, robot: Robot, path: ArcPath | None = None,
-                 config: ControllerConfig | None = None, human: KinectHuman | None = None,
-                 analytic: AnalyticConfig | None = None):
+    def __init__(
+        self,
+        robot: Robot,
+        path: ArcPath | None = None,
+        config: ControllerConfig | None = None,
+        human: KinectHuman | None = None,
+        analytic: AnalyticConfig | None = None,
+    ):
         super().__init__(robot, path, config, human)
         self.analytic = analytic or AnalyticConfig()
         self.l2_cols = joint_columns(robot, self.analytic.l2_joints, "l2_joints")
@@ -95,8 +103,16 @@ class AnalyticController(Controller):
         if tick.v_rep_L2.any():
             J_L2 = tick.table.robot_jacobian(tick.kin, self.i_L2, tick.L2_part)[:, self.l2_cols]
             dq_L2 = l2_joint_velocity(J_L2, tick.v_rep_L2, cfg.sigma_min, cfg.lambda_max)  # (6)
-        dq = modified_ik(tick.kin.ee_jacobian, tick.ref_twist, self.K, tick.error,
-                         tick.v_rep_EE, cfg.sigma_min, cfg.lambda_max)                  # eq. (8)
-        dq[self.l2_cols] += dq_L2                                                       # eq. (9)
-        dq, scale = enforce_limits(dq, tick.limits, self.analytic.limit_mode)           # eq. (3)
+        assert tick.kin.ee_jacobian is not None  # a tick's kinematics carry the Jacobians
+        dq = modified_ik(
+            tick.kin.ee_jacobian,
+            tick.ref_twist,
+            self.K,
+            tick.error,
+            tick.v_rep_EE,
+            cfg.sigma_min,
+            cfg.lambda_max,
+        )  # eq. (8)
+        dq[self.l2_cols] += dq_L2  # eq. (9)
+        dq, scale = enforce_limits(dq, tick.limits, self.analytic.limit_mode)  # eq. (3)
         return self.command(tick, dq, scale, tick.v_rep_L2, tick.v_rep_EE)

@@ -73,8 +73,10 @@ class CapsuleDistance:
         """Distance table between the robot capsules at ``kin`` and the human ``geo``."""
         seg = kin.segments
         n_sets, n_parts = self._shape
-        self._place(np.concatenate([seg, np.nan_to_num(geo.segments)]),
-                    np.concatenate([self._robot_valid, geo.segment_valid]))
+        self._place(
+            np.concatenate([seg, np.nan_to_num(geo.segments)]),
+            np.concatenate([self._robot_valid, geo.segment_valid]),
+        )
         req, res = self._request, self._result
         parts = np.flatnonzero(geo.segment_valid).tolist()
         dist, rp, hp, normal, where = [], [], [], [], []
@@ -99,17 +101,25 @@ class CapsuleDistance:
             distance[where], robot_point[where], human_point[where] = d, r_pts, h_pts
             v = (r_pts - h_pts) / np.where(d > 1e-9, d, 1.0)[:, None]
             for n, nrm in enumerate(normal):
-                if nrm is not None:   # coal's normal points from the human to the robot
+                if nrm is not None:  # coal's normal points from the human to the robot
                     nn = np.linalg.norm(nrm)
                     v[n] = nrm / nn if nn > 0.5 else unit(h_pts[n] - r_pts[n], FALLBACK_DIRECTION)
             vector[where] = v
         # Parameter along the robot capsule's axis of the robot witness point (for its Jacobian).
         a = np.repeat(seg[:, 0], n_parts, axis=0)
         ab = np.repeat(seg[:, 1] - seg[:, 0], n_parts, axis=0)
-        s = np.einsum("nk,nk->n", np.where(np.isnan(robot_point), 0.0, robot_point) - a, ab) \
-            / np.maximum(np.einsum("nk,nk->n", ab, ab), 1e-18)
+        s = np.einsum(
+            "nk,nk->n", np.where(np.isnan(robot_point), 0.0, robot_point) - a, ab
+        ) / np.maximum(np.einsum("nk,nk->n", ab, ab), 1e-18)
         shape = self._shape
-        return DistanceTable(self.method, distance.reshape(shape), vector.reshape(*shape, 3),
-                             self._minus_one, np.clip(s, 0.0, 1.0).reshape(shape), self._minus_one,
-                             self.set_names, self.part_names,
-                             (robot_point.reshape(*shape, 3), human_point.reshape(*shape, 3)))
+        return DistanceTable(
+            self.method,
+            distance.reshape(shape),
+            vector.reshape(*shape, 3),
+            self._minus_one,
+            np.clip(s, 0.0, 1.0).reshape(shape),
+            self._minus_one,
+            self.set_names,
+            self.part_names,
+            (robot_point.reshape(*shape, 3), human_point.reshape(*shape, 3)),
+        )

@@ -28,9 +28,11 @@ from .recording import load_recording
 from .runs import CONTROLLERS, DISTANCES, LIMIT_MODES, RunSpec, run_one
 from .scenarios import SCENARIOS
 
-DESCRIPTION = ("Collision avoidance between a cobot arm and the person beside it: simulate "
-               "the paper's controller or its QP variant against generated or recorded "
-               "human motion.")
+DESCRIPTION = (
+    "Collision avoidance between a cobot arm and the person beside it: simulate "
+    "the paper's controller or its QP variant against generated or recorded "
+    "human motion."
+)
 
 
 class Parser(argparse.ArgumentParser):
@@ -63,6 +65,7 @@ def _number(kind: type, check: Callable[[Any], bool], what: str) -> Callable[[st
         if not check(value):
             raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}")
         return value
+
     return parse
 
 
@@ -78,7 +81,7 @@ workers = _number(int, lambda n: n >= 1, "a whole number >= 1")
 def _version() -> str:
     try:
         return version("qpavoid")
-    except PackageNotFoundError:                 # running from a source tree
+    except PackageNotFoundError:  # running from a source tree
         return __version__
 
 
@@ -87,77 +90,150 @@ def build_parser() -> Parser:
     fmt = HelpFormatter
     parser = Parser(prog="qpavoid", description=DESCRIPTION, formatter_class=fmt)
     parser.add_argument("--version", action="version", version=f"qpavoid {_version()}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
-                                parser_class=Parser)
+    sub = parser.add_subparsers(
+        dest="command", required=True, metavar="COMMAND", parser_class=Parser
+    )
 
-    run = sub.add_parser("run", help="simulate one scenario or recording", formatter_class=fmt,
-                         description="Simulate the robot against one scenario or recording and "
-                                     "write metrics.json, log.npz and the figures into --out.")
-    run.add_argument("scenario", nargs="?", metavar="SCENARIO",
-                     help=f"{', '.join(SCENARIOS)} or random:SEED (or give --human FILE)")
-    run.add_argument("--human", metavar="FILE", help="replay a recording (NPZ or CSV, "
-                                                     "docs/formats.md) instead of a scenario")
-    run.add_argument("--controller", choices=CONTROLLERS, default="analytic",
-                     help="the paper's controller or its QP variant")
-    run.add_argument("--distance", choices=DISTANCES, default="spheres",
-                     help="robot-human distances: the paper's spheres or exact capsules")
-    run.add_argument("--limit-mode", choices=LIMIT_MODES, default="scale",
-                     help="analytic controller only: enforce eq. (3) by scaling the whole "
-                          "velocity or clipping each joint")
-    run.add_argument("--solver", metavar="NAME",
-                     help="QP only: a qpsolvers solver (osqp, daqp, proxqp, ...); default: the "
-                          "persistent OSQP problem")
-    run.add_argument("--redundant", action="store_true",
-                     help="QP only: free A3 (7 joints) and keep the elbow away from the person")
+    run = sub.add_parser(
+        "run",
+        help="simulate one scenario or recording",
+        formatter_class=fmt,
+        description="Simulate the robot against one scenario or recording and "
+        "write metrics.json, log.npz and the figures into --out.",
+    )
+    run.add_argument(
+        "scenario",
+        nargs="?",
+        metavar="SCENARIO",
+        help=f"{', '.join(SCENARIOS)} or random:SEED (or give --human FILE)",
+    )
+    run.add_argument(
+        "--human",
+        metavar="FILE",
+        help="replay a recording (NPZ or CSV, docs/formats.md) instead of a scenario",
+    )
+    run.add_argument(
+        "--controller",
+        choices=CONTROLLERS,
+        default="analytic",
+        help="the paper's controller or its QP variant",
+    )
+    run.add_argument(
+        "--distance",
+        choices=DISTANCES,
+        default="spheres",
+        help="robot-human distances: the paper's spheres or exact capsules",
+    )
+    run.add_argument(
+        "--limit-mode",
+        choices=LIMIT_MODES,
+        default="scale",
+        help="analytic controller only: enforce eq. (3) by scaling the whole "
+        "velocity or clipping each joint",
+    )
+    run.add_argument(
+        "--solver",
+        metavar="NAME",
+        help="QP only: a qpsolvers solver (osqp, daqp, proxqp, ...); default: the "
+        "persistent OSQP problem",
+    )
+    run.add_argument(
+        "--redundant",
+        action="store_true",
+        help="QP only: free A3 (7 joints) and keep the elbow away from the person",
+    )
     run.add_argument("--out", metavar="DIR", help="output folder (default: runs/NAME)")
     _add_common(run)
     run.set_defaults(parser=run)
 
-    cmp = sub.add_parser("compare", formatter_class=fmt,
-                         help="analytic vs QP, spheres vs capsules, on the same inputs",
-                         description="Run every input with both controllers and both distance "
-                                     "methods; write compare.json, compare.md and one plot "
-                                     "per input into --out.")
+    cmp = sub.add_parser(
+        "compare",
+        formatter_class=fmt,
+        help="analytic vs QP, spheres vs capsules, on the same inputs",
+        description="Run every input with both controllers and both distance "
+        "methods; write compare.json, compare.md and one plot "
+        "per input into --out.",
+    )
     cmp.add_argument("--out", metavar="DIR", default="runs/compare", help="output folder")
-    cmp.add_argument("--scenarios", nargs="*", metavar="NAME", default=["test1", "test2", "free"],
-                     help="generated scenarios")
-    cmp.add_argument("--human", nargs="*", default=[], metavar="FILE",
-                     help="recordings to replay too")
-    cmp.add_argument("--random", type=count, default=0, metavar="N",
-                     help="also N random hand approaches (seeds SEED .. SEED+N-1)")
+    cmp.add_argument(
+        "--scenarios",
+        nargs="*",
+        metavar="NAME",
+        default=["test1", "test2", "free"],
+        help="generated scenarios",
+    )
+    cmp.add_argument(
+        "--human", nargs="*", default=[], metavar="FILE", help="recordings to replay too"
+    )
+    cmp.add_argument(
+        "--random",
+        type=count,
+        default=0,
+        metavar="N",
+        help="also N random hand approaches (seeds SEED .. SEED+N-1)",
+    )
     cmp.add_argument("--seed", type=count, default=0, help="first seed of --random")
-    cmp.add_argument("--workers", type=workers, default=None, metavar="N",
-                     help="parallel processes (default: all cores)")
+    cmp.add_argument(
+        "--workers",
+        type=workers,
+        default=None,
+        metavar="N",
+        help="parallel processes (default: all cores)",
+    )
     _add_common(cmp)
     cmp.set_defaults(parser=cmp)
     return parser
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--max-time", type=positive_float, default=40.0, metavar="S",
-                   help="cap on each run, s (0.1 to 3600)")
-    p.add_argument("--rate", type=positive_float, default=500.0, metavar="HZ",
-                   help="control rate, Hz (30 to 10000)")
+    p.add_argument(
+        "--max-time",
+        type=positive_float,
+        default=40.0,
+        metavar="S",
+        help="cap on each run, s (0.1 to 3600)",
+    )
+    p.add_argument(
+        "--rate",
+        type=positive_float,
+        default=500.0,
+        metavar="HZ",
+        help="control rate, Hz (30 to 10000)",
+    )
     p.add_argument("--no-plots", action="store_true", help="do not write the figures")
-    p.add_argument("--robot", default="iiwa14", metavar="NAME",
-                   help="robot description: a bundled name or a folder")
+    p.add_argument(
+        "--robot",
+        default="iiwa14",
+        metavar="NAME",
+        help="robot description: a bundled name or a folder",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
 
 def _run(args: argparse.Namespace, parser: Parser) -> str:
     if args.scenario and args.human:
         parser.error("give either SCENARIO or --human FILE, not both")
-    spec = RunSpec(scenario=args.scenario, human_file=args.human, controller=args.controller,
-                   distance=args.distance, max_time_s=args.max_time, rate_hz=args.rate,
-                   limit_mode=args.limit_mode, robot=args.robot, solver=args.solver,
-                   redundant=args.redundant)
+    spec = RunSpec(
+        scenario=args.scenario,
+        human_file=args.human,
+        controller=args.controller,
+        distance=args.distance,
+        max_time_s=args.max_time,
+        rate_hz=args.rate,
+        limit_mode=args.limit_mode,
+        robot=args.robot,
+        solver=args.solver,
+        redundant=args.redundant,
+    )
     out = Path(args.out or Path("runs") / spec.label.replace(":", "-"))
     check_output_dir(out)
     if args.human:
-        load_recording(args.human)                # a bad file fails before the run
+        load_recording(args.human)  # a bad file fails before the run
     with progress_bar(spec.max_time_s, spec.label, "s", not args.quiet) as bar:
+
         def advance(t: float) -> None:
             bar.update(t - bar.n)
+
         m = run_one(spec, out, plots=not args.no_plots, progress=advance)
     lines = [summary(m)]
     if m.get("plots_skipped"):
@@ -168,9 +244,19 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
 
 
 def _compare(args: argparse.Namespace) -> str:
-    table = compare(args.out, args.scenarios, args.human, args.random, args.seed,
-                    args.max_time, args.rate, not args.no_plots, args.robot,
-                    workers=args.workers, progress=not args.quiet)
+    table = compare(
+        args.out,
+        args.scenarios,
+        args.human,
+        args.random,
+        args.seed,
+        args.max_time,
+        args.rate,
+        not args.no_plots,
+        args.robot,
+        workers=args.workers,
+        progress=not args.quiet,
+    )
     return f"{table}\nwrote compare.json, compare.md and the plots to {args.out}/"
 
 
@@ -178,17 +264,19 @@ def summary(m: dict) -> str:
     """A run's metrics as a few readable lines."""
     stops = "; ".join(f"{e['t']:.2f} s: {e['reason']}" for e in m["stop_events"]) or "none"
     md = m["min_distance_m"]
-    return (f"{m['scenario']}: controller {m['controller']}, distances {m['distance_method']}\n"
-            f"  reached goal {m['reached_goal']} in {m['duration_s']:.2f} s "
-            f"(final error {m['final_position_error_m'] * 1e3:.3f} mm)\n"
-            f"  path error rms {m['rms_path_error_m'] * 1e3:.3f} mm, "
-            f"max {m['max_path_error_m'] * 1e3:.3f} mm\n"
-            f"  min distance spheres {md['spheres']:.4f} m, capsules {md['capsules']:.4f} m, "
-            f"max f {m['max_f']:.3f}\n"
-            f"  stopped {m['stopped_s']:.2f} s, stops: {stops}\n"
-            f"  tick {m['tick_us']['median']:.0f} us median, {m['tick_us']['p99']:.0f} us p99; "
-            f"limit violations: velocity {m['joint_velocity_limit_violations']}, "
-            f"position {m['joint_position_limit_violations']}")
+    return (
+        f"{m['scenario']}: controller {m['controller']}, distances {m['distance_method']}\n"
+        f"  reached goal {m['reached_goal']} in {m['duration_s']:.2f} s "
+        f"(final error {m['final_position_error_m'] * 1e3:.3f} mm)\n"
+        f"  path error rms {m['rms_path_error_m'] * 1e3:.3f} mm, "
+        f"max {m['max_path_error_m'] * 1e3:.3f} mm\n"
+        f"  min distance spheres {md['spheres']:.4f} m, capsules {md['capsules']:.4f} m, "
+        f"max f {m['max_f']:.3f}\n"
+        f"  stopped {m['stopped_s']:.2f} s, stops: {stops}\n"
+        f"  tick {m['tick_us']['median']:.0f} us median, {m['tick_us']['p99']:.0f} us p99; "
+        f"limit violations: velocity {m['joint_velocity_limit_violations']}, "
+        f"position {m['joint_position_limit_violations']}"
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -200,15 +288,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     except QpavoidError as exc:
         return _fail(f"qpavoid: error: {exc}", 2)
     except OSError as exc:
-        return _fail(f"qpavoid: error: {exc.strerror or exc}"
-                     + (f": {exc.filename}" if exc.filename else ""), 2)
+        return _fail(
+            f"qpavoid: error: {exc.strerror or exc}"
+            + (f": {exc.filename}" if exc.filename else ""),
+            2,
+        )
     except KeyboardInterrupt:
         return _fail("qpavoid: interrupted; nothing written", 130)
-    except Exception as exc:                     # a bug: one line, the traceback on request
+    except Exception as exc:  # a bug: one line, the traceback on request
         if os.environ.get("QPAVOID_DEBUG"):
             raise
-        return _fail(f"qpavoid: error: internal error, please report it: "
-                     f"{type(exc).__name__}: {exc} (QPAVOID_DEBUG=1 shows the traceback)", 2)
+        return _fail(
+            f"qpavoid: error: internal error, please report it: "
+            f"{type(exc).__name__}: {exc} (QPAVOID_DEBUG=1 shows the traceback)",
+            2,
+        )
     print(text)
     return 0
 

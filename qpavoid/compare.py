@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -36,22 +37,27 @@ def run_case(spec: RunSpec) -> tuple[RunSpec, dict, Series]:
     """Simulate one case; return its metrics and the time series the plots need."""
     run = simulate_one(spec)
     log = run.sim.log
-    series = {"t": log["t"][::10], "min_distance": log["distance"].min(axis=1)[::10],
-              "path_error": np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)[::10]}
+    series = {
+        "t": log["t"][::10],
+        "min_distance": log["distance"].min(axis=1)[::10],
+        "path_error": np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)[::10],
+    }
     return spec, run.metrics, series
 
 
-def _row(label, ctrl, dist, m) -> str:
+def _row(label: str, ctrl: str, dist: str, m: dict[str, Any]) -> str:
     md = m["min_distance_m"]
-    return (f"| {label} | {ctrl} | {dist} | {'yes' if m['reached_goal'] else 'no'} | "
-            f"{m['duration_s']:.2f} | {md['spheres']:.3f} | {md['capsules']:.3f} | "
-            f"{m['rms_path_error_m'] * 1e3:.2f} | {m['max_path_error_m'] * 1e3:.1f} | "
-            f"{m['stopped_s']:.2f} | {len(m['stop_events'])} | "
-            f"{m['joint_velocity_limit_violations']}/{m['joint_position_limit_violations']} | "
-            f"{m['tick_us']['median']:.0f} / {m['tick_us']['p99']:.0f} |")
+    return (
+        f"| {label} | {ctrl} | {dist} | {'yes' if m['reached_goal'] else 'no'} | "
+        f"{m['duration_s']:.2f} | {md['spheres']:.3f} | {md['capsules']:.3f} | "
+        f"{m['rms_path_error_m'] * 1e3:.2f} | {m['max_path_error_m'] * 1e3:.1f} | "
+        f"{m['stopped_s']:.2f} | {len(m['stop_events'])} | "
+        f"{m['joint_velocity_limit_violations']}/{m['joint_position_limit_violations']} | "
+        f"{m['tick_us']['median']:.0f} / {m['tick_us']['p99']:.0f} |"
+    )
 
 
-def _random_row(label, ctrl, dist, runs: list[dict]) -> str:
+def _random_row(label: str, ctrl: str, dist: str, runs: list[dict[str, Any]]) -> str:
     md_s = min(m["min_distance_m"]["spheres"] for m in runs)
     md_c = min(m["min_distance_m"]["capsules"] for m in runs)
     reached = sum(m["reached_goal"] for m in runs)
@@ -64,19 +70,29 @@ def _random_row(label, ctrl, dist, runs: list[dict]) -> str:
     pv = sum(m["joint_position_limit_violations"] for m in runs)
     tick = np.median([m["tick_us"]["median"] for m in runs])
     p99 = np.median([m["tick_us"]["p99"] for m in runs])
-    return (f"| {label} | {ctrl} | {dist} | {reached}/{len(runs)} | {dur:.2f} (mean) | {md_s:.3f} | "
-            f"{md_c:.3f} | {rms:.2f} (mean) | {mx:.1f} | {stopped:.2f} (mean) | {stops} | "
-            f"{vv}/{pv} | {tick:.0f} / {p99:.0f} |")
+    return (
+        f"| {label} | {ctrl} | {dist} | {reached}/{len(runs)} | {dur:.2f} (mean) | {md_s:.3f} | "
+        f"{md_c:.3f} | {rms:.2f} (mean) | {mx:.1f} | {stopped:.2f} (mean) | {stops} | "
+        f"{vv}/{pv} | {tick:.0f} / {p99:.0f} |"
+    )
 
 
-HEADER = ("| input | controller | distances | goal | time (s) | min d spheres (m) | "
-          "min d capsules (m) | rms path err (mm) | max path err (mm) | stopped (s) | stops | "
-          "limit viol. vel/pos | tick µs median / p99 |\n" + "|---" * 13 + "|")
+HEADER = (
+    "| input | controller | distances | goal | time (s) | min d spheres (m) | "
+    "min d capsules (m) | rms path err (mm) | max path err (mm) | stopped (s) | stops | "
+    "limit viol. vel/pos | tick µs median / p99 |\n" + "|---" * 13 + "|"
+)
 
 
-def compare_specs(scenarios: Sequence[str], human_files: Sequence[str], n_random: int = 0,
-                  seed: int = 0, max_time_s: float = 40.0, rate_hz: float = 500.0,
-                  robot: str = "iiwa14") -> list[RunSpec]:
+def compare_specs(
+    scenarios: Sequence[str],
+    human_files: Sequence[str],
+    n_random: int = 0,
+    seed: int = 0,
+    max_time_s: float = 40.0,
+    rate_hz: float = 500.0,
+    robot: str = "iiwa14",
+) -> list[RunSpec]:
     """Every case of a comparison, checked: each input × controller × distance method.
 
     Raises
@@ -89,30 +105,49 @@ def compare_specs(scenarios: Sequence[str], human_files: Sequence[str], n_random
     """
     if n_random < 0 or seed < 0:
         bad = ("--random", n_random) if n_random < 0 else ("--seed", seed)
-        raise InputError(f"{bad[0]} must be a whole number >= 0, got {bad[1]}", name=bad[0],
-                         value=bad[1])
+        raise InputError(
+            f"{bad[0]} must be a whole number >= 0, got {bad[1]}", name=bad[0], value=bad[1]
+        )
     if not (scenarios or human_files or n_random):
-        raise InputError("nothing to compare: give --scenarios NAME..., --human FILE... or "
-                         "--random N", name="--scenarios", value=list(scenarios))
+        raise InputError(
+            "nothing to compare: give --scenarios NAME..., --human FILE... or --random N",
+            name="--scenarios",
+            value=list(scenarios),
+        )
     labels = [Path(f).stem for f in human_files]
     if len(set(labels)) < len(labels):
-        raise InputError(f"recordings must have distinct file names, got {list(human_files)}",
-                         name="--human", value=list(human_files))
+        raise InputError(
+            f"recordings must have distinct file names, got {list(human_files)}",
+            name="--human",
+            value=list(human_files),
+        )
     load_robot(robot)
     for f in human_files:
         load_recording(f)
     inputs = [dict(scenario=s) for s in scenarios]
     inputs += [dict(human_file=str(f)) for f in human_files]
     inputs += [dict(scenario=f"random:{seed + k}") for k in range(n_random)]
-    return [RunSpec(**i, controller=c, distance=d, max_time_s=max_time_s, rate_hz=rate_hz,
-                    robot=robot)  # type: ignore[arg-type]
-            for i in inputs for c in CONTROLLERS for d in DISTANCES]
+    return [
+        RunSpec(**i, controller=c, distance=d, max_time_s=max_time_s, rate_hz=rate_hz, robot=robot)  # type: ignore[arg-type]
+        for i in inputs
+        for c in CONTROLLERS
+        for d in DISTANCES
+    ]
 
 
-def compare(out: str | Path, scenarios: Sequence[str], human_files: Sequence[str],
-            n_random: int = 0, seed: int = 0, max_time_s: float = 40.0, rate_hz: float = 500.0,
-            plots: bool = True, robot: str = "iiwa14", workers: int | None = None,
-            progress: bool = False) -> str:
+def compare(
+    out: str | Path,
+    scenarios: Sequence[str],
+    human_files: Sequence[str],
+    n_random: int = 0,
+    seed: int = 0,
+    max_time_s: float = 40.0,
+    rate_hz: float = 500.0,
+    plots: bool = True,
+    robot: str = "iiwa14",
+    workers: int | None = None,
+    progress: bool = False,
+) -> str:
     """Run the comparison, write its files into ``out``; return the markdown table.
 
     Every case is checked before the first run starts (:func:`compare_specs`); the files
@@ -120,8 +155,7 @@ def compare(out: str | Path, scenarios: Sequence[str], human_files: Sequence[str
     """
     check_output_dir(out)
     specs = compare_specs(scenarios, human_files, n_random, seed, max_time_s, rate_hz, robot)
-    done = map_jobs(run_case, specs, workers=workers, progress=progress, desc="compare",
-                    unit="run")
+    done = map_jobs(run_case, specs, workers=workers, progress=progress, desc="compare", unit="run")
     metrics: dict = {}
     series: dict = {}
     for spec, m, s in done:
@@ -132,22 +166,31 @@ def compare(out: str | Path, scenarios: Sequence[str], human_files: Sequence[str
     named = [label for label in labels if label not in randoms]
 
     lines = [HEADER]
-    lines += [_row(label, c, d, metrics[label][c][d])
-              for label in named for c in CONTROLLERS for d in DISTANCES]
+    lines += [
+        _row(label, c, d, metrics[label][c][d])
+        for label in named
+        for c in CONTROLLERS
+        for d in DISTANCES
+    ]
     if randoms:
-        lines += [_random_row(f"random ×{len(randoms)}", c, d,
-                              [metrics[r][c][d] for r in randoms])
-                  for c in CONTROLLERS for d in DISTANCES]
+        lines += [
+            _random_row(f"random ×{len(randoms)}", c, d, [metrics[r][c][d] for r in randoms])
+            for c in CONTROLLERS
+            for d in DISTANCES
+        ]
     table = "\n".join(lines)
     with staged_output(out) as stage:
         (stage / "compare.json").write_text(json.dumps(metrics, indent=2) + "\n")
         (stage / "compare.md").write_text(
             "# qpavoid compare\n\nEvery input run with both controllers and both distance "
             f"methods ({rate_hz:g} Hz control, {max_time_s:g} s cap). Limit violations: ticks "
-            "over a joint velocity / position limit.\n\n" + table + "\n")
+            "over a joint velocity / position limit.\n\n" + table + "\n"
+        )
         if plots and plotting.available():
             for label in named:
-                plotting.write_comparison(stage / f"compare_{label}.png", label,
-                                          {(c, d): series[(label, c, d)]
-                                           for c in CONTROLLERS for d in DISTANCES})
+                plotting.write_comparison(
+                    stage / f"compare_{label}.png",
+                    label,
+                    {(c, d): series[(label, c, d)] for c in CONTROLLERS for d in DISTANCES},
+                )
     return table

@@ -16,6 +16,7 @@ joint angle or path time) raise :class:`~qpavoid.errors.InputError` before any o
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._checks import finite_number
 from .distances import distance_method
@@ -53,8 +54,13 @@ class Controller:
 
     name = "base"
 
-    def __init__(self, robot: Robot, path: ArcPath | None = None,
-                 config: ControllerConfig | None = None, human: KinectHuman | None = None):
+    def __init__(
+        self,
+        robot: Robot,
+        path: ArcPath | None = None,
+        config: ControllerConfig | None = None,
+        human: KinectHuman | None = None,
+    ):
         self.robot = robot
         self.path = path or ArcPath()
         self.config = config or ControllerConfig()
@@ -79,7 +85,9 @@ class Controller:
         assert self._geometry is not None
         return self._geometry
 
-    def measure(self, q, joints, state, t: float, frame_age_s: float = 0.0) -> Tick:
+    def measure(
+        self, q: ArrayLike, joints: object, state: object, t: float, frame_age_s: float = 0.0
+    ) -> Tick:
         """Shared prelude: kinematics, distances, f (eq. 2), reference, stop rules.
 
         Raises
@@ -94,28 +102,55 @@ class Controller:
         table = self.distances(kin, geo)
         dmin = table.min_per_set()
         cfg = self.config.avoidance
-        f = float(l1_factor(dmin[self.i_L1], cfg))                                   # eq. (2)
-        limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)      # eq. (3)
+        f = float(l1_factor(dmin[self.i_L1], cfg))  # eq. (2)
+        limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)  # eq. (3)
         j = table.closest_part(self.i_L2)
-        v_rep_L2 = repulsive_velocity(table.distance[self.i_L2, j], table.vector[self.i_L2, j],
-                                      cfg)                                       # eqs. (4)-(5)
-        v_rep_EE = ee_repulsive_velocity(table.distance[self.i_EE], table.vector[self.i_EE],
-                                         cfg)                                            # eq. (7)
+        v_rep_L2 = repulsive_velocity(
+            table.distance[self.i_L2, j], table.vector[self.i_L2, j], cfg
+        )  # eqs. (4)-(5)
+        v_rep_EE = ee_repulsive_velocity(
+            table.distance[self.i_EE], table.vector[self.i_EE], cfg
+        )  # eq. (7)
         ref_pose, ref_twist = self.path.reference(t)
         error = pose_error(ref_pose, kin.ee_placement)
         if not frame_age_s <= self.config.max_frame_age_s:
-            reason = (f"human frame is stale ({frame_age_s:.3f} s old, "
-                      f"max {self.config.max_frame_age_s} s)")
+            reason = (
+                f"human frame is stale ({frame_age_s:.3f} s old, "
+                f"max {self.config.max_frame_age_s} s)"
+            )
         elif self.config.require_human and not np.isfinite(table.distance).any():
             reason = "no body part of the operator is tracked"
         else:
             reason = stop_reason(f, dmin[self.i_L2], dmin[self.i_EE], cfg) or ""
-        return Tick(kin.q, kin, frame, geo, table, dmin, f, limits, j, v_rep_L2, v_rep_EE,
-                    ref_pose, ref_twist, error, ref_twist + self.K * error, reason)
+        return Tick(
+            kin.q,
+            kin,
+            frame,
+            geo,
+            table,
+            dmin,
+            f,
+            limits,
+            j,
+            v_rep_L2,
+            v_rep_EE,
+            ref_pose,
+            ref_twist,
+            error,
+            ref_twist + self.K * error,
+            reason,
+        )
 
-    def command(self, tick: Tick, dq: np.ndarray | None, time_scale: float = 1.0,
-                v_rep_L2: np.ndarray | None = None, v_rep_EE: np.ndarray | None = None,
-                reason: str = "", info: dict | None = None) -> Command:
+    def command(
+        self,
+        tick: Tick,
+        dq: np.ndarray | None,
+        time_scale: float = 1.0,
+        v_rep_L2: np.ndarray | None = None,
+        v_rep_EE: np.ndarray | None = None,
+        reason: str = "",
+        info: dict | None = None,
+    ) -> Command:
         """Shared epilogue: the last-resort layer, then the :class:`Command`.
 
         ``dq = None`` or a non-empty ``reason`` (or the tick's own) means stop. A command
@@ -131,20 +166,36 @@ class Controller:
                 out = (q_next > self.robot.q_max) | (q_next < self.robot.q_min)
                 if out.any():
                     k = int(np.flatnonzero(out)[0])
-                    reason = (f"joint {self.robot.joint_names[k]} would cross its position limit "
-                              f"(q = {tick.q[k]:.4f} rad)")
+                    reason = (
+                        f"joint {self.robot.joint_names[k]} would cross its position limit "
+                        f"(q = {tick.q[k]:.4f} rad)"
+                    )
         stopped = bool(reason) or dq is None
         zero3 = np.zeros(3)
         return Command(
             dq=np.zeros(self.robot.nv) if stopped else np.asarray(dq, dtype=float),
-            stopped=stopped, reason=reason if stopped else "",
-            time_scale=0.0 if stopped else float(time_scale), f=tick.f, distance=tick.distance,
-            table=tick.table, v_rep_L2=zero3 if v_rep_L2 is None else v_rep_L2,
-            v_rep_EE=zero3 if v_rep_EE is None else v_rep_EE, limits=tick.limits,
-            ee_pos=tick.kin.ee_placement[:3, 3].copy(), ee_ref=tick.ref_pose[:3, 3].copy(),
-            info=info or {})
+            stopped=stopped,
+            reason=reason if stopped else "",
+            time_scale=0.0 if stopped else float(time_scale),
+            f=tick.f,
+            distance=tick.distance,
+            table=tick.table,
+            v_rep_L2=zero3 if v_rep_L2 is None else v_rep_L2,
+            v_rep_EE=zero3 if v_rep_EE is None else v_rep_EE,
+            limits=tick.limits,
+            ee_pos=tick.kin.ee_placement[:3, 3].copy(),
+            ee_ref=tick.ref_pose[:3, 3].copy(),
+            info=info or {},
+        )
 
-    def step(self, q, joints, state=None, t: float = 0.0, frame_age_s: float = 0.0) -> Command:
+    def step(
+        self,
+        q: ArrayLike,
+        joints: object,
+        state: object = None,
+        t: float = 0.0,
+        frame_age_s: float = 0.0,
+    ) -> Command:
         """One control tick: :meth:`measure`, then (unless a stop rule holds) :meth:`act`.
 
         Parameters
@@ -173,8 +224,11 @@ class Controller:
         try:
             return self.act(tick)
         except (SolverError, np.linalg.LinAlgError) as exc:
-            info = ({"solver": exc.solver, "status": exc.status} if isinstance(exc, SolverError)
-                    else {"error": type(exc).__name__})
+            info = (
+                {"solver": exc.solver, "status": exc.status}
+                if isinstance(exc, SolverError)
+                else {"error": type(exc).__name__}
+            )
             return self.command(tick, None, reason=f"numerical failure: {exc}", info=info)
 
     def act(self, tick: Tick) -> Command:
@@ -196,6 +250,9 @@ def joint_columns(robot: Robot, names: tuple[str, ...], option: str) -> np.ndarr
     """
     missing = [n for n in names if n not in robot.joint_names]
     if missing:
-        raise InputError(f"{option}: joints {missing} are not active joints of "
-                         f"{robot.joint_names}", name=option, value=tuple(names))
+        raise InputError(
+            f"{option}: joints {missing} are not active joints of {robot.joint_names}",
+            name=option,
+            value=tuple(names),
+        )
     return np.array([robot.joint_names.index(n) for n in names])

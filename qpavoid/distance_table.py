@@ -93,7 +93,14 @@ class DistanceTable:
         For spheres, the Jacobian of the control point that realised the minimum (the
         sphere centre, as in eq. 6); for capsules, that of the closest point on the axis.
         """
-        k = self.robot_index[set_index, part]
-        if k >= 0:
-            return kin.point_jacobians[k]
-        return kin.segment_point_jacobian(set_index, float(self.robot_s[set_index, part]))
+        return self.robot_jacobians(kin, np.array([set_index]), np.array([part]))[0]
+
+    def robot_jacobians(self, kin: Kinematics, sets: np.ndarray, parts: np.ndarray) -> np.ndarray:
+        """(A, 3, nv) Jacobians of the robot points of the pairs ``(sets[a], parts[a])``.
+
+        The vectorised :meth:`robot_jacobian` (the velocity dampers need every close pair).
+        """
+        if self.method == "spheres":
+            assert kin.point_jacobians is not None
+            return kin.point_jacobians[self.robot_index[sets, parts]]
+        return kin.segment_point_jacobian(sets, self.robot_s[sets, parts])

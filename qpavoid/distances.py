@@ -19,6 +19,7 @@ human's :class:`~qpavoid.human.HumanGeometry`; the free functions
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .capsules import CapsuleDistance, axis_rotations
 from .distance_table import FALLBACK_DIRECTION, DistanceTable
@@ -26,8 +27,17 @@ from .errors import InputError
 from .human import HumanGeometry, KinectHuman
 from .robot import Kinematics, Robot
 
-__all__ = ["FALLBACK_DIRECTION", "METHODS", "CapsuleDistance", "DistanceTable", "SphereDistance",
-           "axis_rotations", "capsule_distances", "distance_method", "sphere_distances"]
+__all__ = [
+    "FALLBACK_DIRECTION",
+    "METHODS",
+    "CapsuleDistance",
+    "DistanceTable",
+    "SphereDistance",
+    "axis_rotations",
+    "capsule_distances",
+    "distance_method",
+    "sphere_distances",
+]
 
 
 class SphereDistance:
@@ -50,14 +60,22 @@ class SphereDistance:
         # pairs, padded with an index that points at +inf: one gather, one argmin per tick.
         n_human = human.n_points
         pad = len(robot.point_set) * n_human
-        pairs = [[[p * n_human + m for p in robot.sets[i].points
-                   for m in np.flatnonzero(human.point_part[:, j])] for j in range(n_parts)]
-                 for i in range(n_sets)]
+        pairs = [
+            [
+                [
+                    p * n_human + m
+                    for p in robot.sets[i].points
+                    for m in np.flatnonzero(human.point_part[:, j])
+                ]
+                for j in range(n_parts)
+            ]
+            for i in range(n_sets)
+        ]
         width = max(len(x) for row in pairs for x in row)
         self._pairs = np.full((n_sets * n_parts, width), pad)
         for i in range(n_sets):
             for j in range(n_parts):
-                self._pairs[i * n_parts + j, :len(pairs[i][j])] = pairs[i][j]
+                self._pairs[i * n_parts + j, : len(pairs[i][j])] = pairs[i][j]
         self._rows = np.arange(n_sets * n_parts)
         self._pairs_pad = pad
         # Flat pair index -> robot point, human point (-1 for the padding index).
@@ -75,38 +93,58 @@ class SphereDistance:
     def __call__(self, kin: Kinematics, geo: HumanGeometry) -> DistanceTable:
         """Distance table between the robot at ``kin`` and the human ``geo``."""
         P, H = kin.points, geo.filled_points
-        diff = P[:, None, :] - H[None, :, :]                                         # (P, M, 3)
+        diff = P[:, None, :] - H[None, :, :]  # (P, M, 3)
         buf = np.empty(self._pairs_pad + 1)
         buf[-1] = np.inf
-        np.add(np.sqrt(np.einsum("pmk,pmk->pm", diff, diff)), geo.point_penalty,
-               out=buf[:-1].reshape(len(P), -1))
-        best = self._pairs[self._rows, buf[self._pairs].argmin(axis=1)]             # flat pair
+        np.add(
+            np.sqrt(np.einsum("pmk,pmk->pm", diff, diff)),
+            geo.point_penalty,
+            out=buf[:-1].reshape(len(P), -1),
+        )
+        best = self._pairs[self._rows, buf[self._pairs].argmin(axis=1)]  # flat pair
         d_star = buf[best]
         vector = diff.reshape(-1, 3)[np.minimum(best, self._pairs_pad - 1)]
         with np.errstate(invalid="ignore", divide="ignore"):
-            vector /= d_star[:, None]                                               # inf -> 0
+            vector /= d_star[:, None]  # inf -> 0
         if d_star.min() < 1e-12:
             vector[d_star < 1e-12] = FALLBACK_DIRECTION
-        p_idx, m_idx = self._p_of[best], self._m_of[best]                           # -1: unseen
+        p_idx, m_idx = self._p_of[best], self._m_of[best]  # -1: unseen
         shape = self._shape
-        return DistanceTable(                                                       # eq. (1)
-            self.method, (d_star - self._radii).reshape(shape), vector.reshape(*shape, 3),
-            p_idx.reshape(shape), self._no_s, m_idx.reshape(shape), self.set_names,
-            self.part_names, (P, H, self._r_robot_flat, self._r_human_flat))
+        return DistanceTable(  # eq. (1)
+            self.method,
+            (d_star - self._radii).reshape(shape),
+            vector.reshape(*shape, 3),
+            p_idx.reshape(shape),
+            self._no_s,
+            m_idx.reshape(shape),
+            self.set_names,
+            self.part_names,
+            (P, H, self._r_robot_flat, self._r_human_flat),
+        )
 
 
-METHODS = {"spheres": SphereDistance, "capsules": CapsuleDistance}
+METHODS: dict[str, type[SphereDistance] | type[CapsuleDistance]] = {
+    "spheres": SphereDistance,
+    "capsules": CapsuleDistance,
+}
 
 
-def distance_method(name: str, robot: Robot, human: KinectHuman):
+def distance_method(
+    name: str, robot: Robot, human: KinectHuman
+) -> SphereDistance | CapsuleDistance:
     """Build the distance method called ``name`` (``"spheres"`` or ``"capsules"``)."""
     if name not in METHODS:
-        raise InputError(f"unknown distance method {name!r}; choose from {sorted(METHODS)}",
-                         name="distance", value=name)
+        raise InputError(
+            f"unknown distance method {name!r}; choose from {sorted(METHODS)}",
+            name="distance",
+            value=name,
+        )
     return METHODS[name](robot, human)
 
 
-def sphere_distances(robot: Robot, q, human: KinectHuman, joints, state=None) -> DistanceTable:
+def sphere_distances(
+    robot: Robot, q: ArrayLike, human: KinectHuman, joints: object, state: object = None
+) -> DistanceTable:
     """The paper's sphere distance table (eq. 1) at robot angles ``q`` (rad).
 
     Parameters
@@ -117,14 +155,18 @@ def sphere_distances(robot: Robot, q, human: KinectHuman, joints, state=None) ->
         The human model, its (25, 3) Kinect joints (m, robot base frame) and optional
         (25,) tracking states (None = all tracked).
     """
-    return SphereDistance(robot, human)(robot.kinematics(q, jacobians=False),
-                                        human.geometry(joints, state))
+    return SphereDistance(robot, human)(
+        robot.kinematics(q, jacobians=False), human.geometry(joints, state)
+    )
 
 
-def capsule_distances(robot: Robot, q, human: KinectHuman, joints, state=None) -> DistanceTable:
+def capsule_distances(
+    robot: Robot, q: ArrayLike, human: KinectHuman, joints: object, state: object = None
+) -> DistanceTable:
     """The exact capsule distance table (coal) at robot angles ``q`` (rad).
 
     Same arguments as :func:`sphere_distances`.
     """
-    return CapsuleDistance(robot, human)(robot.kinematics(q, jacobians=False),
-                                         human.geometry(joints, state))
+    return CapsuleDistance(robot, human)(
+        robot.kinematics(q, jacobians=False), human.geometry(joints, state)
+    )

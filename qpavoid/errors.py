@@ -19,8 +19,14 @@ from __future__ import annotations
 import pickle
 from pathlib import Path
 
-__all__ = ["IKNotConvergedError", "InputError", "QpavoidError", "RecordingError",
-           "RobotDescriptionError", "SolverError"]
+__all__ = [
+    "IKNotConvergedError",
+    "InputError",
+    "QpavoidError",
+    "RecordingError",
+    "RobotDescriptionError",
+    "SolverError",
+]
 
 
 class QpavoidError(Exception):
@@ -31,7 +37,7 @@ class QpavoidError(Exception):
     attributes.
     """
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple[object, ...]:
         attrs = {k: _picklable(v) for k, v in self.__dict__.items()}
         return _rebuild, (type(self), self.args, attrs)
 
@@ -40,7 +46,7 @@ def _picklable(value: object) -> object:
     """``value``, or its ``repr`` if it cannot be pickled (an error must always cross)."""
     try:
         pickle.dumps(value)
-    except Exception:  # noqa: BLE001 - whatever pickling raises, the repr will do
+    except Exception:
         return repr(value)
     return value
 
@@ -81,8 +87,14 @@ class RecordingError(InputError):
         content is invalid (as for :class:`InputError`).
     """
 
-    def __init__(self, message: str, *, path: str | Path | None = None,
-                 name: str | None = None, value: object = None):
+    def __init__(
+        self,
+        message: str,
+        *,
+        path: str | Path | None = None,
+        name: str | None = None,
+        value: object = None,
+    ):
         super().__init__(message, name=name, value=value)
         self.path = path
 
@@ -105,8 +117,15 @@ class IKNotConvergedError(InputError):
         The last iterate (nq,), rad: inside the joint limits, possibly usable if close.
     """
 
-    def __init__(self, message: str, *, target: object = None, residual: float | None = None,
-                 iterations: int | None = None, q: object = None):
+    def __init__(
+        self,
+        message: str,
+        *,
+        target: object = None,
+        residual: float | None = None,
+        iterations: int | None = None,
+        q: object = None,
+    ):
         super().__init__(message, name="target", value=target)
         self.target, self.residual, self.iterations, self.q = target, residual, iterations, q
 
@@ -122,8 +141,14 @@ class RobotDescriptionError(QpavoidError):
         The key, frame or robot name at fault and its value, if known.
     """
 
-    def __init__(self, message: str, *, path: str | Path | None = None, name: str | None = None,
-                 value: object = None):
+    def __init__(
+        self,
+        message: str,
+        *,
+        path: str | Path | None = None,
+        name: str | None = None,
+        value: object = None,
+    ):
         super().__init__(message)
         self.path, self.name, self.value = path, name, value
 

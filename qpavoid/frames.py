@@ -90,8 +90,11 @@ class HumanFrame(NamedTuple):
         if isinstance(joints, HumanFrame) and state is None:
             return joints
         j = check_joints(joints)
-        s = (np.full(N_KINECT_JOINTS, TrackingState.Tracked, dtype=np.int8) if state is None
-             else check_states(state))
+        s = (
+            np.full(N_KINECT_JOINTS, TrackingState.Tracked, dtype=np.int8)
+            if state is None
+            else check_states(state)
+        )
         return cls(j, s)
 
     @property
@@ -110,9 +113,13 @@ def check_joints(joints: object, times: np.ndarray | None = None) -> np.ndarray:
     arr = as_array(joints, (*lead, N_KINECT_JOINTS, 3), what, finite=False)
     if np.any(np.isinf(arr)):
         *frame, joint, axis = (int(i) for i in np.argwhere(np.isinf(arr))[0])
-        raise InputError(f"joints has an infinite coordinate at {_where(frame, times)}joint "
-                         f"{JointType(joint).name}, axis {'xyz'[axis]}: "
-                         f"{float(arr[(*frame, joint, axis)])!r}", name="joints", value=arr)
+        raise InputError(
+            f"joints has an infinite coordinate at {_where(frame, times)}joint "
+            f"{JointType(joint).name}, axis {'xyz'[axis]}: "
+            f"{float(arr[tuple([*frame, joint, axis])])!r}",
+            name="joints",
+            value=arr,
+        )
     return arr
 
 
@@ -126,9 +133,13 @@ def check_states(state: object, times: np.ndarray | None = None) -> np.ndarray:
         *frame, joint = (int(i) for i in np.argwhere(bad)[0])
         index = ", ".join(str(i) for i in (*frame, joint))
         at = "" if times is None else f" at t={float(times[frame[0]])!r} s"
-        raise InputError(f"state[{index}] ({JointType(joint).name}{at}) is "
-                         f"{_number_text(arr[(*frame, joint)])}, expected 0 (not tracked), "
-                         "1 (inferred) or 2 (tracked)", name="state", value=arr)
+        raise InputError(
+            f"state[{index}] ({JointType(joint).name}{at}) is "
+            f"{_number_text(arr[tuple([*frame, joint])])}, expected 0 (not tracked), "
+            "1 (inferred) or 2 (tracked)",
+            name="state",
+            value=arr,
+        )
     return arr.astype(np.int8)
 
 

@@ -3,12 +3,19 @@
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: Norm below which :func:`unit` returns its ``fallback`` direction.
 TINY = 1e-12
 
 
-def unit(v, fallback=None, *, norm=None, floor: float = 0.0) -> np.ndarray:
+def unit(
+    v: ArrayLike,
+    fallback: ArrayLike | None = None,
+    *,
+    norm: ArrayLike | None = None,
+    floor: float = 0.0,
+) -> np.ndarray:
     """Unit vector(s) ``v / ‖v‖`` along the last axis.
 
     Parameters

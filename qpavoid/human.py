@@ -19,16 +19,36 @@ import numpy as np
 
 from .frames import N_KINECT_JOINTS, HumanFrame, JointType, TrackingState, check_joints
 
-__all__ = ["N_KINECT_JOINTS", "UPPER_BODY", "BodyPart", "HumanFrame", "HumanGeometry",
-           "JointType", "KinectHuman", "TrackingState"]
+__all__ = [
+    "N_KINECT_JOINTS",
+    "UPPER_BODY",
+    "BodyPart",
+    "HumanFrame",
+    "HumanGeometry",
+    "JointType",
+    "KinectHuman",
+    "TrackingState",
+]
 
 
 J = JointType
 
 #: Order of the Kinect joints among the model points (spine up, then left and right arm).
-POINT_ORDER = (J.SpineBase, J.SpineMid, J.SpineShoulder, J.Neck, J.Head,
-               J.ShoulderLeft, J.ElbowLeft, J.WristLeft, J.HandLeft,
-               J.ShoulderRight, J.ElbowRight, J.WristRight, J.HandRight)
+POINT_ORDER = (
+    J.SpineBase,
+    J.SpineMid,
+    J.SpineShoulder,
+    J.Neck,
+    J.Head,
+    J.ShoulderLeft,
+    J.ElbowLeft,
+    J.WristLeft,
+    J.HandLeft,
+    J.ShoulderRight,
+    J.ElbowRight,
+    J.WristRight,
+    J.HandRight,
+)
 
 
 @dataclass(frozen=True)
@@ -57,7 +77,9 @@ class BodyPart:
     capsule_radius_m: float
 
 
-def _arm(side: str, shoulder, elbow, wrist, hand) -> tuple[BodyPart, ...]:
+def _arm(
+    side: str, shoulder: JointType, elbow: JointType, wrist: JointType, hand: JointType
+) -> tuple[BodyPart, ...]:
     # Sphere radii cover the capsule between consecutive points (spacing h):
     # r_sphere >= sqrt(r_capsule^2 + (h/2)^2), with h about 0.14 m (upper arm),
     # 0.125 m (forearm) and 0.045 m (hand) for an adult skeleton.
@@ -73,8 +95,13 @@ UPPER_BODY: tuple[BodyPart, ...] = (
     BodyPart("head", (J.Neck, J.Head), (J.Neck, J.Head), 0.11, 0.10),
     # The trunk's extra point is on the chest (SpineShoulder-SpineMid), the part of the
     # trunk at the height of the robot's links when the operator sits at the table.
-    BodyPart("trunk", (J.SpineShoulder, J.SpineMid, J.SpineBase), (J.SpineShoulder, J.SpineMid),
-             0.17, 0.15),
+    BodyPart(
+        "trunk",
+        (J.SpineShoulder, J.SpineMid, J.SpineBase),
+        (J.SpineShoulder, J.SpineMid),
+        0.17,
+        0.15,
+    ),
     *_arm("left", J.ShoulderLeft, J.ElbowLeft, J.WristLeft, J.HandLeft),
     *_arm("right", J.ShoulderRight, J.ElbowRight, J.WristRight, J.HandRight),
 )
@@ -105,10 +132,12 @@ class HumanGeometry:
     filled_points: np.ndarray = field(init=False, repr=False)
     point_penalty: np.ndarray = field(init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         # For vectorised distances: unusable points at the origin, with +inf added to any
         # distance to them (so they never win a minimum and never make a NaN).
-        object.__setattr__(self, "filled_points", np.where(self.point_valid[:, None], self.points, 0.0))
+        object.__setattr__(
+            self, "filled_points", np.where(self.point_valid[:, None], self.points, 0.0)
+        )
         object.__setattr__(self, "point_penalty", np.where(self.point_valid, 0.0, np.inf))
 
 
@@ -132,8 +161,10 @@ class KinectHuman:
     parts: tuple[BodyPart, ...] = UPPER_BODY
     joint_ids: np.ndarray = field(init=False, repr=False)
     point_part: np.ndarray = field(init=False, repr=False)
+    _mid_ids: np.ndarray = field(init=False, repr=False)
+    _chains: np.ndarray = field(init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         used = {int(j) for p in self.parts for j in (*p.chain, *p.mid)}
         joints = [int(j) for j in POINT_ORDER if int(j) in used] + sorted(used - set(POINT_ORDER))
         n_points = len(joints) + len(self.parts)
@@ -144,12 +175,20 @@ class KinectHuman:
             member[len(joints) + k, k] = True
         object.__setattr__(self, "joint_ids", np.array(joints))
         object.__setattr__(self, "point_part", member)
-        object.__setattr__(self, "_mid_ids", np.array([[int(a), int(b)] for a, b in
-                                                       (p.mid for p in self.parts)]))
+        object.__setattr__(
+            self, "_mid_ids", np.array([[int(a), int(b)] for a, b in (p.mid for p in self.parts)])
+        )
         width = max(len(p.chain) for p in self.parts)
-        object.__setattr__(self, "_chains", np.array(
-            [[int(j) for j in p.chain] + [int(p.chain[-1])] * (width - len(p.chain))
-             for p in self.parts]))
+        object.__setattr__(
+            self,
+            "_chains",
+            np.array(
+                [
+                    [int(j) for j in p.chain] + [int(p.chain[-1])] * (width - len(p.chain))
+                    for p in self.parts
+                ]
+            ),
+        )
 
     @property
     def part_names(self) -> tuple[str, ...]:
@@ -185,7 +224,7 @@ class KinectHuman:
         """(25,) True where a joint has finite coordinates and is not NotTracked."""
         return HumanFrame.check(joints, state).usable
 
-    def points(self, joints, state=None) -> np.ndarray:
+    def points(self, joints: object, state: object = None) -> np.ndarray:
         """The model points (21, 3) from (25, 3) Kinect joints, m.
 
         Rows are the 13 joints (SpineBase, SpineMid, SpineShoulder, Neck, Head, then
@@ -208,10 +247,11 @@ class KinectHuman:
         point_valid = ~np.isnan(points[:, 0])
         # Capsule of each part: first and last usable joint of its chain (padded by
         # repeating the last joint, which changes neither).
-        ok = usable[self._chains]                                      # (K, L)
+        ok = usable[self._chains]  # (K, L)
         first = ok.argmax(axis=1)
         last = ok.shape[1] - 1 - ok[:, ::-1].argmax(axis=1)
         rows = np.arange(len(self.parts))
-        segments = np.stack([clean[self._chains[rows, first]], clean[self._chains[rows, last]]],
-                            axis=1)
-        return HumanGeometry(points, point_valid, segments, ok.any(axis=1))
+        segments = np.stack(
+            [clean[self._chains[rows, first]], clean[self._chains[rows, last]]], axis=1
+        )
+        return HumanGeometry(points, point_valid, segments, np.asarray(ok.any(axis=1)))

@@ -15,6 +15,7 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -22,12 +23,33 @@ from .errors import InputError
 from .recording import Recording, load_recording, read_file, read_npz, save_csv, save_npz
 from .simulation import SimResult
 
-__all__ = ["LOG_KEYS", "Recording", "check_output_dir", "load_log", "load_recording",
-           "save_csv", "save_npz", "staged_output", "write_run"]
+__all__ = [
+    "LOG_KEYS",
+    "Recording",
+    "check_output_dir",
+    "load_log",
+    "load_recording",
+    "save_csv",
+    "save_npz",
+    "staged_output",
+    "write_run",
+]
 
 #: The arrays every ``log.npz`` contains.
-LOG_KEYS = ("t", "q", "dq", "joints", "state", "stopped", "f", "distance", "v_rep_L2",
-            "v_rep_EE", "ee_pos", "ee_ref")
+LOG_KEYS = (
+    "t",
+    "q",
+    "dq",
+    "joints",
+    "state",
+    "stopped",
+    "f",
+    "distance",
+    "v_rep_L2",
+    "v_rep_EE",
+    "ee_pos",
+    "ee_ref",
+)
 
 
 def write_run(out_dir: str | Path, result: SimResult, extra: dict | None = None) -> Path:
@@ -37,7 +59,8 @@ def write_run(out_dir: str | Path, result: SimResult, extra: dict | None = None)
     metrics = dict(result.metrics)
     metrics.update(extra or {})
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-    np.savez_compressed(out / "log.npz", **result.log)
+    arrays: dict[str, Any] = dict(result.log)
+    np.savez_compressed(out / "log.npz", **arrays)
     return out
 
 
@@ -64,17 +87,24 @@ def check_output_dir(path: str | Path) -> Path:
     """
     out = Path(path)
     if out.exists() and not out.is_dir():
-        raise InputError(f"--out {str(out)!r} is a file, not a folder", name="--out",
-                         value=str(out))
+        raise InputError(
+            f"--out {str(out)!r} is a file, not a folder", name="--out", value=str(out)
+        )
     probe = out
-    while not probe.exists():                     # the deepest folder that exists
+    while not probe.exists():  # the deepest folder that exists
         probe = probe.parent
     if not probe.is_dir():
-        raise InputError(f"--out {str(out)!r}: {str(probe)!r} is a file, not a folder",
-                         name="--out", value=str(out))
+        raise InputError(
+            f"--out {str(out)!r}: {str(probe)!r} is a file, not a folder",
+            name="--out",
+            value=str(out),
+        )
     if not os.access(probe, os.W_OK | os.X_OK):
-        raise InputError(f"--out {str(out)!r}: cannot write in {str(probe)!r} (permission "
-                         "denied)", name="--out", value=str(out))
+        raise InputError(
+            f"--out {str(out)!r}: cannot write in {str(probe)!r} (permission denied)",
+            name="--out",
+            value=str(out),
+        )
     return out
 
 

@@ -24,13 +24,26 @@ R = TypeVar("R")
 
 def progress_bar(total: float | None, desc: str, unit: str, enabled: bool) -> Any:
     """A tqdm bar on standard error; silent when ``enabled`` is False or not on a terminal."""
-    return tqdm(total=total, desc=desc, unit=unit, disable=None if enabled else True,
-                leave=False, dynamic_ncols=True)
+    return tqdm(
+        total=total,
+        desc=desc,
+        unit=unit,
+        disable=None if enabled else True,
+        leave=False,
+        dynamic_ncols=True,
+    )
 
 
-def map_jobs(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None = None,
-             executor: Executor | None = None, progress: bool = False, desc: str = "",
-             unit: str = "job") -> list[R]:
+def map_jobs(
+    fn: Callable[[T], R],
+    items: Sequence[T],
+    *,
+    workers: int | None = None,
+    executor: Executor | None = None,
+    progress: bool = False,
+    desc: str = "",
+    unit: str = "job",
+) -> list[R]:
     """``[fn(x) for x in items]``, in parallel, in the order of ``items``.
 
     Parameters

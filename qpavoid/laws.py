@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.linalg import lapack
 
 from .errors import SolverError
@@ -54,7 +55,7 @@ class AvoidanceConfig:
         return distance_at_factor(self.f_stop, self.rho_L1_m, self.alpha_L1)
 
 
-def logistic(d, rho: float, alpha: float):
+def logistic(d: ArrayLike, rho: float, alpha: float) -> np.ndarray:
     """``1 / (1 + exp((d · 2/ρ − 1) · α))``, the common shape of eqs. (2) and (4).
 
     Evaluated as ``(1 − tanh(x/2)) / 2`` so that it neither overflows far away nor
@@ -70,13 +71,14 @@ def distance_at_factor(f: float, rho: float, alpha: float) -> float:
     return 0.5 * rho * (1.0 + np.log(1.0 / f - 1.0) / alpha)
 
 
-def l1_factor(d_L1, cfg: AvoidanceConfig):
+def l1_factor(d_L1: ArrayLike, cfg: AvoidanceConfig) -> np.ndarray:
     """Eq. (2): the factor f in [0, 1] from the minimum L1 distance (m)."""
     return logistic(d_L1, cfg.rho_L1_m, cfg.alpha_L1)
 
 
-def scaled_velocity_limits(dq_max: np.ndarray, f: float | np.ndarray,
-                           joints: np.ndarray | None = None) -> np.ndarray:
+def scaled_velocity_limits(
+    dq_max: np.ndarray, f: float | np.ndarray, joints: np.ndarray | None = None
+) -> np.ndarray:
     """Eq. (3): joint velocity limits with those of ``joints`` scaled by (1 − f), rad/s (±).
 
     Parameters
@@ -94,14 +96,13 @@ def scaled_velocity_limits(dq_max: np.ndarray, f: float | np.ndarray,
         (nv,) limits, or (T, nv) for (T,) ``f``.
     """
     f = np.asarray(f, dtype=float)
-    limits = np.repeat(np.asarray(dq_max, dtype=float)[None], f.size, axis=0).reshape(
-        *f.shape, -1)
+    limits = np.repeat(np.asarray(dq_max, dtype=float)[None], f.size, axis=0).reshape(*f.shape, -1)
     cols = slice(None) if joints is None else joints
     limits[..., cols] *= (1.0 - f)[..., None]
     return limits
 
 
-def repulsive_speed(d, cfg: AvoidanceConfig):
+def repulsive_speed(d: ArrayLike, cfg: AvoidanceConfig) -> np.ndarray:
     """Eq. (4): repulsive speed (m/s) at distance ``d`` (m); V_max/2 at d = ρ/2."""
     return cfg.v_max_mps * logistic(d, cfg.rho_rep_m, cfg.alpha_rep)
 
@@ -113,7 +114,9 @@ def repulsive_velocity(d: float, direction: np.ndarray, cfg: AvoidanceConfig) ->
     return repulsive_speed(d, cfg) * np.asarray(direction, dtype=float)
 
 
-def ee_repulsive_velocity(d: np.ndarray, directions: np.ndarray, cfg: AvoidanceConfig) -> np.ndarray:
+def ee_repulsive_velocity(
+    d: np.ndarray, directions: np.ndarray, cfg: AvoidanceConfig
+) -> np.ndarray:
     """Eq. (7): sum over all human parts of the EE repulsive velocities (3,), m/s.
 
     Parameters
@@ -123,7 +126,7 @@ def ee_repulsive_velocity(d: np.ndarray, directions: np.ndarray, cfg: AvoidanceC
     directions
         (K, 3) unit directions human → robot.
     """
-    speed = repulsive_speed(d, cfg)                       # 0 at d = +inf
+    speed = repulsive_speed(d, cfg)  # 0 at d = +inf
     return speed @ np.where(speed[:, None] > 0.0, directions, 0.0)
 
 
@@ -141,17 +144,22 @@ def damped_pinv(J: np.ndarray, sigma_min: float, lambda_max: float) -> np.ndarra
         did not converge (info > 0) or ``J`` has a non-finite entry (info < 0). A
         controller tick turns it into a stop.
     """
-    U, s, Vt, info = lapack.dgesdd(J, full_matrices=0)   # numpy's svd costs 2x in overhead
+    U, s, Vt, info = lapack.dgesdd(J, full_matrices=0)  # numpy's svd costs 2x in overhead
     if info != 0:
         why = "did not converge" if info > 0 else "the matrix has a non-finite entry"
-        raise SolverError(f"SVD of the {J.shape[0]}x{J.shape[1]} Jacobian failed: {why} "
-                          f"(LAPACK dgesdd info {info})", solver="lapack.dgesdd", status=int(info))
-    lam2 = 0.0 if s[-1] >= sigma_min else (1.0 - (s[-1] / sigma_min) ** 2) * lambda_max ** 2
+        raise SolverError(
+            f"SVD of the {J.shape[0]}x{J.shape[1]} Jacobian failed: {why} "
+            f"(LAPACK dgesdd info {info})",
+            solver="lapack.dgesdd",
+            status=int(info),
+        )
+    lam2 = 0.0 if s[-1] >= sigma_min else (1.0 - (s[-1] / sigma_min) ** 2) * lambda_max**2
     return (Vt.T * (s / (s * s + lam2))) @ U.T
 
 
-def l2_joint_velocity(J_L2: np.ndarray, v_rep: np.ndarray, sigma_min: float, lambda_max: float
-                      ) -> np.ndarray:
+def l2_joint_velocity(
+    J_L2: np.ndarray, v_rep: np.ndarray, sigma_min: float, lambda_max: float
+) -> np.ndarray:
     """Eq. (6): joint velocities (3,) of (A1, A2, A4) that move the L2 point at ``v_rep``.
 
     ``J_L2`` is the 3×3 position Jacobian of the closest L2 point with respect to those
@@ -160,8 +168,15 @@ def l2_joint_velocity(J_L2: np.ndarray, v_rep: np.ndarray, sigma_min: float, lam
     return damped_pinv(J_L2, sigma_min, lambda_max) @ v_rep
 
 
-def modified_ik(J: np.ndarray, v_pl: np.ndarray, K: np.ndarray, e: np.ndarray, v_ee: np.ndarray,
-                sigma_min: float, lambda_max: float) -> np.ndarray:
+def modified_ik(
+    J: np.ndarray,
+    v_pl: np.ndarray,
+    K: np.ndarray,
+    e: np.ndarray,
+    v_ee: np.ndarray,
+    sigma_min: float,
+    lambda_max: float,
+) -> np.ndarray:
     """Eq. (8): ``q̇ = J⁻¹ (v_PL + K e + v_EE)`` with a damped inverse.
 
     Parameters
@@ -183,14 +198,18 @@ def modified_ik(J: np.ndarray, v_pl: np.ndarray, K: np.ndarray, e: np.ndarray, v
     return damped_pinv(J, sigma_min, lambda_max) @ target
 
 
-def stop_rule_holds(f: float | np.ndarray, d_L2: float | np.ndarray, d_EE: float | np.ndarray,
-                    cfg: AvoidanceConfig) -> bool | np.ndarray:
+def stop_rule_holds(
+    f: float | np.ndarray, d_L2: float | np.ndarray, d_EE: float | np.ndarray, cfg: AvoidanceConfig
+) -> bool | np.ndarray:
     """The paper's stop rules (Sect. 5.4), element-wise: f > 0.8, d_L2 <= 0.05 m or d_EE <= 0.05 m.
 
     Works on numbers or on arrays of ticks (checkers use it on whole logs).
     """
-    return ((np.asarray(f) > cfg.f_stop) | (np.asarray(d_L2) <= cfg.d_stop_L2_m)
-            | (np.asarray(d_EE) <= cfg.d_stop_EE_m))
+    return (
+        (np.asarray(f) > cfg.f_stop)
+        | (np.asarray(d_L2) <= cfg.d_stop_L2_m)
+        | (np.asarray(d_EE) <= cfg.d_stop_EE_m)
+    )
 
 
 def stop_distances(cfg: AvoidanceConfig) -> np.ndarray:

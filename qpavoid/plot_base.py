@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -11,9 +12,9 @@ from .robot import Robot
 
 SCENARIO_TITLES = {"test1": "Test 1", "test2": "Test 2"}
 #: Styles: the "robot stopped" shading, the planned path and the end-effector trace.
-STOP = {"color": "red", "alpha": 0.12, "lw": 0}
-PATH = {"color": "C2", "lw": 4, "alpha": 0.45}
-TRACE = {"color": "k", "lw": 1.2}
+STOP: dict[str, Any] = {"color": "red", "alpha": 0.12, "lw": 0}
+PATH: dict[str, Any] = {"color": "C2", "lw": 4, "alpha": 0.45}
+TRACE: dict[str, Any] = {"color": "k", "lw": 1.2}
 
 
 @dataclass(frozen=True)
@@ -30,8 +31,11 @@ class Run:
     @property
     def subtitle(self) -> str:
         """E.g. ``"Test 1 · analytic controller · spheres"``."""
-        parts = (SCENARIO_TITLES.get(self.scenario, self.scenario),
-                 f"{self.controller} controller" if self.controller else "", self.method)
+        parts = (
+            SCENARIO_TITLES.get(self.scenario, self.scenario),
+            f"{self.controller} controller" if self.controller else "",
+            self.method,
+        )
         return " · ".join(p for p in parts if p)
 
     def column(self, name: str) -> np.ndarray:
@@ -40,7 +44,7 @@ class Run:
         return np.where(np.isfinite(d), d, np.nan)
 
 
-def finish(ax, ylabel: str, *extra) -> None:
+def finish(ax: Any, ylabel: str, *extra: Any) -> None:
     """Label, grid and a legend outside the axes (never over the data)."""
     handles = ax.get_legend_handles_labels()[0] + list(extra)
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
@@ -48,6 +52,6 @@ def finish(ax, ylabel: str, *extra) -> None:
     ax.grid(alpha=0.3)
 
 
-def set_title(fig, run: Run, text: str) -> None:
+def set_title(fig: Any, run: Run, text: str) -> None:
     """The figure's title, with the scenario, controller and method on a second line."""
     fig.suptitle(f"{text}\n{run.subtitle}" if run.subtitle else text)

@@ -21,8 +21,10 @@ rate (see docs/analytic.md).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -39,15 +41,41 @@ from .plot_time import (
 )
 from .robot import Robot
 
-__all__ = ["BONES", "BUILDERS", "DPI", "F6_D_MAX_M", "FIGURES_BY_SCENARIO", "PATH",
-           "SCENARIO_TITLES", "STOP", "TRACE", "VIEWS", "available", "build_figures",
-           "fig_distance", "fig_f_and_l1", "fig_f_vs_distance", "fig_snapshots", "fig_timeline",
-           "fig_vrep", "figures_for", "snapshot_ticks", "write_comparison", "write_figures"]
+__all__ = [
+    "BONES",
+    "BUILDERS",
+    "DPI",
+    "F6_D_MAX_M",
+    "FIGURES_BY_SCENARIO",
+    "PATH",
+    "SCENARIO_TITLES",
+    "STOP",
+    "TRACE",
+    "VIEWS",
+    "available",
+    "build_figures",
+    "fig_distance",
+    "fig_f_and_l1",
+    "fig_f_vs_distance",
+    "fig_snapshots",
+    "fig_timeline",
+    "fig_vrep",
+    "figures_for",
+    "snapshot_ticks",
+    "write_comparison",
+    "write_figures",
+]
 
 #: Figure files written per scenario; any scenario not listed gets those of "other".
 FIGURES_BY_SCENARIO: dict[str, tuple[str, ...]] = {
-    "test1": ("fig06_f_vs_distance.png", "fig07_snapshots.png", "fig08_distance_L2.png",
-              "fig09_vrep_L2.png", "fig10_distance_EE.png", "fig11_vrep_EE.png"),
+    "test1": (
+        "fig06_f_vs_distance.png",
+        "fig07_snapshots.png",
+        "fig08_distance_L2.png",
+        "fig09_vrep_L2.png",
+        "fig10_distance_EE.png",
+        "fig11_vrep_EE.png",
+    ),
     "test2": ("fig06_f_vs_distance.png", "fig12_snapshots.png", "fig13_f_and_L1.png"),
     "other": ("fig06_f_vs_distance.png", "timeline.png", "snapshots.png"),
 }
@@ -68,9 +96,16 @@ def figures_for(scenario: str) -> tuple[str, ...]:
     return FIGURES_BY_SCENARIO.get(scenario, FIGURES_BY_SCENARIO["other"])
 
 
-def write_figures(out_dir: str | Path, log: dict, robot: Robot,
-                  avoidance: AvoidanceConfig | None = None, method: str = "spheres", *,
-                  scenario: str = "", controller: str = "") -> list[Path]:
+def write_figures(
+    out_dir: str | Path,
+    log: dict,
+    robot: Robot,
+    avoidance: AvoidanceConfig | None = None,
+    method: str = "spheres",
+    *,
+    scenario: str = "",
+    controller: str = "",
+) -> list[Path]:
     """Write the figures of a run into ``out_dir``; return their paths.
 
     Parameters
@@ -92,23 +127,28 @@ def write_figures(out_dir: str | Path, log: dict, robot: Robot,
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    figures = build_figures(log, robot, avoidance, method, scenario=scenario,
-                            controller=controller)
+    figures = build_figures(log, robot, avoidance, method, scenario=scenario, controller=controller)
     for name, fig in figures.items():
         fig.savefig(out / name, dpi=DPI)
     return [out / name for name in figures]
 
 
-def build_figures(log: dict, robot: Robot, avoidance: AvoidanceConfig | None = None,
-                  method: str = "spheres", *, scenario: str = "", controller: str = ""
-                  ) -> dict:
+def build_figures(
+    log: dict,
+    robot: Robot,
+    avoidance: AvoidanceConfig | None = None,
+    method: str = "spheres",
+    *,
+    scenario: str = "",
+    controller: str = "",
+) -> dict:
     """The matplotlib Figures of :func:`write_figures`, by file name, not saved."""
     run = Run(log, robot, avoidance or AvoidanceConfig(), method, scenario, controller)
     return {name: BUILDERS[name](run) for name in figures_for(scenario)}
 
 
 #: Builder of each figure file from a run.
-BUILDERS = {
+BUILDERS: dict[str, Callable[[Run], Any]] = {
     "fig06_f_vs_distance.png": fig_f_vs_distance,
     "fig07_snapshots.png": partial(fig_snapshots, 7),
     "fig08_distance_L2.png": partial(fig_distance, "L2", 8),
@@ -125,13 +165,18 @@ BUILDERS = {
 def write_comparison(path: Path, label: str, series: dict) -> None:
     """Minimum distance and path error over time of every (controller, distance) run."""
     from matplotlib.figure import Figure
+
     fig = Figure(figsize=(9, 6), layout="constrained")
     a1, a2 = fig.subplots(2, 1, sharex=True)
     styles = {"analytic": "-", "qp": "--"}
     colors = {"spheres": "C0", "capsules": "C1"}
     for (ctrl, dist), s in series.items():
-        kw = {"ls": styles.get(ctrl, "-"), "color": colors.get(dist, "k"), "lw": 1.3,
-              "label": f"{ctrl} controller, {dist}"}
+        kw = {
+            "ls": styles.get(ctrl, "-"),
+            "color": colors.get(dist, "k"),
+            "lw": 1.3,
+            "label": f"{ctrl} controller, {dist}",
+        }
         a1.plot(s["t"], s["min_distance"], **kw)
         a2.plot(s["t"], np.asarray(s["path_error"]) * 1e3, **kw)
     stop = AvoidanceConfig().d_stop_L2_m
@@ -139,6 +184,8 @@ def write_comparison(path: Path, label: str, series: dict) -> None:
     finish(a1, "min distance (m)\n(each run's own method)")
     a2.set(ylabel="path error (mm)", xlabel="time (s)")
     a2.grid(alpha=0.3)
-    fig.suptitle(f"{SCENARIO_TITLES.get(label, label)}: analytic (solid) vs QP (dashed) "
-                 "controller, spheres (blue) vs capsules (orange)")
+    fig.suptitle(
+        f"{SCENARIO_TITLES.get(label, label)}: analytic (solid) vs QP (dashed) "
+        "controller, spheres (blue) vs capsules (orange)"
+    )
     fig.savefig(path, dpi=DPI)

@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .geometry import unit
 from .human import JointType as J
@@ -20,8 +21,14 @@ from .human import JointType as J
 #: Per-side joint chains (shoulder, elbow, wrist, hand, hand tip, thumb).
 ARM = {
     "left": (J.ShoulderLeft, J.ElbowLeft, J.WristLeft, J.HandLeft, J.HandTipLeft, J.ThumbLeft),
-    "right": (J.ShoulderRight, J.ElbowRight, J.WristRight, J.HandRight, J.HandTipRight,
-              J.ThumbRight),
+    "right": (
+        J.ShoulderRight,
+        J.ElbowRight,
+        J.WristRight,
+        J.HandRight,
+        J.HandTipRight,
+        J.ThumbRight,
+    ),
 }
 #: Per-side leg chains (hip, knee, ankle, foot).
 LEG = {
@@ -82,7 +89,7 @@ class Operator:
             j[foot] = (hx, y - 0.45, -0.72)
         return j
 
-    def reach(self, joints: np.ndarray, side: str, target) -> np.ndarray:
+    def reach(self, joints: np.ndarray, side: str, target: ArrayLike) -> np.ndarray:
         """Copy of ``joints`` with the ``side`` hand (Hand joint) moved to ``target`` (3,).
 
         The elbow hangs below the shoulder-wrist line. A target beyond the arm's reach
@@ -94,8 +101,9 @@ class Operator:
         out = np.array(joints, dtype=float, copy=True)
         target = np.asarray(target, dtype=float)
         shoulder = out[ARM[side][0]]
-        missing = np.linalg.norm(target - shoulder) - 0.98 * (self.upper_arm_m + self.forearm_m
-                                                              + self.hand_m)
+        missing = np.linalg.norm(target - shoulder) - 0.98 * (
+            self.upper_arm_m + self.forearm_m + self.hand_m
+        )
         horizontal = (target - shoulder) * [1.0, 1.0, 0.0]
         if missing > 0 and np.linalg.norm(horizontal) > 1e-9:
             lean = min(missing, self.max_lean_m) * horizontal / np.linalg.norm(horizontal)
@@ -109,7 +117,7 @@ class Operator:
         a, b, c = self.upper_arm_m, self.forearm_m, self.hand_m
         s = j[s_id]
         to_hand = hand - s
-        dist = np.linalg.norm(to_hand)
+        dist = float(np.linalg.norm(to_hand))
         u = to_hand / dist if dist > 1e-9 else np.array([0.0, -1.0, 0.0])
         dist = min(dist, a + b + c - 1e-6)
         hand = s + dist * u
@@ -131,8 +139,12 @@ class Operator:
         j[th_id] = j[h_id] + 0.03 * u + 0.02 * m
 
 
-def random_posture(rng: np.random.Generator, robot_points: np.ndarray,
-                   operator: Operator | None = None, spread_m: float = 0.25) -> np.ndarray:
+def random_posture(
+    rng: np.random.Generator,
+    robot_points: np.ndarray,
+    operator: Operator | None = None,
+    spread_m: float = 0.25,
+) -> np.ndarray:
     """A random seated posture with one hand near the robot.
 
     Parameters
@@ -147,8 +159,9 @@ def random_posture(rng: np.random.Generator, robot_points: np.ndarray,
         Standard deviation of the hand target around the robot point, m.
     """
     op = operator or Operator()
-    op = Operator(x_m=op.x_m + rng.uniform(-0.15, 0.15),
-                  distance_m=op.distance_m + rng.uniform(-0.15, 0.1))
+    op = Operator(
+        x_m=op.x_m + rng.uniform(-0.15, 0.15), distance_m=op.distance_m + rng.uniform(-0.15, 0.1)
+    )
     joints = op.rest()
     side = "right" if rng.random() < 0.5 else "left"
     target = robot_points[rng.integers(len(robot_points))] + rng.normal(0.0, spread_m, 3)

@@ -35,8 +35,16 @@ from .recording_files import (
     read_npz,
 )
 
-__all__ = ["Recording", "csv_header", "load_recording", "read_file", "read_npz", "save_csv",
-           "save_npz"]
+__all__ = [
+    "Recording",
+    "csv_header",
+    "load_recording",
+    "read_file",
+    "read_npz",
+    "save_csv",
+    "save_npz",
+]
+
 
 @dataclass(frozen=True, eq=False)
 class Recording:
@@ -109,8 +117,12 @@ class Recording:
         time_s = finite_number(time_s, "time_s (s)")
         index = int(np.searchsorted(self.t, time_s, side="right")) - 1
         if index < 0:
-            raise InputError(f"no frame yet at t={time_s!r} s: the recording starts at "
-                             f"t[0]={float(self.t[0])!r} s", name="time_s", value=time_s)
+            raise InputError(
+                f"no frame yet at t={time_s!r} s: the recording starts at "
+                f"t[0]={float(self.t[0])!r} s",
+                name="time_s",
+                value=time_s,
+            )
         return index
 
     def frame_at(self, time_s: float) -> HumanFrame:
@@ -139,23 +151,31 @@ class Recording:
         return HumanFrame(self.joints[index].copy(), self.state[index].copy())
 
 
-def _check_times(t) -> np.ndarray:
+def _check_times(t: object) -> np.ndarray:
     """(N,) finite, strictly increasing frame times with N >= 1, s."""
     arr = as_array(t, (None,), "t (frame times, s)", finite=False)
     if arr.shape[0] == 0:
-        raise InputError("the recording has no frame: t (frame times, s) is empty", name="t",
-                         value=arr)
+        raise InputError(
+            "the recording has no frame: t (frame times, s) is empty", name="t", value=arr
+        )
     if not np.all(np.isfinite(arr)):
         bad = int(np.flatnonzero(~np.isfinite(arr))[0])
-        raise InputError(f"t (frame times, s) has a non-finite value at index {bad}: "
-                         f"{float(arr[bad])!r}", name="t", value=arr)
+        raise InputError(
+            f"t (frame times, s) has a non-finite value at index {bad}: {float(arr[bad])!r}",
+            name="t",
+            value=arr,
+        )
     steps = np.diff(arr)
     if np.any(steps <= 0):
         i = int(np.flatnonzero(steps <= 0)[0]) + 1
         kind = "duplicate frame time" if steps[i - 1] == 0 else "frames out of order"
-        raise InputError(f"t (frame times, s) must be strictly increasing ({kind}): "
-                         f"t[{i}]={float(arr[i])!r} s is not after t[{i - 1}]="
-                         f"{float(arr[i - 1])!r} s", name="t", value=arr)
+        raise InputError(
+            f"t (frame times, s) must be strictly increasing ({kind}): "
+            f"t[{i}]={float(arr[i])!r} s is not after t[{i - 1}]="
+            f"{float(arr[i - 1])!r} s",
+            name="t",
+            value=arr,
+        )
     return arr
 
 
@@ -185,8 +205,11 @@ def load_recording(path: str | Path) -> Recording:
     readers = {".npz": _load_npz, ".csv": _load_csv}
     reader = readers.get(path.suffix.lower())
     if reader is None:
-        raise RecordingError(f"unknown recording format {path.suffix!r} for {str(path)!r}: "
-                             "expected a .npz or .csv file", path=path)
+        raise RecordingError(
+            f"unknown recording format {path.suffix!r} for {str(path)!r}: "
+            "expected a .npz or .csv file",
+            path=path,
+        )
     return read_file(path, reader, "recording", f"see {FORMATS_DOC}")
 
 
@@ -242,13 +265,14 @@ def save_csv(path: str | Path, rec: Recording) -> None:
 def _csv_row(t: float, joints: np.ndarray, state: np.ndarray) -> list[str]:
     """Text cells of one frame: shortest exact float text (``nan`` for NaN), int states."""
     cells = [repr(float(t))]
-    for xyz, s in zip(joints, state):
+    for xyz, s in zip(joints, state, strict=True):
         cells += [repr(float(v)) for v in xyz] + [str(int(s))]
     return cells
 
 
-def _check_recording(rec) -> None:
+def _check_recording(rec: object) -> None:
     """Raise InputError unless ``rec`` is a :class:`Recording`."""
     if not isinstance(rec, Recording):
-        raise InputError(f"rec must be a Recording, got {type(rec).__name__}", name="rec",
-                         value=rec)
+        raise InputError(
+            f"rec must be a Recording, got {type(rec).__name__}", name="rec", value=rec
+        )

@@ -33,13 +33,16 @@ CSV_JOINT_FIELDS: tuple[str, ...] = ("x", "y", "z", "state")
 FORMATS_DOC = "docs/formats.md"
 
 #: What an NPZ recording must be, for error messages.
-NPZ_EXPECTED = ("expected a NumPy .npz archive with arrays t (N,), joints (N, 25, 3) and "
-                "state (N, 25)")
+NPZ_EXPECTED = (
+    "expected a NumPy .npz archive with arrays t (N,), joints (N, 25, 3) and state (N, 25)"
+)
 
 #: What a CSV recording must be, for error messages.
-CSV_EXPECTED = ("expected a UTF-8 CSV file: the header row t,SpineBase_x,SpineBase_y,"
-                "SpineBase_z,SpineBase_state,...,ThumbRight_state (101 columns), then one row "
-                "of numbers per frame")
+CSV_EXPECTED = (
+    "expected a UTF-8 CSV file: the header row t,SpineBase_x,SpineBase_y,"
+    "SpineBase_z,SpineBase_state,...,ThumbRight_state (101 columns), then one row "
+    "of numbers per frame"
+)
 
 
 def csv_header() -> list[str]:
@@ -74,17 +77,20 @@ def read_file(path: Path, reader: Callable[[Path], T], what: str, hint: str = ""
     if path.is_dir():
         raise RecordingError(f"{str(path)!r} is a folder, not a {what} file", path=path)
     if not path.is_file():
-        raise RecordingError(f"{str(path)!r} is not a regular file (expected a {what} file)",
-                             path=path)
+        raise RecordingError(
+            f"{str(path)!r} is not a regular file (expected a {what} file)", path=path
+        )
     try:
         return reader(path)
-    except InputError as exc:      # bad content (RecordingError included): name the file
+    except InputError as exc:  # bad content (RecordingError included): name the file
         tail = f"; {hint}" if hint else ""
-        raise RecordingError(f"{path}: {exc}{tail}", path=path, name=exc.name,
-                             value=exc.value) from exc
-    except OSError as exc:         # permission denied, vanished, a special file...
-        raise RecordingError(f"{path}: cannot read the {what} file "
-                             f"({exc.strerror or one_line(exc)})", path=path) from exc
+        raise RecordingError(
+            f"{path}: {exc}{tail}", path=path, name=exc.name, value=exc.value
+        ) from exc
+    except OSError as exc:  # permission denied, vanished, a special file...
+        raise RecordingError(
+            f"{path}: cannot read the {what} file ({exc.strerror or one_line(exc)})", path=path
+        ) from exc
 
 
 def _file_kind(path: Path) -> str:
@@ -98,7 +104,7 @@ def _file_kind(path: Path) -> str:
         return "zip"
     if head.startswith(b"\x93NUMPY"):
         return "npy"
-    try:                           # a multi-byte character may be cut at the end: not final
+    try:  # a multi-byte character may be cut at the end: not final
         codecs.getincrementaldecoder("utf-8")().decode(head, final=False)
     except UnicodeDecodeError:
         return "binary"
@@ -106,9 +112,13 @@ def _file_kind(path: Path) -> str:
 
 
 #: How :func:`_file_kind`'s answers read in messages.
-_KIND_TEXT = {"empty": "the file is empty", "zip": "it is a ZIP archive",
-              "npy": "it is a single .npy array", "text": "it is a text file",
-              "binary": "it is binary data"}
+_KIND_TEXT = {
+    "empty": "the file is empty",
+    "zip": "it is a ZIP archive",
+    "npy": "it is a single .npy array",
+    "text": "it is a text file",
+    "binary": "it is binary data",
+}
 
 
 def read_npz(path: Path, names: Sequence[str] | None, expected: str) -> dict[str, np.ndarray]:
@@ -131,19 +141,24 @@ def read_npz(path: Path, names: Sequence[str] | None, expected: str) -> dict[str
             found = [name for name in data.files if f"{name}.npy" in members]
             if not found:
                 others = ", ".join(data.files[:5]) or "none"
-                raise RecordingError(f"not a readable NPZ archive (a ZIP archive without .npy "
-                                     f"arrays; members: {others}); {expected}")
+                raise RecordingError(
+                    f"not a readable NPZ archive (a ZIP archive without .npy "
+                    f"arrays; members: {others}); {expected}"
+                )
             missing = [name for name in names or () if name not in found]
             if missing:
                 raise RecordingError(
                     f"NPZ file has no array {', '.join(map(repr, missing))} (found: "
-                    f"{', '.join(map(repr, found))}); {expected}", name=missing[0])
+                    f"{', '.join(map(repr, found))}); {expected}",
+                    name=missing[0],
+                )
             return {name: _npz_array(data, name, expected) for name in names or found}
     except RecordingError:
         raise
-    except Exception as exc:       # zipfile, zlib, numpy's format parser: a damaged file
-        raise RecordingError(f"not a readable NPZ archive (damaged: {one_line(exc)}); "
-                             f"{expected}") from exc
+    except Exception as exc:  # zipfile, zlib, numpy's format parser: a damaged file
+        raise RecordingError(
+            f"not a readable NPZ archive (damaged: {one_line(exc)}); {expected}"
+        ) from exc
 
 
 def _npz_array(data: Any, name: str, expected: str) -> np.ndarray:
@@ -153,11 +168,12 @@ def _npz_array(data: Any, name: str, expected: str) -> np.ndarray:
     except ValueError as exc:
         if "allow_pickle" not in str(exc):
             raise
-        raise RecordingError(f"array {name!r} holds Python objects (pickled data, never "
-                             f"loaded); {expected}", name=name) from None
-    if not isinstance(arr, np.ndarray):        # a member named .npy that is not one
-        raise RecordingError(f"member {name + '.npy'!r} is not a .npy array; {expected}",
-                             name=name)
+        raise RecordingError(
+            f"array {name!r} holds Python objects (pickled data, never loaded); {expected}",
+            name=name,
+        ) from None
+    if not isinstance(arr, np.ndarray):  # a member named .npy that is not one
+        raise RecordingError(f"member {name + '.npy'!r} is not a .npy array; {expected}", name=name)
     return arr
 
 
@@ -177,12 +193,16 @@ def read_csv_table(path: Path, names: list[str], expected: str) -> np.ndarray:
         with path.open("r", encoding="utf-8-sig", newline="") as handle:
             rows = csv.reader(handle)
             _check_csv_header(next(rows, None), names)
-            values = [_parse_csv_row(row, line, names) for line, row in enumerate(rows, start=2)
-                      if any(cell.strip() for cell in row)]
-    except UnicodeDecodeError as exc:      # past the first 4 kB that _file_kind looked at
-        raise RecordingError(f"not a CSV text file (invalid UTF-8: {one_line(exc)}); "
-                             f"{expected}") from exc
-    except csv.Error as exc:               # a NUL byte, a field too long...
+            values = [
+                _parse_csv_row(row, line, names)
+                for line, row in enumerate(rows, start=2)
+                if any(cell.strip() for cell in row)
+            ]
+    except UnicodeDecodeError as exc:  # past the first 4 kB that _file_kind looked at
+        raise RecordingError(
+            f"not a CSV text file (invalid UTF-8: {one_line(exc)}); {expected}"
+        ) from exc
+    except csv.Error as exc:  # a NUL byte, a field too long...
         raise RecordingError(f"not a readable CSV file ({one_line(exc)}); {expected}") from exc
     return np.array(values, dtype=float).reshape(len(values), len(names))
 
@@ -210,24 +230,30 @@ def _check_csv_header(header: list[str] | None, expected: list[str]) -> None:
     unknown = [name for name in found if name not in expected]
     if unknown:
         raise fail(f"has unknown column(s) {', '.join(map(repr, unknown))}")
-    for i, (got, want) in enumerate(zip(found, expected)):
+    for i, (got, want) in enumerate(zip(found, expected, strict=False)):
         if got != want:
-            raise fail(f"column {i} is {got!r}, expected {want!r} (columns must be t then "
-                       "<Joint>_x,_y,_z,_state in JointType order)")
+            raise fail(
+                f"column {i} is {got!r}, expected {want!r} (columns must be t then "
+                "<Joint>_x,_y,_z,_state in JointType order)"
+            )
     raise fail(f"has {len(found)} columns, expected {len(expected)} (a column is repeated)")
 
 
 def _parse_csv_row(row: list[str], line: int, names: list[str]) -> list[float]:
     """Floats of one CSV data row; ``line`` is its 1-based line number for messages."""
     if len(row) != len(names):
-        raise RecordingError(f"CSV line {line} has {len(row)} values, expected {len(names)}",
-                             name="line", value=line)
+        raise RecordingError(
+            f"CSV line {line} has {len(row)} values, expected {len(names)}", name="line", value=line
+        )
     try:
         return [float(cell) for cell in row]
     except ValueError:
         col = next(i for i, cell in enumerate(row) if not _is_float(cell))
-        raise RecordingError(f"CSV line {line}, column {names[col]!r}: {row[col]!r} is not a "
-                             "number", name=names[col], value=row[col]) from None
+        raise RecordingError(
+            f"CSV line {line}, column {names[col]!r}: {row[col]!r} is not a number",
+            name=names[col],
+            value=row[col],
+        ) from None
 
 
 def _is_float(text: str) -> bool:

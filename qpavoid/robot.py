@@ -20,13 +20,22 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from ._checks import as_array
 from .errors import InputError
 from .robot_description import CAPSULE_KEYS, CONFIG_NAME, SET_KEYS, ControlSet, read_description
 
-__all__ = ["CAPSULE_KEYS", "CONFIG_NAME", "LWA", "SET_KEYS", "ControlSet", "Kinematics", "Robot",
-           "load_robot"]
+__all__ = [
+    "CAPSULE_KEYS",
+    "CONFIG_NAME",
+    "LWA",
+    "SET_KEYS",
+    "ControlSet",
+    "Kinematics",
+    "Robot",
+    "load_robot",
+]
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
@@ -65,18 +74,23 @@ class Kinematics:
     ee_placement: np.ndarray
     ee_jacobian: np.ndarray | None
 
-    def segment_point_jacobian(self, set_index: int, s: float) -> np.ndarray:
+    def segment_point_jacobian(
+        self, set_index: int | np.ndarray, s: float | np.ndarray
+    ) -> np.ndarray:
         """Jacobian (3, nv) of the point at parameter ``s`` in [0, 1] on a capsule axis.
 
         The capsule ends lie on one rigid segment (for the iiwa the locked or spinning
         joint between them turns about that very segment), so the velocity of the point
-        ``(1 - s) a + s b`` is exactly ``(1 - s) v_a + s v_b``.
+        ``(1 - s) a + s b`` is exactly ``(1 - s) v_a + s v_b``. With (A,) arrays of sets
+        and parameters: (A, 3, nv).
         """
         if self.segment_jacobians is None:
-            raise InputError("kinematics were computed without Jacobians", name="jacobians",
-                             value=False)
-        ja, jb = self.segment_jacobians[set_index]
-        return (1.0 - s) * ja + s * jb
+            raise InputError(
+                "kinematics were computed without Jacobians", name="jacobians", value=False
+            )
+        ends = self.segment_jacobians[set_index]  # (2, 3, nv) or (A, 2, 3, nv)
+        s = np.asarray(s, dtype=float)[..., None, None]
+        return (1.0 - s) * ends[..., 0, :, :] + s * ends[..., 1, :, :]
 
 
 class Robot:
@@ -99,8 +113,15 @@ class Robot:
         Joints removed from the model and the angle (rad) they are locked at.
     """
 
-    def __init__(self, model: pin.Model, sets: Sequence[ControlSet], point_frames: Sequence[int],
-                 ee_frame: int, name: str, locked: Mapping[str, float]):
+    def __init__(
+        self,
+        model: pin.Model,
+        sets: Sequence[ControlSet],
+        point_frames: Sequence[int],
+        ee_frame: int,
+        name: str,
+        locked: Mapping[str, float],
+    ):
         self.model = model
         self.data = model.createData()
         self.sets = tuple(sets)
@@ -118,7 +139,7 @@ class Robot:
         self.capsule_radii = np.array([s.capsule_radius_m for s in self.sets])
         # Frames whose positions/Jacobians a tick needs, each once: the control points, then
         # any capsule end that is not a control point (for the iiwa only A2).
-        placement = {}
+        placement: dict[tuple[int, tuple[float, ...]], int] = {}
         for f in self.point_frames:
             placement.setdefault(self._frame_key(f), f)
         frames = list(self.point_frames)
@@ -136,7 +157,7 @@ class Robot:
         self._segment_index = np.array(seg_idx)
         self._n_points = len(self.point_frames)
 
-    def _frame_key(self, frame_id: int) -> tuple:
+    def _frame_key(self, frame_id: int) -> tuple[int, tuple[float, ...]]:
         """Identity of a frame's origin: its parent joint and placement (rounded)."""
         f = self.model.frames[frame_id]
         return (f.parentJoint, tuple(np.round(f.placement.translation, 12)))
@@ -156,14 +177,15 @@ class Robot:
         try:
             return self.set_names.index(name)
         except ValueError:
-            raise InputError(f"unknown control set {name!r}; sets are {self.set_names}",
-                             name="set", value=name) from None
+            raise InputError(
+                f"unknown control set {name!r}; sets are {self.set_names}", name="set", value=name
+            ) from None
 
-    def check_q(self, q) -> np.ndarray:
+    def check_q(self, q: ArrayLike) -> np.ndarray:
         """Return ``q`` as a float array of shape (nq,) or raise :class:`InputError`."""
         return as_array(q, (self.nq,), "q (joint angles, rad)")
 
-    def kinematics(self, q, jacobians: bool = True) -> Kinematics:
+    def kinematics(self, q: ArrayLike, jacobians: bool = True) -> Kinematics:
         """Forward kinematics (and Jacobians) of every control point, capsule and the EE.
 
         Parameters
@@ -182,24 +204,24 @@ class Robot:
         pin.updateFramePlacements(model, data)
         omf = data.oMf
         pos = np.array([omf[f].translation for f in self._frames])
-        points, segments = pos[:self._n_points], pos[self._segment_index]
+        points, segments = pos[: self._n_points], pos[self._segment_index]
         ee = omf[self.ee_frame].homogeneous
         pj = sj = ej = None
         if jacobians:
             jac = np.array([pin.getFrameJacobian(model, data, f, LWA)[:3] for f in self._frames])
-            pj, sj = jac[:self._n_points], jac[self._segment_index]
+            pj, sj = jac[: self._n_points], jac[self._segment_index]
             ej = pin.getFrameJacobian(model, data, self.ee_frame, LWA)
         return Kinematics(q, points, pj, segments, sj, ee, ej)
 
-    def control_points(self, q) -> np.ndarray:
+    def control_points(self, q: ArrayLike) -> np.ndarray:
         """Control points (P, 3) at ``q``, base frame, m; for the iiwa L1(4), L2(4), EE(1)."""
         return self.kinematics(q, jacobians=False).points
 
-    def capsules(self, q) -> np.ndarray:
+    def capsules(self, q: ArrayLike) -> np.ndarray:
         """Capsule axes (S, 2, 3) at ``q``, one per control set, m."""
         return self.kinematics(q, jacobians=False).segments
 
-    def end_effector(self, q) -> np.ndarray:
+    def end_effector(self, q: ArrayLike) -> np.ndarray:
         """End-effector pose (4, 4) at ``q`` in the base frame."""
         return self.kinematics(q, jacobians=False).ee_placement
 
@@ -207,7 +229,7 @@ class Robot:
         """The zero configuration (nq,)."""
         return pin.neutral(self.model)
 
-    def full_configuration(self, q) -> dict[str, float]:
+    def full_configuration(self, q: ArrayLike) -> dict[str, float]:
         """Angle of every joint of the description, locked ones included, by name (rad)."""
         q = self.check_q(q)
         out = dict(zip(self.joint_names, q.tolist(), strict=False))
@@ -215,8 +237,9 @@ class Robot:
         return out
 
 
-def load_robot(name: str | Path = "iiwa14",
-               locked: Mapping[str, float] | Sequence[str] | None = None) -> Robot:
+def load_robot(
+    name: str | Path = "iiwa14", locked: Mapping[str, float] | Sequence[str] | None = None
+) -> Robot:
     """Load a robot description and build its (reduced) Pinocchio model.
 
     Parameters

@@ -11,21 +11,23 @@ paper locks A3) is Pinocchio's ``buildReducedModel``, which carries the frames o
 
 from __future__ import annotations
 
-try:  # Python >= 3.11
-    import tomllib
-except ModuleNotFoundError:  # Python 3.10: the same parser, as a package
-    import tomli as tomllib
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
 from ._checks import one_line
 from .errors import InputError, RobotDescriptionError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.10: the same parser, as a package
+    import tomli as tomllib
 
 CONFIG_NAME = "control_points.toml"
 #: Keys of a ``[[sets]]`` entry of the control-point file and of its ``capsule`` table.
@@ -91,7 +93,11 @@ def _description_dir(name: str | Path) -> Path:
     available = sorted(p.name for p in root.iterdir() if (p / CONFIG_NAME).is_file())
     raise RobotDescriptionError(
         f"unknown robot {str(name)!r}: not a folder with {CONFIG_NAME} and not one of the "
-        f"bundled descriptions {available}", path=path, name="robot", value=str(name))
+        f"bundled descriptions {available}",
+        path=path,
+        name="robot",
+        value=str(name),
+    )
 
 
 def _carriers(model: pin.Model, frame_id: int) -> set[int]:
@@ -112,20 +118,24 @@ def _add_point_frame(model: pin.Model, data: pin.Data, label: str, names: Sequen
     ids = []
     for n in names:
         if not model.existFrame(n):
-            raise RobotDescriptionError(f"{label}: no frame named {n!r} in the URDF",
-                                        name=label, value=n)
+            raise RobotDescriptionError(
+                f"{label}: no frame named {n!r} in the URDF", name=label, value=n
+            )
         ids.append(model.getFrameId(n))
     common = set.intersection(*(_carriers(model, i) for i in ids))
     if not common:
-        raise RobotDescriptionError(f"{label}: frames {list(names)} are not on one rigid body",
-                                    name=label, value=list(names))
+        raise RobotDescriptionError(
+            f"{label}: frames {list(names)} are not on one rigid body",
+            name=label,
+            value=list(names),
+        )
     parent = max(common)  # the deepest body carrying all of them
     centre = np.mean([data.oMf[i].translation for i in ids], axis=0)
     placement = data.oMi[parent].actInv(pin.SE3(np.eye(3), centre))
     return model.addFrame(pin.Frame(label, parent, placement, pin.FrameType.OP_FRAME))
 
 
-def _check_sets(set_cfgs, path: Path) -> None:
+def _check_sets(set_cfgs: Any, path: Path) -> None:
     """Raise :class:`RobotDescriptionError` unless every ``[[sets]]`` entry has its keys."""
     for k, sc in enumerate(set_cfgs if isinstance(set_cfgs, list) else [set_cfgs]):
         sc = sc if isinstance(sc, dict) else {}
@@ -134,9 +144,12 @@ def _check_sets(set_cfgs, path: Path) -> None:
         if isinstance(cap, dict):
             missing += [f"capsule.{key}" for key in CAPSULE_KEYS if key not in cap]
         if missing:
-            raise RobotDescriptionError(f"{path}: [[sets]] entry {k} is missing key(s) "
-                                        f"{', '.join(missing)}", path=path, name=f"sets[{k}]",
-                                        value=missing)
+            raise RobotDescriptionError(
+                f"{path}: [[sets]] entry {k} is missing key(s) {', '.join(missing)}",
+                path=path,
+                name=f"sets[{k}]",
+                value=missing,
+            )
 
 
 def _read_config(folder: Path) -> tuple[dict, Path, list, str]:
@@ -150,8 +163,9 @@ def _read_config(folder: Path) -> tuple[dict, Path, list, str]:
     try:
         urdf, set_cfgs, ee_name = folder / cfg["urdf"], cfg["sets"], cfg["end_effector"]
     except KeyError as exc:
-        raise RobotDescriptionError(f"{path}: missing key {exc}", path=path,
-                                    name=exc.args[0]) from None
+        raise RobotDescriptionError(
+            f"{path}: missing key {exc}", path=path, name=exc.args[0]
+        ) from None
     _check_sets(set_cfgs, path)
     return cfg, urdf, set_cfgs, ee_name
 
@@ -160,13 +174,15 @@ def _build_model(urdf: Path) -> pin.Model:
     """The Pinocchio model of a URDF, or :class:`RobotDescriptionError`."""
     try:
         return pin.buildModelFromUrdf(str(urdf))
-    except (ValueError, RuntimeError, OSError) as exc:   # missing or malformed URDF
-        raise RobotDescriptionError(f"{urdf}: cannot build a model from this URDF: "
-                                    f"{one_line(exc)}", path=urdf) from exc
+    except (ValueError, RuntimeError, OSError) as exc:  # missing or malformed URDF
+        raise RobotDescriptionError(
+            f"{urdf}: cannot build a model from this URDF: {one_line(exc)}", path=urdf
+        ) from exc
 
 
-def _locked_angles(locked: Mapping[str, float] | Sequence[str] | None,
-                   default: Mapping[str, float]) -> dict[str, float]:
+def _locked_angles(
+    locked: Mapping[str, float] | Sequence[str] | None, default: Mapping[str, float]
+) -> dict[str, float]:
     """The joints to lock and their angles (rad); see :func:`read_description`."""
     default_locked = {k: float(v) for k, v in default.items()}
     if locked is None:
@@ -176,8 +192,11 @@ def _locked_angles(locked: Mapping[str, float] | Sequence[str] | None,
     try:
         return {str(k): float(v) for k, v in locked.items()}
     except (TypeError, ValueError) as exc:
-        raise InputError(f"locked angles must be numbers (rad), got {dict(locked)!r}",
-                         name="locked", value=dict(locked)) from exc
+        raise InputError(
+            f"locked angles must be numbers (rad), got {dict(locked)!r}",
+            name="locked",
+            value=dict(locked),
+        ) from exc
 
 
 def _add_frames(model: pin.Model, set_cfgs: list) -> None:
@@ -201,8 +220,9 @@ def _lock(model: pin.Model, locked: Mapping[str, float]) -> pin.Model:
         return model
     for jn in locked:
         if not model.existJointName(jn):
-            raise InputError(f"cannot lock {jn!r}: joints are {list(model.names)[1:]}",
-                             name="locked", value=jn)
+            raise InputError(
+                f"cannot lock {jn!r}: joints are {list(model.names)[1:]}", name="locked", value=jn
+            )
     q_ref = pin.neutral(model)
     for jn, angle in locked.items():
         q_ref[model.joints[model.getJointId(jn)].idx_q] = angle
@@ -211,22 +231,31 @@ def _lock(model: pin.Model, locked: Mapping[str, float]) -> pin.Model:
 
 def _control_sets(model: pin.Model, set_cfgs: list) -> tuple[list[ControlSet], list[int]]:
     """The control sets and the frame id of every control point, set after set."""
-    sets, point_frames = [], []
+    sets: list[ControlSet] = []
+    point_frames: list[int] = []
     for sc in set_cfgs:
         idx = []
         for k in range(len(sc["points"])):
             idx.append(len(point_frames))
             point_frames.append(model.getFrameId(f"{sc['name']}_p{k}"))
-        sets.append(ControlSet(
-            name=sc["name"], sphere_radius_m=float(sc["sphere_radius_m"]), points=tuple(idx),
-            capsule_frames=(model.getFrameId(f"{sc['name']}_capsule_from"),
-                            model.getFrameId(f"{sc['name']}_capsule_to")),
-            capsule_radius_m=float(sc["capsule"]["capsule_radius_m"])))
+        sets.append(
+            ControlSet(
+                name=sc["name"],
+                sphere_radius_m=float(sc["sphere_radius_m"]),
+                points=tuple(idx),
+                capsule_frames=(
+                    model.getFrameId(f"{sc['name']}_capsule_from"),
+                    model.getFrameId(f"{sc['name']}_capsule_to"),
+                ),
+                capsule_radius_m=float(sc["capsule"]["capsule_radius_m"]),
+            )
+        )
     return sets, point_frames
 
 
-def read_description(name: str | Path = "iiwa14",
-                     locked: Mapping[str, float] | Sequence[str] | None = None) -> Description:
+def read_description(
+    name: str | Path = "iiwa14", locked: Mapping[str, float] | Sequence[str] | None = None
+) -> Description:
     """Read a robot description and build its (reduced) Pinocchio model.
 
     Arguments and errors as :func:`qpavoid.robot.load_robot`, which makes the
@@ -238,8 +267,12 @@ def read_description(name: str | Path = "iiwa14",
     locked = _locked_angles(locked, cfg.get("locked", {}))
     _add_frames(model, set_cfgs)
     if not model.existFrame(ee_name):
-        raise RobotDescriptionError(f"end_effector {ee_name!r} is not a frame of {urdf.name}",
-                                    path=urdf, name="end_effector", value=ee_name)
+        raise RobotDescriptionError(
+            f"end_effector {ee_name!r} is not a frame of {urdf.name}",
+            path=urdf,
+            name="end_effector",
+            value=ee_name,
+        )
     model = _lock(model, locked)
     sets, point_frames = _control_sets(model, set_cfgs)
     return Description(model, sets, point_frames, model.getFrameId(ee_name), folder.name, locked)

@@ -51,16 +51,20 @@ REDUNDANT_REGULARIZATION = 1e-4
 def check_range(name: str, value: float, low: float, high: float, unit: str) -> float:
     """``value`` as a float if it is finite and in ``[low, high]``, else :class:`InputError`."""
     if not (math.isfinite(value) and low <= value <= high):
-        raise InputError(f"{name} must be between {low:g} and {high:g} {unit}, got {value:g}",
-                         name=name.split()[-1].strip("()"), value=value)
+        raise InputError(
+            f"{name} must be between {low:g} and {high:g} {unit}, got {value:g}",
+            name=name.split()[-1].strip("()"),
+            value=value,
+        )
     return float(value)
 
 
 def check_choice(name: str, value: str, choices: tuple[str, ...]) -> str:
     """``value`` if it is one of ``choices``, else :class:`InputError`."""
     if value not in choices:
-        raise InputError(f"unknown {name} {value!r}; choose from {', '.join(choices)}",
-                         name=name, value=value)
+        raise InputError(
+            f"unknown {name} {value!r}; choose from {', '.join(choices)}", name=name, value=value
+        )
     return value
 
 
@@ -68,11 +72,17 @@ def check_solver(name: str) -> str:
     """``name`` if qpsolvers has that solver installed; else say which extra brings it."""
     if name in qpsolvers.available_solvers:
         return name
-    hint = (f'; install it with pip install "qpavoid[{SOLVER_EXTRAS[name]}]"'
-            if name in SOLVER_EXTRAS else "")
-    raise InputError(f"QP solver {name!r} is not installed (installed: "
-                     f"{', '.join(sorted(qpsolvers.available_solvers))}){hint}",
-                     name="solver", value=name)
+    hint = (
+        f'; install it with pip install "qpavoid[{SOLVER_EXTRAS[name]}]"'
+        if name in SOLVER_EXTRAS
+        else ""
+    )
+    raise InputError(
+        f"QP solver {name!r} is not installed (installed: "
+        f"{', '.join(sorted(qpsolvers.available_solvers))}){hint}",
+        name="solver",
+        value=name,
+    )
 
 
 @dataclass(frozen=True)
@@ -118,11 +128,17 @@ class RunSpec:
 
     def __post_init__(self) -> None:
         if self.scenario is None and self.human_file is None:
-            raise InputError("give a SCENARIO (test1, test2, free, random:SEED) or --human FILE",
-                             name="scenario", value=None)
+            raise InputError(
+                "give a SCENARIO (test1, test2, free, random:SEED) or --human FILE",
+                name="scenario",
+                value=None,
+            )
         if self.scenario is not None and self.human_file is not None:
-            raise InputError("give either SCENARIO or --human FILE, not both", name="scenario",
-                             value=self.scenario)
+            raise InputError(
+                "give either SCENARIO or --human FILE, not both",
+                name="scenario",
+                value=self.scenario,
+            )
         if self.scenario is not None:
             check_scenario_name(self.scenario)
         check_choice("controller", self.controller, CONTROLLERS)
@@ -133,12 +149,13 @@ class RunSpec:
         if self.controller != "qp":
             for flag, given in (("--solver", self.solver), ("--redundant", self.redundant)):
                 if given:
-                    raise InputError(f"{flag} needs --controller qp", name=flag,
-                                     value=given)
+                    raise InputError(f"{flag} needs --controller qp", name=flag, value=given)
         elif self.limit_mode != "scale":
-            raise InputError("--limit-mode needs --controller analytic (the QP enforces "
-                             "eq. (3) as bounds)", name="--limit-mode",
-                             value=self.limit_mode)
+            raise InputError(
+                "--limit-mode needs --controller analytic (the QP enforces eq. (3) as bounds)",
+                name="--limit-mode",
+                value=self.limit_mode,
+            )
         if self.solver is not None:
             check_solver(self.solver)
 
@@ -168,13 +185,19 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
     """The controller ``spec`` names, on ``robot``, at the spec's control rate."""
     config = ControllerConfig(distance=spec.distance, control_period_s=1.0 / spec.rate_hz)
     if spec.controller == "analytic":
-        return AnalyticController(robot, config=config,
-                                  analytic=AnalyticConfig(limit_mode=spec.limit_mode))
-    qp = QPConfig(backend="qpsolvers" if spec.solver else "persistent",
-                  solver=spec.solver or "osqp")
+        return AnalyticController(
+            robot, config=config, analytic=AnalyticConfig(limit_mode=spec.limit_mode)
+        )
+    qp = QPConfig(
+        backend="qpsolvers" if spec.solver else "persistent", solver=spec.solver or "osqp"
+    )
     if spec.redundant:
-        qp = QPConfig(backend=qp.backend, solver=qp.solver, elbow_weight=REDUNDANT_ELBOW_WEIGHT,
-                      regularization=REDUNDANT_REGULARIZATION)
+        qp = QPConfig(
+            backend=qp.backend,
+            solver=qp.solver,
+            elbow_weight=REDUNDANT_ELBOW_WEIGHT,
+            regularization=REDUNDANT_REGULARIZATION,
+        )
     return QPController(robot, config=config, qp=qp)
 
 
@@ -185,8 +208,11 @@ def load_motion(spec: RunSpec, robot: Robot) -> HumanMotion:
     return make_scenario(str(spec.scenario), robot)
 
 
-def simulate_one(spec: RunSpec, motion: HumanMotion | None = None,
-                 progress: Callable[[float], None] | None = None) -> RunResult:
+def simulate_one(
+    spec: RunSpec,
+    motion: HumanMotion | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> RunResult:
     """Build the robot, controller and motion of ``spec`` and simulate them.
 
     Parameters
@@ -201,12 +227,18 @@ def simulate_one(spec: RunSpec, motion: HumanMotion | None = None,
     robot = load_robot(spec.robot, locked=() if spec.redundant else None)
     controller = build_controller(spec, robot)
     motion = motion if motion is not None else load_motion(spec, robot)
-    sim = simulate(controller, motion,
-                   SimConfig(control_rate_hz=spec.rate_hz, max_time_s=spec.max_time_s),
-                   progress=progress)
+    sim = simulate(
+        controller,
+        motion,
+        SimConfig(control_rate_hz=spec.rate_hz, max_time_s=spec.max_time_s),
+        progress=progress,
+    )
     metrics = dict(sim.metrics)
-    metrics.update(scenario=spec.label, redundant=bool(spec.redundant),
-                   solver=getattr(getattr(controller, "backend", None), "name", None))
+    metrics.update(
+        scenario=spec.label,
+        redundant=bool(spec.redundant),
+        solver=getattr(getattr(controller, "backend", None), "name", None),
+    )
     return RunResult(spec, sim, robot, controller, metrics)
 
 
@@ -230,14 +262,24 @@ def write_outputs(run: RunResult, out: str | Path, plots: bool = True) -> dict:
     with staged_output(out) as stage:
         if plots and plotting.available():
             figures = plotting.write_figures(
-                stage, run.sim.log, run.robot, run.config.avoidance, run.spec.distance,
-                scenario=run.spec.label, controller=run.spec.controller)
+                stage,
+                run.sim.log,
+                run.robot,
+                run.config.avoidance,
+                run.spec.distance,
+                scenario=run.spec.label,
+                controller=run.spec.controller,
+            )
             extra["plots"] = [p.name for p in figures]
         write_run(stage, run.sim, {**run.metrics, **extra})
     return {**run.metrics, **extra}
 
 
-def run_one(spec: RunSpec, out: str | Path, plots: bool = True,
-            progress: Callable[[float], None] | None = None) -> dict:
+def run_one(
+    spec: RunSpec,
+    out: str | Path,
+    plots: bool = True,
+    progress: Callable[[float], None] | None = None,
+) -> dict:
     """Simulate ``spec`` and write its files into ``out``; return its metrics."""
     return write_outputs(simulate_one(spec, progress=progress), out, plots)

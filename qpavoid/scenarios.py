@@ -88,13 +88,15 @@ class Working:
         return joints, np.full(25, 2, dtype=np.int8)
 
 
-def reach_and_return(operator: Operator, side: str, target: np.ndarray,
-                     times: tuple[float, float, float, float]) -> ScriptedReach:
+def reach_and_return(
+    operator: Operator, side: str, target: np.ndarray, times: tuple[float, float, float, float]
+) -> ScriptedReach:
     """The ``side`` hand leaves its rest at ``times[0]``, is at ``target`` at ``times[1]``,
     holds it until ``times[2]`` and is back at rest at ``times[3]`` (s)."""
     leave, arrive, hold_until, back = times
-    return ScriptedReach(operator, side, ((leave, None), (arrive, target), (hold_until, target),
-                                          (back, None)))
+    return ScriptedReach(
+        operator, side, ((leave, None), (arrive, target), (hold_until, target), (back, None))
+    )
 
 
 def _hand_joint(side: str) -> int:
@@ -112,15 +114,25 @@ def nominal_configurations(robot: Robot, path: ArcPath, times: np.ndarray) -> np
     return np.array(out)
 
 
-def _clearance_target(robot: Robot, human: KinectHuman, path: ArcPath, operator: Operator,
-                      side: str, anchor: np.ndarray, direction: np.ndarray, clearance_m: float,
-                      sets: tuple[str, ...], methods: tuple[str, ...] = ("spheres",)) -> np.ndarray:
+def _clearance_target(
+    robot: Robot,
+    human: KinectHuman,
+    path: ArcPath,
+    operator: Operator,
+    side: str,
+    anchor: np.ndarray,
+    direction: np.ndarray,
+    clearance_m: float,
+    sets: tuple[str, ...],
+    methods: tuple[str, ...] = ("spheres",),
+) -> np.ndarray:
     """Hand target ``anchor + s·direction`` whose distance to ``sets`` over the nominal
     motion is ``clearance_m`` at its closest, by every one of the distance ``methods``
     (the largest of them; bisection on s)."""
     times = np.linspace(0, path.duration_s, 61)
-    kins = [robot.kinematics(q, jacobians=False)
-            for q in nominal_configurations(robot, path, times)]
+    kins = [
+        robot.kinematics(q, jacobians=False) for q in nominal_configurations(robot, path, times)
+    ]
     tables = [distance_method(m, robot, human) for m in methods]
     rows = [robot.set_index(n) for n in sets]
     hand = human.part_names.index(f"{side}_hand")
@@ -137,8 +149,13 @@ def _clearance_target(robot: Robot, human: KinectHuman, path: ArcPath, operator:
     return anchor + hi * direction
 
 
-def make_scenario(name: str, robot: Robot, path: ArcPath | None = None,
-                  human: KinectHuman | None = None, operator: Operator | None = None):
+def make_scenario(
+    name: str,
+    robot: Robot,
+    path: ArcPath | None = None,
+    human: KinectHuman | None = None,
+    operator: Operator | None = None,
+) -> ScriptedReach | Working:
     """The generated motion called ``name`` (``free``, ``test1``, ``test2``, ``random:SEED``)."""
     path = path or ArcPath()
     human = human or KinectHuman()
@@ -156,9 +173,18 @@ def make_scenario(name: str, robot: Robot, path: ArcPath | None = None,
         wrist = P[robot.sets[robot.set_index("L2")].points[-1]]
         flange = P[robot.sets[robot.set_index("EE")].points[-1]]
         axis = unit(flange - wrist)
-        towards = np.array([0.0, 1.0, 0.3])                  # the operator's side, above
-        target = _clearance_target(robot, human, path, op, "right", 0.5 * (wrist + flange),
-                                   unit(towards - (towards @ axis) * axis), 0.04, ("L2", "EE"))
+        towards = np.array([0.0, 1.0, 0.3])  # the operator's side, above
+        target = _clearance_target(
+            robot,
+            human,
+            path,
+            op,
+            "right",
+            0.5 * (wrist + flange),
+            unit(towards - (towards @ axis) * axis),
+            0.04,
+            ("L2", "EE"),
+        )
         return reach_and_return(op, "right", target, (2.0, 5.0, 11.0, 14.0))
     if name == "test2":
         # Towards A3 (the lower half of L1) of the robot's start configuration, from the
@@ -170,9 +196,18 @@ def make_scenario(name: str, robot: Robot, path: ArcPath | None = None,
         op = operator or Operator(x_m=-0.25)
         q0 = inverse_kinematics(robot, path.reference(0.0)[0])
         anchor = robot.control_points(q0)[1]
-        target = _clearance_target(robot, human, ArcPath(path.start, path.start, 1.0, 0.0), op,
-                                   "right", anchor, unit([-1.0, 0.5, -0.2]), 0.02, ("L1",),
-                                   ("spheres", "capsules"))
+        target = _clearance_target(
+            robot,
+            human,
+            ArcPath(path.start, path.start, 1.0, 0.0),
+            op,
+            "right",
+            anchor,
+            unit([-1.0, 0.5, -0.2]),
+            0.02,
+            ("L1",),
+            ("spheres", "capsules"),
+        )
         return reach_and_return(op, "right", target, (1.0, 4.0, 9.0, 11.0))
     return random_approach(np.random.default_rng(check_scenario_name(name)), robot, path)
 
@@ -187,19 +222,28 @@ def check_scenario_name(name: str) -> int | None:
     """
     if name in SCENARIOS:
         return None
-    seed = name[len("random:"):] if name.startswith("random:") else None
+    seed = name[len("random:") :] if name.startswith("random:") else None
     if seed is not None and seed.isdigit() and seed.isascii():
         return int(seed)
-    raise InputError(f"unknown scenario {name!r}; choose from {', '.join(SCENARIOS)} or "
-                     "random:SEED (SEED a whole number >= 0)", name="scenario", value=name)
+    raise InputError(
+        f"unknown scenario {name!r}; choose from {', '.join(SCENARIOS)} or "
+        "random:SEED (SEED a whole number >= 0)",
+        name="scenario",
+        value=name,
+    )
 
 
 SCENARIOS = ("test1", "test2", "free")
 
 
-def random_approach(rng: np.random.Generator, robot: Robot, path: ArcPath | None = None,
-                    operator: Operator | None = None, max_speed_mps: float = 1.6,
-                    nominal: np.ndarray | None = None) -> ScriptedReach:
+def random_approach(
+    rng: np.random.Generator,
+    robot: Robot,
+    path: ArcPath | None = None,
+    operator: Operator | None = None,
+    max_speed_mps: float = 1.6,
+    nominal: np.ndarray | None = None,
+) -> ScriptedReach:
     """A hand approaching a random robot set from a random direction at a random time.
 
     The target is a random control point of the robot's nominal configuration at a random
@@ -222,5 +266,6 @@ def random_approach(rng: np.random.Generator, robot: Robot, path: ArcPath | None
     travel = np.linalg.norm(target - rest) * 1.875 / peak
     start = max(0.0, times[k] - travel + rng.uniform(-3.0, 2.0))
     hold = rng.uniform(1.0, 4.0)
-    return reach_and_return(op, side, target, (start, start + travel, start + travel + hold,
-                                               start + 2 * travel + hold))
+    return reach_and_return(
+        op, side, target, (start, start + travel, start + travel + hold, start + 2 * travel + hold)
+    )

@@ -23,15 +23,17 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 import pinocchio as pin
 
 from .controller import Controller
 from .distances import distance_method
-from .frames import HumanFrame
+from .frames import N_KINECT_JOINTS, HumanFrame
+from .robot import Robot
 from .task import inverse_kinematics
 
 
@@ -86,12 +88,17 @@ def _frame_source(motion: HumanMotion) -> Callable[[float], HumanFrame]:
     def frame_at(t: float) -> HumanFrame:
         frame = motion.frame_at(t0 + t)
         return frame if isinstance(frame, HumanFrame) else HumanFrame.check(*frame)
+
     return frame_at
 
 
-def simulate(controller: Controller, motion: HumanMotion, config: SimConfig | None = None,
-             q0: np.ndarray | None = None,
-             progress: Callable[[float], None] | None = None) -> SimResult:
+def simulate(
+    controller: Controller,
+    motion: HumanMotion,
+    config: SimConfig | None = None,
+    q0: np.ndarray | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> SimResult:
     """Run the controller in closed loop against ``motion`` along ``controller.path``.
 
     Parameters
@@ -121,21 +128,32 @@ def simulate(controller: Controller, motion: HumanMotion, config: SimConfig | No
     cfg = config or SimConfig()
     robot, path = controller.robot, controller.path
     dt = 1.0 / cfg.control_rate_hz
-    q = (inverse_kinematics(robot, path.reference(0.0)[0]) if q0 is None
-         else robot.check_q(q0).astype(float).copy())
-    n_max = int(math.floor(cfg.max_time_s * cfg.control_rate_hz + 1e-9)) + 1
+    q = (
+        inverse_kinematics(robot, path.reference(0.0)[0])
+        if q0 is None
+        else robot.check_q(q0).astype(float).copy()
+    )
+    n_max = math.floor(cfg.max_time_s * cfg.control_rate_hz + 1e-9) + 1
     other_name = "capsules" if controller.config.distance == "spheres" else "spheres"
     other = distance_method(other_name, robot, controller.human)
     frame = _frame_source(motion)
     goal = path.reference(path.duration_s)[0]
 
-    log = {
-        "t": np.empty(n_max), "q": np.empty((n_max, robot.nq)), "dq": np.empty((n_max, robot.nv)),
-        "joints": np.empty((n_max, 25, 3)), "state": np.empty((n_max, 25), dtype=np.int8),
-        "stopped": np.empty(n_max, dtype=bool), "f": np.empty(n_max),
-        "distance": np.empty((n_max, 3)), "distance_other": np.empty((n_max, 3)),
-        "v_rep_L2": np.empty((n_max, 3)), "v_rep_EE": np.empty((n_max, 3)),
-        "ee_pos": np.empty((n_max, 3)), "ee_ref": np.empty((n_max, 3)), "tau": np.empty(n_max),
+    log: dict[str, np.ndarray] = {
+        "t": np.empty(n_max),
+        "q": np.empty((n_max, robot.nq)),
+        "dq": np.empty((n_max, robot.nv)),
+        "joints": np.empty((n_max, N_KINECT_JOINTS, 3)),
+        "state": np.empty((n_max, N_KINECT_JOINTS), dtype=np.int8),
+        "stopped": np.empty(n_max, dtype=bool),
+        "f": np.empty(n_max),
+        "distance": np.empty((n_max, 3)),
+        "distance_other": np.empty((n_max, 3)),
+        "v_rep_L2": np.empty((n_max, 3)),
+        "v_rep_EE": np.empty((n_max, 3)),
+        "ee_pos": np.empty((n_max, 3)),
+        "ee_ref": np.empty((n_max, 3)),
+        "tau": np.empty(n_max),
         "tick_us": np.empty(n_max),
     }
     stop_events = []
@@ -186,16 +204,29 @@ def simulate(controller: Controller, motion: HumanMotion, config: SimConfig | No
         tau = min(tau + cmd.time_scale * dt, path.duration_s)
 
     log = {key: v[:n] for key, v in log.items()}
-    return SimResult(log, run_metrics(log, robot, goal, reached, stop_events, vel_violations,
-                                      pos_violations, controller, cfg))
+    return SimResult(
+        log,
+        run_metrics(
+            log, robot, goal, reached, stop_events, vel_violations, pos_violations, controller, cfg
+        ),
+    )
 
 
 def _rot_err(A: np.ndarray, B: np.ndarray) -> float:
     return float(np.linalg.norm(pin.log3(A[:3, :3] @ B[:3, :3].T)))
 
 
-def run_metrics(log, robot, goal, reached, stop_events, vel_violations, pos_violations,
-                controller, cfg) -> dict:
+def run_metrics(
+    log: dict[str, np.ndarray],
+    robot: Robot,
+    goal: np.ndarray,
+    reached: bool,
+    stop_events: list[dict[str, Any]],
+    vel_violations: int,
+    pos_violations: int,
+    controller: Controller,
+    cfg: SimConfig,
+) -> dict[str, Any]:
     """The summary of a run (the keys of ``metrics.json``)."""
     dt = 1.0 / cfg.control_rate_hz
     path_err = np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)
@@ -207,7 +238,7 @@ def run_metrics(log, robot, goal, reached, stop_events, vel_violations, pos_viol
     return {
         "reached_goal": bool(reached),
         "final_position_error_m": final_err,
-        "rms_path_error_m": float(np.sqrt(np.mean(path_err ** 2))),
+        "rms_path_error_m": float(np.sqrt(np.mean(path_err**2))),
         "max_path_error_m": float(np.max(path_err)),
         "duration_s": float(log["t"][-1]),
         "stopped_s": float(np.count_nonzero(log["stopped"]) * dt),
@@ -215,13 +246,18 @@ def run_metrics(log, robot, goal, reached, stop_events, vel_violations, pos_viol
         "max_f": float(np.max(log["f"])),
         "min_distance_m": {"spheres": dmin["spheres"], "capsules": dmin["capsules"]},
         "min_distance_per_set_m": {
-            method: dict(zip(robot.set_names, np.min(log["distance"], axis=0).tolist())),
-            other: dict(zip(robot.set_names, np.min(log["distance_other"], axis=0).tolist()))},
+            method: dict(
+                zip(robot.set_names, np.min(log["distance"], axis=0).tolist(), strict=True)
+            ),
+            other: dict(
+                zip(robot.set_names, np.min(log["distance_other"], axis=0).tolist(), strict=True)
+            ),
+        },
         "joint_velocity_limit_violations": int(vel_violations),
         "joint_position_limit_violations": int(pos_violations),
         "tick_us": {"median": float(np.median(tick)), "p99": float(np.percentile(tick, 99))},
         "controller": controller.name,
         "distance_method": method,
         "control_rate_hz": cfg.control_rate_hz,
-        "ticks": int(len(tick)),
+        "ticks": len(tick),
     }

@@ -18,13 +18,16 @@ from __future__ import annotations
 from collections.abc import Iterable
 from concurrent.futures import Executor
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
 from .controller import joint_columns
 from .jobs import map_jobs
 from .laws import scaled_velocity_limits, stop_distances, stop_rule_holds
+from .robot import Robot
 from .runs import RunSpec, simulate_one
+from .tick import ControllerConfig
 
 
 @dataclass(frozen=True)
@@ -65,11 +68,17 @@ class ApproachCheck:
     @property
     def safe(self) -> bool:
         """True if no invariant was broken."""
-        return not (self.position_violations or self.velocity_violations
-                    or self.moving_under_stop_rule or self.moving_below_capsule_threshold)
+        return not (
+            self.position_violations
+            or self.velocity_violations
+            or self.moving_under_stop_rule
+            or self.moving_below_capsule_threshold
+        )
 
 
-def check_log(log: dict, robot, config, distance: str) -> dict:
+def check_log(
+    log: dict[str, np.ndarray], robot: Robot, config: ControllerConfig, distance: str
+) -> dict[str, Any]:
     """Tick counts of every broken invariant in a simulation log (see the module docstring).
 
     Returns a dict with ``position_violations``, ``velocity_violations``,
@@ -77,14 +86,14 @@ def check_log(log: dict, robot, config, distance: str) -> dict:
     ``min_capsule_distance_moving_m`` (per set, m).
     """
     avo = config.avoidance
-    sets = [robot.set_index(name) for name in ("L1", "L2", "EE")]    # the paper's three sets
+    sets = [robot.set_index(name) for name in ("L1", "L2", "EE")]  # the paper's three sets
     capsule = (log["distance"] if distance == "capsules" else log["distance_other"])[:, sets]
     threshold = stop_distances(avo)
     moving = np.any(log["dq"] != 0.0, axis=1)
     seen = log["distance"][:, sets]
     rule = stop_rule_holds(log["f"], seen[:, 1], seen[:, 2], avo)
     cols = joint_columns(robot, config.scaled_joints, "scaled_joints")
-    limits = scaled_velocity_limits(robot.dq_max, log["f"], cols)                     # eq. (3)
+    limits = scaled_velocity_limits(robot.dq_max, log["f"], cols)  # eq. (3)
     over = np.any(np.abs(log["dq"]) > limits * (1 + 1e-9) + 1e-12, axis=1)
     outside = np.any((log["q"] > robot.q_max) | (log["q"] < robot.q_min), axis=1)
     below = np.any(capsule < threshold, axis=1)
@@ -94,29 +103,53 @@ def check_log(log: dict, robot, config, distance: str) -> dict:
         "moving_under_stop_rule": int((moving & rule).sum()),
         "moving_below_capsule_threshold": int((moving & below).sum()),
         "min_capsule_distance_moving_m": tuple(
-            float(x) for x in (capsule[moving].min(axis=0) if moving.any() else np.full(3, np.inf))),
+            float(x) for x in (capsule[moving].min(axis=0) if moving.any() else np.full(3, np.inf))
+        ),
     }
 
 
-def check_approach(seed: int, controller: str = "qp", distance: str = "spheres",
-                   rate_hz: float = 50.0, max_time_s: float = 25.0) -> ApproachCheck:
+def check_approach(
+    seed: int,
+    controller: str = "qp",
+    distance: str = "spheres",
+    rate_hz: float = 50.0,
+    max_time_s: float = 25.0,
+) -> ApproachCheck:
     """Simulate the random approach ``seed`` and check the invariants of every tick."""
-    run = simulate_one(RunSpec(scenario=f"random:{seed}", controller=controller,
-                               distance=distance, max_time_s=max_time_s, rate_hz=rate_hz))
-    return ApproachCheck(seed, controller, distance, len(run.sim.log["t"]),
-                         **check_log(run.sim.log, run.robot, run.config, distance),
-                         stopped_s=run.metrics["stopped_s"],
-                         reached_goal=run.metrics["reached_goal"])
+    run = simulate_one(
+        RunSpec(
+            scenario=f"random:{seed}",
+            controller=controller,
+            distance=distance,
+            max_time_s=max_time_s,
+            rate_hz=rate_hz,
+        )
+    )
+    return ApproachCheck(
+        seed,
+        controller,
+        distance,
+        len(run.sim.log["t"]),
+        **check_log(run.sim.log, run.robot, run.config, distance),
+        stopped_s=run.metrics["stopped_s"],
+        reached_goal=run.metrics["reached_goal"],
+    )
 
 
 def _check(args: tuple[int, str, str, float, float]) -> ApproachCheck:
     return check_approach(*args)
 
 
-def safety_sweep(seeds: Iterable[int], controller: str = "qp", distance: str = "spheres",
-                 rate_hz: float = 50.0, max_time_s: float = 25.0, workers: int | None = None,
-                 executor: Executor | None = None, progress: bool = False
-                 ) -> list[ApproachCheck]:
+def safety_sweep(
+    seeds: Iterable[int],
+    controller: str = "qp",
+    distance: str = "spheres",
+    rate_hz: float = 50.0,
+    max_time_s: float = 25.0,
+    workers: int | None = None,
+    executor: Executor | None = None,
+    progress: bool = False,
+) -> list[ApproachCheck]:
     """Check every seed's random approach; in parallel over ``workers`` processes.
 
     Parameters
@@ -140,10 +173,22 @@ def safety_sweep(seeds: Iterable[int], controller: str = "qp", distance: str = "
         In the order of ``seeds``, whatever the number of workers.
     """
     jobs = [(int(s), controller, distance, rate_hz, max_time_s) for s in seeds]
-    RunSpec(scenario="free", controller=controller, distance=distance, max_time_s=max_time_s,
-            rate_hz=rate_hz)                     # check the settings before any job starts
-    return map_jobs(_check, jobs, workers=workers, executor=executor, progress=progress,
-                    desc="safety sweep", unit="approach")
+    RunSpec(
+        scenario="free",
+        controller=controller,
+        distance=distance,
+        max_time_s=max_time_s,
+        rate_hz=rate_hz,
+    )  # check the settings before any job starts
+    return map_jobs(
+        _check,
+        jobs,
+        workers=workers,
+        executor=executor,
+        progress=progress,
+        desc="safety sweep",
+        unit="approach",
+    )
 
 
 def summarize(checks: list[ApproachCheck]) -> dict:
@@ -156,7 +201,9 @@ def summarize(checks: list[ApproachCheck]) -> dict:
         "velocity_violations": sum(c.velocity_violations for c in checks),
         "moving_under_stop_rule": sum(c.moving_under_stop_rule for c in checks),
         "moving_below_capsule_threshold": sum(c.moving_below_capsule_threshold for c in checks),
-        "min_capsule_distance_moving_m": dict(zip(("L1", "L2", "EE"), mins.min(axis=0).tolist())),
+        "min_capsule_distance_moving_m": dict(
+            zip(("L1", "L2", "EE"), mins.min(axis=0).tolist(), strict=True)
+        ),
         "reached_goal": sum(c.reached_goal for c in checks),
         "mean_stopped_s": float(np.mean([c.stopped_s for c in checks])),
     }

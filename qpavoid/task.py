@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -25,10 +26,22 @@ from .geometry import unit
 from .robot import Robot
 
 #: The paper's initial and final end-effector poses (Sect. 3), base frame, m.
-A_IN = np.array([[0.25, -0.866, 0.433, 0.3524], [0.433, 0.5, 0.75, 0.6105],
-                 [-0.866, 0.0, 0.5, 0.5779], [0.0, 0.0, 0.0, 1.0]])
-A_FIN = np.array([[0.25, -0.866, 0.433, -0.0476], [0.433, 0.5, 0.75, 0.6105],
-                  [-0.866, 0.0, 0.5, 0.6779], [0.0, 0.0, 0.0, 1.0]])
+A_IN = np.array(
+    [
+        [0.25, -0.866, 0.433, 0.3524],
+        [0.433, 0.5, 0.75, 0.6105],
+        [-0.866, 0.0, 0.5, 0.5779],
+        [0.0, 0.0, 0.0, 1.0],
+    ]
+)
+A_FIN = np.array(
+    [
+        [0.25, -0.866, 0.433, -0.0476],
+        [0.433, 0.5, 0.75, 0.6105],
+        [-0.866, 0.0, 0.5, 0.6779],
+        [0.0, 0.0, 0.0, 1.0],
+    ]
+)
 
 
 def orthonormalize(R: np.ndarray) -> np.ndarray:
@@ -52,7 +65,7 @@ def quintic(tau: float) -> tuple[float, float]:
     reaches (:mod:`qpavoid.scenarios`) both move with it.
     """
     t = min(max(tau, 0.0), 1.0)
-    return t ** 3 * (10 - 15 * t + 6 * t * t), 30 * t * t * (1 - t) ** 2
+    return t**3 * (10 - 15 * t + 6 * t * t), 30 * t * t * (1 - t) ** 2
 
 
 def smoothstep(x: float) -> float:
@@ -81,8 +94,11 @@ class ArcPath:
     goal: np.ndarray = field(default_factory=lambda: A_FIN.copy())
     duration_s: float = 15.0
     sagitta_m: float = 0.08
+    _geom: dict[str, Any] = field(init=False, repr=False)
+    _rotation: np.ndarray = field(init=False, repr=False)
+    _pose: np.ndarray = field(init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         finite_number(self.duration_s, "duration_s", positive=True)
         finite_number(self.sagitta_m, "sagitta_m")
         start = as_array(self.start, (4, 4), "start (pose)")
@@ -91,7 +107,7 @@ class ArcPath:
         chord = p1 - p0
         L = np.linalg.norm(chord)
         up = np.array([0.0, 0.0, 1.0])
-        n = up - (up @ chord) / max(L * L, 1e-18) * chord      # in-plane normal, upwards
+        n = up - (up @ chord) / max(L * L, 1e-18) * chord  # in-plane normal, upwards
         if np.linalg.norm(n) < 1e-9 or L < 1e-9 or self.sagitta_m <= 0:
             geom = dict(kind="line", p0=p0, chord=chord)
         else:
@@ -104,8 +120,9 @@ class ArcPath:
             if s > R:  # more than a half circle
                 angle = 2 * np.pi - angle
             e1 = (p0 - centre) / R
-            geom = dict(kind="arc", centre=centre, radius=R, angle=angle, e1=e1,
-                        e2=np.cross(axis, e1))
+            geom = dict(
+                kind="arc", centre=centre, radius=R, angle=angle, e1=e1, e2=np.cross(axis, e1)
+            )
         object.__setattr__(self, "_geom", geom)
         object.__setattr__(self, "_rotation", orthonormalize(start[:3, :3]))
         pose = np.eye(4)
@@ -154,13 +171,18 @@ def pose_error(T_desired: np.ndarray, T: np.ndarray) -> np.ndarray:
     return e
 
 
+#: iiwa 14: distance from the wrist centre (A6 axis) to the flange along the tool's z, m
+#: (the URDF's A7 and flange offsets); the seed only needs it roughly.
+WRIST_TO_FLANGE_M = 0.126
+
+
 def ik_seed(robot: Robot, target: np.ndarray) -> np.ndarray:
     """Seed on the elbow-up, non-flipped-wrist branch facing the target.
 
     A1 points the arm at the wrist centre, A2 > 0 leans it forward, the elbow joint A4
     bends back (< 0), A5 = 0 and A6 < 0 (the branch of the reading notes' solution).
     """
-    wrist = target[:3, 3] - 0.126 * target[:3, 2]
+    wrist = target[:3, 3] - WRIST_TO_FLANGE_M * target[:3, 2]
     q = np.zeros(robot.nq)
     guess = {"A1": np.arctan2(wrist[1], wrist[0]), "A2": 0.5, "A4": -1.5, "A6": -1.0}
     for name, value in guess.items():
@@ -169,8 +191,13 @@ def ik_seed(robot: Robot, target: np.ndarray) -> np.ndarray:
     return q
 
 
-def inverse_kinematics(robot: Robot, target: np.ndarray, q0: np.ndarray | None = None,
-                       tol: float = 1e-10, max_iter: int = 500) -> np.ndarray:
+def inverse_kinematics(
+    robot: Robot,
+    target: np.ndarray,
+    q0: np.ndarray | None = None,
+    tol: float = 1e-10,
+    max_iter: int = 500,
+) -> np.ndarray:
     """Joint angles (rad) that put the end effector at ``target`` (4, 4).
 
     Damped Newton iterations on the error ``log6(T(q)⁻¹ T_target)`` with the LOCAL
@@ -188,12 +215,13 @@ def inverse_kinematics(robot: Robot, target: np.ndarray, q0: np.ndarray | None =
     target = as_array(target, (4, 4), "target (pose)")
     target_se3 = pin.SE3(orthonormalize(target[:3, :3]), target[:3, 3])
     q = ik_seed(robot, target) if q0 is None else robot.check_q(q0).copy()
-    model, data = robot.model, robot.data
+    model = robot.model
+    data = model.createData()  # its own: the robot's data serves the control tick
     err, q_err = np.inf, q
     for _ in range(max_iter):
         pin.framesForwardKinematics(model, data, q)
         e = pin.log6(data.oMf[robot.ee_frame].actInv(target_se3)).vector
-        err = np.linalg.norm(e)
+        err = float(np.linalg.norm(e))
         if err < tol:
             return q
         q_err = q
@@ -206,4 +234,9 @@ def inverse_kinematics(robot: Robot, target: np.ndarray, q0: np.ndarray | None =
     raise IKNotConvergedError(
         f"inverse kinematics did not reach the target position ({x:.4g}, {y:.4g}, {z:.4g}) m "
         f"(residual {err:.2e} > tol {tol:.0e} after {max_iter} iterations): unreachable "
-        "on this branch", target=target, residual=float(err), iterations=max_iter, q=q_err)
+        "on this branch",
+        target=target,
+        residual=float(err),
+        iterations=max_iter,
+        q=q_err,
+    )

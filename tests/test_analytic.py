@@ -36,14 +36,14 @@ def test_free_tracks_the_path_alone(runs):
 def test_test1_deflects_without_stopping_and_returns(runs):
     m, log = runs["test1"].metrics, runs["test1"].log
     assert m["stop_events"] == []
-    assert np.linalg.norm(log["v_rep_EE"], axis=1).max() > 0.05      # m/s
+    assert np.linalg.norm(log["v_rep_EE"], axis=1).max() > 0.05  # m/s
     assert np.linalg.norm(log["v_rep_L2"], axis=1).max() > 0.005
-    assert log["distance"][:, 1:].min() > 0.05                        # beyond the stop distance
+    assert log["distance"][:, 1:].min() > 0.05  # beyond the stop distance
     near = np.linalg.norm(log["v_rep_EE"], axis=1) > 0.01
     path_err = np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)
-    assert path_err[near].max() > 0.01                                 # really deflected
+    assert path_err[near].max() > 0.01  # really deflected
     assert m["reached_goal"] and m["final_position_error_m"] < 1e-3
-    assert path_err[-1] < 1e-3                                         # back on the path
+    assert path_err[-1] < 1e-3  # back on the path
 
 
 def test_test2_stops_when_f_exceeds_08_and_holds_still(runs, robot):
@@ -51,7 +51,7 @@ def test_test2_stops_when_f_exceeds_08_and_holds_still(runs, robot):
     assert m["stop_events"] and m["stop_events"][0]["reason"].startswith("f = ")
     k = int(np.argmax(log["stopped"]))
     assert log["f"][k] > 0.8 and np.all(log["f"][:k] <= 0.8)
-    assert log["f"][k] > log["f"][0] + 0.5                             # f rose on the approach
+    assert log["f"][k] > log["f"][0] + 0.5  # f rose on the approach
     # While stopped with the hand holding still (the frames do not change), the joint
     # angles and the L1 distance stay exactly constant (paper Fig. 13).
     motion = make_scenario("test2", robot)
@@ -61,7 +61,7 @@ def test_test2_stops_when_f_exceeds_08_and_holds_still(runs, robot):
     assert (log["q"][hold] == log["q"][hold][0]).all()
     assert (log["distance"][hold, 0] == log["distance"][hold][0, 0]).all()
     np.testing.assert_array_equal(log["dq"][log["stopped"]], 0.0)
-    assert m["reached_goal"]                                           # resumes after withdrawal
+    assert m["reached_goal"]  # resumes after withdrawal
 
 
 class Corrupted:
@@ -77,7 +77,7 @@ class Corrupted:
         half = self.rng.random(25) < 0.5
         joints[lost & half] = np.nan
         state[lost & ~half] = 0
-        if self.rng.random() < 0.03:                     # the whole body lost for a frame
+        if self.rng.random() < 0.03:  # the whole body lost for a frame
             joints[:] = np.nan
         return joints, state
 
@@ -94,8 +94,8 @@ def test_invariants_over_random_approaches(robot, seed):
     log = simulate(ctrl, motion, SimConfig(control_rate_hz=100, max_time_s=20)).log
     assert np.isfinite(log["dq"]).all() and np.isfinite(log["q"]).all()
     checks = check_log(log, robot, ctrl.config, "spheres")
-    assert checks["moving_under_stop_rule"] == 0                 # a stop rule: exactly zero
-    assert checks["velocity_violations"] == 0                    # eq. (3) and nominal limits
+    assert checks["moving_under_stop_rule"] == 0  # a stop rule: exactly zero
+    assert checks["velocity_violations"] == 0  # eq. (3) and nominal limits
     assert checks["position_violations"] == 0
     np.testing.assert_array_equal(log["dq"][log["stopped"]], 0.0)
 
@@ -131,6 +131,7 @@ def test_nobody_near_is_eq8(robot):
     cmd = ctrl.step(q, Operator().rest(), None, 5.0)
     kin = robot.kinematics(q)
     from qpavoid.task import pose_error
+
     T_ref, twist = path.reference(5.0)
     target = twist + 5.0 * pose_error(T_ref, kin.ee_placement)
     assert 0 < np.linalg.norm(cmd.v_rep_EE) < 1e-6 and np.linalg.norm(cmd.v_rep_L2) < 1e-8
@@ -146,5 +147,5 @@ def test_enforce_limits_modes():
     dq, s = enforce_limits(np.array([2.0, 0.5, -1.0]), lim, "clip")
     np.testing.assert_allclose(dq, [1.0, 0.5, -1.0])
     assert s == 1.0
-    dq, s = enforce_limits(np.array([0.1, 0.1, 0.1]), np.zeros(3), "scale")   # f = 1: all stop
+    dq, s = enforce_limits(np.array([0.1, 0.1, 0.1]), np.zeros(3), "scale")  # f = 1: all stop
     np.testing.assert_allclose(dq, 0.0)

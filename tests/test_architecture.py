@@ -20,7 +20,7 @@ def imports_of(path: Path) -> set[str]:
     name = module_name(path)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     found = set()
-    for node in ast.parse(path.read_text()).body:      # module level only
+    for node in ast.parse(path.read_text()).body:  # module level only
         if isinstance(node, ast.ImportFrom):
             if node.level:
                 base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
@@ -53,7 +53,7 @@ def test_no_import_cycles():
         stack.append(m)
         for n in sorted(graph[m]):
             if state.get(n) == 1:
-                cycle = stack[stack.index(n):] + [n]
+                cycle = [*stack[stack.index(n) :], n]
                 raise AssertionError("import cycle: " + " -> ".join(cycle))
             if n not in state:
                 visit(n)
@@ -67,8 +67,11 @@ def test_no_import_cycles():
 
 def test_nothing_imports_the_command_line():
     graph = import_graph()
-    users = sorted(m for m, deps in graph.items()
-                   if {"qpavoid.cli", "qpavoid.__main__"} & deps and m != "qpavoid.__main__")
+    users = sorted(
+        m
+        for m, deps in graph.items()
+        if {"qpavoid.cli", "qpavoid.__main__"} & deps and m != "qpavoid.__main__"
+    )
     assert users == []
 
 
@@ -80,12 +83,15 @@ def test_no_function_level_imports_of_the_package():
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 for inner in ast.walk(node):
                     if isinstance(inner, ast.ImportFrom) and (
-                            inner.level or (inner.module or "").startswith("qpavoid")):
+                        inner.level or (inner.module or "").startswith("qpavoid")
+                    ):
                         offenders.append(f"{path.name}:{inner.lineno}")
     assert offenders == []
 
 
 def test_source_files_stay_small():
-    sizes = {p.relative_to(PACKAGE).as_posix(): len(p.read_text().splitlines())
-             for p in PACKAGE.rglob("*.py")}
+    sizes = {
+        p.relative_to(PACKAGE).as_posix(): len(p.read_text().splitlines())
+        for p in PACKAGE.rglob("*.py")
+    }
     assert {f: n for f, n in sizes.items() if n > 320} == {}

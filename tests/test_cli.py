@@ -18,15 +18,43 @@ from qpavoid.io import LOG_KEYS, load_log
 from qpavoid.recording import Recording, save_csv, save_npz
 from qpavoid.scenarios import make_scenario
 
-METRIC_KEYS = ("reached_goal", "final_position_error_m", "rms_path_error_m", "max_path_error_m",
-               "duration_s", "stopped_s", "stop_events", "max_f", "min_distance_m",
-               "joint_velocity_limit_violations", "joint_position_limit_violations", "tick_us")
+METRIC_KEYS = (
+    "reached_goal",
+    "final_position_error_m",
+    "rms_path_error_m",
+    "max_path_error_m",
+    "duration_s",
+    "stopped_s",
+    "stop_events",
+    "max_f",
+    "min_distance_m",
+    "joint_velocity_limit_violations",
+    "joint_position_limit_violations",
+    "tick_us",
+)
 
 
 def test_run_writes_metrics_log_and_figures(tmp_path, capsys):
     out = tmp_path / "run"
-    assert main(["run", "test2", "--controller", "analytic", "--distance", "capsules",
-                 "--out", str(out), "--max-time", "5", "--rate", "100"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "test2",
+                "--controller",
+                "analytic",
+                "--distance",
+                "capsules",
+                "--out",
+                str(out),
+                "--max-time",
+                "5",
+                "--rate",
+                "100",
+            ]
+        )
+        == 0
+    )
     m = json.loads((out / "metrics.json").read_text())
     for key in METRIC_KEYS:
         assert key in m, key
@@ -42,10 +70,11 @@ def test_run_writes_metrics_log_and_figures(tmp_path, capsys):
     assert log["joints"].shape == (T, 25, 3) and log["state"].shape == (T, 25)
     assert log["distance"].shape == (T, 3) and log["f"].shape == (T,)
     # Row k is the state at t[k] and the command computed from it.
-    np.testing.assert_allclose(log["q"][1:], log["q"][:-1] + log["dq"][:-1] * np.diff(log["t"])[:, None],
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        log["q"][1:], log["q"][:-1] + log["dq"][:-1] * np.diff(log["t"])[:, None], atol=1e-12
+    )
     assert m["duration_s"] == pytest.approx(5.0)
-    if plots.available():                         # Test 2's figures: Figs. 6, 12 and 13
+    if plots.available():  # Test 2's figures: Figs. 6, 12 and 13
         figures = {"fig06_f_vs_distance.png", "fig13_f_and_L1.png", "fig12_snapshots.png"}
         assert {p.name for p in out.glob("*.png")} == figures
         assert set(m["plots"]) == figures
@@ -68,14 +97,29 @@ def test_without_matplotlib_plots_are_skipped(tmp_path, monkeypatch, capsys):
 @pytest.mark.parametrize("fmt", ["npz", "csv"])
 def test_replay_a_recording(robot, tmp_path, fmt):
     motion = make_scenario("test1", robot)
-    t = np.arange(0, 6, 1 / 30) + 100.0                      # a recording need not start at 0
+    t = np.arange(0, 6, 1 / 30) + 100.0  # a recording need not start at 0
     frames = [motion.frame_at(x - 100.0) for x in t]
     rec = Recording(t, np.array([f[0] for f in frames]), np.array([f[1] for f in frames]))
     path = tmp_path / f"rec.{fmt}"
     (save_npz if fmt == "npz" else save_csv)(path, rec)
     out = tmp_path / "run"
-    assert main(["run", "--human", str(path), "--out", str(out), "--max-time", "8", "--rate", "100",
-                 "--no-plots"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--human",
+                str(path),
+                "--out",
+                str(out),
+                "--max-time",
+                "8",
+                "--rate",
+                "100",
+                "--no-plots",
+            ]
+        )
+        == 0
+    )
     m = json.loads((out / "metrics.json").read_text())
     assert m["scenario"] == "rec"
     log = load_log(out)
@@ -100,15 +144,27 @@ def test_errors_are_reported(tmp_path, capsys):
 
 def test_public_names():
     """The names the issues fix are importable from the package."""
-    for name in ("load_robot", "KinectHuman", "sphere_distances", "capsule_distances",
-                 "DistanceTable", "AnalyticController", "QPController"):
+    for name in (
+        "load_robot",
+        "KinectHuman",
+        "sphere_distances",
+        "capsule_distances",
+        "DistanceTable",
+        "AnalyticController",
+        "QPController",
+    ):
         assert hasattr(qpavoid, name), name
 
 
 def qpavoid_cli(*args: str, cwd) -> subprocess.CompletedProcess:
     """The installed command line in a subprocess (as a user types it)."""
-    return subprocess.run([sys.executable, "-m", "qpavoid", *args], cwd=cwd, capture_output=True,
-                          text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "qpavoid", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 #: Bad inputs a user tried (issue 7), and a word the one-line error must contain.
@@ -172,7 +228,7 @@ def test_bad_input_is_one_line_and_exit_2(workdir, monkeypatch, capsys, args, wo
     assert len(lines) == 1 and lines[0].startswith("qpavoid: error: "), err
     assert word in lines[0]
     assert "Traceback" not in out + err
-    assert sorted(p.name for p in workdir.iterdir()) == before        # no runs/, no --out
+    assert sorted(p.name for p in workdir.iterdir()) == before  # no runs/, no --out
 
 
 @pytest.mark.parametrize("args, word", [BAD_INPUTS[0], BAD_INPUTS[5], BAD_INPUTS[15]])
@@ -189,9 +245,13 @@ def test_version_and_help_show_defaults(workdir, capsys):
     assert r.returncode == 0 and r.stdout.startswith("qpavoid ")
     assert run_main("run", "--help") == 0
     help_text = " ".join(capsys.readouterr().out.split())
-    for option, default in (("--controller", "analytic"), ("--distance", "spheres"),
-                            ("--max-time", "40.0"), ("--rate", "500.0"),
-                            ("--out", "runs/NAME")):
+    for option, default in (
+        ("--controller", "analytic"),
+        ("--distance", "spheres"),
+        ("--max-time", "40.0"),
+        ("--rate", "500.0"),
+        ("--out", "runs/NAME"),
+    ):
         assert option in help_text and f"(default: {default})" in help_text, option
     assert run_main("--help") == 0
     assert "``" not in capsys.readouterr().out
@@ -199,12 +259,11 @@ def test_version_and_help_show_defaults(workdir, capsys):
 
 def test_default_out_and_last_line(workdir):
     """`qpavoid run free` works as typed: it writes runs/free and says so."""
-    r = qpavoid_cli("run", "free", "--max-time", "0.5", "--rate", "100", "--no-plots",
-                    cwd=workdir)
+    r = qpavoid_cli("run", "free", "--max-time", "0.5", "--rate", "100", "--no-plots", cwd=workdir)
     assert r.returncode == 0, r.stderr
     assert (workdir / "runs" / "free" / "metrics.json").is_file()
     assert r.stdout.strip().splitlines()[-1] == "wrote metrics.json, log.npz to runs/free/"
-    assert r.stderr == ""                          # no progress bar when not on a terminal
+    assert r.stderr == ""  # no progress bar when not on a terminal
     shutil.rmtree(workdir / "runs")
 
 
@@ -214,6 +273,7 @@ def test_failure_during_a_run_leaves_no_folder(tmp_path, monkeypatch, capsys):
 
     def fail(*args, **kwargs):
         raise qpavoid.SolverError("the solver gave up")
+
     monkeypatch.setattr(qpavoid.runs, "simulate", fail)
     out = tmp_path / "new" / "run"
     assert main(["run", "free", "--out", str(out)]) == 2
@@ -227,11 +287,12 @@ def test_failure_while_writing_leaves_no_folder(tmp_path, monkeypatch, capsys):
 
     def fail(*args, **kwargs):
         raise OSError(28, "No space left on device", "log.npz")
+
     monkeypatch.setattr(qpavoid.runs, "write_run", fail)
     out = tmp_path / "run"
     assert main(["run", "free", "--max-time", "0.5", "--rate", "100", "--out", str(out)]) == 2
     assert capsys.readouterr().err == "qpavoid: error: No space left on device: log.npz\n"
-    assert list(tmp_path.iterdir()) == []            # figures were written, then removed
+    assert list(tmp_path.iterdir()) == []  # figures were written, then removed
 
 
 def test_a_bug_is_one_line_too(tmp_path, monkeypatch, capsys):
@@ -239,6 +300,7 @@ def test_a_bug_is_one_line_too(tmp_path, monkeypatch, capsys):
 
     def bug(*args, **kwargs):
         raise ZeroDivisionError("division by zero")
+
     monkeypatch.setattr(qpavoid.runs, "simulate", bug)
     assert main(["run", "free", "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
@@ -246,17 +308,37 @@ def test_a_bug_is_one_line_too(tmp_path, monkeypatch, capsys):
     assert "ZeroDivisionError" in err and not (tmp_path / "x").exists()
 
 
-@pytest.mark.skipif(multiprocessing.get_start_method() != "fork",
-                    reason="the failure is patched into forked workers")
+@pytest.mark.skipif(
+    multiprocessing.get_start_method() != "fork",
+    reason="the failure is patched into forked workers",
+)
 def test_worker_errors_are_reported_in_one_line(tmp_path, monkeypatch, capsys):
     """A failure inside a worker process of `compare`: one line, exit 2, nothing written."""
     import qpavoid.runs
 
     def fail(*args, **kwargs):
         raise qpavoid.SolverError("the solver gave up in a worker")
+
     monkeypatch.setattr(qpavoid.runs, "simulate", fail)
     out = tmp_path / "c"
-    assert main(["compare", "--scenarios", "free", "test1", "--workers", "2", "--out", str(out),
-                 "--max-time", "0.2", "--rate", "50"]) == 2
+    assert (
+        main(
+            [
+                "compare",
+                "--scenarios",
+                "free",
+                "test1",
+                "--workers",
+                "2",
+                "--out",
+                str(out),
+                "--max-time",
+                "0.2",
+                "--rate",
+                "50",
+            ]
+        )
+        == 2
+    )
     assert capsys.readouterr().err == "qpavoid: error: the solver gave up in a worker\n"
     assert not out.exists()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import random_q
 
 import qpavoid
 from qpavoid.distances import CapsuleDistance, SphereDistance
@@ -16,10 +17,8 @@ from qpavoid.human import HumanGeometry, JointType, TrackingState
 from qpavoid.posture import random_posture
 from qpavoid.robot import Kinematics
 
-from conftest import random_q
-
-
 # ----------------------------------------------------------------------------- references
+
 
 def point_segment(p, a, b):
     ab = b - a
@@ -30,8 +29,12 @@ def point_segment(p, a, b):
 
 def segment_segment(a, b, c, d):
     """Exact distance between segments [a, b] and [c, d] (any may have zero length)."""
-    cands = [point_segment(a, c, d), point_segment(b, c, d),
-             point_segment(c, a, b), point_segment(d, a, b)]
+    cands = [
+        point_segment(a, c, d),
+        point_segment(b, c, d),
+        point_segment(c, a, b),
+        point_segment(d, a, b),
+    ]
     u, v, w = b - a, d - c, a - c
     A, B, C = u @ u, u @ v, v @ v
     den = A * C - B * B
@@ -55,14 +58,18 @@ def sphere_reference(robot, kin, human, geo):
                 for m in np.flatnonzero(human.point_part[:, j]):
                     if not geo.point_valid[m]:
                         continue
-                    d = np.linalg.norm(kin.points[p] - geo.points[m]) - rset.sphere_radius_m \
+                    d = (
+                        np.linalg.norm(kin.points[p] - geo.points[m])
+                        - rset.sphere_radius_m
                         - part.sphere_radius_m
+                    )
                     if d < dist[i, j]:
                         dist[i, j], rp[i, j], hp[i, j] = d, p, m
     return dist, rp, hp
 
 
 # ----------------------------------------------------------------------------- spheres
+
 
 def test_spheres_match_double_loop(robot, human):
     rng = np.random.default_rng(0)
@@ -71,7 +78,7 @@ def test_spheres_match_double_loop(robot, human):
         q = random_q(rng, robot)
         kin = robot.kinematics(q, jacobians=False)
         joints = random_posture(rng, kin.points, spread_m=0.15)
-        state = np.where(rng.random(25) < 0.1, 0, 2)   # a few joints lost
+        state = np.where(rng.random(25) < 0.1, 0, 2)  # a few joints lost
         geo = human.geometry(joints, state)
         t = spheres(kin, geo)
         dist, rp, hp = sphere_reference(robot, kin, human, geo)
@@ -81,10 +88,14 @@ def test_spheres_match_double_loop(robot, human):
         assert np.array_equal(t.human_index[seen], hp[seen])
         # Witness points and direction are consistent with the distance.
         diff = kin.points[rp[seen]] - geo.points[hp[seen]]
-        np.testing.assert_allclose(t.vector[seen], diff / np.linalg.norm(diff, axis=1)[:, None],
-                                   atol=1e-12)
-        np.testing.assert_allclose(np.einsum("nk,nk->n", t.robot_point[seen] - t.human_point[seen],
-                                             t.vector[seen]), t.distance[seen], atol=1e-12)
+        np.testing.assert_allclose(
+            t.vector[seen], diff / np.linalg.norm(diff, axis=1)[:, None], atol=1e-12
+        )
+        np.testing.assert_allclose(
+            np.einsum("nk,nk->n", t.robot_point[seen] - t.human_point[seen], t.vector[seen]),
+            t.distance[seen],
+            atol=1e-12,
+        )
         assert not np.any(np.isnan(t.distance))
 
 
@@ -98,7 +109,7 @@ def test_sphere_hand_computed(robot, human):
     j = human.part_names.index("right_hand")
     r_ee, r_hand = robot.sets[2].sphere_radius_m, human.parts[j].sphere_radius_m
     assert t.distance[2, j] == pytest.approx(0.30 - r_ee - r_hand, abs=1e-12)
-    np.testing.assert_allclose(t.vector[2, j], [0, 0, -1], atol=1e-12)   # human above: push down
+    np.testing.assert_allclose(t.vector[2, j], [0, 0, -1], atol=1e-12)  # human above: push down
     assert t.robot_index[2, j] == 8
     # Only the right hand and the forearm (through its wrist) are seen; the rest is +inf.
     seen = np.isfinite(t.distance)
@@ -108,10 +119,15 @@ def test_sphere_hand_computed(robot, human):
 
 # ----------------------------------------------------------------------------- capsules
 
+
 def _geometry(human, segments):
     segments = np.asarray(segments, dtype=float)
-    return HumanGeometry(np.zeros((human.n_points, 3)), np.ones(human.n_points, dtype=bool),
-                         segments, np.ones(len(segments), dtype=bool))
+    return HumanGeometry(
+        np.zeros((human.n_points, 3)),
+        np.ones(human.n_points, dtype=bool),
+        segments,
+        np.ones(len(segments), dtype=bool),
+    )
 
 
 def _kinematics(segments):
@@ -122,13 +138,21 @@ def _kinematics(segments):
 def _check_capsules(robot, human, table, rseg, hseg):
     for i in range(len(rseg)):
         for j in range(len(hseg)):
-            ref = segment_segment(*rseg[i], *hseg[j]) - robot.capsule_radii[i] - human.capsule_radii[j]
+            ref = (
+                segment_segment(*rseg[i], *hseg[j])
+                - robot.capsule_radii[i]
+                - human.capsule_radii[j]
+            )
             assert table.distance[i, j] == pytest.approx(ref, abs=1e-6), (i, j)
             if ref > 1e-6:
                 # Witness points on the surfaces, the vector along their difference.
                 rp, hp = table.robot_point[i, j], table.human_point[i, j]
-                assert point_segment(rp, *rseg[i]) == pytest.approx(robot.capsule_radii[i], abs=1e-6)
-                assert point_segment(hp, *hseg[j]) == pytest.approx(human.capsule_radii[j], abs=1e-6)
+                assert point_segment(rp, *rseg[i]) == pytest.approx(
+                    robot.capsule_radii[i], abs=1e-6
+                )
+                assert point_segment(hp, *hseg[j]) == pytest.approx(
+                    human.capsule_radii[j], abs=1e-6
+                )
                 np.testing.assert_allclose(rp - hp, ref * table.vector[i, j], atol=1e-6)
             assert np.linalg.norm(table.vector[i, j]) == pytest.approx(1.0)
 
@@ -146,22 +170,29 @@ def test_capsules_random_against_analytic(robot, human):
         assert np.all((s >= 0) & (s <= 1))
 
 
-@pytest.mark.parametrize("name, hseg", [
-    ("parallel", [[0.3, 0.0, 0.0], [0.3, 0.0, 0.5]]),
-    ("parallel_offset", [[0.4, 0.1, 0.6], [0.4, 0.1, 1.5]]),
-    ("antiparallel", [[0.0, 0.25, 0.8], [0.0, 0.25, 0.2]]),
-    ("crossing", [[-0.5, 0.0, 0.4], [0.5, 0.0, 0.4]]),          # through the robot axis
-    ("skew", [[-0.5, 0.3, 0.4], [0.5, 0.2, 0.9]]),
-    ("touching", [[0.0, 0.17, -0.5], [0.0, 0.17, 0.5]]),       # gap 0.17 = 0.07 (L1) + 0.10 (head)
-    ("degenerate_human", [[0.2, 0.2, 0.3], [0.2, 0.2, 0.3]]),
-    ("beyond_end", [[0.0, 0.0, 1.2], [0.0, 0.0, 1.6]]),        # collinear, past the end
-    ("along_minus_z", [[0.3, 0.0, 1.0], [0.3, 0.0, 0.2]]),
-])
+@pytest.mark.parametrize(
+    "name, hseg",
+    [
+        ("parallel", [[0.3, 0.0, 0.0], [0.3, 0.0, 0.5]]),
+        ("parallel_offset", [[0.4, 0.1, 0.6], [0.4, 0.1, 1.5]]),
+        ("antiparallel", [[0.0, 0.25, 0.8], [0.0, 0.25, 0.2]]),
+        ("crossing", [[-0.5, 0.0, 0.4], [0.5, 0.0, 0.4]]),  # through the robot axis
+        ("skew", [[-0.5, 0.3, 0.4], [0.5, 0.2, 0.9]]),
+        ("touching", [[0.0, 0.17, -0.5], [0.0, 0.17, 0.5]]),  # gap 0.17 = 0.07 (L1) + 0.10 (head)
+        ("degenerate_human", [[0.2, 0.2, 0.3], [0.2, 0.2, 0.3]]),
+        ("beyond_end", [[0.0, 0.0, 1.2], [0.0, 0.0, 1.6]]),  # collinear, past the end
+        ("along_minus_z", [[0.3, 0.0, 1.0], [0.3, 0.0, 0.2]]),
+    ],
+)
 def test_capsules_special_cases(robot, human, name, hseg):
     caps = CapsuleDistance(robot, human)
-    rseg = np.array([[[0, 0, 0.0], [0, 0, 1.0]],          # vertical
-                     [[0, 0, 0.0], [0, 0, 0.0]],          # degenerate robot capsule (a sphere)
-                     [[0.1, -0.2, 0.5], [0.4, 0.3, 0.5]]])
+    rseg = np.array(
+        [
+            [[0, 0, 0.0], [0, 0, 1.0]],  # vertical
+            [[0, 0, 0.0], [0, 0, 0.0]],  # degenerate robot capsule (a sphere)
+            [[0.1, -0.2, 0.5], [0.4, 0.3, 0.5]],
+        ]
+    )
     hsegs = np.repeat(np.asarray(hseg, dtype=float)[None], len(human.parts), axis=0)
     hsegs[1:] += np.linspace(0, 0.3, len(human.parts) - 1)[:, None, None] * [1, -1, 0.5]
     t = caps(_kinematics(rseg), _geometry(human, hsegs))
@@ -191,6 +222,7 @@ def test_capsule_one_usable_joint_is_a_sphere(robot, human):
 
 # ----------------------------------------------------------------------------- both
 
+
 @pytest.mark.parametrize("method", [qpavoid.sphere_distances, qpavoid.capsule_distances])
 def test_untracked_and_nan_joints_are_left_out(robot, human, method):
     rng = np.random.default_rng(5)
@@ -218,12 +250,21 @@ def test_untracked_and_nan_joints_are_left_out(robot, human, method):
 @pytest.mark.parametrize("method", [qpavoid.sphere_distances, qpavoid.capsule_distances])
 def test_table_shapes_and_labels(robot, human, method):
     from qpavoid.posture import Operator
+
     t = method(robot, np.zeros(6), human, Operator().rest())
     assert t.distance.shape == (3, 8) and t.vector.shape == (3, 8, 3)
     assert t.robot_point.shape == (3, 8, 3) and t.human_point.shape == (3, 8, 3)
     assert t.set_names == ("L1", "L2", "EE")
-    assert t.part_names == ("head", "trunk", "left_upper_arm", "left_forearm", "left_hand",
-                            "right_upper_arm", "right_forearm", "right_hand")
+    assert t.part_names == (
+        "head",
+        "trunk",
+        "left_upper_arm",
+        "left_forearm",
+        "left_hand",
+        "right_upper_arm",
+        "right_forearm",
+        "right_hand",
+    )
     np.testing.assert_allclose(t.min_per_set(), t.distance.min(axis=1))
 
 

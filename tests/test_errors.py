@@ -16,12 +16,18 @@ import pytest
 
 import qpavoid
 from qpavoid import laws
-from qpavoid.errors import (IKNotConvergedError, InputError, QpavoidError, RecordingError,
-                            RobotDescriptionError, SolverError)
+from qpavoid.errors import (
+    IKNotConvergedError,
+    InputError,
+    QpavoidError,
+    RecordingError,
+    RobotDescriptionError,
+    SolverError,
+)
 from qpavoid.io import load_log
 from qpavoid.posture import Operator
-from qpavoid.qp.config import QPConfig
 from qpavoid.qp.backends import make_backend
+from qpavoid.qp.config import QPConfig
 from qpavoid.recording import Recording, csv_header, load_recording, save_csv
 from qpavoid.scenarios import make_scenario
 from qpavoid.task import A_IN, ArcPath, inverse_kinematics, orthonormalize
@@ -41,10 +47,11 @@ def q_start(robot):
 
 # --------------------------------------------------------------------------- hierarchy
 
+
 def test_hierarchy():
     assert issubclass(InputError, QpavoidError) and issubclass(InputError, ValueError)
     assert issubclass(RecordingError, InputError)
-    assert issubclass(IKNotConvergedError, InputError)      # old `except InputError` works
+    assert issubclass(IKNotConvergedError, InputError)  # old `except InputError` works
     for cls in (RobotDescriptionError, SolverError):
         assert issubclass(cls, QpavoidError) and not issubclass(cls, InputError)
     for name in ("IKNotConvergedError", "RecordingError"):
@@ -52,8 +59,14 @@ def test_hierarchy():
 
 
 def test_message_only_construction_keeps_working():
-    for cls in (QpavoidError, InputError, RecordingError, IKNotConvergedError,
-                RobotDescriptionError, SolverError):
+    for cls in (
+        QpavoidError,
+        InputError,
+        RecordingError,
+        IKNotConvergedError,
+        RobotDescriptionError,
+        SolverError,
+    ):
         err = cls("plain message")
         assert str(err) == "plain message"
     err = InputError("rate must be positive", name="--rate", value=0.0)
@@ -66,8 +79,9 @@ EXAMPLES = [
     InputError("bad rate", name="--rate", value=0.0),
     InputError("bad q", name="q", value=np.array([1.0, np.nan])),
     RecordingError("rec.npz: not an NPZ archive", path="rec.npz", name="t", value=3),
-    IKNotConvergedError("unreachable", target=np.eye(4), residual=0.25, iterations=500,
-                        q=np.zeros(6)),
+    IKNotConvergedError(
+        "unreachable", target=np.eye(4), residual=0.25, iterations=500, q=np.zeros(6)
+    ),
     RobotDescriptionError("unknown robot 'ur5'", path="ur5", name="robot", value="ur5"),
     SolverError("SVD failed", solver="lapack.dgesdd", status=-4),
 ]
@@ -90,6 +104,7 @@ def test_unpicklable_attribute_becomes_its_repr():
 
 def test_errors_cross_a_process_pool():
     from concurrent.futures import ProcessPoolExecutor
+
     with ProcessPoolExecutor(1) as pool:
         future = pool.submit(load_recording, "/nonexistent/rec.npz")
         with pytest.raises(RecordingError, match="not found") as info:
@@ -98,6 +113,7 @@ def test_errors_cross_a_process_pool():
 
 
 # --------------------------------------------------------------------------- public API
+
 
 def test_sphere_distances_bad_shape(robot, human):
     with pytest.raises(InputError) as info:
@@ -134,7 +150,7 @@ def test_controller_step_bad_inputs(robot, q_start, ctrl_cls):
     ctrl = ctrl_cls(robot)
     rest = Operator().rest()
     bad_q = q_start.copy()
-    bad_q[0] = np.nan                    # would make the SVD of the Jacobians fail
+    bad_q[0] = np.nan  # would make the SVD of the Jacobians fail
     with pytest.raises(InputError) as info:
         ctrl.step(bad_q, rest, None, 1.0)
     assert not isinstance(info.value, np.linalg.LinAlgError)
@@ -155,7 +171,7 @@ def test_a_failed_svd_stops_the_analytic_controller(robot, q_start, monkeypatch)
     class FailingLapack:
         @staticmethod
         def dgesdd(J, full_matrices=0):
-            return None, None, None, 3              # "did not converge"
+            return None, None, None, 3  # "did not converge"
 
     monkeypatch.setattr(laws, "lapack", FailingLapack)
     with pytest.raises(SolverError) as info:
@@ -165,8 +181,11 @@ def test_a_failed_svd_stops_the_analytic_controller(robot, q_start, monkeypatch)
     cmd = qpavoid.AnalyticController(robot).step(q_start, Operator().rest(), None, 1.0)
     assert cmd.stopped and cmd.time_scale == 0.0
     np.testing.assert_array_equal(cmd.dq, 0.0)
-    assert re.fullmatch(r"numerical failure: SVD of the \dx\d Jacobian failed: did not converge "
-                        r"\(LAPACK dgesdd info 3\)", cmd.reason)
+    assert re.fullmatch(
+        r"numerical failure: SVD of the \dx\d Jacobian failed: did not converge "
+        r"\(LAPACK dgesdd info 3\)",
+        cmd.reason,
+    )
     assert cmd.info == {"solver": "lapack.dgesdd", "status": 3}
 
 
@@ -205,7 +224,7 @@ def test_orthonormalize_rejects_nan():
         orthonormalize(R)
     assert info.value.name == "R" and "non-finite entry at index (0, 1)" in one_line(info.value)
     start = A_IN.copy()
-    start[1, 0] = np.nan                  # the rotation: its SVD used to fail
+    start[1, 0] = np.nan  # the rotation: its SVD used to fail
     with pytest.raises(InputError) as info:
         ArcPath(start=start)
     assert info.value.name == "start"
@@ -221,15 +240,18 @@ def test_unconverged_ik(robot):
         qpavoid.inverse_kinematics(robot, far, max_iter=50)
     err = info.value
     np.testing.assert_array_equal(err.target, far)
-    assert err.iterations == 50 and err.residual > 0.3       # ~0.6 m short of the target
+    assert err.iterations == 50 and err.residual > 0.3  # ~0.6 m short of the target
     assert err.q.shape == (robot.nq,)
     assert np.all(err.q >= robot.q_min) and np.all(err.q <= robot.q_max)
     assert (err.name, err.value) == ("target", err.target)
-    assert re.fullmatch(r"inverse kinematics did not reach the target position \(1\.5, 0, 0\.5\) "
-                        r"m \(residual \S+ > tol 1e-10 after 50 iterations\): unreachable on "
-                        r"this branch", one_line(err))
+    assert re.fullmatch(
+        r"inverse kinematics did not reach the target position \(1\.5, 0, 0\.5\) "
+        r"m \(residual \S+ > tol 1e-10 after 50 iterations\): unreachable on "
+        r"this branch",
+        one_line(err),
+    )
     assert f"{err.residual:.2e}" in str(err)
-    assert isinstance(err, InputError)                   # existing except clauses still work
+    assert isinstance(err, InputError)  # existing except clauses still work
 
 
 def test_unknown_names(robot):
@@ -245,8 +267,9 @@ def test_unknown_names(robot):
     with pytest.raises(InputError) as info:
         qpavoid.distance_method("boxes", robot, qpavoid.KinectHuman())
     assert (info.value.name, info.value.value) == ("distance", "boxes")
-    assert one_line(info.value) == ("unknown distance method 'boxes'; choose from ['capsules', "
-                                    "'spheres']")
+    assert one_line(info.value) == (
+        "unknown distance method 'boxes'; choose from ['capsules', 'spheres']"
+    )
     with pytest.raises(InputError) as info:
         qpavoid.AnalyticConfig(limit_mode="wrap")
     assert (info.value.name, info.value.value) == ("limit_mode", "wrap")
@@ -266,24 +289,27 @@ def test_unknown_solver_and_backend():
     with pytest.raises(SolverError) as info:
         make_backend(QPConfig(backend="qpsolvers", solver="no-such-solver"), 8, 4)
     assert (info.value.solver, info.value.status) == ("no-such-solver", "not installed")
-    assert one_line(info.value).startswith("QP solver 'no-such-solver' is not installed; "
-                                           "available:")
+    assert one_line(info.value).startswith(
+        "QP solver 'no-such-solver' is not installed; available:"
+    )
     with pytest.raises(SolverError) as info:
         make_backend(QPConfig(backend="magic"), 8, 4)
     assert (info.value.solver, info.value.status) == ("magic", "unknown backend")
 
 
 def test_robot_description_errors(tmp_path):
-    (tmp_path / "control_points.toml").write_text('urdf = "arm.urdf"\nend_effector = "tool"\n'
-                                                  'sets = [{ name = "L1" }]\n')
+    (tmp_path / "control_points.toml").write_text(
+        'urdf = "arm.urdf"\nend_effector = "tool"\nsets = [{ name = "L1" }]\n'
+    )
     with pytest.raises(RobotDescriptionError) as info:
         qpavoid.load_robot(tmp_path)
     err = info.value
     assert err.path == tmp_path / "control_points.toml" and err.name == "sets[0]"
     assert err.value == ["sphere_radius_m", "points", "capsule"]
     assert "[[sets]] entry 0 is missing key(s) sphere_radius_m, points, capsule" in one_line(err)
-    (tmp_path / "control_points.toml").write_text('urdf = "arm.urdf"\nend_effector = "tool"\n'
-                                                  'sets = []\n')
+    (tmp_path / "control_points.toml").write_text(
+        'urdf = "arm.urdf"\nend_effector = "tool"\nsets = []\n'
+    )
     (tmp_path / "arm.urdf").write_text("<robot name='broken'><link>")
     with pytest.raises(RobotDescriptionError) as info:
         qpavoid.load_robot(tmp_path)
@@ -293,11 +319,15 @@ def test_robot_description_errors(tmp_path):
 
 # --------------------------------------------------------------------------- recordings
 
-NPZ_HINT = ("expected a NumPy .npz archive with arrays t (N,), joints (N, 25, 3) and state "
-            "(N, 25); see docs/formats.md")
-CSV_HINT = ("expected a UTF-8 CSV file: the header row t,SpineBase_x,SpineBase_y,SpineBase_z,"
-            "SpineBase_state,...,ThumbRight_state (101 columns), then one row of numbers per "
-            "frame; see docs/formats.md")
+NPZ_HINT = (
+    "expected a NumPy .npz archive with arrays t (N,), joints (N, 25, 3) and state "
+    "(N, 25); see docs/formats.md"
+)
+CSV_HINT = (
+    "expected a UTF-8 CSV file: the header row t,SpineBase_x,SpineBase_y,SpineBase_z,"
+    "SpineBase_state,...,ThumbRight_state (101 columns), then one row of numbers per "
+    "frame; see docs/formats.md"
+)
 
 
 def _zip(path, members: dict[str, bytes]):
@@ -318,57 +348,118 @@ def _arrays(n: int = 3):
 
 BAD_FILES = {
     # name: (make(path), message after "<path>: ", .name)
-    "text.npz": (lambda p: p.write_text("t,joints,state\n1,2,3\n"),
-                 f"not a readable NPZ archive (it is a text file); {NPZ_HINT}", None),
-    "empty.npz": (lambda p: p.write_bytes(b""),
-                  f"not a readable NPZ archive (the file is empty); {NPZ_HINT}", None),
-    "single.npz": (lambda p: _write(p, np.save, np.zeros(3)),
-                   f"not a readable NPZ archive (it is a single .npy array); {NPZ_HINT}", None),
-    "garbage.npz": (lambda p: p.write_bytes(bytes(range(256)) * 8),
-                    f"not a readable NPZ archive (it is binary data); {NPZ_HINT}", None),
-    "plainzip.npz": (lambda p: _zip(p, {"readme.txt": b"hello"}),
-                     ("not a readable NPZ archive (a ZIP archive without .npy arrays; members: "
-                     f"readme.txt); {NPZ_HINT}"), None),
-    "not_npy.npz": (lambda p: _zip(p, {"t.npy": b"junk", "joints.npy": b"", "state.npy": b""}),
-                    f"member 't.npy' is not a .npy array; {NPZ_HINT}", "t"),
-    "damaged.npz": (lambda p: _zip(p, {name: b"\x93NUMPY\x01\x00junk"
-                                       for name in ("t.npy", "joints.npy", "state.npy")}),
-                    None, None),
-    "truncated.npz": (lambda p: (np.savez(p, t=np.zeros(2)),
-                                 p.write_bytes(p.read_bytes()[:40])),
-                      f"not a readable NPZ archive (damaged: File is not a zip file); {NPZ_HINT}",
-                      None),
-    "keys.npz": (lambda p: np.savez(p, t=np.arange(3.0)),
-                 f"NPZ file has no array 'joints', 'state' (found: 't'); {NPZ_HINT}", "joints"),
-    "objects.npz": (lambda p: np.savez(p, t=np.array([0.0, "a"], dtype=object),
-                                       joints=np.zeros((2, 25, 3)), state=np.zeros((2, 25))),
-                    f"array 't' holds Python objects (pickled data, never loaded); {NPZ_HINT}",
-                    "t"),
-    "shape.npz": (lambda p: np.savez(p, t=np.arange(3.0), joints=np.zeros((3, 24, 3)),
-                                     state=np.zeros((3, 25))),
-                  ("joints (robot base frame, m) must have shape (3, 25, 3), got (3, 24, 3); "
-                   "see docs/formats.md"), "joints"),
-    "nan_t.npz": (lambda p: np.savez(p, t=np.array([0.0, np.nan]), joints=np.zeros((2, 25, 3)),
-                                     state=np.zeros((2, 25))),
-                  "t (frame times, s) has a non-finite value at index 1: nan; see docs/formats.md",
-                  "t"),
-    "garbage.csv": (lambda p: p.write_bytes(bytes(range(256)) * 8),
-                    f"not a CSV text file (it is binary data); {CSV_HINT}", None),
-    "archive.csv": (lambda p: _write(p, np.savez, t=np.zeros(2)),
-                    f"not a CSV text file (it is a ZIP archive); {CSV_HINT}", None),
-    "empty.csv": (lambda p: p.write_text(""),
-                  f"not a CSV text file (the file is empty); {CSV_HINT}", None),
-    "header.csv": (lambda p: p.write_text("time,x,y,z\n0,1,2,3\n"),
-                   f"CSV header not found: the first row is 'time,x,y,...' (4 columns); {CSV_HINT}",
-                   "header"),
-    "prose.csv": (lambda p: p.write_text("just some notes\n"),
-                  (f"CSV header not found: the first row is 'just some notes' (1 column); "
-                   f"{CSV_HINT}"), "header"),
-    "short_row.csv": (lambda p: p.write_text(",".join(csv_header()) + "\n0.0,1.0\n"),
-                      "CSV line 2 has 2 values, expected 101; see docs/formats.md", "line"),
-    "no_frames.csv": (lambda p: p.write_text(",".join(csv_header()) + "\n"),
-                      ("the recording has no frame: t (frame times, s) is empty; see "
-                       "docs/formats.md"), "t"),
+    "text.npz": (
+        lambda p: p.write_text("t,joints,state\n1,2,3\n"),
+        f"not a readable NPZ archive (it is a text file); {NPZ_HINT}",
+        None,
+    ),
+    "empty.npz": (
+        lambda p: p.write_bytes(b""),
+        f"not a readable NPZ archive (the file is empty); {NPZ_HINT}",
+        None,
+    ),
+    "single.npz": (
+        lambda p: _write(p, np.save, np.zeros(3)),
+        f"not a readable NPZ archive (it is a single .npy array); {NPZ_HINT}",
+        None,
+    ),
+    "garbage.npz": (
+        lambda p: p.write_bytes(bytes(range(256)) * 8),
+        f"not a readable NPZ archive (it is binary data); {NPZ_HINT}",
+        None,
+    ),
+    "plainzip.npz": (
+        lambda p: _zip(p, {"readme.txt": b"hello"}),
+        (
+            "not a readable NPZ archive (a ZIP archive without .npy arrays; members: "
+            f"readme.txt); {NPZ_HINT}"
+        ),
+        None,
+    ),
+    "not_npy.npz": (
+        lambda p: _zip(p, {"t.npy": b"junk", "joints.npy": b"", "state.npy": b""}),
+        f"member 't.npy' is not a .npy array; {NPZ_HINT}",
+        "t",
+    ),
+    "damaged.npz": (
+        lambda p: _zip(
+            p, {name: b"\x93NUMPY\x01\x00junk" for name in ("t.npy", "joints.npy", "state.npy")}
+        ),
+        None,
+        None,
+    ),
+    "truncated.npz": (
+        lambda p: (np.savez(p, t=np.zeros(2)), p.write_bytes(p.read_bytes()[:40])),
+        f"not a readable NPZ archive (damaged: File is not a zip file); {NPZ_HINT}",
+        None,
+    ),
+    "keys.npz": (
+        lambda p: np.savez(p, t=np.arange(3.0)),
+        f"NPZ file has no array 'joints', 'state' (found: 't'); {NPZ_HINT}",
+        "joints",
+    ),
+    "objects.npz": (
+        lambda p: np.savez(
+            p,
+            t=np.array([0.0, "a"], dtype=object),
+            joints=np.zeros((2, 25, 3)),
+            state=np.zeros((2, 25)),
+        ),
+        f"array 't' holds Python objects (pickled data, never loaded); {NPZ_HINT}",
+        "t",
+    ),
+    "shape.npz": (
+        lambda p: np.savez(
+            p, t=np.arange(3.0), joints=np.zeros((3, 24, 3)), state=np.zeros((3, 25))
+        ),
+        (
+            "joints (robot base frame, m) must have shape (3, 25, 3), got (3, 24, 3); "
+            "see docs/formats.md"
+        ),
+        "joints",
+    ),
+    "nan_t.npz": (
+        lambda p: np.savez(
+            p, t=np.array([0.0, np.nan]), joints=np.zeros((2, 25, 3)), state=np.zeros((2, 25))
+        ),
+        "t (frame times, s) has a non-finite value at index 1: nan; see docs/formats.md",
+        "t",
+    ),
+    "garbage.csv": (
+        lambda p: p.write_bytes(bytes(range(256)) * 8),
+        f"not a CSV text file (it is binary data); {CSV_HINT}",
+        None,
+    ),
+    "archive.csv": (
+        lambda p: _write(p, np.savez, t=np.zeros(2)),
+        f"not a CSV text file (it is a ZIP archive); {CSV_HINT}",
+        None,
+    ),
+    "empty.csv": (
+        lambda p: p.write_text(""),
+        f"not a CSV text file (the file is empty); {CSV_HINT}",
+        None,
+    ),
+    "header.csv": (
+        lambda p: p.write_text("time,x,y,z\n0,1,2,3\n"),
+        f"CSV header not found: the first row is 'time,x,y,...' (4 columns); {CSV_HINT}",
+        "header",
+    ),
+    "prose.csv": (
+        lambda p: p.write_text("just some notes\n"),
+        (f"CSV header not found: the first row is 'just some notes' (1 column); {CSV_HINT}"),
+        "header",
+    ),
+    "short_row.csv": (
+        lambda p: p.write_text(",".join(csv_header()) + "\n0.0,1.0\n"),
+        "CSV line 2 has 2 values, expected 101; see docs/formats.md",
+        "line",
+    ),
+    "no_frames.csv": (
+        lambda p: p.write_text(",".join(csv_header()) + "\n"),
+        ("the recording has no frame: t (frame times, s) is empty; see docs/formats.md"),
+        "t",
+    ),
 }
 
 
@@ -381,7 +472,7 @@ def test_bad_recording_files(tmp_path, filename):
         load_recording(path)
     err = info.value
     assert err.path == path and err.name == name
-    if message is None:                                   # text from zipfile/numpy
+    if message is None:  # text from zipfile/numpy
         assert one_line(err).startswith(f"{path}: not a readable NPZ archive (damaged: ")
         assert one_line(err).endswith(NPZ_HINT)
     else:
@@ -394,8 +485,9 @@ def test_csv_the_csv_module_refuses(tmp_path):
     path.write_text(path.read_text() + '"' + "1" * 200_000 + '"\n')
     with pytest.raises(RecordingError) as info:
         load_recording(path)
-    assert one_line(info.value).startswith(f"{path}: not a readable CSV file (field larger than "
-                                           "field limit")
+    assert one_line(info.value).startswith(
+        f"{path}: not a readable CSV file (field larger than field limit"
+    )
     assert one_line(info.value).endswith(CSV_HINT)
 
 
@@ -430,7 +522,9 @@ def test_bad_run_log(tmp_path):
     with pytest.raises(RecordingError) as info:
         load_log(tmp_path)
     assert info.value.path == tmp_path / "log.npz"
-    assert one_line(info.value).startswith(f"{tmp_path / 'log.npz'}: not a readable NPZ archive "
-                                           "(it is a text file); expected the log.npz of a run")
+    assert one_line(info.value).startswith(
+        f"{tmp_path / 'log.npz'}: not a readable NPZ archive "
+        "(it is a text file); expected the log.npz of a run"
+    )
     with pytest.raises(RecordingError, match="run log file not found"):
         load_log(tmp_path / "other")

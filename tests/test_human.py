@@ -14,14 +14,27 @@ def test_points_and_parts(human):
     assert P.shape == (21, 3)
     assert human.part_names[:2] == ("head", "trunk")
     # 13 joints, then the 8 mid-points in part order.
-    order = [J.SpineBase, J.SpineMid, J.SpineShoulder, J.Neck, J.Head, J.ShoulderLeft, J.ElbowLeft,
-             J.WristLeft, J.HandLeft, J.ShoulderRight, J.ElbowRight, J.WristRight, J.HandRight]
+    order = [
+        J.SpineBase,
+        J.SpineMid,
+        J.SpineShoulder,
+        J.Neck,
+        J.Head,
+        J.ShoulderLeft,
+        J.ElbowLeft,
+        J.WristLeft,
+        J.HandLeft,
+        J.ShoulderRight,
+        J.ElbowRight,
+        J.WristRight,
+        J.HandRight,
+    ]
     np.testing.assert_allclose(P[:13], joints[order])
     np.testing.assert_allclose(P[13], (joints[J.Neck] + joints[J.Head]) / 2)
     np.testing.assert_allclose(P[14], (joints[J.SpineShoulder] + joints[J.SpineMid]) / 2)
     np.testing.assert_allclose(P[20], (joints[J.WristRight] + joints[J.HandRight]) / 2)
     assert human.point_part.sum(axis=0).tolist() == [3, 4, 3, 3, 3, 3, 3, 3]
-    assert human.point_part.any(axis=1).all()     # every point belongs to a part
+    assert human.point_part.any(axis=1).all()  # every point belongs to a part
 
 
 def test_head_larger_than_hand(human):

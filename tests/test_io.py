@@ -10,7 +10,7 @@ import pytest
 
 from qpavoid.errors import InputError
 from qpavoid.human import JointType
-from qpavoid.recording import (Recording, csv_header, load_recording, save_csv, save_npz)
+from qpavoid.recording import Recording, csv_header, load_recording, save_csv, save_npz
 
 N_FRAMES = 5
 
@@ -20,10 +20,10 @@ def make_arrays(n: int = N_FRAMES, seed: int = 0) -> tuple[np.ndarray, np.ndarra
     rng = np.random.default_rng(seed)
     t = 10.0 + np.cumsum(rng.uniform(0.02, 0.05, n))
     joints = rng.normal(0.0, 0.7, (n, 25, 3)) + np.array([0.6, 0.0, 0.4])
-    joints[1, JointType.HandLeft] = np.nan            # lost joint
-    joints[3, JointType.Head, 2] = np.nan              # one NaN coordinate
+    joints[1, JointType.HandLeft] = np.nan  # lost joint
+    joints[3, JointType.Head, 2] = np.nan  # one NaN coordinate
     state = rng.integers(0, 3, (n, 25))
-    state[0] = [0, 1, 2] * 8 + [2]                     # all three states present
+    state[0] = [0, 1, 2] * 8 + [2]  # all three states present
     return t, joints, state
 
 
@@ -41,6 +41,7 @@ def assert_same(a: Recording, b: Recording) -> None:
 
 # ----------------------------------------------------------------------------- round trips
 
+
 def test_recording_converts_and_freezes(rec):
     t, joints, state = make_arrays()
     assert rec.n_frames == N_FRAMES
@@ -49,8 +50,8 @@ def test_recording_converts_and_freezes(rec):
     np.testing.assert_array_equal(rec.state, state)
     assert rec.duration_s == pytest.approx(t[-1] - t[0])
     with pytest.raises(ValueError):
-        rec.joints[0, 0, 0] = 1.0                      # read-only
-    joints[0, 0, 0] = 123.0                            # the recording holds a copy
+        rec.joints[0, 0, 0] = 1.0  # read-only
+    joints[0, 0, 0] = 123.0  # the recording holds a copy
     assert rec.joints[0, 0, 0] != 123.0
 
 
@@ -83,7 +84,7 @@ def test_csv_text_nan_and_integer_states(tmp_path, rec):
         rows = list(csv.reader(f))
     assert len(rows) == 1 + N_FRAMES
     header = rows[0]
-    row1 = dict(zip(header, rows[2]))                  # frame 1: HandLeft is NaN
+    row1 = dict(zip(header, rows[2]))  # frame 1: HandLeft is NaN
     assert [row1[f"HandLeft_{a}"] for a in "xyz"] == ["nan", "nan", "nan"]
     row0 = dict(zip(header, rows[1]))
     assert [row0[f"{j.name}_state"] for j in JointType][:4] == ["0", "1", "2", "0"]
@@ -108,11 +109,18 @@ def test_csv_written_by_hand_with_numpy(tmp_path):
 
 # ----------------------------------------------------------------------------- header
 
+
 def test_csv_header_exact():
     header = csv_header()
     assert len(header) == 101
-    assert header[:6] == ["t", "SpineBase_x", "SpineBase_y", "SpineBase_z", "SpineBase_state",
-                          "SpineMid_x"]
+    assert header[:6] == [
+        "t",
+        "SpineBase_x",
+        "SpineBase_y",
+        "SpineBase_z",
+        "SpineBase_state",
+        "SpineMid_x",
+    ]
     assert header[-4:] == ["ThumbRight_x", "ThumbRight_y", "ThumbRight_z", "ThumbRight_state"]
     assert header[-1] == "ThumbRight_state"
     assert header[1 + 4 * JointType.SpineShoulder] == "SpineShoulder_x"
@@ -129,6 +137,7 @@ def test_csv_file_header_line(tmp_path, rec):
 
 
 # ----------------------------------------------------------------------------- sampling
+
 
 @pytest.fixture
 def steps() -> Recording:
@@ -149,7 +158,7 @@ def test_between_frames_returns_earlier_frame(steps):
 
 def test_exactly_at_frame_time_returns_that_frame(steps):
     for k, tk in enumerate(steps.t):
-        joints, state = steps.frame_at(float(tk))
+        joints, _ = steps.frame_at(float(tk))
         assert steps.index_at(float(tk)) == k
         assert np.all(joints == k)
     assert np.all(steps.frame_at(2.0)[1] == 0)
@@ -177,6 +186,7 @@ def test_frame_at_returns_copies(steps):
 
 
 # ----------------------------------------------------------------------------- errors
+
 
 def test_wrong_joints_shape():
     t, joints, state = make_arrays()
@@ -258,8 +268,11 @@ def test_wrong_csv_header_order(tmp_path, rec):
     lines = path.read_text().splitlines()
     lines[0] = lines[0].replace("SpineBase_x,SpineBase_y", "SpineBase_y,SpineBase_x")
     path.write_text("\n".join(lines) + "\n")
-    with pytest.raises(InputError, match=r"swapped\.csv.*column 1 is 'SpineBase_y', "
-                                         r"expected 'SpineBase_x'"):
+    with pytest.raises(
+        InputError,
+        match=r"swapped\.csv.*column 1 is 'SpineBase_y', "
+        r"expected 'SpineBase_x'",
+    ):
         load_recording(path)
 
 
@@ -268,7 +281,7 @@ def test_csv_missing_column(tmp_path, rec):
     save_csv(path, rec)
     rows = [line.split(",") for line in path.read_text().splitlines()]
     drop = rows[0].index("Head_state")
-    path.write_text("\n".join(",".join(r[:drop] + r[drop + 1:]) for r in rows) + "\n")
+    path.write_text("\n".join(",".join(r[:drop] + r[drop + 1 :]) for r in rows) + "\n")
     with pytest.raises(InputError, match=r"missing column\(s\) Head_state"):
         load_recording(path)
 

@@ -7,18 +7,28 @@ import math
 import numpy as np
 import pytest
 
-from qpavoid.laws import (AvoidanceConfig, damped_pinv, distance_at_factor, ee_repulsive_velocity,
-                          l1_factor, l2_joint_velocity, modified_ik, repulsive_speed,
-                          repulsive_velocity, scaled_velocity_limits, stop_reason)
+from qpavoid.laws import (
+    AvoidanceConfig,
+    damped_pinv,
+    distance_at_factor,
+    ee_repulsive_velocity,
+    l1_factor,
+    l2_joint_velocity,
+    modified_ik,
+    repulsive_speed,
+    repulsive_velocity,
+    scaled_velocity_limits,
+    stop_reason,
+)
 
 CFG = AvoidanceConfig()
 
 
 def test_f_at_hand_computed_distances():
     # f = 1 / (1 + exp((2d/rho - 1) alpha)), rho = 0.1, alpha = 9 (paper Fig. 6)
-    assert l1_factor(0.0, CFG) == pytest.approx(1 / (1 + math.exp(-9)))      # 0.99988
+    assert l1_factor(0.0, CFG) == pytest.approx(1 / (1 + math.exp(-9)))  # 0.99988
     assert l1_factor(0.05, CFG) == pytest.approx(0.5)
-    assert l1_factor(0.1, CFG) == pytest.approx(1 / (1 + math.exp(9)))       # 1.234e-4
+    assert l1_factor(0.1, CFG) == pytest.approx(1 / (1 + math.exp(9)))  # 1.234e-4
     assert l1_factor(np.inf, CFG) == 0.0
     assert l1_factor(-np.inf, CFG) == 1.0
     assert not np.isnan(l1_factor(np.array([np.inf, -np.inf, 1e6]), CFG)).any()
@@ -31,7 +41,7 @@ def test_f_at_hand_computed_distances():
 
 
 def test_f_is_monotone_decreasing():
-    d = np.linspace(-0.05, 0.2, 1000)          # beyond, it saturates at exactly 1 or 0
+    d = np.linspace(-0.05, 0.2, 1000)  # beyond, it saturates at exactly 1 or 0
     assert np.all(np.diff(l1_factor(d, CFG)) < 0)
     d = np.linspace(-1, 1, 1000)
     assert np.all(np.diff(l1_factor(d, CFG)) <= 0)
@@ -45,7 +55,7 @@ def test_scaled_limits_eq3():
 
 def test_repulsive_speed_eq4_and_velocity_eq5():
     cfg = AvoidanceConfig(v_max_mps=0.3, rho_rep_m=0.2, alpha_rep=9)
-    assert repulsive_speed(0.1, cfg) == pytest.approx(0.15)                 # V_max / 2 at rho/2
+    assert repulsive_speed(0.1, cfg) == pytest.approx(0.15)  # V_max / 2 at rho/2
     assert repulsive_speed(0.2, cfg) == pytest.approx(0.3 / (1 + math.exp(9)))
     v = repulsive_velocity(0.1, np.array([0, 0.6, 0.8]), cfg)
     np.testing.assert_allclose(v, [0, 0.09, 0.12])
@@ -69,7 +79,7 @@ def test_damped_pinv_is_the_inverse_away_from_singularities():
 def test_damped_pinv_stays_bounded_at_a_singularity():
     J = np.diag([1.0, 1.0, 1e-9])
     Jp = damped_pinv(J, 0.02, 0.05)
-    assert np.abs(Jp).max() < 1.0 / 0.05          # sigma / (sigma^2 + lambda^2) <= 1 / (2 lambda)
+    assert np.abs(Jp).max() < 1.0 / 0.05  # sigma / (sigma^2 + lambda^2) <= 1 / (2 lambda)
     np.testing.assert_allclose(Jp[:2, :2], np.eye(2), atol=1e-2)
 
 
@@ -89,14 +99,17 @@ def test_modified_ik_eq8():
     np.testing.assert_allclose(J @ dq, v_pl + K * e + np.r_[v_ee, 0, 0, 0], atol=1e-10)
 
 
-@pytest.mark.parametrize("f, d_l2, d_ee, expect", [
-    (0.8, 1.0, 1.0, None),            # f must exceed 0.8
-    (0.8000001, 1.0, 1.0, "f = "),
-    (0.0, 0.05, 1.0, "d_L2"),         # <= 0.05 m stops
-    (0.0, 0.0500001, 1.0, None),
-    (0.0, 1.0, 0.05, "d_EE"),
-    (0.0, np.inf, np.inf, None),
-])
+@pytest.mark.parametrize(
+    "f, d_l2, d_ee, expect",
+    [
+        (0.8, 1.0, 1.0, None),  # f must exceed 0.8
+        (0.8000001, 1.0, 1.0, "f = "),
+        (0.0, 0.05, 1.0, "d_L2"),  # <= 0.05 m stops
+        (0.0, 0.0500001, 1.0, None),
+        (0.0, 1.0, 0.05, "d_EE"),
+        (0.0, np.inf, np.inf, None),
+    ],
+)
 def test_stop_rules(f, d_l2, d_ee, expect):
     reason = stop_reason(f, d_l2, d_ee, CFG)
     if expect is None:

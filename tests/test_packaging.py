@@ -14,19 +14,27 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def source_files() -> set[str]:
     """What the wheel must hold: the package's modules and markers, the robot descriptions."""
-    pkg = {p.relative_to(ROOT).as_posix() for p in (ROOT / "qpavoid").rglob("*")
-           if p.suffix in (".py", ".typed") and "__pycache__" not in p.parts}
-    robots = {"qpavoid/robots/" + p.relative_to(ROOT / "robots").as_posix()
-              for p in (ROOT / "robots").rglob("*")
-              if p.suffix in (".py", ".urdf", ".toml", ".stl", ".dae", ".obj")
-              and "__pycache__" not in p.parts}
+    pkg = {
+        p.relative_to(ROOT).as_posix()
+        for p in (ROOT / "qpavoid").rglob("*")
+        if p.suffix in (".py", ".typed") and "__pycache__" not in p.parts
+    }
+    robots = {
+        "qpavoid/robots/" + p.relative_to(ROOT / "robots").as_posix()
+        for p in (ROOT / "robots").rglob("*")
+        if p.suffix in (".py", ".urdf", ".toml", ".stl", ".dae", ".obj")
+        and "__pycache__" not in p.parts
+    }
     return pkg | robots
 
 
 def test_wheel_holds_every_module_and_robot_file(tmp_path):
     build = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(tmp_path), str(ROOT)],
-        capture_output=True, text=True, timeout=300)
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     if build.returncode != 0 and "network" in build.stderr.lower():
         pytest.skip(f"pip cannot reach the package index to build: {build.stderr[-200:]}")
     assert build.returncode == 0, build.stderr

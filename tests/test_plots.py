@@ -12,8 +12,14 @@ from qpavoid.scenarios import make_scenario
 pytest.importorskip("matplotlib")
 
 EXPECTED = {
-    "test1": {"fig06_f_vs_distance.png", "fig07_snapshots.png", "fig08_distance_L2.png",
-              "fig09_vrep_L2.png", "fig10_distance_EE.png", "fig11_vrep_EE.png"},
+    "test1": {
+        "fig06_f_vs_distance.png",
+        "fig07_snapshots.png",
+        "fig08_distance_L2.png",
+        "fig09_vrep_L2.png",
+        "fig10_distance_EE.png",
+        "fig11_vrep_EE.png",
+    },
     "test2": {"fig06_f_vs_distance.png", "fig12_snapshots.png", "fig13_f_and_L1.png"},
     "other": {"fig06_f_vs_distance.png", "timeline.png", "snapshots.png"},
 }
@@ -34,12 +40,20 @@ def _legend(ax) -> list[str]:
     return [t.get_text() for t in ax.get_legend().get_texts()]
 
 
-@pytest.mark.parametrize("scenario, kind", [("test1", "test1"), ("test2", "test2"),
-                                            ("free", "other"), ("random:3", "other"),
-                                            ("", "other")])
+@pytest.mark.parametrize(
+    "scenario, kind",
+    [
+        ("test1", "test1"),
+        ("test2", "test2"),
+        ("free", "other"),
+        ("random:3", "other"),
+        ("", "other"),
+    ],
+)
 def test_each_scenario_writes_its_figures(tmp_path, log, robot, scenario, kind):
-    paths = plots.write_figures(tmp_path, log, robot, None, "spheres", scenario=scenario,
-                                controller="analytic")
+    paths = plots.write_figures(
+        tmp_path, log, robot, None, "spheres", scenario=scenario, controller="analytic"
+    )
     assert {p.name for p in paths} == EXPECTED[kind] and len(paths) == len(EXPECTED[kind])
     assert paths == [tmp_path / n for n in plots.figures_for(scenario)]
     assert {p.name for p in tmp_path.iterdir()} == EXPECTED[kind]
@@ -98,6 +112,11 @@ def test_snapshots_label_every_axis_and_share_one_legend(log, robot):
     assert titles[2].startswith("c) end")
     (legend,) = fig.legends
     texts = [t.get_text() for t in legend.get_texts()]
-    assert texts == ["robot links", "robot spheres (eq. 1)", "operator (Kinect skeleton)",
-                     "planned path", "end-effector trace"]
+    assert texts == [
+        "robot links",
+        "robot spheres (eq. 1)",
+        "operator (Kinect skeleton)",
+        "planned path",
+        "end-effector trace",
+    ]
     assert plots.snapshot_ticks(log)[1] == int(np.flatnonzero(log["stopped"])[0])

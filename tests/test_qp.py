@@ -13,9 +13,8 @@ from qpavoid.analytic import AnalyticController
 from qpavoid.cli import main
 from qpavoid.controller import ControllerConfig
 from qpavoid.human import JointType
-from qpavoid.qp import QPConfig, QPController
+from qpavoid.qp import Bounds, PersistentOSQP, QPConfig, QPController, QPProblem, QPSolversBackend
 from qpavoid.qp.elbow_task import ElbowClearanceTask
-from qpavoid.qp import Bounds, PersistentOSQP, QPProblem, QPSolversBackend
 from qpavoid.qp.velocity_limits import VelocityLimit
 from qpavoid.runs import RunSpec, simulate_one
 from qpavoid.scenarios import make_scenario
@@ -45,8 +44,9 @@ def test_nobody_near_qp_equals_analytic_at_every_tick(robot):
 @pytest.mark.parametrize("distance", ["spheres", "capsules"])
 def test_scenarios_are_safe(name, distance):
     """Every scenario, both distance methods: the sweep's invariants hold."""
-    run = simulate_one(RunSpec(scenario=name, controller="qp", distance=distance,
-                               max_time_s=40.0, rate_hz=100.0))
+    run = simulate_one(
+        RunSpec(scenario=name, controller="qp", distance=distance, max_time_s=40.0, rate_hz=100.0)
+    )
     result, robot, config = run.sim, run.robot, run.config
     checks = check_log(result.log, robot, config, distance)
     assert checks["position_violations"] == checks["velocity_violations"] == 0
@@ -67,7 +67,7 @@ def _assert_sweep_safe(n: int, distance: str, min_stopping: int) -> None:
     assert s["velocity_violations"] == 0
     assert s["moving_under_stop_rule"] == 0
     assert s["moving_below_capsule_threshold"] == 0, [c for c in checks if not c.safe][:3]
-    assert sum(c.stopped_s > 0 for c in checks) >= min_stopping   # the approaches reach the robot
+    assert sum(c.stopped_s > 0 for c in checks) >= min_stopping  # the approaches reach the robot
 
 
 @pytest.mark.parametrize("distance", ["spheres", "capsules"])
@@ -103,7 +103,9 @@ def test_solve_paths_agree(recorded_problems):
     persistent = PersistentOSQP(n, m, QPConfig())
     through_osqp = QPSolversBackend("osqp", QPConfig())
     daqp = QPSolversBackend("daqp", QPConfig())
-    others = [QPSolversBackend(s, QPConfig()) for s in ("proxqp",) if s in qpsolvers.available_solvers]
+    others = [
+        QPSolversBackend(s, QPConfig()) for s in ("proxqp",) if s in qpsolvers.available_solvers
+    ]
     active = 0
     for prob in recorded_problems:
         ref = daqp.solve(prob)
@@ -115,7 +117,7 @@ def test_solve_paths_agree(recorded_problems):
             sol = backend.solve(prob)
             assert sol.found, (backend.name, sol.status)
             np.testing.assert_allclose(sol.x[:-2], ref.x[:-2], atol=SOLVER_TOL)
-    assert active > 50                       # constraints were really active on many ticks
+    assert active > 50  # constraints were really active on many ticks
 
 
 def test_persistent_paths_agree(recorded_problems):
@@ -138,6 +140,7 @@ def test_iteration_limit_stops_the_robot(robot):
     path, q = _start(robot)
     ctrl = QPController(robot, path, qp=QPConfig(max_iter=1))
     from qpavoid.posture import Operator
+
     cmd = ctrl.step(q + 0.05, Operator().rest(), None, 1.0)
     assert cmd.stopped and cmd.reason.startswith("QP not solved")
     assert "maximum iterations" in cmd.reason
@@ -147,19 +150,30 @@ def test_iteration_limit_stops_the_robot(robot):
 @pytest.mark.parametrize("backend", ["persistent", "qpsolvers"])
 def test_infeasible_problem_stops_the_robot(robot, monkeypatch, backend):
     path, q = _start(robot)
-    monkeypatch.setattr(VelocityLimit, "compute_qp_bounds",
-                        lambda self, tick, dt: Bounds(np.full(self.variables.n, 1.0),
-                                                      np.full(self.variables.n, -1.0)))
+    monkeypatch.setattr(
+        VelocityLimit,
+        "compute_qp_bounds",
+        lambda self, tick, dt: Bounds(
+            np.full(self.variables.n, 1.0), np.full(self.variables.n, -1.0)
+        ),
+    )
     ctrl = QPController(robot, path, qp=QPConfig(backend=backend, solver="daqp"))
     from qpavoid.posture import Operator
+
     cmd = ctrl.step(q, Operator().rest(), None, 1.0)
     assert cmd.stopped and cmd.reason.startswith("QP not solved")
     np.testing.assert_array_equal(cmd.dq, 0.0)
 
 
 def test_backends_report_infeasibility():
-    prob = QPProblem(np.eye(2), np.zeros(2), np.zeros((1, 2)), np.array([-1.0]),
-                     np.full(2, -1.0), np.full(2, 1.0))              # 0 <= -1: infeasible
+    prob = QPProblem(
+        np.eye(2),
+        np.zeros(2),
+        np.zeros((1, 2)),
+        np.array([-1.0]),
+        np.full(2, -1.0),
+        np.full(2, 1.0),
+    )  # 0 <= -1: infeasible
     assert not PersistentOSQP(2, 1, QPConfig()).solve(prob).found
     assert not QPSolversBackend("daqp", QPConfig()).solve(prob).found
     with pytest.raises(qpavoid.SolverError, match="not installed"):
@@ -175,7 +189,7 @@ def test_redundancy_moves_the_elbow_away_keeping_the_end_effector(robot7):
     side = np.cross(P[7] - P[3], P[3] - robot7.capsules(q)[0, 0])
     side /= np.linalg.norm(side)
     for sign in (1.0, -1.0):
-        joints = np.full((25, 3), np.nan)                     # only one hand is tracked
+        joints = np.full((25, 3), np.nan)  # only one hand is tracked
         joints[JointType.WristRight] = elbow + sign * 0.35 * side
         joints[JointType.HandRight] = elbow + sign * 0.33 * side
         speeds = []
@@ -185,29 +199,81 @@ def test_redundancy_moves_the_elbow_away_keeping_the_end_effector(robot7):
             cmd = ctrl.step(q, joints, None, 5.0)
             assert not cmd.stopped
             radii = np.where(ctrl.human.point_part, ctrl.human.sphere_radii, 0).max(axis=1)
-            d, n = ElbowClearanceTask(ctrl.variables, 3, robot7.sphere_radii[3], radii, 1, 0.4,
-                                      0.1).clearance(tick)
+            _, n = ElbowClearanceTask(
+                ctrl.variables, 3, robot7.sphere_radii[3], radii, 1, 0.4, 0.1
+            ).clearance(tick)
             speeds.append(n @ tick.kin.point_jacobians[3] @ cmd.dq)
             residual = tick.kin.ee_jacobian @ cmd.dq - ctrl.ee_task.target(tick)
-            assert np.abs(residual).max() < 1e-3                # the end effector keeps its path
-        assert speeds[1] > speeds[0] + 0.03                    # m/s: the elbow moves away
+            assert np.abs(residual).max() < 1e-3  # the end effector keeps its path
+        assert speeds[1] > speeds[0] + 0.03  # m/s: the elbow moves away
 
 
 def test_cli_qp_solver_redundant_and_compare(tmp_path, capsys):
     out = tmp_path / "qp"
-    assert main(["run", "test1", "--controller", "qp", "--solver", "daqp", "--out", str(out),
-                 "--max-time", "1", "--rate", "100", "--no-plots"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "test1",
+                "--controller",
+                "qp",
+                "--solver",
+                "daqp",
+                "--out",
+                str(out),
+                "--max-time",
+                "1",
+                "--rate",
+                "100",
+                "--no-plots",
+            ]
+        )
+        == 0
+    )
     m = json.loads((out / "metrics.json").read_text())
     assert m["controller"] == "qp" and m["solver"] == "daqp"
     out = tmp_path / "red"
-    assert main(["run", "free", "--controller", "qp", "--redundant", "--out", str(out),
-                 "--max-time", "1", "--rate", "100", "--no-plots"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "free",
+                "--controller",
+                "qp",
+                "--redundant",
+                "--out",
+                str(out),
+                "--max-time",
+                "1",
+                "--rate",
+                "100",
+                "--no-plots",
+            ]
+        )
+        == 0
+    )
     assert np.load(out / "log.npz")["q"].shape[1] == 7
     assert main(["run", "free", "--redundant", "--out", str(out)]) == 2
     assert "needs --controller qp" in capsys.readouterr().err
     cmp = tmp_path / "cmp"
-    assert main(["compare", "--out", str(cmp), "--scenarios", "free", "--random", "1",
-                 "--max-time", "2", "--rate", "50"]) == 0
+    assert (
+        main(
+            [
+                "compare",
+                "--out",
+                str(cmp),
+                "--scenarios",
+                "free",
+                "--random",
+                "1",
+                "--max-time",
+                "2",
+                "--rate",
+                "50",
+            ]
+        )
+        == 0
+    )
     data = json.loads((cmp / "compare.json").read_text())
     assert set(data) == {"free", "random:0"}
     for ctrl in ("analytic", "qp"):
@@ -219,12 +285,20 @@ def test_cli_qp_solver_redundant_and_compare(tmp_path, capsys):
 
 def test_rejected_update_is_never_solved_stale(robot):
     """OSQP keeps the old data when an update is invalid; the backend must not 'solve' it."""
-    ok = QPProblem(np.eye(2), np.zeros(2), np.zeros((1, 2)), np.array([1.0]),
-                   np.full(2, -1.0), np.full(2, 1.0))
-    bad = QPProblem(np.eye(2), np.zeros(2), np.zeros((1, 2)), np.array([1.0]),
-                    np.full(2, 1.0), np.full(2, -1.0))                # lb > ub
-    nonconvex = QPProblem(-np.eye(2), np.zeros(2), np.zeros((1, 2)), np.array([1.0]),
-                          np.full(2, -1.0), np.full(2, 1.0))
+    ok = QPProblem(
+        np.eye(2), np.zeros(2), np.zeros((1, 2)), np.array([1.0]), np.full(2, -1.0), np.full(2, 1.0)
+    )
+    bad = QPProblem(
+        np.eye(2), np.zeros(2), np.zeros((1, 2)), np.array([1.0]), np.full(2, 1.0), np.full(2, -1.0)
+    )  # lb > ub
+    nonconvex = QPProblem(
+        -np.eye(2),
+        np.zeros(2),
+        np.zeros((1, 2)),
+        np.array([1.0]),
+        np.full(2, -1.0),
+        np.full(2, 1.0),
+    )
     for native in (True, False):
         b = PersistentOSQP(2, 1, QPConfig())
         if not native:

@@ -22,8 +22,11 @@ TOL = 1e-7
 
 def assert_same_commands(scenario: str, distance: str, rate_hz: float) -> None:
     recorded = np.load(DATA / f"qp_commands_{rate_hz:.0f}hz.npz")[f"{scenario}/{distance}/dq"]
-    run = simulate_one(RunSpec(scenario=scenario, controller="qp", distance=distance,
-                               rate_hz=rate_hz, max_time_s=40.0))
+    run = simulate_one(
+        RunSpec(
+            scenario=scenario, controller="qp", distance=distance, rate_hz=rate_hz, max_time_s=40.0
+        )
+    )
     dq = run.sim.log["dq"]
     assert dq.shape == recorded.shape
     worst = float(np.abs(dq - recorded).max())

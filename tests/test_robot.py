@@ -5,11 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import random_q
 
 import qpavoid
 from qpavoid.errors import InputError, RobotDescriptionError
-
-from conftest import random_q
 
 D = np.radians
 
@@ -45,25 +44,52 @@ def test_zero_configuration_heights(robot):
     kin = robot.kinematics(np.zeros(6))
     assert kin.points.shape == (9, 3)
     np.testing.assert_allclose(kin.segments[0, 0], [0, 0, 0.36], atol=1e-12)  # shoulder A2
-    np.testing.assert_allclose(kin.points[3], [0, 0, 0.78], atol=1e-12)       # elbow A4
-    np.testing.assert_allclose(kin.points[7], [0, 0, 1.18], atol=1e-12)       # wrist A6
-    np.testing.assert_allclose(kin.points[8], [0, 0, 1.306], atol=1e-12)      # flange
+    np.testing.assert_allclose(kin.points[3], [0, 0, 0.78], atol=1e-12)  # elbow A4
+    np.testing.assert_allclose(kin.points[7], [0, 0, 1.18], atol=1e-12)  # wrist A6
+    np.testing.assert_allclose(kin.points[8], [0, 0, 1.306], atol=1e-12)  # flange
     # Mid-points: half-way between the joint centres of the paper's Sect. 4.
-    z = [(0.36 + 0.5645) / 2, 0.5645, (0.5645 + 0.78) / 2, 0.78,
-         (0.78 + 0.9645) / 2, 0.9645, (0.9645 + 1.18) / 2, 1.18, 1.306]
+    z = [
+        (0.36 + 0.5645) / 2,
+        0.5645,
+        (0.5645 + 0.78) / 2,
+        0.78,
+        (0.78 + 0.9645) / 2,
+        0.9645,
+        (0.9645 + 1.18) / 2,
+        1.18,
+        1.306,
+    ]
     np.testing.assert_allclose(kin.points[:, 2], z, atol=1e-12)
     T = np.eye(4)
     T[2, 3] = 1.306
     np.testing.assert_allclose(kin.ee_placement, T, atol=1e-12)
 
 
-@pytest.mark.parametrize("q, elbow, wrist, flange", [
-    ([0, 90, 0, 0, 0, 0], [0.42, 0, 0.36], [0.82, 0, 0.36], [0.946, 0, 0.36]),   # A2 lays the arm along +x
-    ([90, 90, 0, 0, 0, 0], [0, 0.42, 0.36], [0, 0.82, 0.36], [0, 0.946, 0.36]),  # A1 turns it to +y
-    ([0, 0, 90, 0, 0, 0], [0, 0, 0.78], [-0.40, 0, 0.78], [-0.526, 0, 0.78]),    # A4 bends about -y
-    ([0, 0, 0, 0, 90, 0], [0, 0, 0.78], [0, 0, 1.18], [0.126, 0, 1.18]),         # A6 bends the flange
-    ([0, 0, 0, 90, 90, 0], [0, 0, 0.78], [0, 0, 1.18], [0, 0.126, 1.18]),        # A5 turns that bend
-])
+@pytest.mark.parametrize(
+    "q, elbow, wrist, flange",
+    [
+        (
+            [0, 90, 0, 0, 0, 0],
+            [0.42, 0, 0.36],
+            [0.82, 0, 0.36],
+            [0.946, 0, 0.36],
+        ),  # A2 lays the arm along +x
+        (
+            [90, 90, 0, 0, 0, 0],
+            [0, 0.42, 0.36],
+            [0, 0.82, 0.36],
+            [0, 0.946, 0.36],
+        ),  # A1 turns it to +y
+        (
+            [0, 0, 90, 0, 0, 0],
+            [0, 0, 0.78],
+            [-0.40, 0, 0.78],
+            [-0.526, 0, 0.78],
+        ),  # A4 bends about -y
+        ([0, 0, 0, 0, 90, 0], [0, 0, 0.78], [0, 0, 1.18], [0.126, 0, 1.18]),  # A6 bends the flange
+        ([0, 0, 0, 90, 90, 0], [0, 0, 0.78], [0, 0, 1.18], [0, 0.126, 1.18]),  # A5 turns that bend
+    ],
+)
 def test_hand_worked_configurations(robot, q, elbow, wrist, flange):
     P = robot.control_points(D(q))
     np.testing.assert_allclose(P[3], elbow, atol=1e-12)
@@ -73,8 +99,14 @@ def test_hand_worked_configurations(robot, q, elbow, wrist, flange):
 
 def test_paper_initial_pose(robot):
     """The reading notes' closed-form IK solution reaches the paper's initial pose."""
-    A_in = np.array([[0.25, -0.866, 0.433, 0.3524], [0.433, 0.5, 0.75, 0.6105],
-                     [-0.866, 0, 0.5, 0.5779], [0, 0, 0, 1]])
+    A_in = np.array(
+        [
+            [0.25, -0.866, 0.433, 0.3524],
+            [0.433, 0.5, 0.75, 0.6105],
+            [-0.866, 0, 0.5, 0.5779],
+            [0, 0, 0, 1],
+        ]
+    )
     T = robot.end_effector(D([60, 35.3, -82.7, 0, -58.0, 0]))
     np.testing.assert_allclose(T, A_in, atol=6e-4)  # the paper prints 4 digits, angles 0.1 deg
 
@@ -99,15 +131,18 @@ def test_jacobians_match_finite_differences(which, request):
         np.testing.assert_allclose(kin.segment_jacobians, _fd(r.capsules, q), atol=1e-7)
         for s in (0.0, 0.3, 1.0):
             for i in range(3):
+
                 def seg_point(qq, i=i, s=s):
                     a, b = r.capsules(qq)[i]
                     return (1 - s) * a + s * b
-                np.testing.assert_allclose(kin.segment_point_jacobian(i, s), _fd(seg_point, q)[...],
-                                           atol=1e-7)
+
+                np.testing.assert_allclose(
+                    kin.segment_point_jacobian(i, s), _fd(seg_point, q)[...], atol=1e-7
+                )
         # End effector twist: linear part by differences of positions, angular by log3.
         R0 = kin.ee_placement[:3, :3]
         jv = _fd(lambda qq: r.end_effector(qq)[:3, 3], q)
-        jw = _fd(lambda qq: pin.log3(r.end_effector(qq)[:3, :3] @ R0.T), q)
+        jw = _fd(lambda qq, R0=R0: pin.log3(r.end_effector(qq)[:3, :3] @ R0.T), q)
         np.testing.assert_allclose(kin.ee_jacobian[:3], jv, atol=1e-7)
         np.testing.assert_allclose(kin.ee_jacobian[3:], jw, atol=1e-6)
 
@@ -135,6 +170,7 @@ def test_description_from_a_folder(tmp_path, robot):
     """Any URDF with a control-point file beside it loads by path."""
     import shutil
     from importlib import resources
+
     src = resources.files("qpavoid.robots") / "iiwa14"
     robot_dir = tmp_path / "myarm"
     robot_dir.mkdir()

@@ -27,7 +27,7 @@ def test_path_ends_and_orientation():
 def test_arc_geometry():
     path = ArcPath()
     pts = np.array([path.reference(t)[0][:3, 3] for t in np.linspace(0, 15, 301)])
-    np.testing.assert_allclose(pts[:, 1], 0.6105, atol=1e-12)          # in the plane y = 0.6105
+    np.testing.assert_allclose(pts[:, 1], 0.6105, atol=1e-12)  # in the plane y = 0.6105
     # Constant distance from one centre (a circle), and the sagitta above the chord.
     chord_mid = 0.5 * (A_IN[:3, 3] + A_FIN[:3, 3])
     mid = path.position(0.5)[0]

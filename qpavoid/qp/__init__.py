@@ -15,6 +15,18 @@ from .pieces import Bounds, Constraint, Objective, QPPiece
 from .problem import Assembler, QPProblem, QPSolution
 from .variables import Variables
 
-__all__ = ["Assembler", "Bounds", "Constraint", "Objective", "PersistentOSQP", "QPConfig",
-           "QPController", "QPPiece", "QPProblem", "QPSolution", "QPSolversBackend",
-           "Variables", "make_backend"]
+__all__ = [
+    "Assembler",
+    "Bounds",
+    "Constraint",
+    "Objective",
+    "PersistentOSQP",
+    "QPConfig",
+    "QPController",
+    "QPPiece",
+    "QPProblem",
+    "QPSolution",
+    "QPSolversBackend",
+    "Variables",
+    "make_backend",
+]

@@ -14,6 +14,8 @@ success; the controller then stops the robot.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import osqp
 import qpsolvers
@@ -29,8 +31,13 @@ PROXQP_EPS_ABS = 1e-9
 
 
 def _osqp_settings(cfg: QPConfig) -> dict:
-    return dict(eps_abs=cfg.eps_abs, eps_rel=cfg.eps_rel, max_iter=cfg.max_iter,
-                polishing=cfg.polish, verbose=False)
+    return dict(
+        eps_abs=cfg.eps_abs,
+        eps_rel=cfg.eps_rel,
+        max_iter=cfg.max_iter,
+        polishing=cfg.polish,
+        verbose=False,
+    )
 
 
 class PersistentOSQP:
@@ -58,12 +65,19 @@ class PersistentOSQP:
         rows_p = [r for j in range(n) for r in range(j + 1)]
         cols_p = [j for j in range(n) for _ in range(j + 1)]
         self._p_idx = np.array(rows_p) * n + np.array(cols_p)
-        a_rows = [[j] + list(range(n, n + m)) for j in range(n)]
+        a_rows = [[j, *range(n, n + m)] for j in range(n)]
         self._a_idx = np.array([r * n + j for j in range(n) for r in a_rows[j]])
         P = sp.csc_matrix((np.ones(len(rows_p)), (rows_p, cols_p)), shape=(n, n))
-        A = sp.csc_matrix((np.ones(len(self._a_idx)),
-                           ([r for j in range(n) for r in a_rows[j]],
-                            [j for j in range(n) for _ in a_rows[j]])), shape=(n + m, n))
+        A = sp.csc_matrix(
+            (
+                np.ones(len(self._a_idx)),
+                (
+                    [r for j in range(n) for r in a_rows[j]],
+                    [j for j in range(n) for _ in a_rows[j]],
+                ),
+            ),
+            shape=(n + m, n),
+        )
         self._M = np.zeros((n + m, n))
         self._M[:n] = np.eye(n)
         self._l = np.full(n + m, -np.inf)
@@ -79,26 +93,35 @@ class PersistentOSQP:
         # rebuilds an info namespace per solve and caches data for derivatives per update):
         # where the compiled solver object offers the calls that layer makes, use them.
         native = getattr(self._solver, "_solver", None)
-        self._native = native if all(hasattr(native, a) for a in
-                                     ("update_data_vec", "update_data_mat", "solve", "info",
-                                      "solution")) else None
+        self._native = (
+            native
+            if all(
+                hasattr(native, a)
+                for a in ("update_data_vec", "update_data_mat", "solve", "info", "solution")
+            )
+            else None
+        )
 
     def solve(self, prob: QPProblem) -> QPSolution:
         n, inf = self.n, self._infinity
         self._M[n:] = prob.G
         self._l[:n], self._u[:n], self._u[n:] = prob.lb, prob.ub, prob.h
-        l, u = np.maximum(self._l, -inf), np.minimum(self._u, inf)
+        lower, upper = np.maximum(self._l, -inf), np.minimum(self._u, inf)
         # OSQP rejects l > u (or a non-convex P) in an update by keeping the *previous*
         # data, after which solve() reports "solved" for that old problem: never let it.
-        if np.any(l > u):
-            k = int(np.argmax(l > u))
-            return QPSolution(None, False, f"infeasible bounds: l > u in row {k} "
-                                           f"({l[k]:.4g} > {u[k]:.4g})")
+        if np.any(lower > upper):
+            k = int(np.argmax(lower > upper))
+            return QPSolution(
+                None,
+                False,
+                f"infeasible bounds: l > u in row {k} ({lower[k]:.4g} > {upper[k]:.4g})",
+            )
         Px, Ax = prob.H.ravel()[self._p_idx], self._M.ravel()[self._a_idx]
         if self._native is not None:
             s = self._native
-            flag = s.update_data_vec(q=prob.c, l=l, u=u) or s.update_data_mat(
-                P_x=Px, P_i=None, A_x=Ax, A_i=None)
+            flag = s.update_data_vec(q=prob.c, l=lower, u=upper) or s.update_data_mat(
+                P_x=Px, P_i=None, A_x=Ax, A_i=None
+            )
             if flag:
                 return QPSolution(None, False, f"OSQP rejected the update (exit flag {flag})")
             s.solve()
@@ -109,13 +132,18 @@ class PersistentOSQP:
             # The public update() discards OSQP's exit flag: check convexity here instead.
             if not _convex(prob.H):
                 return QPSolution(None, False, "the cost is not convex (or not finite)")
-            self._solver.update(q=prob.c, l=l, u=u, Px=Px, Ax=Ax)
+            self._solver.update(q=prob.c, l=lower, u=upper, Px=Px, Ax=Ax)
             res = self._solver.solve(raise_error=False)
-            status_val, status, iters, x = res.info.status_val, res.info.status, res.info.iter, res.x
+            status_val, status, iters, x = (
+                res.info.status_val,
+                res.info.status,
+                res.info.iter,
+                res.x,
+            )
         found = status_val == self._solved
         return QPSolution(np.array(x) if found else None, found, str(status), int(iters))
 
-    def update_settings(self, **settings) -> None:
+    def update_settings(self, **settings: Any) -> None:
         """Change OSQP settings (e.g. ``max_iter``) of the live problem."""
         self._solver.update_settings(**settings)
 
@@ -128,9 +156,12 @@ class QPSolversBackend:
 
     def __init__(self, solver: str, cfg: QPConfig):
         if solver not in qpsolvers.available_solvers:
-            raise SolverError(f"QP solver {solver!r} is not installed; available: "
-                              f"{sorted(qpsolvers.available_solvers)}", solver=solver,
-                              status="not installed")
+            raise SolverError(
+                f"QP solver {solver!r} is not installed; available: "
+                f"{sorted(qpsolvers.available_solvers)}",
+                solver=solver,
+                status="not installed",
+            )
         self.name, self._qpsolvers = solver, qpsolvers
         self._settings = _osqp_settings(cfg) if solver == "osqp" else {}
         if solver == "proxqp":
@@ -139,32 +170,35 @@ class QPSolversBackend:
     def solve(self, prob: QPProblem) -> QPSolution:
         keep = np.isfinite(prob.h)
         H, G = prob.H, prob.G[keep]
-        if self.name == "osqp":          # it wants sparse matrices (and warns otherwise)
+        if self.name == "osqp":  # it wants sparse matrices (and warns otherwise)
             H, G = sp.csc_matrix(H), sp.csc_matrix(G)
         problem = self._qpsolvers.Problem(H, prob.c, G, prob.h[keep], lb=prob.lb, ub=prob.ub)
         try:
             sol = self._qpsolvers.solve_problem(problem, solver=self.name, **self._settings)
-        except Exception as exc:   # a solver's own failure must stop the robot, not crash
+        except Exception as exc:  # a solver's own failure must stop the robot, not crash
             return QPSolution(None, False, f"{type(exc).__name__}: {exc}")
-        found = bool(sol.found) and sol.x is not None and np.all(np.isfinite(sol.x))
+        found = bool(sol.found) and sol.x is not None and bool(np.all(np.isfinite(sol.x)))
         return QPSolution(sol.x if found else None, found, "solved" if found else "not solved")
 
 
-def make_backend(cfg: QPConfig, n: int, m: int):
+def make_backend(cfg: QPConfig, n: int, m: int) -> PersistentOSQP | QPSolversBackend:
     """The backend named by ``cfg.backend``."""
     if cfg.backend == "persistent":
         return PersistentOSQP(n, m, cfg)
     if cfg.backend == "qpsolvers":
         return QPSolversBackend(cfg.solver, cfg)
-    raise SolverError(f"unknown QP backend {cfg.backend!r}; choose 'persistent' or 'qpsolvers'",
-                      solver=cfg.backend, status="unknown backend")
+    raise SolverError(
+        f"unknown QP backend {cfg.backend!r}; choose 'persistent' or 'qpsolvers'",
+        solver=cfg.backend,
+        status="unknown backend",
+    )
 
 
 def _convex(H: np.ndarray) -> bool:
     """True if ``H`` is finite and positive semidefinite (to -1e-9); never raises."""
-    if not np.isfinite(H).all():       # eigvalsh returns garbage (or raises) on NaN
+    if not np.isfinite(H).all():  # eigvalsh returns garbage (or raises) on NaN
         return False
     try:
         return bool(np.linalg.eigvalsh(H).min() >= -1e-9)
-    except np.linalg.LinAlgError:      # did not converge
+    except np.linalg.LinAlgError:  # did not converge
         return False

@@ -57,9 +57,14 @@ class QPController(Controller):
 
     name = "qp"
 
-    def __init__(self, robot: Robot, path: ArcPath | None = None,
-                 config: ControllerConfig | None = None, human: KinectHuman | None = None,
-                 qp: QPConfig | None = None):
+    def __init__(
+        self,
+        robot: Robot,
+        path: ArcPath | None = None,
+        config: ControllerConfig | None = None,
+        human: KinectHuman | None = None,
+        qp: QPConfig | None = None,
+    ):
         super().__init__(robot, path, config, human)
         self.qp = qp or QPConfig()
         w, cfg = self.qp, self.config
@@ -69,20 +74,30 @@ class QPController(Controller):
         self.ee_task = EndEffectorTask(x, w.weight_position, w.weight_orientation)
         pieces: list[QPPiece] = [
             self.ee_task,
-            L2RepulsionTask(x, w.weight_repulsion, self.i_L2, self.K, cfg.sigma_min,
-                            cfg.lambda_max),
+            L2RepulsionTask(
+                x, w.weight_repulsion, self.i_L2, self.K, cfg.sigma_min, cfg.lambda_max
+            ),
             EERepulsionTask(x, w.weight_repulsion),
             Regularization(x, w.regularization),
         ]
         if w.elbow_weight > 0:
-            elbow = robot.sets[self.i_L1].points[-1]          # A4, where L1 meets L2
+            elbow = robot.sets[self.i_L1].points[-1]  # A4, where L1 meets L2
             radii = np.where(self.human.point_part, self.human.sphere_radii, 0.0).max(axis=1)
-            pieces.append(ElbowClearanceTask(x, elbow, robot.sphere_radii[elbow], radii,
-                                             w.elbow_weight, w.elbow_influence_m,
-                                             w.elbow_speed_mps))
+            pieces.append(
+                ElbowClearanceTask(
+                    x,
+                    elbow,
+                    robot.sphere_radii[elbow],
+                    radii,
+                    w.elbow_weight,
+                    w.elbow_influence_m,
+                    w.elbow_speed_mps,
+                )
+            )
         pieces += [
-            VelocityDamper(x, d_stop, w.damper_influence_m, w.damper_gain_mps,
-                           len(self.human.parts)),
+            VelocityDamper(
+                x, d_stop, w.damper_influence_m, w.damper_gain_mps, len(self.human.parts)
+            ),
             VelocityLimit(x),
             PositionLimit(x, robot.q_min, robot.q_max, w.position_limit_gain),
         ]
@@ -98,18 +113,28 @@ class QPController(Controller):
         sol = self.backend.solve(prob)
         info = {"solver": self.backend.name, "status": sol.status, "iterations": sol.iterations}
         if not sol.found or sol.x is None:
-            return self.command(tick, None, reason=f"QP not solved ({self.backend.name}: "
-                                f"{sol.status})", info=info)
+            return self.command(
+                tick, None, reason=f"QP not solved ({self.backend.name}: {sol.status})", info=info
+            )
         x, dq = sol.x, self.variables.dq
         # Hard rows, checked against the problem we meant to solve: a solution that breaks
         # a bound or a damper by more than the solver's tolerance is never applied; within
         # it, the bounds (joint limits) are then met exactly.
         lb, ub = prob.lb[dq], prob.ub[dq]
         damper = prob.rows[VelocityDamper.name]
-        excess = max(float(np.max(lb - x[dq])), float(np.max(x[dq] - ub)),
-                     float(np.max(prob.G[damper] @ x - prob.h[damper], initial=-np.inf)))
+        excess = max(
+            float(np.max(lb - x[dq])),
+            float(np.max(x[dq] - ub)),
+            float(np.max(prob.G[damper] @ x - prob.h[damper], initial=-np.inf)),
+        )
         if excess > FEASIBILITY_TOL:
-            return self.command(tick, None, reason=f"QP solution breaks a hard constraint by "
-                                f"{excess:.2e} ({self.backend.name}: {sol.status})", info=info)
-        return self.command(tick, np.clip(x[dq], lb, ub), 1.0, tick.v_rep_L2, tick.v_rep_EE,
-                            info=info)
+            return self.command(
+                tick,
+                None,
+                reason=f"QP solution breaks a hard constraint by "
+                f"{excess:.2e} ({self.backend.name}: {sol.status})",
+                info=info,
+            )
+        return self.command(
+            tick, np.clip(x[dq], lb, ub), 1.0, tick.v_rep_L2, tick.v_rep_EE, info=info
+        )

@@ -29,7 +29,7 @@ class EndEffectorTask(QPPiece):
 
     def __init__(self, variables: Variables, weight_position: float, weight_orientation: float):
         self.variables = variables
-        self.w2 = np.r_[[weight_position ** 2] * 3, [weight_orientation ** 2] * 3]
+        self.w2 = np.r_[[weight_position**2] * 3, [weight_orientation**2] * 3]
 
     @staticmethod
     def target(tick: Tick) -> np.ndarray:
@@ -42,6 +42,7 @@ class EndEffectorTask(QPPiece):
         assert tick is not None
         n, dq = self.variables.n, self.variables.dq
         J = tick.kin.ee_jacobian
+        assert J is not None  # a tick's kinematics carry the Jacobians
         JW = J.T * self.w2
         H, c = np.zeros((n, n)), np.zeros(n)
         H[dq, dq] = 2.0 * JW @ J

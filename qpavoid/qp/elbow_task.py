@@ -37,9 +37,17 @@ class ElbowClearanceTask(QPPiece):
 
     name = "elbow_task"
 
-    def __init__(self, variables: Variables, point: int, robot_radius_m: float,
-                 human_radii_m: np.ndarray, weight: float, influence_m: float, speed_mps: float,
-                 alpha: float = 9.0):
+    def __init__(
+        self,
+        variables: Variables,
+        point: int,
+        robot_radius_m: float,
+        human_radii_m: np.ndarray,
+        weight: float,
+        influence_m: float,
+        speed_mps: float,
+        alpha: float = 9.0,
+    ):
         self.variables, self.point, self.weight = variables, point, weight
         self.radii = robot_radius_m + np.asarray(human_radii_m, dtype=float)
         self.rho, self.speed, self.alpha = influence_m, speed_mps, alpha
@@ -62,7 +70,8 @@ class ElbowClearanceTask(QPPiece):
         if not np.isfinite(d):
             return Objective(H, c)
         v = self.speed * float(logistic(d, self.rho, self.alpha))
-        a = n @ tick.kin.point_jacobians[self.point]                          # (nv,)
+        assert tick.kin.point_jacobians is not None  # a tick's kinematics carry the Jacobians
+        a = n @ tick.kin.point_jacobians[self.point]  # (nv,)
         H[dq, dq] = 2.0 * self.weight * np.outer(a, a)
         c[dq] = -2.0 * self.weight * v * a
         return Objective(H, c)

@@ -27,8 +27,7 @@ class PositionLimit(QPPiece):
 
     name = "position_limits"
 
-    def __init__(self, variables: Variables, q_min: np.ndarray, q_max: np.ndarray,
-                 gain: float):
+    def __init__(self, variables: Variables, q_min: np.ndarray, q_max: np.ndarray, gain: float):
         self.variables = variables
         self.q_min, self.q_max, self.gain = q_min, q_max, gain
 

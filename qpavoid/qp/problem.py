@@ -104,7 +104,9 @@ class Assembler:
         self._bounds = [p for p in self.pieces if not p.constant_bounds]
         self._rows = [p for p in self.pieces if p.rows]
         offsets = np.cumsum([0] + [p.rows for p in self._rows]).tolist()
-        self.rows = {p.name: slice(a, b) for p, a, b in zip(self._rows, offsets, offsets[1:])}
+        self.rows = {
+            p.name: slice(a, b) for p, a, b in zip(self._rows, offsets, offsets[1:], strict=False)
+        }
         self.m = offsets[-1]
 
     def __call__(self, tick: Tick, dt: float) -> QPProblem:

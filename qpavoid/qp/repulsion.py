@@ -106,8 +106,15 @@ class L2RepulsionTask(RepulsionTask):
 
     name = "repulsion_L2"
 
-    def __init__(self, variables: Variables, weight: float, set_index: int, K: np.ndarray,
-                 sigma_min: float, lambda_max: float):
+    def __init__(
+        self,
+        variables: Variables,
+        weight: float,
+        set_index: int,
+        K: np.ndarray,
+        sigma_min: float,
+        lambda_max: float,
+    ):
         super().__init__(variables, weight)
         self.set_index, self.K = set_index, K
         self.sigma_min, self.lambda_max = sigma_min, lambda_max
@@ -117,8 +124,16 @@ class L2RepulsionTask(RepulsionTask):
 
     def motion(self, tick: Tick) -> tuple[np.ndarray, np.ndarray]:
         Jp = tick.table.robot_jacobian(tick.kin, self.set_index, tick.L2_part)
-        dq8 = modified_ik(tick.kin.ee_jacobian, tick.ref_twist, self.K, tick.error,
-                          tick.v_rep_EE, self.sigma_min, self.lambda_max)          # eq. (8)
+        assert tick.kin.ee_jacobian is not None  # a tick's kinematics carry the Jacobians
+        dq8 = modified_ik(
+            tick.kin.ee_jacobian,
+            tick.ref_twist,
+            self.K,
+            tick.error,
+            tick.v_rep_EE,
+            self.sigma_min,
+            self.lambda_max,
+        )  # eq. (8)
         return Jp, Jp @ dq8
 
 
@@ -131,4 +146,5 @@ class EERepulsionTask(RepulsionTask):
         return tick.v_rep_EE
 
     def motion(self, tick: Tick) -> tuple[np.ndarray, np.ndarray]:
+        assert tick.kin.ee_jacobian is not None
         return tick.kin.ee_jacobian[:3], tick.task_twist[:3]

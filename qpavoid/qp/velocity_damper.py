@@ -40,8 +40,14 @@ class VelocityDamper(QPPiece):
 
     name = "velocity_damper"
 
-    def __init__(self, variables: Variables, d_stop: np.ndarray, influence_m: float,
-                 gain_mps: float, n_parts: int):
+    def __init__(
+        self,
+        variables: Variables,
+        d_stop: np.ndarray,
+        influence_m: float,
+        gain_mps: float,
+        n_parts: int,
+    ):
         self.variables = variables
         self.d_stop = np.repeat(np.asarray(d_stop, dtype=float), n_parts)
         self.influence_m, self.gain = influence_m, gain_mps
@@ -55,15 +61,10 @@ class VelocityDamper(QPPiece):
         h = np.full(self.rows, np.inf)
         active = np.flatnonzero(d < self.influence_m)
         if len(active):
-            S, K = table.distance.shape
-            i, j = np.divmod(active, K)
-            if table.method == "spheres":
-                Jp = kin.point_jacobians[table.robot_index.ravel()[active]]
-            else:
-                s = table.robot_s.ravel()[active][:, None, None]                      # capsules
-                Jp = (1.0 - s) * kin.segment_jacobians[i, 0] + s * kin.segment_jacobians[i, 1]
-            n = table.vector.reshape(-1, 3)[active]
-            G[active, self.variables.dq] = -np.einsum("ak,akv->av", n, Jp)
+            sets, parts = np.divmod(active, table.distance.shape[1])
+            Jp = table.robot_jacobians(kin, sets, parts)  # (A, 3, nv)
+            normal = table.vector.reshape(-1, 3)[active]
+            G[active, self.variables.dq] = -np.einsum("ak,akv->av", normal, Jp)
             ds = self.d_stop[active]
             h[active] = self.gain * (d[active] - ds) / (self.influence_m - ds)
         return Constraint(G, h)
