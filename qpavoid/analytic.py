@@ -9,7 +9,7 @@ import numpy as np
 from .controller import Command, Controller, ControllerConfig, Tick, joint_columns
 from .errors import InputError
 from .human import KinectHuman
-from .laws import l2_joint_velocity, modified_ik
+from .laws import l2_joint_velocity
 from .robot import Robot
 from .task import ArcPath
 
@@ -103,16 +103,7 @@ class AnalyticController(Controller):
         if tick.v_rep_L2.any():
             J_L2 = tick.table.robot_jacobian(tick.kin, self.i_L2, tick.L2_part)[:, self.l2_cols]
             dq_L2 = l2_joint_velocity(J_L2, tick.v_rep_L2, cfg.sigma_min, cfg.lambda_max)  # (6)
-        assert tick.kin.ee_jacobian is not None  # a tick's kinematics carry the Jacobians
-        dq = modified_ik(
-            tick.kin.ee_jacobian,
-            tick.ref_twist,
-            self.K,
-            tick.error,
-            tick.v_rep_EE,
-            cfg.sigma_min,
-            cfg.lambda_max,
-        )  # eq. (8)
+        dq = self.task_joint_velocities(tick)  # eq. (8)
         dq[self.l2_cols] += dq_L2  # eq. (9)
         dq, scale = enforce_limits(dq, tick.limits, self.analytic.limit_mode)  # eq. (3)
         return self.command(tick, dq, scale, tick.v_rep_L2, tick.v_rep_EE)

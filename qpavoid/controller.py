@@ -26,6 +26,7 @@ from .human import HumanGeometry, KinectHuman
 from .laws import (
     ee_repulsive_velocity,
     l1_factor,
+    modified_ik,
     repulsive_velocity,
     scaled_velocity_limits,
     stop_reason,
@@ -139,6 +140,20 @@ class Controller:
             error,
             ref_twist + self.K * error,
             reason,
+        )
+
+    def task_joint_velocities(self, tick: Tick) -> np.ndarray:
+        """Eq. (8): ``q̇ = J⁻¹ (v_PL + K e + v_EE)``, damped near singularities, rad/s (nv,)."""
+        assert tick.kin.ee_jacobian is not None  # a tick's kinematics carry the Jacobians
+        cfg = self.config
+        return modified_ik(
+            tick.kin.ee_jacobian,
+            tick.ref_twist,
+            self.K,
+            tick.error,
+            tick.v_rep_EE,
+            cfg.sigma_min,
+            cfg.lambda_max,
         )
 
     def command(

@@ -74,9 +74,7 @@ class QPController(Controller):
         self.ee_task = EndEffectorTask(x, w.weight_position, w.weight_orientation)
         pieces: list[QPPiece] = [
             self.ee_task,
-            L2RepulsionTask(
-                x, w.weight_repulsion, self.i_L2, self.K, cfg.sigma_min, cfg.lambda_max
-            ),
+            L2RepulsionTask(x, w.weight_repulsion, self.i_L2, self.task_joint_velocities),
             EERepulsionTask(x, w.weight_repulsion),
             Regularization(x, w.regularization),
         ]

@@ -19,10 +19,11 @@ against other constraints. The row is always present (fixed structure); below
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from ..controller import Tick
-from ..laws import modified_ik
 from .pieces import Bounds, Constraint, Objective, QPPiece, free_bounds, readonly
 from .variables import Variables
 
@@ -100,8 +101,9 @@ class L2RepulsionTask(RepulsionTask):
         As for :class:`RepulsionTask`.
     set_index
         Row of L2 in the distance table.
-    K, sigma_min, lambda_max
-        Eq. (8)'s gain and damped inverse, for the point's nominal velocity J_p q̇₈.
+    task_joint_velocities
+        Eq. (8)'s joint velocities q̇₈ of a tick (the controller's), for the point's
+        nominal velocity J_p q̇₈.
     """
 
     name = "repulsion_L2"
@@ -111,30 +113,17 @@ class L2RepulsionTask(RepulsionTask):
         variables: Variables,
         weight: float,
         set_index: int,
-        K: np.ndarray,
-        sigma_min: float,
-        lambda_max: float,
+        task_joint_velocities: Callable[[Tick], np.ndarray],
     ):
         super().__init__(variables, weight)
-        self.set_index, self.K = set_index, K
-        self.sigma_min, self.lambda_max = sigma_min, lambda_max
+        self.set_index, self.task_joint_velocities = set_index, task_joint_velocities
 
     def velocity(self, tick: Tick) -> np.ndarray:
         return tick.v_rep_L2
 
     def motion(self, tick: Tick) -> tuple[np.ndarray, np.ndarray]:
         Jp = tick.table.robot_jacobian(tick.kin, self.set_index, tick.L2_part)
-        assert tick.kin.ee_jacobian is not None  # a tick's kinematics carry the Jacobians
-        dq8 = modified_ik(
-            tick.kin.ee_jacobian,
-            tick.ref_twist,
-            self.K,
-            tick.error,
-            tick.v_rep_EE,
-            self.sigma_min,
-            self.lambda_max,
-        )  # eq. (8)
-        return Jp, Jp @ dq8
+        return Jp, Jp @ self.task_joint_velocities(tick)  # J_p q̇₈, eq. (8)
 
 
 class EERepulsionTask(RepulsionTask):
