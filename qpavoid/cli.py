@@ -24,6 +24,7 @@ from .compare import compare
 from .errors import QpavoidError
 from .io import check_output_dir
 from .jobs import progress_bar
+from .metrics import describe
 from .recording import load_recording
 from .runs import CONTROLLERS, DISTANCES, LIMIT_MODES, RunSpec, run_one
 from .scenarios import SCENARIOS
@@ -200,6 +201,13 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         metavar="HZ",
         help="control rate, Hz (30 to 10000)",
     )
+    p.add_argument(
+        "--goal-tolerance",
+        type=positive_float,
+        default=1e-3,
+        metavar="M",
+        help="the goal counts as reached within this end-effector error, m",
+    )
     p.add_argument("--no-plots", action="store_true", help="do not write the figures")
     p.add_argument(
         "--robot",
@@ -224,6 +232,7 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
         robot=args.robot,
         solver=args.solver,
         redundant=args.redundant,
+        goal_tolerance_m=args.goal_tolerance,
     )
     out = Path(args.out or Path("runs") / spec.label.replace(":", "-"))
     check_output_dir(out)
@@ -235,7 +244,7 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
             bar.update(t - bar.n)
 
         m = run_one(spec, out, plots=not args.no_plots, progress=advance)
-    lines = [summary(m)]
+    lines = [describe(m)]
     if m.get("plots_skipped"):
         lines.append(f"  figures skipped: {m['plots_skipped']}")
     figures = f" and {len(m['plots'])} figures" if m["plots"] else ""
@@ -258,25 +267,6 @@ def _compare(args: argparse.Namespace) -> str:
         progress=not args.quiet,
     )
     return f"{table}\nwrote compare.json, compare.md and the plots to {args.out}/"
-
-
-def summary(m: dict) -> str:
-    """A run's metrics as a few readable lines."""
-    stops = "; ".join(f"{e['t']:.2f} s: {e['reason']}" for e in m["stop_events"]) or "none"
-    md = m["min_distance_m"]
-    return (
-        f"{m['scenario']}: controller {m['controller']}, distances {m['distance_method']}\n"
-        f"  reached goal {m['reached_goal']} in {m['duration_s']:.2f} s "
-        f"(final error {m['final_position_error_m'] * 1e3:.3f} mm)\n"
-        f"  path error rms {m['rms_path_error_m'] * 1e3:.3f} mm, "
-        f"max {m['max_path_error_m'] * 1e3:.3f} mm\n"
-        f"  min distance spheres {md['spheres']:.4f} m, capsules {md['capsules']:.4f} m, "
-        f"max f {m['max_f']:.3f}\n"
-        f"  stopped {m['stopped_s']:.2f} s, stops: {stops}\n"
-        f"  tick {m['tick_us']['median']:.0f} us median, {m['tick_us']['p99']:.0f} us p99; "
-        f"limit violations: velocity {m['joint_velocity_limit_violations']}, "
-        f"position {m['joint_position_limit_violations']}"
-    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -2,7 +2,7 @@
 
 ``log.npz`` holds the per-tick arrays of :func:`qpavoid.simulation.simulate` (row k is
 the state at ``t[k]`` and the command computed from it). ``metrics.json`` holds the
-run's summary (:func:`qpavoid.simulation.run_metrics`). Recorded human motion is read by
+run's summary (:func:`qpavoid.metrics.run_metrics`). Recorded human motion is read by
 :mod:`qpavoid.recording`.
 """
 

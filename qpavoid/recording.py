@@ -125,6 +125,14 @@ class Recording:
             )
         return index
 
+    def capture_time_at(self, time_s: float) -> float:
+        """Capture time (s, on the clock of ``t``) of the frame shown at ``time_s``.
+
+        A frame's age is ``time_s`` minus this: after a gap in the recording, or once it
+        has ended, the frame shown grows old and a controller stops on it.
+        """
+        return float(self.t[self.index_at(time_s)])
+
     def frame_at(self, time_s: float) -> HumanFrame:
         """Joints and states shown at ``time_s``: the last frame with ``t <= time_s``.
 

@@ -113,6 +113,9 @@ class RunSpec:
         OSQP problem.
     redundant
         QP only: free A3 (7 joints) and keep the elbow away from the person.
+    goal_tolerance_m
+        The goal counts as reached within this end-effector position error, m (default
+        1 mm). A run that ends short of it says why (``end_reason``, ``held_by_person``).
     """
 
     scenario: str | None = None
@@ -125,6 +128,7 @@ class RunSpec:
     robot: str = "iiwa14"
     solver: str | None = None
     redundant: bool = False
+    goal_tolerance_m: float = 1e-3
 
     def __post_init__(self) -> None:
         if self.scenario is None and self.human_file is None:
@@ -146,6 +150,7 @@ class RunSpec:
         check_choice("limit mode", self.limit_mode, LIMIT_MODES)
         check_range("the run's cap (--max-time)", self.max_time_s, *MAX_TIME_RANGE_S, "s")
         check_range("the control rate (--rate)", self.rate_hz, *RATE_RANGE_HZ, "Hz")
+        check_range("the goal tolerance (--goal-tolerance)", self.goal_tolerance_m, 1e-6, 1.0, "m")
         if self.controller != "qp":
             for flag, given in (("--solver", self.solver), ("--redundant", self.redundant)):
                 if given:
@@ -230,7 +235,11 @@ def simulate_one(
     sim = simulate(
         controller,
         motion,
-        SimConfig(control_rate_hz=spec.rate_hz, max_time_s=spec.max_time_s),
+        SimConfig(
+            control_rate_hz=spec.rate_hz,
+            max_time_s=spec.max_time_s,
+            goal_tolerance_m=spec.goal_tolerance_m,
+        ),
         progress=progress,
     )
     metrics = dict(sim.metrics)

@@ -4,7 +4,10 @@ The control loop runs at ``control_rate_hz`` (default 500 Hz) and integrates the
 commanded joint velocities (explicit Euler: ``q[k+1] = q[k] + dq[k] · dt``, the robot
 follows its velocity command exactly). Human frames arrive at ``frame_rate_hz`` (30 Hz):
 at time t the controller sees the frame taken at ``floor(t · 30) / 30`` (sample and hold,
-never a frame from the future; after a recording's last frame the person holds that pose).
+never a frame from the future), together with its true age: now minus its capture time. For
+a recording the capture time is the recording's own, so during a gap in the recording, and
+once it has ended, the frame in hand grows old and the controller stops on it (it resumes
+only on a fresh frame).
 
 The path has its own clock τ. It advances at the rate the controller returns
 (``Command.time_scale``): 0 while stopped, so resuming causes no jump, and the factor by
@@ -25,7 +28,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -33,7 +36,7 @@ import pinocchio as pin
 from .controller import Controller
 from .distances import distance_method
 from .frames import N_KINECT_JOINTS, HumanFrame
-from .robot import Robot
+from .metrics import end_of_run, run_metrics
 from .task import inverse_kinematics
 
 
@@ -77,17 +80,24 @@ class SimResult:
     metrics: dict = field(default_factory=dict)
 
 
-def _frame_source(motion: HumanMotion) -> Callable[[float], HumanFrame]:
-    """``f(t)`` giving the motion's frame at run time t, recordings replayed from t[0].
+def _frame_source(motion: HumanMotion) -> Callable[[float], tuple[HumanFrame, float]]:
+    """``f(t)``: the motion's frame at run time t and its capture time (run clock, s).
 
-    A motion that returns plain ``(joints, state)`` has its frames checked here, where
-    they enter the library; a :class:`HumanFrame` (a recording's) was checked already.
+    Recordings are replayed from their first frame ``t[0]``; a frame's capture time is the
+    recording's (so after a gap, or once the recording has ended, the frame in hand grows
+    old); a generated motion is captured when it is sampled. A motion that returns plain
+    ``(joints, state)`` has its frames checked here, where they enter the library; a
+    :class:`HumanFrame` (a recording's) was checked already.
     """
     t0 = float(np.asarray(getattr(motion, "t", [0.0]))[0])
+    capture_time_at = getattr(motion, "capture_time_at", None)
 
-    def frame_at(t: float) -> HumanFrame:
+    def frame_at(t: float) -> tuple[HumanFrame, float]:
         frame = motion.frame_at(t0 + t)
-        return frame if isinstance(frame, HumanFrame) else HumanFrame.check(*frame)
+        captured = t if capture_time_at is None else capture_time_at(t0 + t) - t0
+        if not isinstance(frame, HumanFrame):
+            frame = HumanFrame.check(*frame)
+        return frame, captured
 
     return frame_at
 
@@ -123,7 +133,9 @@ def simulate(
         ``joints`` (T, 25, 3), ``state`` (T, 25), ``stopped`` (T,), ``f`` (T,),
         ``distance`` (T, 3) per set of the method in use, ``distance_other`` (T, 3) of the
         other method, ``v_rep_L2`` and ``v_rep_EE`` (T, 3), ``ee_pos`` and ``ee_ref`` (T, 3),
-        ``tau`` (T,) path clock, ``tick_us`` (T,) controller time per tick.
+        ``tau`` (T,) path clock, ``tick_us`` (T,) controller time per tick,
+        ``frame_age_s`` (T,) the age of the frame the controller was given (now minus its
+        capture time).
     """
     cfg = config or SimConfig()
     robot, path = controller.robot, controller.path
@@ -155,22 +167,24 @@ def simulate(
         "ee_ref": np.empty((n_max, 3)),
         "tau": np.empty(n_max),
         "tick_us": np.empty(n_max),
+        "frame_age_s": np.empty(n_max),
     }
     stop_events = []
     vel_violations = pos_violations = 0
     tau, was_stopped, frame_key = 0.0, False, None
     human: HumanFrame
+    captured_s = 0.0
     reached, n = False, 0
     for k in range(n_max):
         t = k * dt
         key = math.floor(t * cfg.frame_rate_hz + 1e-9)
         if key != frame_key:
             frame_key = key
-            human = frame(key / cfg.frame_rate_hz)
+            human, captured_s = frame(key / cfg.frame_rate_hz)
             if progress is not None:
                 progress(t)
         t0 = time.perf_counter_ns()
-        cmd = controller.step(q, human, None, tau, t - key / cfg.frame_rate_hz)
+        cmd = controller.step(q, human, None, tau, t - captured_s)  # the frame's true age
         tick_us = (time.perf_counter_ns() - t0) / 1e3
         other_table = other(robot.kinematics(q, jacobians=False), controller.geometry(human))
 
@@ -190,7 +204,7 @@ def simulate(
         log["distance"][k], log["distance_other"][k] = cmd.distance, other_table.min_per_set()
         log["v_rep_L2"][k], log["v_rep_EE"][k] = cmd.v_rep_L2, cmd.v_rep_EE
         log["ee_pos"][k], log["ee_ref"][k] = cmd.ee_pos, cmd.ee_ref
-        log["tau"][k], log["tick_us"][k] = tau, tick_us
+        log["tau"][k], log["tick_us"][k], log["frame_age_s"][k] = tau, tick_us, t - captured_s
         n = k + 1
 
         if tau >= path.duration_s and not cmd.stopped:
@@ -204,60 +218,24 @@ def simulate(
         tau = min(tau + cmd.time_scale * dt, path.duration_s)
 
     log = {key: v[:n] for key, v in log.items()}
+    ending = end_of_run(reached, cmd, robot, controller.config.avoidance, log, goal)
     return SimResult(
         log,
         run_metrics(
-            log, robot, goal, reached, stop_events, vel_violations, pos_violations, controller, cfg
-        ),
+            log,
+            robot,
+            goal,
+            reached,
+            stop_events,
+            vel_violations,
+            pos_violations,
+            controller.name,
+            controller.config.distance,
+            cfg.control_rate_hz,
+        )
+        | ending,
     )
 
 
 def _rot_err(A: np.ndarray, B: np.ndarray) -> float:
     return float(np.linalg.norm(pin.log3(A[:3, :3] @ B[:3, :3].T)))
-
-
-def run_metrics(
-    log: dict[str, np.ndarray],
-    robot: Robot,
-    goal: np.ndarray,
-    reached: bool,
-    stop_events: list[dict[str, Any]],
-    vel_violations: int,
-    pos_violations: int,
-    controller: Controller,
-    cfg: SimConfig,
-) -> dict[str, Any]:
-    """The summary of a run (the keys of ``metrics.json``)."""
-    dt = 1.0 / cfg.control_rate_hz
-    path_err = np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)
-    method = controller.config.distance
-    other = "capsules" if method == "spheres" else "spheres"
-    dmin = {method: float(np.min(log["distance"])), other: float(np.min(log["distance_other"]))}
-    tick = log["tick_us"]
-    final_err = float(np.linalg.norm(log["ee_pos"][-1] - goal[:3, 3]))
-    return {
-        "reached_goal": bool(reached),
-        "final_position_error_m": final_err,
-        "rms_path_error_m": float(np.sqrt(np.mean(path_err**2))),
-        "max_path_error_m": float(np.max(path_err)),
-        "duration_s": float(log["t"][-1]),
-        "stopped_s": float(np.count_nonzero(log["stopped"]) * dt),
-        "stop_events": stop_events,
-        "max_f": float(np.max(log["f"])),
-        "min_distance_m": {"spheres": dmin["spheres"], "capsules": dmin["capsules"]},
-        "min_distance_per_set_m": {
-            method: dict(
-                zip(robot.set_names, np.min(log["distance"], axis=0).tolist(), strict=True)
-            ),
-            other: dict(
-                zip(robot.set_names, np.min(log["distance_other"], axis=0).tolist(), strict=True)
-            ),
-        },
-        "joint_velocity_limit_violations": int(vel_violations),
-        "joint_position_limit_violations": int(pos_violations),
-        "tick_us": {"median": float(np.median(tick)), "p99": float(np.percentile(tick, 99))},
-        "controller": controller.name,
-        "distance_method": method,
-        "control_rate_hz": cfg.control_rate_hz,
-        "ticks": len(tick),
-    }

@@ -1,0 +1,135 @@
+"""The summary of a simulated run: the keys of ``metrics.json``.
+
+:func:`run_metrics` condenses a run's log (path error, distances, stops, limits, tick
+times); :func:`describe` puts them in a few lines of words; :func:`end_of_run` says why the
+run ended: the goal was reached, a person held the
+robot off its goal (``held_by_person``), the robot was stopped for another reason, or the
+time cap came first.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .laws import AvoidanceConfig
+from .robot import Robot
+from .tick import Command
+
+
+def end_of_run(
+    reached: bool,
+    last: Command,
+    robot: Robot,
+    avoidance: AvoidanceConfig,
+    log: dict[str, np.ndarray],
+    goal: np.ndarray,
+) -> dict[str, Any]:
+    """Why the run ended: ``end_reason`` and, if a person kept the robot off its goal,
+    ``held_by_person``.
+
+    A run that did not reach its goal was held by a person when, at its last tick, the
+    robot was stopped by one of the paper's rules or a robot set was within the repulsion's
+    reach of a body part (``rho_rep_m``): then ``held_by_person`` names the closest set and
+    part, their distance (m) and the remaining end-effector error (m). Otherwise it is None.
+    """
+    remaining = float(np.linalg.norm(log["ee_pos"][-1] - goal[:3, 3]))
+    if reached:
+        return {"end_reason": "goal reached", "held_by_person": None}
+    table = last.table
+    s, k = np.unravel_index(int(np.argmin(table.distance)), table.distance.shape)
+    closest = float(table.distance[s, k])
+    by_rule = last.stopped and last.reason.startswith(("f = ", "d_L2", "d_EE"))
+    if by_rule or closest < avoidance.rho_rep_m:
+        held = {
+            "set": robot.set_names[s],
+            "part": table.part_names[k],
+            "distance_m": closest,
+            "remaining_error_m": remaining,
+            "stopped": bool(last.stopped),
+        }
+        return {"end_reason": "held by person", "held_by_person": held}
+    reason = f"stopped: {last.reason}" if last.stopped else "time cap"
+    return {"end_reason": reason, "held_by_person": None}
+
+
+def run_metrics(
+    log: dict[str, np.ndarray],
+    robot: Robot,
+    goal: np.ndarray,
+    reached: bool,
+    stop_events: list[dict[str, Any]],
+    vel_violations: int,
+    pos_violations: int,
+    controller: str,
+    method: str,
+    control_rate_hz: float,
+) -> dict[str, Any]:
+    """The summary of a run (the keys of ``metrics.json``).
+
+    ``controller`` and ``method`` name the controller and its distance method;
+    ``control_rate_hz`` is the simulation's control rate.
+    """
+    dt = 1.0 / control_rate_hz
+    path_err = np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)
+    other = "capsules" if method == "spheres" else "spheres"
+    dmin = {method: float(np.min(log["distance"])), other: float(np.min(log["distance_other"]))}
+    tick = log["tick_us"]
+    final_err = float(np.linalg.norm(log["ee_pos"][-1] - goal[:3, 3]))
+    return {
+        "reached_goal": bool(reached),
+        "final_position_error_m": final_err,
+        "rms_path_error_m": float(np.sqrt(np.mean(path_err**2))),
+        "max_path_error_m": float(np.max(path_err)),
+        "duration_s": float(log["t"][-1]),
+        "stopped_s": float(np.count_nonzero(log["stopped"]) * dt),
+        "stop_events": stop_events,
+        "max_f": float(np.max(log["f"])),
+        "min_distance_m": {"spheres": dmin["spheres"], "capsules": dmin["capsules"]},
+        "min_distance_per_set_m": {
+            method: dict(
+                zip(robot.set_names, np.min(log["distance"], axis=0).tolist(), strict=True)
+            ),
+            other: dict(
+                zip(robot.set_names, np.min(log["distance_other"], axis=0).tolist(), strict=True)
+            ),
+        },
+        "joint_velocity_limit_violations": int(vel_violations),
+        "joint_position_limit_violations": int(pos_violations),
+        "tick_us": {"median": float(np.median(tick)), "p99": float(np.percentile(tick, 99))},
+        "controller": controller,
+        "distance_method": method,
+        "control_rate_hz": control_rate_hz,
+        "ticks": len(tick),
+    }
+
+
+def _ending(m: dict[str, Any]) -> str:
+    """How a run ended, in words."""
+    held = m.get("held_by_person")
+    if held:
+        return (
+            f"held by person: {held['part']} {held['distance_m']:.3f} m from {held['set']}, "
+            f"{held['remaining_error_m'] * 1e3:.1f} mm from the goal"
+        )
+    return str(m.get("end_reason", "goal reached" if m["reached_goal"] else "time cap"))
+
+
+def describe(m: dict[str, Any]) -> str:
+    """A run's metrics as a few readable lines."""
+    stops = "; ".join(f"{e['t']:.2f} s: {e['reason']}" for e in m["stop_events"]) or "none"
+    md = m["min_distance_m"]
+    return (
+        f"{m['scenario']}: controller {m['controller']}, distances {m['distance_method']}\n"
+        f"  reached goal {m['reached_goal']} in {m['duration_s']:.2f} s: {_ending(m)} "
+        f"(final error {m['final_position_error_m'] * 1e3:.3f} mm)\n"
+        f"  path error rms {m['rms_path_error_m'] * 1e3:.3f} mm, "
+        f"max {m['max_path_error_m'] * 1e3:.3f} mm\n"
+        f"  min distance spheres {md['spheres']:.4f} m, capsules {md['capsules']:.4f} m, "
+        f"max f {m['max_f']:.3f}\n"
+        f"  stopped {m['stopped_s']:.2f} s, stops: {stops}\n"
+        f"  tick {m['tick_us']['median']:.0f} us median, {m['tick_us']['p99']:.0f} us p99; "
+        f"limit violations: velocity {m['joint_velocity_limit_violations']}, "
+        f"position {m['joint_position_limit_violations']}"
+    )
