@@ -21,7 +21,7 @@ def recording_of(robot, times: np.ndarray) -> Recording:
 
 
 def test_a_gap_in_a_recording_stops_the_robot_until_frames_come_back(robot):
-    t = np.r_[np.arange(0.0, 3.0, 1 / 30), np.arange(4.0, 20.0, 1 / 30)]   # 1 s without frames
+    t = np.r_[np.arange(0.0, 3.0, 1 / 30), np.arange(4.0, 20.0, 1 / 30)]  # 1 s without frames
     for ctrl in (AnalyticController(robot), QPController(robot)):
         log = simulate(ctrl, recording_of(robot, t), SimConfig(control_rate_hz=RATE)).log
         age, moving = log["frame_age_s"], np.any(log["dq"] != 0, axis=1)
@@ -29,7 +29,7 @@ def test_a_gap_in_a_recording_stops_the_robot_until_frames_come_back(robot):
         # Within the gap the frame in hand is up to 1 s old: the robot holds still...
         gap = (log["t"] > 3.1) & (log["t"] < 4.0)
         assert stale[gap].all() and not moving[gap].any()
-        assert not (moving & stale).any()                  # never moves on an old frame
+        assert not (moving & stale).any()  # never moves on an old frame
         assert age[gap].max() > 0.9
         # ...and moves again on fresh frames, reaching the goal later.
         assert moving[log["t"] > 4.1].any()
@@ -39,17 +39,21 @@ def test_a_gap_in_a_recording_stops_the_robot_until_frames_come_back(robot):
 def test_a_recording_that_has_ended_is_stale(robot):
     """One frame, held: the robot stops once it is older than the limit, and stays stopped."""
     rec = recording_of(robot, np.array([0.0]))
-    log = simulate(AnalyticController(robot), rec, SimConfig(control_rate_hz=RATE,
-                                                             max_time_s=10.0)).log
+    log = simulate(
+        AnalyticController(robot), rec, SimConfig(control_rate_hz=RATE, max_time_s=10.0)
+    ).log
     moving = np.any(log["dq"] != 0, axis=1)
     assert not moving[log["t"] > 0.1 + 1e-9].any()
-    assert log["stopped"][-1] and log["t"][-1] >= 10.0 - 1e-9        # no goal on an old frame
+    assert log["stopped"][-1] and log["t"][-1] >= 10.0 - 1e-9  # no goal on an old frame
     np.testing.assert_allclose(log["frame_age_s"], log["t"])
 
 
 def test_generated_motions_are_always_fresh(robot):
-    log = simulate(AnalyticController(robot), make_scenario("free", robot),
-                   SimConfig(control_rate_hz=RATE, max_time_s=2.0)).log
+    log = simulate(
+        AnalyticController(robot),
+        make_scenario("free", robot),
+        SimConfig(control_rate_hz=RATE, max_time_s=2.0),
+    ).log
     assert log["frame_age_s"].max() < 1 / 30 + 1e-9
 
 
@@ -63,13 +67,13 @@ def test_a_person_holding_the_robot_off_its_goal_is_named(robot):
     hand = op.reach(op.rest(), "right", goal + np.array([0.0, 0.11, 0.0]))
     t = np.arange(0.0, 25.0, 1 / 30)
     rec = Recording(t, np.repeat(hand[None], len(t), axis=0), np.full((len(t), 25), 2))
-    run = simulate(AnalyticController(robot), rec, SimConfig(control_rate_hz=RATE,
-                                                             max_time_s=24.0))
+    run = simulate(AnalyticController(robot), rec, SimConfig(control_rate_hz=RATE, max_time_s=24.0))
     m = run.metrics
     assert not m["reached_goal"] and m["end_reason"] == "held by person"
     held = m["held_by_person"]
     assert held["part"] in ("right_hand", "right_forearm") and held["set"] in ("EE", "L2")
     assert 0.0 < held["distance_m"] < 0.2 and held["remaining_error_m"] > 1e-3
-    free = simulate(AnalyticController(robot), make_scenario("free", robot),
-                    SimConfig(control_rate_hz=RATE)).metrics
+    free = simulate(
+        AnalyticController(robot), make_scenario("free", robot), SimConfig(control_rate_hz=RATE)
+    ).metrics
     assert free["end_reason"] == "goal reached" and free["held_by_person"] is None

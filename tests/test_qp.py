@@ -26,11 +26,19 @@ from qpavoid.task import ArcPath, inverse_kinematics
 SOLVER_TOL = 1e-5
 
 
-def test_nobody_near_qp_equals_analytic_at_every_tick(robot):
+@pytest.mark.parametrize(
+    "rate_hz", [100.0, pytest.param(500.0, marks=pytest.mark.slow)], ids=["100Hz", "500Hz"]
+)
+def test_nobody_near_qp_equals_analytic_at_every_tick(robot, rate_hz):
     """In `free` both controllers solve eq. (8): same command within 1e-4 rad/s."""
-    result = simulate(QPController(robot), make_scenario("free", robot))
+    cfg = ControllerConfig(control_period_s=1.0 / rate_hz)
+    result = simulate(
+        QPController(robot, config=cfg),
+        make_scenario("free", robot),
+        SimConfig(control_rate_hz=rate_hz),
+    )
     log = result.log
-    analytic = AnalyticController(robot)
+    analytic = AnalyticController(robot, config=cfg)
     worst = 0.0
     for k in range(len(log["t"])):
         cmd = analytic.step(log["q"][k], log["joints"][k], log["state"][k], log["tau"][k])
@@ -71,10 +79,10 @@ def _assert_sweep_safe(n: int, distance: str, min_stopping: int) -> None:
 
 
 @pytest.mark.parametrize("distance", ["spheres", "capsules"])
-def test_safety_over_12_random_approaches(distance):
-    """The default suite's sweep: the first 12 seeds (12 stop the robot with spheres, 11 with
-    capsules, coming within 0.5 mm of the L2 and EE capsule thresholds)."""
-    _assert_sweep_safe(12, distance, min_stopping=10)
+def test_safety_over_8_random_approaches(distance):
+    """The default suite's sweep: the first 8 seeds (8 stop the robot with spheres, 7 with
+    capsules, coming within 1.3 mm of the L2 and EE capsule thresholds)."""
+    _assert_sweep_safe(8, distance, min_stopping=6)
 
 
 @pytest.mark.slow

@@ -1,0 +1,106 @@
+"""The command line in a subprocess, as a user types it: every bad input a user tried
+(issue 7), --version, the default output folder.
+
+Each must end with exit status 2 and one line ``qpavoid: error: ...`` naming the problem,
+no traceback, and nothing written (no ``runs/`` folder, no ``--out`` folder).
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+
+import pytest
+import qpsolvers
+
+from qpavoid.cli import main
+
+
+def qpavoid_cli(*args: str, cwd) -> subprocess.CompletedProcess:
+    """The installed command line in a subprocess (as a user types it)."""
+    return subprocess.run(
+        [sys.executable, "-m", "qpavoid", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+#: Bad inputs a user tried (issue 7), and a word the one-line error must contain.
+BAD_INPUTS = [
+    (["run", "test1", "--out", "afile"], "is a file"),
+    (["run", "test1", "--max-time", "-1"], "--max-time"),
+    (["run", "test1", "--max-time", "nan"], "--max-time"),
+    (["run", "test1", "--max-time", "0"], "--max-time"),
+    (["run", "test1", "--max-time", "0.01"], "--max-time"),
+    (["run", "test1", "--rate", "0"], "--rate"),
+    (["run", "test1", "--rate", "-500"], "--rate"),
+    (["run", "test1", "--rate", "inf"], "--rate"),
+    (["run", "test1", "--rate", "5"], "--rate"),
+    (["compare", "--rate", "0"], "--rate"),
+    (["compare", "--random", "-1"], "--random"),
+    (["compare", "--scenarios"], "nothing to compare"),
+    (["compare", "--seed", "-5"], "--seed"),
+    (["compare", "--workers", "0"], "--workers"),
+    (["compare", "--scenarios", "test1", "nosuch"], "unknown scenario 'nosuch'"),
+    (["run", "--human", "text.npz"], "text.npz"),
+    (["compare", "--scenarios", "--human", "text.npz"], "text.npz"),
+    (["run", "--human", "missing.csv"], "missing.csv"),
+    (["run", "test1", "--human", "text.npz"], "not both"),
+    (["run"], "give a SCENARIO"),
+    (["run", "nosuch"], "unknown scenario 'nosuch'"),
+    (["run", "random:-5"], "random:SEED"),
+    (["run", "test1", "--controller", "qp", "--limit-mode", "clip"], "--limit-mode"),
+    (["run", "test1", "--limit-mode", "clip", "--solver", "daqp"], "--solver"),
+    (["run", "test1", "--redundant"], "--redundant"),
+    (["run", "test1", "--controller", "qp", "--solver", "nosuch"], "'nosuch' is not installed"),
+    (["run", "test1", "--controller", "nosuch"], "--controller"),
+    (["run", "test1", "--robot", "nosuch"], "unknown robot 'nosuch'"),
+    (["nosuch"], "invalid choice"),
+]
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cli")
+    (d / "afile").write_text("")
+    (d / "text.npz").write_text("hello, not an archive\n")
+    return d
+
+
+@pytest.mark.parametrize("args, word", BAD_INPUTS, ids=[" ".join(a) for a, _ in BAD_INPUTS])
+def test_bad_input_is_one_line_and_exit_2(workdir, args, word):
+    before = sorted(p.name for p in workdir.iterdir())
+    r = qpavoid_cli(*args, cwd=workdir)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("qpavoid: error: "), r.stderr
+    assert word in lines[0]
+    assert "Traceback" not in r.stderr + r.stdout and r.stdout == ""
+    assert sorted(p.name for p in workdir.iterdir()) == before  # no runs/, no --out
+
+
+def test_a_missing_solver_names_the_extra(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(qpsolvers, "available_solvers", ["osqp"])
+    out = tmp_path / "x"
+    assert main(["run", "test1", "--controller", "qp", "--solver", "daqp", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert 'pip install "qpavoid[solvers]"' in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_version(tmp_path):
+    r = qpavoid_cli("--version", cwd=tmp_path)
+    assert r.returncode == 0 and r.stdout.startswith("qpavoid ")
+
+
+def test_default_out_and_last_line(workdir):
+    """`qpavoid run free` works as typed: it writes runs/free and says so."""
+    r = qpavoid_cli("run", "free", "--max-time", "0.5", "--rate", "100", "--no-plots", cwd=workdir)
+    assert r.returncode == 0, r.stderr
+    assert (workdir / "runs" / "free" / "metrics.json").is_file()
+    assert r.stdout.strip().splitlines()[-1] == "wrote metrics.json, log.npz to runs/free/"
+    assert r.stderr == ""  # no progress bar when not on a terminal
+    shutil.rmtree(workdir / "runs")
