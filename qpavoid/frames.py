@@ -11,7 +11,7 @@ again.
 from __future__ import annotations
 
 from enum import IntEnum
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -153,3 +153,11 @@ def _number_text(value: object) -> str:
     """``3`` for an integral value, else the float's repr (``1.5``, ``nan``)."""
     x = float(value)  # type: ignore[arg-type]
     return str(int(x)) if x.is_integer() else repr(x)
+
+
+class HumanMotion(Protocol):
+    """Anything that gives the Kinect frame at a time: generated scenarios, recordings."""
+
+    def frame_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """The frame shown at time t: a :class:`HumanFrame`, or (joints (25, 3), state (25,))."""
+        ...

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .laws import AvoidanceConfig
+from .laws import AvoidanceConfig, stop_distances
 from .robot import Robot
 from .tick import Command
 
@@ -52,6 +52,48 @@ def end_of_run(
         return {"end_reason": "held by person", "held_by_person": held}
     reason = f"stopped: {last.reason}" if last.stopped else "time cap"
     return {"end_reason": reason, "held_by_person": None}
+
+
+def truth_metrics(
+    log: dict[str, np.ndarray],
+    robot: Robot,
+    avoidance: AvoidanceConfig,
+    stop_events: list[dict[str, Any]],
+    dt: float,
+) -> dict[str, Any]:
+    """Safety judged against where the person really is (``log["true_distance"]``).
+
+    Returns ``min_true_clearance_moving_m`` (smallest true capsule distance over the ticks
+    with a non-zero command, m; None if never measured or never moving),
+    ``ticks_moving_in_true_contact`` (moving while a true distance is <= 0),
+    ``ticks_moving_below_stop_distance`` (moving while a set is closer than its stop
+    distance, :func:`~qpavoid.laws.stop_distances`), and adds to each stop event the
+    robot's speed when it began (``robot_speed_mps``: the fastest control point over the
+    tick before it).
+    """
+    true = log["true_distance"]
+    moving = np.any(log["dq"] != 0.0, axis=1)
+    for event in stop_events:
+        k = int(np.searchsorted(log["t"], event["t"] - 1e-9))
+        if k > 0:
+            step = robot.control_points(log["q"][k]) - robot.control_points(log["q"][k - 1])
+            event["robot_speed_mps"] = float(np.linalg.norm(step, axis=1).max() / dt)
+        else:
+            event["robot_speed_mps"] = 0.0
+    if np.isnan(true).all():
+        return {
+            "min_true_clearance_moving_m": None,
+            "ticks_moving_in_true_contact": None,
+            "ticks_moving_below_stop_distance": None,
+        }
+    sets = [robot.set_index(name) for name in ("L1", "L2", "EE")]
+    below = np.any(true[:, sets] < stop_distances(avoidance), axis=1)
+    closest = true.min(axis=1)
+    return {
+        "min_true_clearance_moving_m": float(closest[moving].min()) if moving.any() else None,
+        "ticks_moving_in_true_contact": int((moving & (closest <= 0.0)).sum()),
+        "ticks_moving_below_stop_distance": int((moving & below).sum()),
+    }
 
 
 def run_metrics(

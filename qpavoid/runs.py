@@ -116,6 +116,9 @@ class RunSpec:
     goal_tolerance_m
         The goal counts as reached within this end-effector position error, m (default
         1 mm). A run that ends short of it says why (``end_reason``, ``held_by_person``).
+    measure_truth
+        Measure every tick's clearance to where the person really is (``true_*`` metrics,
+        :mod:`qpavoid.truth`); on by default, it doubles the simulation's time.
     """
 
     scenario: str | None = None
@@ -129,6 +132,7 @@ class RunSpec:
     solver: str | None = None
     redundant: bool = False
     goal_tolerance_m: float = 1e-3
+    measure_truth: bool = True
 
     def __post_init__(self) -> None:
         if self.scenario is None and self.human_file is None:
@@ -239,6 +243,7 @@ def simulate_one(
             control_rate_hz=spec.rate_hz,
             max_time_s=spec.max_time_s,
             goal_tolerance_m=spec.goal_tolerance_m,
+            measure_truth=spec.measure_truth,
         ),
         progress=progress,
     )

@@ -28,24 +28,16 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 import pinocchio as pin
 
 from .controller import Controller
 from .distances import distance_method
-from .frames import N_KINECT_JOINTS, HumanFrame
-from .metrics import end_of_run, run_metrics
+from .frames import N_KINECT_JOINTS, HumanFrame, HumanMotion
+from .metrics import end_of_run, run_metrics, truth_metrics
 from .task import inverse_kinematics
-
-
-class HumanMotion(Protocol):
-    """Anything that gives the Kinect frame at a time: generated scenarios, recordings."""
-
-    def frame_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """The frame shown at time t: a :class:`HumanFrame`, or (joints (25, 3), state (25,))."""
-        ...
+from .truth import TrueClearance
 
 
 @dataclass(frozen=True)
@@ -63,6 +55,12 @@ class SimConfig:
     goal_tolerance_m, goal_tolerance_rad
         The goal counts as reached when the path clock is over and the end effector is
         this close to the final pose (position, m; orientation, rad).
+    measure_truth
+        Measure, every tick, the exact capsule distance from each robot set to where the
+        person really is (:mod:`qpavoid.truth`): ``true_distance`` in the log and the
+        ``true_*`` metrics. Off by default here because it doubles a simulation's time
+        (the true person and a capsule table every tick, about 1.5 ms); runs made through
+        :mod:`qpavoid.runs` (the command line, ``compare``) turn it on.
     """
 
     control_rate_hz: float = 500.0
@@ -70,6 +68,7 @@ class SimConfig:
     max_time_s: float = 40.0
     goal_tolerance_m: float = 1e-3
     goal_tolerance_rad: float = 1e-2
+    measure_truth: bool = False
 
 
 @dataclass
@@ -135,7 +134,8 @@ def simulate(
         other method, ``v_rep_L2`` and ``v_rep_EE`` (T, 3), ``ee_pos`` and ``ee_ref`` (T, 3),
         ``tau`` (T,) path clock, ``tick_us`` (T,) controller time per tick,
         ``frame_age_s`` (T,) the age of the frame the controller was given (now minus its
-        capture time).
+        capture time), ``true_distance`` (T, 3) exact capsule distance per set to where the
+        person really is (NaN without ``measure_truth``).
     """
     cfg = config or SimConfig()
     robot, path = controller.robot, controller.path
@@ -149,6 +149,7 @@ def simulate(
     other_name = "capsules" if controller.config.distance == "spheres" else "spheres"
     other = distance_method(other_name, robot, controller.human)
     frame = _frame_source(motion)
+    truth = TrueClearance(robot, controller.human, motion) if cfg.measure_truth else None
     goal = path.reference(path.duration_s)[0]
 
     log: dict[str, np.ndarray] = {
@@ -168,6 +169,7 @@ def simulate(
         "tau": np.empty(n_max),
         "tick_us": np.empty(n_max),
         "frame_age_s": np.empty(n_max),
+        "true_distance": np.full((n_max, 3), np.nan),
     }
     stop_events = []
     vel_violations = pos_violations = 0
@@ -186,7 +188,10 @@ def simulate(
         t0 = time.perf_counter_ns()
         cmd = controller.step(q, human, None, tau, t - captured_s)  # the frame's true age
         tick_us = (time.perf_counter_ns() - t0) / 1e3
-        other_table = other(robot.kinematics(q, jacobians=False), controller.geometry(human))
+        kin = robot.kinematics(q, jacobians=False)
+        other_table = other(kin, controller.geometry(human))
+        if truth is not None:
+            log["true_distance"][k] = truth(kin, t)
 
         dq = cmd.dq
         if np.any(np.abs(dq) > robot.dq_max * (1 + 1e-9)):
@@ -218,7 +223,9 @@ def simulate(
         tau = min(tau + cmd.time_scale * dt, path.duration_s)
 
     log = {key: v[:n] for key, v in log.items()}
-    ending = end_of_run(reached, cmd, robot, controller.config.avoidance, log, goal)
+    avoidance = controller.config.avoidance
+    ending = end_of_run(reached, cmd, robot, avoidance, log, goal)
+    ending |= truth_metrics(log, robot, avoidance, stop_events, dt)
     return SimResult(
         log,
         run_metrics(
