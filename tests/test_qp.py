@@ -53,7 +53,14 @@ def test_nobody_near_qp_equals_analytic_at_every_tick(robot, rate_hz):
 def test_scenarios_are_safe(name, distance):
     """Every scenario, both distance methods: the sweep's invariants hold."""
     run = simulate_one(
-        RunSpec(scenario=name, controller="qp", distance=distance, max_time_s=40.0, rate_hz=100.0)
+        RunSpec(
+            scenario=name,
+            controller="qp",
+            distance=distance,
+            max_time_s=40.0,
+            rate_hz=100.0,
+            measure_truth=False,
+        )
     )
     result, robot, config = run.sim, run.robot, run.config
     checks = check_log(result.log, robot, config, distance)
@@ -79,10 +86,10 @@ def _assert_sweep_safe(n: int, distance: str, min_stopping: int) -> None:
 
 
 @pytest.mark.parametrize("distance", ["spheres", "capsules"])
-def test_safety_over_8_random_approaches(distance):
-    """The default suite's sweep: the first 8 seeds (8 stop the robot with spheres, 7 with
-    capsules, coming within 1.3 mm of the L2 and EE capsule thresholds)."""
-    _assert_sweep_safe(8, distance, min_stopping=6)
+def test_safety_over_5_random_approaches(distance):
+    """The default suite's sweep: the first 5 seeds (5 stop the robot with spheres, 4 with
+    capsules, the EE coming within 0.5 mm of its capsule threshold)."""
+    _assert_sweep_safe(5, distance, min_stopping=4)
 
 
 @pytest.mark.slow

@@ -24,7 +24,12 @@ def assert_same_commands(scenario: str, distance: str, rate_hz: float) -> None:
     recorded = np.load(DATA / f"qp_commands_{rate_hz:.0f}hz.npz")[f"{scenario}/{distance}/dq"]
     run = simulate_one(
         RunSpec(
-            scenario=scenario, controller="qp", distance=distance, rate_hz=rate_hz, max_time_s=40.0
+            scenario=scenario,
+            controller="qp",
+            distance=distance,
+            rate_hz=rate_hz,
+            max_time_s=40.0,
+            measure_truth=False,
         )
     )
     dq = run.sim.log["dq"]
