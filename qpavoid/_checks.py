@@ -77,3 +77,23 @@ def finite_number(value: object, name: str, *, positive: bool = False) -> float:
         kind = "positive and finite" if positive else "a finite number"
         raise InputError(f"{name} must be {kind}, got {value!r}", name=arg_name(name), value=value)
     return number
+
+
+def check_range(name: str, value: float, low: float, high: float, unit: str) -> float:
+    """``value`` as a float if it is finite and in ``[low, high]``, else :class:`InputError`."""
+    if not (math.isfinite(value) and low <= value <= high):
+        raise InputError(
+            f"{name} must be between {low:g} and {high:g} {unit}, got {value:g}",
+            name=name.split()[-1].strip("()"),
+            value=value,
+        )
+    return float(value)
+
+
+def check_choice(name: str, value: str, choices: tuple[str, ...]) -> str:
+    """``value`` if it is one of ``choices``, else :class:`InputError`."""
+    if value not in choices:
+        raise InputError(
+            f"unknown {name} {value!r}; choose from {', '.join(choices)}", name=name, value=value
+        )
+    return value

@@ -11,6 +11,7 @@ from .errors import InputError
 from .human import KinectHuman
 from .laws import l2_joint_velocity
 from .robot import Robot
+from .ssm import BOUND_INACTIVE_MPS, speed_scale
 from .task import ArcPath
 
 #: How eq. (3)'s scaled limits can be enforced (:func:`enforce_limits`).
@@ -73,7 +74,10 @@ class AnalyticController(Controller):
     3. eq. (8): ``q̇ = J⁻¹ (v_PL + K e + v_EE)`` (damped inverse near singularities);
     4. eq. (9): ``q̇(A1, A2, A4) += q̇_L2``;
     5. eq. (3): the limits of A1 and A2 scaled by (1 − f), enforced as configured
-       (:func:`enforce_limits`).
+       (:func:`enforce_limits`);
+    6. with ``safety="ssm"``, speed scaling: the command is scaled down until every robot
+       point approaches every body part no faster than the speed and separation bound
+       (:func:`~qpavoid.ssm.speed_scale`); where no scaling can meet it, the robot stops.
 
     Parameters
     ----------
@@ -106,4 +110,20 @@ class AnalyticController(Controller):
         dq = self.task_joint_velocities(tick)  # eq. (8)
         dq[self.l2_cols] += dq_L2  # eq. (9)
         dq, scale = enforce_limits(dq, tick.limits, self.analytic.limit_mode)  # eq. (3)
+        active = np.flatnonzero(tick.approach_limit.ravel() < BOUND_INACTIVE_MPS)
+        if len(active):  # speed and separation monitoring (safety="ssm")
+            table = tick.table
+            sets, parts = np.divmod(active, table.distance.shape[1])
+            Jp = table.robot_jacobians(tick.kin, sets, parts)
+            approach = -np.einsum("ak,akv,v->a", table.vector.reshape(-1, 3)[active], Jp, dq)
+            s = speed_scale(approach, tick.approach_limit.ravel()[active])
+            if s is None:
+                k = active[int(np.argmin(tick.approach_limit.ravel()[active]))]
+                i, j = divmod(int(k), table.distance.shape[1])
+                reason = (
+                    f"speed and separation: {table.part_names[j]} {table.distance[i, j]:.3f} m "
+                    f"from {table.set_names[i]}"
+                )
+                return self.command(tick, None, reason=reason)
+            dq, scale = dq * s, scale * s
         return self.command(tick, dq, scale, tick.v_rep_L2, tick.v_rep_EE)

@@ -36,8 +36,9 @@ class CapsuleDistance:
     """Exact capsule-capsule distances from coal; build once, call every tick.
 
     The coal shapes, transforms and distance functors are created once; each call only
-    moves them. coal's signed distance gives the witness points and the normal (from the
-    human capsule to the robot capsule), also under penetration.
+    moves them (and widens the human ones by their margins). coal's signed distance gives
+    the witness points and the normal (from the human capsule to the robot capsule), also
+    under penetration.
     """
 
     method = "capsules"
@@ -47,6 +48,7 @@ class CapsuleDistance:
         robot_shapes = [coal.Capsule(r, 0.0) for r in robot.capsule_radii]
         human_shapes = [coal.Capsule(r, 0.0) for r in human.capsule_radii]
         self._shapes = robot_shapes + human_shapes
+        self._human_radii = human.capsule_radii
         self._tfs = [coal.Transform3s() for _ in self._shapes]
         self._functors = [[coal.ComputeDistance(h, r) for h in human_shapes] for r in robot_shapes]
         self._shape = (len(robot_shapes), len(human_shapes))
@@ -77,6 +79,9 @@ class CapsuleDistance:
             np.concatenate([seg, np.nan_to_num(geo.segments)]),
             np.concatenate([self._robot_valid, geo.segment_valid]),
         )
+        radii = (self._human_radii + geo.part_margin + geo.reach_margin).tolist()
+        for j, r in enumerate(radii):
+            self._shapes[n_sets + j].radius = r
         req, res = self._request, self._result
         parts = np.flatnonzero(geo.segment_valid).tolist()
         dist, rp, hp, normal, where = [], [], [], [], []

@@ -1,6 +1,7 @@
 """The ``qpavoid`` command line: it parses, calls the library and prints, nothing more.
 
-    qpavoid run SCENARIO [--controller analytic|qp] [--distance spheres|capsules] [--out DIR]
+    qpavoid run SCENARIO [--controller analytic|qp] [--distance capsules|spheres]
+                         [--safety paper|ssm] [--bench real|ideal] [--out DIR]
     qpavoid run --human FILE [...]
     qpavoid compare [--scenarios NAME ...] [--human FILE ...] [--random N] [--out DIR]
 
@@ -26,13 +27,13 @@ from .io import check_output_dir
 from .jobs import progress_bar
 from .metrics import describe
 from .recording import load_recording
-from .runs import CONTROLLERS, DISTANCES, LIMIT_MODES, RunSpec, run_one
+from .runs import BENCHES, CONTROLLERS, DISTANCES, LIMIT_MODES, RunSpec, run_one
 from .scenarios import SCENARIOS
+from .tick import SAFETY_MODES
 
 DESCRIPTION = (
-    "Collision avoidance between a cobot arm and the person beside it: simulate "
-    "the paper's controller or its QP variant against generated or recorded "
-    "human motion."
+    "Collision avoidance between a cobot arm and the person beside it: simulate the "
+    "paper's controller or its QP variant against generated or recorded human motion."
 )
 
 
@@ -122,8 +123,20 @@ def build_parser() -> Parser:
     run.add_argument(
         "--distance",
         choices=DISTANCES,
-        default="spheres",
-        help="robot-human distances: the paper's spheres or exact capsules",
+        default="capsules",
+        help="exact capsules (cover the shoulder) or the paper's spheres (for its figures)",
+    )
+    run.add_argument(
+        "--safety",
+        choices=SAFETY_MODES,
+        default="paper",
+        help="the paper's rules, or ISO/TS 15066 speed and separation monitoring on top",
+    )
+    run.add_argument(
+        "--bench",
+        choices=BENCHES,
+        default="real",
+        help="real: Kinect v2 latency and noise, iiwa braking; ideal: the paper's bench",
     )
     run.add_argument(
         "--limit-mode",
@@ -135,8 +148,7 @@ def build_parser() -> Parser:
     run.add_argument(
         "--solver",
         metavar="NAME",
-        help="QP only: a qpsolvers solver (osqp, daqp, proxqp, ...); default: the "
-        "persistent OSQP problem",
+        help="QP only: a qpsolvers solver (osqp, daqp, ...); default: persistent OSQP",
     )
     run.add_argument(
         "--redundant",
@@ -226,6 +238,8 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
         human_file=args.human,
         controller=args.controller,
         distance=args.distance,
+        safety=args.safety,
+        bench=args.bench,
         max_time_s=args.max_time,
         rate_hz=args.rate,
         limit_mode=args.limit_mode,

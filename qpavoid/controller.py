@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike
 
 from ._checks import finite_number
 from .distances import distance_method
-from .errors import InputError, SolverError
+from .errors import SolverError
 from .frames import HumanFrame
 from .human import HumanGeometry, KinectHuman
 from .laws import (
@@ -31,7 +31,9 @@ from .laws import (
     scaled_velocity_limits,
     stop_reason,
 )
-from .robot import Robot
+from .perception import Perceived, Tracker, part_velocities
+from .robot import Robot, joint_columns
+from .ssm import joint_speed_limits, separation_bounds
 from .task import ArcPath, pose_error
 from .tick import Command, ControllerConfig, Tick
 
@@ -70,24 +72,49 @@ class Controller:
         self.K = np.r_[[self.config.gain_position] * 3, [self.config.gain_orientation] * 3]
         self.i_L1, self.i_L2, self.i_EE = (robot.set_index(n) for n in ("L1", "L2", "EE"))
         self.scaled_cols = joint_columns(robot, self.config.scaled_joints, "scaled_joints")
-        self._frame: HumanFrame | None = None
+        self.tracker = Tracker(self.config.perception)
+        self.part_joints = self.human.part_joints()
+        self.ssm_joint_limits = joint_speed_limits(self.config.ssm, robot.nv)
+        self._clock_s = 0.0  # the controller's own clock: control periods since it started
+        self._frame: tuple[HumanFrame, float | None] | None = None
+        self._perceived: Perceived | None = None
         self._geometry: HumanGeometry | None = None
 
-    def geometry(self, frame: HumanFrame) -> HumanGeometry:
-        """The human geometry of ``frame``, built once per frame object.
+    def perceive(
+        self, frame: HumanFrame, frame_age_s: float, frame_time_s: float | None = None
+    ) -> tuple[Perceived, HumanGeometry]:
+        """The tracker's view of ``frame`` and its geometry, updated once per new frame.
 
-        The caller tells a new frame by passing a new :class:`HumanFrame` (the simulation
-        and the live input make one per camera frame); the same object again reuses the
-        geometry, with no copying or hashing.
+        A new frame is a new :class:`HumanFrame` object, or (when the caller gives capture
+        times) a new ``frame_time_s``; its capture time is ``frame_time_s`` or, without
+        one, the controller's clock minus ``frame_age_s``.
         """
-        if frame is not self._frame:
-            self._geometry = self.human.geometry(frame)
-            self._frame = frame
-        assert self._geometry is not None
-        return self._geometry
+        key = (frame, frame_time_s)
+        if self._frame is None or frame is not self._frame[0] or frame_time_s != self._frame[1]:
+            captured = self._clock_s - frame_age_s if frame_time_s is None else frame_time_s
+            self._perceived = self.tracker.update(frame, captured)
+            self._geometry = self.human.geometry(
+                self._perceived.frame, joint_radius=self._perceived.joint_radius
+            )
+            self._frame = key
+        assert self._perceived is not None and self._geometry is not None
+        return self._perceived, self._geometry
+
+    def geometry(self, frame: HumanFrame) -> HumanGeometry:
+        """The geometry the distances used for ``frame`` if it is the last frame perceived,
+        else the frame's own geometry (nothing filled in, no uncertainty)."""
+        if self._frame is not None and frame is self._frame[0] and self._geometry is not None:
+            return self._geometry
+        return self.human.geometry(frame)
 
     def measure(
-        self, q: ArrayLike, joints: object, state: object, t: float, frame_age_s: float = 0.0
+        self,
+        q: ArrayLike,
+        joints: object,
+        state: object,
+        t: float,
+        frame_age_s: float = 0.0,
+        frame_time_s: float | None = None,
     ) -> Tick:
         """Shared prelude: kinematics, distances, f (eq. 2), reference, stop rules.
 
@@ -99,12 +126,26 @@ class Controller:
         t = finite_number(t, "t (path time, s)")
         kin = self.robot.kinematics(q)
         frame = HumanFrame.check(joints, state)
-        geo = self.geometry(frame)
+        self._clock_s += self.config.control_period_s
+        age = frame_age_s
+        if age <= self.config.max_frame_age_s:
+            perceived, geo = self.perceive(frame, age, frame_time_s)
+        else:  # stale or NaN: the robot stops on it; the tracker does not learn from it
+            perceived = Perceived.untracked(frame)
+            geo = self.geometry(frame)
         table = self.distances(kin, geo)
         dmin = table.min_per_set()
         cfg = self.config.avoidance
         f = float(l1_factor(dmin[self.i_L1], cfg))  # eq. (2)
         limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)  # eq. (3)
+        if self.config.safety == "ssm":
+            v_parts = part_velocities(perceived.joint_velocity, self.part_joints)
+            approach_limit, human_approach = separation_bounds(table, v_parts, age, self.config.ssm)
+        else:
+            approach_limit = np.full(table.distance.shape, np.inf)
+            human_approach = np.zeros(table.distance.shape)
+        if self.config.safety == "ssm":
+            limits = np.minimum(limits, self.ssm_joint_limits)
         j = table.closest_part(self.i_L2)
         v_rep_L2 = repulsive_velocity(
             table.distance[self.i_L2, j], table.vector[self.i_L2, j], cfg
@@ -114,10 +155,12 @@ class Controller:
         )  # eq. (7)
         ref_pose, ref_twist = self.path.reference(t)
         error = pose_error(ref_pose, kin.ee_placement)
-        if not frame_age_s <= self.config.max_frame_age_s:
+        frozen = self.config.perception.max_identical_frames
+        if not age <= self.config.max_frame_age_s:  # NaN too
+            reason = f"human frame is stale ({age:.3f} s old, max {self.config.max_frame_age_s} s)"
+        elif frozen is not None and perceived.identical > frozen:
             reason = (
-                f"human frame is stale ({frame_age_s:.3f} s old, "
-                f"max {self.config.max_frame_age_s} s)"
+                f"human frame is frozen ({perceived.identical + 1} identical skeletons in a row)"
             )
         elif self.config.require_human and not np.isfinite(table.distance).any():
             reason = "no body part of the operator is tracked"
@@ -140,6 +183,10 @@ class Controller:
             error,
             ref_twist + self.K * error,
             reason,
+            perceived,
+            age,
+            approach_limit,
+            human_approach,
         )
 
     def task_joint_velocities(self, tick: Tick) -> np.ndarray:
@@ -210,6 +257,7 @@ class Controller:
         state: object = None,
         t: float = 0.0,
         frame_age_s: float = 0.0,
+        frame_time_s: float | None = None,
     ) -> Command:
         """One control tick: :meth:`measure`, then (unless a stop rule holds) :meth:`act`.
 
@@ -226,6 +274,9 @@ class Controller:
         frame_age_s
             Age of the human frame, s (now minus its capture time); too old, or NaN, stops
             the robot.
+        frame_time_s
+            The frame's capture time on any clock, s, if the caller has it (the tracker's
+            velocities use it); without it the controller's own clock minus the age.
 
         Raises
         ------
@@ -233,7 +284,7 @@ class Controller:
             On malformed inputs (see :meth:`measure`). A numerical failure while computing
             the command is not raised: the robot stops with it as the reason.
         """
-        tick = self.measure(q, joints, state, t, frame_age_s)
+        tick = self.measure(q, joints, state, t, frame_age_s, frame_time_s)
         if tick.reason:
             return self.command(tick, None)
         try:
@@ -253,21 +304,3 @@ class Controller:
         (or ``LinAlgError``), which :meth:`step` turns into a stop.
         """
         raise NotImplementedError
-
-
-def joint_columns(robot: Robot, names: tuple[str, ...], option: str) -> np.ndarray:
-    """Columns of the joints ``names`` among the robot's active joints.
-
-    Raises
-    ------
-    InputError
-        If a name is not an active joint (``option`` names the setting at fault).
-    """
-    missing = [n for n in names if n not in robot.joint_names]
-    if missing:
-        raise InputError(
-            f"{option}: joints {missing} are not active joints of {robot.joint_names}",
-            name=option,
-            value=tuple(names),
-        )
-    return np.array([robot.joint_names.index(n) for n in names])

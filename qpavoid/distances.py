@@ -3,6 +3,10 @@
 * **spheres** (the paper's method): for robot set i and human part j, the minimum-norm
   difference d*_ij between any robot point of i and any human point of j, and
   ``‖d_ij‖ = ‖d*_ij‖ - r_R - r_j`` (eq. 1). Vectorised over all pairs.
+
+Both methods widen a part by its uncertainty (``HumanGeometry.part_margin``: lost or
+inferred joints); the capsule method also by how far its fingers stick out of it
+(``reach_margin``).
 * **capsules** (exact): coal's capsule-capsule distance between the capsule of set i and
   the capsule of part j.
 
@@ -103,6 +107,9 @@ class SphereDistance:
         )
         best = self._pairs[self._rows, buf[self._pairs].argmin(axis=1)]  # flat pair
         d_star = buf[best]
+        part_margin = geo.part_margin
+        assert part_margin is not None  # filled in by HumanGeometry
+        margin = np.tile(part_margin, len(self._r_robot_flat) // len(part_margin))
         vector = diff.reshape(-1, 3)[np.minimum(best, self._pairs_pad - 1)]
         with np.errstate(invalid="ignore", divide="ignore"):
             vector /= d_star[:, None]  # inf -> 0
@@ -112,14 +119,14 @@ class SphereDistance:
         shape = self._shape
         return DistanceTable(  # eq. (1)
             self.method,
-            (d_star - self._radii).reshape(shape),
+            (d_star - self._radii - margin).reshape(shape),
             vector.reshape(*shape, 3),
             p_idx.reshape(shape),
             self._no_s,
             m_idx.reshape(shape),
             self.set_names,
             self.part_names,
-            (P, H, self._r_robot_flat, self._r_human_flat),
+            (P, H, self._r_robot_flat, self._r_human_flat + margin),
         )
 
 

@@ -45,3 +45,18 @@ def unit(
     out = v / np.where(small, 1.0, norm)[..., None]
     out[small] = fallback
     return out
+
+
+def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distances from points ``p`` (..., 3) to the segments ``[a, b]`` (..., 3), m.
+
+    The closest point is ``a + s (b − a)`` with ``s = clip((p − a)·(b − a) / ‖b − a‖², 0, 1)``
+    (a degenerate segment is its end point).
+    """
+    ab, ap = b - a, p - a
+    s = np.clip(
+        np.einsum("...k,...k->...", ap, ab) / np.maximum(np.einsum("...k,...k->...", ab, ab), TINY),
+        0.0,
+        1.0,
+    )
+    return np.linalg.norm(ap - s[..., None] * ab, axis=-1)

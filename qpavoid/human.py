@@ -8,7 +8,13 @@ by one capsule along its chain of joints.
 A joint is *usable* when its coordinates are finite and its state is not NotTracked
 (Inferred joints are used, as the Kinect SDK's consumers usually do). A mid-point is
 usable when both its ends are. A part whose points are all unusable is left out of the
-distances (distance +inf), so a lost limb never becomes a NaN command.
+distances (distance +inf), so a lost limb never becomes a NaN command; the controller's
+:class:`~qpavoid.perception.Tracker` keeps a lost joint at its last known position instead,
+with an uncertainty radius that :meth:`KinectHuman.geometry` adds to the part's radius.
+
+The fingers (HandTip, Thumb) are the hands' *reach* joints: not model points (the paper's
+21 points and spheres stay as published), but the capsule method widens a hand's capsule
+by however far they stick out of it.
 """
 
 from __future__ import annotations
@@ -17,7 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .frames import N_KINECT_JOINTS, HumanFrame, JointType, TrackingState, check_joints
+from .frames import N_KINECT_JOINTS, HumanFrame, JointType, TrackingState
+from .geometry import point_segment_distance
 
 __all__ = [
     "N_KINECT_JOINTS",
@@ -68,6 +75,9 @@ class BodyPart:
         Radius r_j of the part's spheres (eq. 1), m.
     capsule_radius_m
         Radius of the part's capsule (exact method), m.
+    reach
+        Joints beyond the chain that the capsule must cover (a hand's HandTip and Thumb):
+        the capsule is widened, each frame, by how far they stick out of it.
     """
 
     name: str
@@ -75,10 +85,16 @@ class BodyPart:
     mid: tuple[JointType, JointType]
     sphere_radius_m: float
     capsule_radius_m: float
+    reach: tuple[JointType, ...] = ()
 
 
 def _arm(
-    side: str, shoulder: JointType, elbow: JointType, wrist: JointType, hand: JointType
+    side: str,
+    shoulder: JointType,
+    elbow: JointType,
+    wrist: JointType,
+    hand: JointType,
+    fingers: tuple[JointType, JointType],
 ) -> tuple[BodyPart, ...]:
     # Sphere radii cover the capsule between consecutive points (spacing h):
     # r_sphere >= sqrt(r_capsule^2 + (h/2)^2), with h about 0.14 m (upper arm),
@@ -86,7 +102,7 @@ def _arm(
     return (
         BodyPart(f"{side}_upper_arm", (shoulder, elbow), (shoulder, elbow), 0.09, 0.055),
         BodyPart(f"{side}_forearm", (elbow, wrist), (elbow, wrist), 0.08, 0.045),
-        BodyPart(f"{side}_hand", (wrist, hand), (wrist, hand), 0.06, 0.05),
+        BodyPart(f"{side}_hand", (wrist, hand), (wrist, hand), 0.06, 0.05, fingers),
     )
 
 
@@ -102,8 +118,17 @@ UPPER_BODY: tuple[BodyPart, ...] = (
         0.17,
         0.15,
     ),
-    *_arm("left", J.ShoulderLeft, J.ElbowLeft, J.WristLeft, J.HandLeft),
-    *_arm("right", J.ShoulderRight, J.ElbowRight, J.WristRight, J.HandRight),
+    *_arm(
+        "left", J.ShoulderLeft, J.ElbowLeft, J.WristLeft, J.HandLeft, (J.HandTipLeft, J.ThumbLeft)
+    ),
+    *_arm(
+        "right",
+        J.ShoulderRight,
+        J.ElbowRight,
+        J.WristRight,
+        J.HandRight,
+        (J.HandTipRight, J.ThumbRight),
+    ),
 )
 
 
@@ -121,6 +146,13 @@ class HumanGeometry:
         (K, 2, 3) capsule axis of each part, m; NaN for a part with no usable joint.
     segment_valid
         (K,) True where the part has at least one usable joint.
+    part_margin
+        (K,) uncertainty added to each part's radius in both methods, m: the largest
+        uncertainty radius of its joints (lost or inferred joints, see
+        :class:`~qpavoid.perception.Tracker`); zeros if not given.
+    reach_margin
+        (K,) how far a part's reach joints (the fingers) stick out of its capsule, m;
+        added to the capsule radius by the capsule method only.
     filled_points, point_penalty
         Derived: ``points`` with unusable rows set to 0, and 0 / +inf per point.
     """
@@ -129,10 +161,16 @@ class HumanGeometry:
     point_valid: np.ndarray
     segments: np.ndarray
     segment_valid: np.ndarray
+    part_margin: np.ndarray | None = None
+    reach_margin: np.ndarray | None = None
     filled_points: np.ndarray = field(init=False, repr=False)
     point_penalty: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        zeros = np.zeros(len(self.segments))
+        for name in ("part_margin", "reach_margin"):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, zeros)
         # For vectorised distances: unusable points at the origin, with +inf added to any
         # distance to them (so they never win a minimum and never make a NaN).
         object.__setattr__(
@@ -163,8 +201,16 @@ class KinectHuman:
     point_part: np.ndarray = field(init=False, repr=False)
     _mid_ids: np.ndarray = field(init=False, repr=False)
     _chains: np.ndarray = field(init=False, repr=False)
+    _members: np.ndarray = field(init=False, repr=False)
+    _reach: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        members = np.zeros((len(self.parts), N_KINECT_JOINTS), dtype=bool)
+        for k, p in enumerate(self.parts):
+            members[k, [int(j) for j in (*p.chain, *p.mid, *p.reach)]] = True
+        object.__setattr__(self, "_members", members)
+        reach = [(k, int(j)) for k, p in enumerate(self.parts) for j in p.reach]
+        object.__setattr__(self, "_reach", np.array(reach, dtype=int).reshape(-1, 2))
         used = {int(j) for p in self.parts for j in (*p.chain, *p.mid)}
         joints = [int(j) for j in POINT_ORDER if int(j) in used] + sorted(used - set(POINT_ORDER))
         n_points = len(joints) + len(self.parts)
@@ -210,20 +256,6 @@ class KinectHuman:
         """Number of model points (21 for the paper's model)."""
         return self.point_part.shape[0]
 
-    @staticmethod
-    def check_joints(joints: object) -> np.ndarray:
-        """(25, 3) float array of Kinect joints; NaN allowed (= not usable), inf is not."""
-        return check_joints(joints)
-
-    @staticmethod
-    def check_state(state: object) -> np.ndarray | None:
-        """(25,) int8 tracking states in {0, 1, 2}, or None (all tracked)."""
-        return None if state is None else HumanFrame.check(np.zeros((25, 3)), state).state
-
-    def joint_usable(self, joints: object, state: object = None) -> np.ndarray:
-        """(25,) True where a joint has finite coordinates and is not NotTracked."""
-        return HumanFrame.check(joints, state).usable
-
     def points(self, joints: object, state: object = None) -> np.ndarray:
         """The model points (21, 3) from (25, 3) Kinect joints, m.
 
@@ -233,11 +265,19 @@ class KinectHuman:
         """
         return self.geometry(joints, state).points
 
-    def geometry(self, joints: object, state: object = None) -> HumanGeometry:
+    def part_joints(self) -> np.ndarray:
+        """(K, 25) bool: the Kinect joints of each part (chain, mid-point ends and reach)."""
+        return self._members.copy()
+
+    def geometry(
+        self, joints: object, state: object = None, joint_radius: np.ndarray | None = None
+    ) -> HumanGeometry:
         """Points, capsules and their usability at one frame.
 
         ``joints`` is a :class:`~qpavoid.frames.HumanFrame` (already checked: used as is)
-        or (25, 3) joints with optional (25,) states (checked here).
+        or (25, 3) joints with optional (25,) states (checked here). ``joint_radius``
+        (25,), m, is each joint's position uncertainty (default 0); a part's
+        ``part_margin`` is the largest of its joints'.
         """
         frame = HumanFrame.check(joints, state)
         usable = frame.usable
@@ -254,4 +294,17 @@ class KinectHuman:
         segments = np.stack(
             [clean[self._chains[rows, first]], clean[self._chains[rows, last]]], axis=1
         )
-        return HumanGeometry(points, point_valid, segments, np.asarray(ok.any(axis=1)))
+        margin = (
+            None
+            if joint_radius is None
+            else np.where(self._members, joint_radius[None, :], 0.0).max(axis=1)
+        )
+        reach = np.zeros(len(self.parts))
+        if len(self._reach):
+            k, j = self._reach.T
+            stick_out = point_segment_distance(clean[j], segments[k, 0], segments[k, 1])
+            stick_out = np.nan_to_num(stick_out - self.capsule_radii[k], nan=0.0)
+            np.maximum.at(reach, k, np.maximum(stick_out, 0.0))
+        return HumanGeometry(
+            points, point_valid, segments, np.asarray(ok.any(axis=1)), margin, reach
+        )

@@ -264,3 +264,21 @@ def load_robot(
         For a locked angle that is not a number or a joint the model does not have.
     """
     return Robot(*read_description(name, locked))
+
+
+def joint_columns(robot: Robot, names: tuple[str, ...], option: str) -> np.ndarray:
+    """Columns of the joints ``names`` among the robot's active joints.
+
+    Raises
+    ------
+    InputError
+        If a name is not an active joint (``option`` names the setting at fault).
+    """
+    missing = [n for n in names if n not in robot.joint_names]
+    if missing:
+        raise InputError(
+            f"{option}: joints {missing} are not active joints of {robot.joint_names}",
+            name=option,
+            value=tuple(names),
+        )
+    return np.array([robot.joint_names.index(n) for n in names])

@@ -11,7 +11,6 @@ The names a run can take live in one registry each: :data:`CONTROLLERS`,
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,20 +18,28 @@ from pathlib import Path
 import qpsolvers
 
 from . import plots as plotting
+from ._checks import check_choice, check_range
 from .analytic import LIMIT_MODES, AnalyticConfig, AnalyticController
+from .braking import BrakingConfig
 from .controller import Controller, ControllerConfig
 from .errors import InputError
 from .io import staged_output, write_run
+from .perception import PerceptionConfig
 from .qp import QPConfig, QPController
 from .recording import load_recording
 from .robot import Robot, load_robot
 from .scenarios import check_scenario_name, make_scenario
+from .sensor import SensorConfig
 from .simulation import HumanMotion, SimConfig, SimResult, simulate
+from .tick import SAFETY_MODES
 
 #: Controllers by name.
 CONTROLLERS = ("analytic", "qp")
-#: Distance methods by name: the paper's spheres (eq. 1) and exact capsules (coal).
-DISTANCES = ("spheres", "capsules")
+#: Distance methods by name: exact capsules (coal, the default) and the paper's spheres (eq. 1).
+DISTANCES = ("capsules", "spheres")
+#: Benches: ``real`` (a Kinect v2 sensor, the iiwa's reaction and braking) or ``ideal``
+#: (the paper's: the true skeleton every frame, an arm that follows its command at once).
+BENCHES = ("real", "ideal")
 #: QP solvers that come with an extra of ours, and its name (``pip install "qpavoid[solvers]"``).
 SOLVER_EXTRAS = {"daqp": "solvers", "proxqp": "solvers"}
 
@@ -46,26 +53,6 @@ MAX_TIME_RANGE_S = (0.1, 3600.0)
 #: OSQP cannot reach its tolerance there).
 REDUNDANT_ELBOW_WEIGHT = 0.05
 REDUNDANT_REGULARIZATION = 1e-4
-
-
-def check_range(name: str, value: float, low: float, high: float, unit: str) -> float:
-    """``value`` as a float if it is finite and in ``[low, high]``, else :class:`InputError`."""
-    if not (math.isfinite(value) and low <= value <= high):
-        raise InputError(
-            f"{name} must be between {low:g} and {high:g} {unit}, got {value:g}",
-            name=name.split()[-1].strip("()"),
-            value=value,
-        )
-    return float(value)
-
-
-def check_choice(name: str, value: str, choices: tuple[str, ...]) -> str:
-    """``value`` if it is one of ``choices``, else :class:`InputError`."""
-    if value not in choices:
-        raise InputError(
-            f"unknown {name} {value!r}; choose from {', '.join(choices)}", name=name, value=value
-        )
-    return value
 
 
 def check_solver(name: str) -> str:
@@ -99,7 +86,17 @@ class RunSpec:
     controller
         ``"analytic"`` (the paper's) or ``"qp"``.
     distance
-        ``"spheres"`` (the paper's eq. 1) or ``"capsules"`` (exact, coal).
+        ``"capsules"`` (exact, coal; covers the shoulder) or ``"spheres"`` (the paper's eq. 1,
+        as published: use it to reproduce the paper's figures).
+    safety
+        ``"paper"`` (the paper's rules as written) or ``"ssm"`` (speed and separation
+        monitoring on top of them, :mod:`qpavoid.ssm`).
+    bench
+        ``"real"``: the controller sees a Kinect v2 (latency, noise; :mod:`qpavoid.sensor`)
+        and the arm reacts and brakes like an iiwa (:mod:`qpavoid.braking`); ``"ideal"``:
+        the paper's bench, the true skeleton every frame and an arm that follows its
+        command at once (the frozen-frame check is off: a perfect sensor films a still
+        person bit for bit).
     max_time_s
         Cap on the run, s (default 40: the 15 s path plus room for stops).
     rate_hz
@@ -124,7 +121,9 @@ class RunSpec:
     scenario: str | None = None
     human_file: str | None = None
     controller: str = "analytic"
-    distance: str = "spheres"
+    distance: str = "capsules"
+    safety: str = "paper"
+    bench: str = "real"
     max_time_s: float = 40.0
     rate_hz: float = 500.0
     limit_mode: str = "scale"
@@ -151,6 +150,8 @@ class RunSpec:
             check_scenario_name(self.scenario)
         check_choice("controller", self.controller, CONTROLLERS)
         check_choice("distance method", self.distance, DISTANCES)
+        check_choice("safety mode (--safety)", self.safety, SAFETY_MODES)
+        check_choice("bench (--bench)", self.bench, BENCHES)
         check_choice("limit mode", self.limit_mode, LIMIT_MODES)
         check_range("the run's cap (--max-time)", self.max_time_s, *MAX_TIME_RANGE_S, "s")
         check_range("the control rate (--rate)", self.rate_hz, *RATE_RANGE_HZ, "Hz")
@@ -192,7 +193,14 @@ class RunResult:
 
 def build_controller(spec: RunSpec, robot: Robot) -> Controller:
     """The controller ``spec`` names, on ``robot``, at the spec's control rate."""
-    config = ControllerConfig(distance=spec.distance, control_period_s=1.0 / spec.rate_hz)
+    config = ControllerConfig(
+        distance=spec.distance,
+        control_period_s=1.0 / spec.rate_hz,
+        safety=spec.safety,
+        perception=PerceptionConfig(max_identical_frames=None)
+        if spec.bench == "ideal"
+        else PerceptionConfig(),
+    )
     if spec.controller == "analytic":
         return AnalyticController(
             robot, config=config, analytic=AnalyticConfig(limit_mode=spec.limit_mode)
@@ -241,6 +249,8 @@ def simulate_one(
         motion,
         SimConfig(
             control_rate_hz=spec.rate_hz,
+            sensor=SensorConfig.ideal() if spec.bench == "ideal" else SensorConfig(),
+            braking=None if spec.bench == "ideal" else BrakingConfig(),
             max_time_s=spec.max_time_s,
             goal_tolerance_m=spec.goal_tolerance_m,
             measure_truth=spec.measure_truth,
@@ -250,6 +260,8 @@ def simulate_one(
     metrics = dict(sim.metrics)
     metrics.update(
         scenario=spec.label,
+        safety=spec.safety,
+        bench=spec.bench,
         redundant=bool(spec.redundant),
         solver=getattr(getattr(controller, "backend", None), "name", None),
     )

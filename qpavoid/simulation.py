@@ -1,13 +1,18 @@
 """Closed-loop kinematic simulation: a controller, the planned path and a moving person.
 
-The control loop runs at ``control_rate_hz`` (default 500 Hz) and integrates the
-commanded joint velocities (explicit Euler: ``q[k+1] = q[k] + dq[k] · dt``, the robot
-follows its velocity command exactly). Human frames arrive at ``frame_rate_hz`` (30 Hz):
-at time t the controller sees the frame taken at ``floor(t · 30) / 30`` (sample and hold,
-never a frame from the future), together with its true age: now minus its capture time. For
-a recording the capture time is the recording's own, so during a gap in the recording, and
-once it has ended, the frame in hand grows old and the controller stops on it (it resumes
-only on a fresh frame).
+Truth and perception are kept apart. The motion (a scenario, or a recording taken as
+ground truth) is where the person really is; the controller sees it only through a
+:class:`~qpavoid.sensor.Sensor` (30 Hz frames, a latency, noise, dropouts and faults,
+``SimConfig.sensor``), each frame with its true age: now minus its capture time. A
+recording keeps its own frame times, so during a gap in the recording, and once it has
+ended, the frame in hand grows old and the controller stops on it (it resumes only on a
+fresh frame).
+
+The control loop runs at ``control_rate_hz`` (default 500 Hz). The arm follows the
+commanded joint velocities after a reaction time and with bounded acceleration
+(``SimConfig.braking``, :class:`~qpavoid.braking.ArmResponse`: a stop is a ramp, not a
+jump); the joint angles integrate the arm's velocity (explicit Euler:
+``q[k+1] = q[k] + dq[k] · dt``). ``braking=None`` makes the arm follow its command exactly.
 
 The path has its own clock τ. It advances at the rate the controller returns
 (``Command.time_scale``): 0 while stopped, so resuming causes no jump, and the factor by
@@ -32,10 +37,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from .braking import ArmResponse, BrakingConfig
 from .controller import Controller
 from .distances import distance_method
-from .frames import N_KINECT_JOINTS, HumanFrame, HumanMotion
+from .frames import N_KINECT_JOINTS, HumanMotion
 from .metrics import end_of_run, run_metrics, truth_metrics
+from .sensor import Sensor, SensorConfig
 from .task import inverse_kinematics
 from .truth import TrueClearance
 
@@ -48,8 +55,12 @@ class SimConfig:
     ----------
     control_rate_hz
         Control loop rate, Hz.
-    frame_rate_hz
-        Camera frame rate (Kinect v2: 30 Hz).
+    sensor
+        What the controller sees of the true motion (default: a Kinect v2, docs/safety.md);
+        ``SensorConfig.ideal()`` for the true skeleton at 30 Hz with no latency or noise.
+    braking
+        How the arm follows its command (default: the iiwa 14's reaction time and
+        acceleration limits, docs/safety.md); None: exactly and at once.
     max_time_s
         Cap on the run's duration, s.
     goal_tolerance_m, goal_tolerance_rad
@@ -64,7 +75,8 @@ class SimConfig:
     """
 
     control_rate_hz: float = 500.0
-    frame_rate_hz: float = 30.0
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    braking: BrakingConfig | None = field(default_factory=BrakingConfig)
     max_time_s: float = 40.0
     goal_tolerance_m: float = 1e-3
     goal_tolerance_rad: float = 1e-2
@@ -77,28 +89,6 @@ class SimResult:
 
     log: dict[str, np.ndarray]
     metrics: dict = field(default_factory=dict)
-
-
-def _frame_source(motion: HumanMotion) -> Callable[[float], tuple[HumanFrame, float]]:
-    """``f(t)``: the motion's frame at run time t and its capture time (run clock, s).
-
-    Recordings are replayed from their first frame ``t[0]``; a frame's capture time is the
-    recording's (so after a gap, or once the recording has ended, the frame in hand grows
-    old); a generated motion is captured when it is sampled. A motion that returns plain
-    ``(joints, state)`` has its frames checked here, where they enter the library; a
-    :class:`HumanFrame` (a recording's) was checked already.
-    """
-    t0 = float(np.asarray(getattr(motion, "t", [0.0]))[0])
-    capture_time_at = getattr(motion, "capture_time_at", None)
-
-    def frame_at(t: float) -> tuple[HumanFrame, float]:
-        frame = motion.frame_at(t0 + t)
-        captured = t if capture_time_at is None else capture_time_at(t0 + t) - t0
-        if not isinstance(frame, HumanFrame):
-            frame = HumanFrame.check(*frame)
-        return frame, captured
-
-    return frame_at
 
 
 def simulate(
@@ -133,6 +123,7 @@ def simulate(
         ``distance`` (T, 3) per set of the method in use, ``distance_other`` (T, 3) of the
         other method, ``v_rep_L2`` and ``v_rep_EE`` (T, 3), ``ee_pos`` and ``ee_ref`` (T, 3),
         ``tau`` (T,) path clock, ``tick_us`` (T,) controller time per tick,
+        ``dq_command`` (T, nv) the controller's command (``dq`` is what the arm did),
         ``frame_age_s`` (T,) the age of the frame the controller was given (now minus its
         capture time), ``true_distance`` (T, 3) exact capsule distance per set to where the
         person really is (NaN without ``measure_truth``).
@@ -148,7 +139,8 @@ def simulate(
     n_max = math.floor(cfg.max_time_s * cfg.control_rate_hz + 1e-9) + 1
     other_name = "capsules" if controller.config.distance == "spheres" else "spheres"
     other = distance_method(other_name, robot, controller.human)
-    frame = _frame_source(motion)
+    sensor = Sensor(motion, cfg.sensor)
+    arm = None if cfg.braking is None else ArmResponse(cfg.braking, robot.nv, dt)
     truth = TrueClearance(robot, controller.human, motion) if cfg.measure_truth else None
     goal = path.reference(path.duration_s)[0]
 
@@ -156,6 +148,7 @@ def simulate(
         "t": np.empty(n_max),
         "q": np.empty((n_max, robot.nq)),
         "dq": np.empty((n_max, robot.nv)),
+        "dq_command": np.empty((n_max, robot.nv)),
         "joints": np.empty((n_max, N_KINECT_JOINTS, 3)),
         "state": np.empty((n_max, N_KINECT_JOINTS), dtype=np.int8),
         "stopped": np.empty(n_max, dtype=bool),
@@ -173,27 +166,23 @@ def simulate(
     }
     stop_events = []
     vel_violations = pos_violations = 0
-    tau, was_stopped, frame_key = 0.0, False, None
-    human: HumanFrame
-    captured_s = 0.0
+    tau, was_stopped, last_progress = 0.0, False, -1.0
     reached, n = False, 0
     for k in range(n_max):
         t = k * dt
-        key = math.floor(t * cfg.frame_rate_hz + 1e-9)
-        if key != frame_key:
-            frame_key = key
-            human, captured_s = frame(key / cfg.frame_rate_hz)
-            if progress is not None:
-                progress(t)
+        human, captured_s = sensor.frame_at(t)
+        if progress is not None and t - last_progress >= 1.0 / 30.0:
+            progress(t)
+            last_progress = t
         t0 = time.perf_counter_ns()
-        cmd = controller.step(q, human, None, tau, t - captured_s)  # the frame's true age
+        cmd = controller.step(q, human, None, tau, t - captured_s, captured_s)
         tick_us = (time.perf_counter_ns() - t0) / 1e3
         kin = robot.kinematics(q, jacobians=False)
         other_table = other(kin, controller.geometry(human))
         if truth is not None:
             log["true_distance"][k] = truth(kin, t)
 
-        dq = cmd.dq
+        dq = cmd.dq if arm is None else arm(cmd.dq)
         if np.any(np.abs(dq) > robot.dq_max * (1 + 1e-9)):
             vel_violations += 1
             dq = np.clip(dq, -robot.dq_max, robot.dq_max)
@@ -203,7 +192,7 @@ def simulate(
             stop_events.append({"t": round(t, 6), "reason": cmd.reason})
         was_stopped = cmd.stopped
 
-        log["t"][k], log["q"][k], log["dq"][k] = t, q, dq
+        log["t"][k], log["q"][k], log["dq"][k], log["dq_command"][k] = t, q, dq, cmd.dq
         log["joints"][k], log["state"][k] = human
         log["stopped"][k], log["f"][k] = cmd.stopped, cmd.f
         log["distance"][k], log["distance_other"][k] = cmd.distance, other_table.min_per_set()

@@ -4,20 +4,27 @@ The protective separation distance at time t₀ (ISO/TS 15066, eq. 1):
 
     S_p(t₀) = S_h + S_r + S_s + C + Z_d + Z_r
 
-* S_h: how far the person moves while the robot reacts and stops, v_h · (T_r + T_s);
+* S_h: how far the person moves from the moment the frame was captured until the robot
+  is stationary, v_h · (T_f + T_r + T_s), where T_f is the frame's age (sensor latency
+  and sample-and-hold: the person moved while the frame travelled);
 * S_r: how far the robot moves during its reaction time, v_r · T_r;
-* S_s: the robot's stopping distance from v_r (constant deceleration a: v_r² / 2a);
-* C: the intrusion distance, how far a body part can reach past what the sensor sees;
-* Z_d: the sensing uncertainty of the person's position;
+* S_s: the robot's stopping distance. A stop is a path-keeping ramp that takes
+  ``T_s = max_j |q̇_j| / a_j`` (:mod:`qpavoid.braking`); the controllers keep every joint
+  within ``a_j T_s`` for a budget T_s (:func:`joint_speed_limits`), so a point moving at
+  v_r travels at most v_r · T_s / 2 while braking;
+* C: the intrusion distance, how far a body part reaches past what the model covers;
+* Z_d: the sensing uncertainty of the person's position (a tracked joint's; lost and
+  inferred joints add their own radius, :mod:`qpavoid.perception`);
 * Z_r: the uncertainty of the robot's position.
 
-With the stopping time T_s = v_r / a, ``S_p ≤ d`` is a quadratic inequality in the robot's
-approach speed v_r, whose positive root :func:`max_approach_speed` is the fastest the robot
-may approach a person at separation d and still be stationary before contact. The human
-speed is ISO 13855's: 2.0 m/s within 0.5 m, 1.6 m/s beyond (:func:`human_speed`).
+``S_p ≤ d`` is then linear in the robot point's approach speed v_r and
+:func:`max_approach_speed` is its bound: the fastest the robot may approach a person at
+separation d and still be stationary before contact. Where even a robot at rest is too
+close, the bound is negative: the robot must move away at least that fast, or stop. The
+human speed is ISO 13855's: 2.0 m/s within 0.5 m, 1.6 m/s beyond (:func:`human_speed`).
 
 Every function is pure and works element-wise on arrays (every set × part pair at once).
-Units: m, s, m/s, m/s².
+Units: m, s, m/s, rad/s².
 """
 
 from __future__ import annotations
@@ -27,10 +34,16 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .braking import IIWA14_MAX_ACCELERATION_RADPS2, IIWA14_REACTION_TIME_S, per_joint
+from .distance_table import DistanceTable
+
+#: A bound on an approach speed above this cannot bind (no iiwa point moves so fast), m/s.
+BOUND_INACTIVE_MPS = 3.0
+
 
 @dataclass(frozen=True)
 class SSMConfig:
-    """Constants of speed and separation monitoring.
+    """Constants of speed and separation monitoring (sources: docs/safety.md).
 
     Attributes
     ----------
@@ -38,26 +51,29 @@ class SSMConfig:
         ISO 13855 §6.2.3 approach speed of the body: 2.0 m/s when the separation is at most
         0.5 m, 1.6 m/s beyond.
     reaction_time_s
-        T_r: from a change in the scene to the robot starting to brake: the sensor's
-        latency, one frame period and the controller's period (see docs/safety.md).
-    deceleration_mps2
-        a: the braking deceleration of the robot's closest point, m/s².
+        T_r: from the controller's tick to the arm starting to brake: one control period
+        and the arm's reaction (:data:`~qpavoid.braking.IIWA14_REACTION_TIME_S`), s.
+    stop_time_s
+        T_s: the stopping-time budget, s; every joint is kept within ``a_j T_s``.
+    max_acceleration_radps2
+        a_j: the arm's joint deceleration limits, rad/s² (A1 first; as in
+        :class:`~qpavoid.braking.BrakingConfig`).
     intrusion_m
-        C: how far a hand reaches past the tracked skeleton (fingers beyond HandTip, the
-        hand's width beyond its capsule).
+        C: how far a hand reaches past its modelled capsule (the fingers beyond HandTip).
     sensing_uncertainty_m
-        Z_d: the skeleton's position error for a tracked joint.
+        Z_d: the position error of a tracked Kinect v2 joint, m.
     robot_uncertainty_m
-        Z_r: the robot's position error (repeatability and model error).
+        Z_r: the robot's position error (repeatability and the capsules' fit), m.
     """
 
     human_speed_near_mps: float = 2.0
     human_speed_far_mps: float = 1.6
     human_speed_zone_m: float = 0.5
-    reaction_time_s: float = 0.15
-    deceleration_mps2: float = 2.0
+    reaction_time_s: float = 0.002 + IIWA14_REACTION_TIME_S
+    stop_time_s: float = 0.1
+    max_acceleration_radps2: tuple[float, ...] = IIWA14_MAX_ACCELERATION_RADPS2
     intrusion_m: float = 0.02
-    sensing_uncertainty_m: float = 0.05
+    sensing_uncertainty_m: float = 0.03
     robot_uncertainty_m: float = 0.005
 
 
@@ -67,85 +83,100 @@ def human_speed(separation_m: ArrayLike, cfg: SSMConfig) -> np.ndarray:
     return np.where(d <= cfg.human_speed_zone_m, cfg.human_speed_near_mps, cfg.human_speed_far_mps)
 
 
-def stopping_time(robot_speed_mps: ArrayLike, cfg: SSMConfig) -> np.ndarray:
-    """T_s: the time to brake from v_r at constant deceleration a, v_r / a."""
-    return np.maximum(np.asarray(robot_speed_mps, dtype=float), 0.0) / cfg.deceleration_mps2
-
-
 def human_distance(
-    human_speed_mps: ArrayLike, robot_speed_mps: ArrayLike, cfg: SSMConfig
+    human_speed_mps: ArrayLike, frame_age_s: ArrayLike, cfg: SSMConfig
 ) -> np.ndarray:
-    """S_h = v_h (T_r + T_s): the person's travel while the robot reacts and stops."""
+    """S_h = v_h (T_f + T_r + T_s): the person's travel from capture until the robot stands."""
     return np.asarray(human_speed_mps, dtype=float) * (
-        cfg.reaction_time_s + stopping_time(robot_speed_mps, cfg)
+        np.asarray(frame_age_s, dtype=float) + cfg.reaction_time_s + cfg.stop_time_s
     )
 
 
 def reaction_distance(robot_speed_mps: ArrayLike, cfg: SSMConfig) -> np.ndarray:
     """S_r = v_r T_r: the robot's travel during its reaction time."""
-    return np.maximum(np.asarray(robot_speed_mps, dtype=float), 0.0) * cfg.reaction_time_s
+    return np.asarray(robot_speed_mps, dtype=float) * cfg.reaction_time_s
 
 
 def stopping_distance(robot_speed_mps: ArrayLike, cfg: SSMConfig) -> np.ndarray:
-    """S_s = v_r² / 2a: the robot's travel while braking at constant deceleration."""
-    v = np.maximum(np.asarray(robot_speed_mps, dtype=float), 0.0)
-    return v * v / (2.0 * cfg.deceleration_mps2)
+    """S_s = v_r T_s / 2: the robot's travel during a linear ramp to rest lasting T_s."""
+    return np.asarray(robot_speed_mps, dtype=float) * cfg.stop_time_s / 2.0
+
+
+def fixed_terms(cfg: SSMConfig) -> float:
+    """C + Z_d + Z_r, m."""
+    return cfg.intrusion_m + cfg.sensing_uncertainty_m + cfg.robot_uncertainty_m
 
 
 def protective_distance(
     robot_speed_mps: ArrayLike,
     separation_m: ArrayLike,
+    frame_age_s: ArrayLike,
     cfg: SSMConfig,
-    extra_uncertainty_m: ArrayLike = 0.0,
 ) -> np.ndarray:
     """S_p = S_h + S_r + S_s + C + Z_d + Z_r (ISO/TS 15066 eq. 1), m.
 
     Parameters
     ----------
     robot_speed_mps
-        v_r: the robot point's speed towards the person (negative: moving away, counted 0).
+        v_r: the robot point's speed towards the person (negative: moving away).
     separation_m
-        The current separation (it selects the human speed's zone).
+        The current separation d (it selects the human speed's zone).
+    frame_age_s
+        T_f: the age of the frame d was measured on.
     cfg
         The constants.
-    extra_uncertainty_m
-        Added to Z_d: the growth of a lost or inferred joint's uncertainty.
     """
-    v_h = human_speed(separation_m, cfg)
     return (
-        human_distance(v_h, robot_speed_mps, cfg)
+        human_distance(human_speed(separation_m, cfg), frame_age_s, cfg)
         + reaction_distance(robot_speed_mps, cfg)
         + stopping_distance(robot_speed_mps, cfg)
-        + cfg.intrusion_m
-        + cfg.sensing_uncertainty_m
-        + np.asarray(extra_uncertainty_m, dtype=float)
-        + cfg.robot_uncertainty_m
+        + fixed_terms(cfg)
     )
 
 
 def max_approach_speed(
-    separation_m: ArrayLike, cfg: SSMConfig, extra_uncertainty_m: ArrayLike = 0.0
+    separation_m: ArrayLike, frame_age_s: ArrayLike, cfg: SSMConfig
 ) -> np.ndarray:
-    """The largest v_r ≥ 0 with ``S_p(v_r) ≤ d``, or a negative speed where none exists.
+    """The largest v_r with ``S_p(v_r) ≤ d``: ``(d − S_h − C − Z_d − Z_r) / (T_r + T_s/2)``.
 
-    ``S_p ≤ d`` reads ``v_r²/2a + v_r (T_r + v_h/a) + (v_h T_r + C + Z_d + Z_r − d) ≤ 0``: a
-    quadratic with positive leading coefficient, so v_r may be anything up to its larger
-    root. Where the constant term is positive (the person is already closer than the
-    robot can stop from rest) the root is negative: the robot must move *away* at least
-    that fast, which is how the QP reads the bound (and infeasibility means stop).
+    Negative where even a robot at rest is too close (it must move away at least that fast,
+    or stop); −inf stays −inf and +inf (a part not seen) gives +inf.
     """
     d = np.asarray(separation_m, dtype=float)
-    v_h = human_speed(d, cfg)
-    a, T_r = cfg.deceleration_mps2, cfg.reaction_time_s
-    A = 1.0 / (2.0 * a)
-    B = T_r + v_h / a
-    C0 = (
-        v_h * T_r
-        + cfg.intrusion_m
-        + cfg.sensing_uncertainty_m
-        + np.asarray(extra_uncertainty_m, dtype=float)
-        + cfg.robot_uncertainty_m
-        - d
-    )
-    disc = np.maximum(B * B - 4.0 * A * C0, 0.0)
-    return (-B + np.sqrt(disc)) / (2.0 * A)
+    room = d - human_distance(human_speed(d, cfg), frame_age_s, cfg) - fixed_terms(cfg)
+    return room / (cfg.reaction_time_s + cfg.stop_time_s / 2.0)
+
+
+def joint_speed_limits(cfg: SSMConfig, nv: int) -> np.ndarray:
+    """(nv,) |q̇_j| ≤ a_j T_s: the joint speeds from which a stop takes at most T_s, rad/s."""
+    return per_joint(cfg.max_acceleration_radps2, nv) * cfg.stop_time_s
+
+
+def speed_scale(approach_mps: np.ndarray, limit_mps: np.ndarray) -> float | None:
+    """The largest s in [0, 1] with ``s · v_r ≤ limit`` for every pair, or None if none.
+
+    Speed scaling: the whole command is multiplied by s, so each pair's approach speed
+    v_r scales with it. A pair with a negative limit needs a retreat at least that fast,
+    which scaling can only keep (v_r < 0) and never create: None (the robot stops).
+    """
+    v, b = np.asarray(approach_mps, dtype=float), np.asarray(limit_mps, dtype=float)
+    if np.any(b[v == 0.0] < 0.0):
+        return None
+    up, down = v > 0.0, v < 0.0
+    high = float(np.min(b[up] / v[up], initial=1.0))
+    low = float(np.max(b[down] / v[down], initial=0.0))
+    return min(high, 1.0) if min(high, 1.0) >= max(low, 0.0) else None
+
+
+def separation_bounds(
+    table: DistanceTable, part_velocity: np.ndarray, frame_age_s: float, cfg: SSMConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every set × part pair's bound and the part's own speed towards the set, (S, K) m/s.
+
+    The bound is :func:`max_approach_speed` of the pair's distance; the part's speed is its
+    velocity (``part_velocity`` (K, 3), m/s) along the direction from the part to the set,
+    where positive (approaching).
+    """
+    limit = max_approach_speed(table.distance, frame_age_s, cfg)
+    towards = np.einsum("skx,kx->sk", table.vector, part_velocity)  # vector: human -> robot
+    return limit, np.maximum(towards, 0.0)

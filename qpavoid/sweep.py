@@ -89,12 +89,12 @@ def check_log(
     sets = [robot.set_index(name) for name in ("L1", "L2", "EE")]  # the paper's three sets
     capsule = (log["distance"] if distance == "capsules" else log["distance_other"])[:, sets]
     threshold = stop_distances(avo)
-    moving = np.any(log["dq"] != 0.0, axis=1)
+    moving = np.any(log["dq_command"] != 0.0, axis=1)  # the controller's decisions
     seen = log["distance"][:, sets]
     rule = stop_rule_holds(log["f"], seen[:, 1], seen[:, 2], avo)
     cols = joint_columns(robot, config.scaled_joints, "scaled_joints")
     limits = scaled_velocity_limits(robot.dq_max, log["f"], cols)  # eq. (3)
-    over = np.any(np.abs(log["dq"]) > limits * (1 + 1e-9) + 1e-12, axis=1)
+    over = np.any(np.abs(log["dq_command"]) > limits * (1 + 1e-9) + 1e-12, axis=1)
     outside = np.any((log["q"] > robot.q_max) | (log["q"] < robot.q_min), axis=1)
     below = np.any(capsule < threshold, axis=1)
     return {

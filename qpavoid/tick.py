@@ -12,10 +12,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .distances import DistanceTable
+from .errors import InputError
 from .frames import HumanFrame
 from .human import HumanGeometry
 from .laws import AvoidanceConfig
+from .perception import Perceived, PerceptionConfig
 from .robot import Kinematics
+from .ssm import SSMConfig
+
+#: What ``ControllerConfig.safety`` may be: the paper's rules as written, or speed and
+#: separation monitoring on top of them.
+SAFETY_MODES = ("paper", "ssm")
 
 
 @dataclass(frozen=True)
@@ -25,7 +32,9 @@ class ControllerConfig:
     Attributes
     ----------
     distance
-        Distance method: ``"spheres"`` (paper eq. 1) or ``"capsules"`` (exact, coal).
+        Distance method: ``"capsules"`` (exact, coal; the default, because it covers every
+        robot surface a person can reach, the shoulder included) or ``"spheres"`` (the
+        paper's eq. 1 as published: blind at the shoulder, docs/distances.md).
     avoidance
         Constants of the avoidance laws (eqs. 2-7) and the stop rules.
     gain_position, gain_orientation
@@ -41,10 +50,22 @@ class ControllerConfig:
     require_human
         Stop when no body part is tracked at all (the safe reading of "nobody seen").
     max_frame_age_s
-        Stop when the human frame is older than this, s (default: 3 Kinect frames).
+        Stop when the human frame is older than this, s (default 0.1 s: the Kinect v2
+        latency and one frame period, with 6 ms to spare).
+    safety
+        ``"paper"``: the paper's laws and stop rules as written; ``"ssm"``: speed and
+        separation monitoring on top of them (:mod:`qpavoid.ssm`): each robot point's
+        approach speed towards each body part bounded so that it can be stationary before
+        the person arrives, joint speeds kept within the stopping-time budget, and (QP)
+        the velocity damper reduced by the part's own approach speed.
+    ssm
+        Constants of speed and separation monitoring (used with ``safety="ssm"``).
+    perception
+        How frames are judged: lost and inferred joints, frozen frames, the person's
+        velocity (:mod:`qpavoid.perception`).
     """
 
-    distance: str = "spheres"
+    distance: str = "capsules"
     avoidance: AvoidanceConfig = field(default_factory=AvoidanceConfig)
     gain_position: float = 5.0
     gain_orientation: float = 5.0
@@ -54,6 +75,17 @@ class ControllerConfig:
     scaled_joints: tuple[str, ...] = ("A1", "A2")
     require_human: bool = True
     max_frame_age_s: float = 0.1
+    safety: str = "paper"
+    ssm: SSMConfig = field(default_factory=SSMConfig)
+    perception: PerceptionConfig = field(default_factory=PerceptionConfig)
+
+    def __post_init__(self) -> None:
+        if self.safety not in SAFETY_MODES:
+            raise InputError(
+                f"safety must be one of {SAFETY_MODES}, got {self.safety!r}",
+                name="safety",
+                value=self.safety,
+            )
 
 
 @dataclass(frozen=True)
@@ -112,7 +144,11 @@ class Tick:
     kin
         Kinematics at ``q`` (points, Jacobians, end-effector placement).
     frame, human
-        The human frame and its geometry.
+        The human frame as given, and the geometry of what the tracker made of it.
+    perceived
+        The tracker's view of the frame (filled-in lost joints, uncertainties, velocities).
+    frame_age_s
+        Age of the newest frame the tracker accepted, s.
     table
         The distance table (sets × parts) of the configured method.
     distance
@@ -131,6 +167,11 @@ class Tick:
         (6,) pose error e of eq. (8).
     task_twist
         (6,) ``v_PL + K e``: eq. (8)'s target without the EE repulsion.
+    approach_limit
+        (S, K) speed and separation bound on each pair's robot approach speed, m/s
+        (:func:`~qpavoid.ssm.max_approach_speed`; +inf with ``safety="paper"``).
+    human_approach
+        (S, K) each part's own speed towards each set, m/s (≥ 0; 0 with ``"paper"``).
     reason
         Why a stop rule holds ("" if none).
     """
@@ -151,3 +192,7 @@ class Tick:
     error: np.ndarray
     task_twist: np.ndarray
     reason: str
+    perceived: Perceived
+    frame_age_s: float
+    approach_limit: np.ndarray
+    human_approach: np.ndarray

@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 import qpavoid
+from qpavoid.perception import PerceptionConfig
+from qpavoid.sensor import SensorConfig
 
 
 @pytest.fixture(scope="session")
@@ -26,3 +28,16 @@ def human():
 def random_q(rng: np.random.Generator, robot, margin: float = 0.05) -> np.ndarray:
     """Uniform joint angles inside the position limits (rad)."""
     return rng.uniform(robot.q_min + margin, robot.q_max - margin)
+
+
+def ideal_sim(**kw) -> qpavoid.SimConfig:
+    """The paper's bench: a perfect sensor (no latency, no noise) and an arm that follows
+    its command at once."""
+    return qpavoid.SimConfig(sensor=SensorConfig.ideal(), braking=None, **kw)
+
+
+def paper_config(**kw) -> qpavoid.ControllerConfig:
+    """The paper's controller settings: spheres, its rules, and no frozen-frame check (a
+    perfect sensor films a still person bit for bit)."""
+    kw.setdefault("distance", "spheres")
+    return qpavoid.ControllerConfig(perception=PerceptionConfig(max_identical_frames=None), **kw)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import ideal_sim, paper_config
 
 from qpavoid.analytic import AnalyticController, enforce_limits
 from qpavoid.controller import ControllerConfig
@@ -20,7 +21,8 @@ def runs(robot):
     """Each scenario once, analytic controller, spheres, default 500 Hz."""
     out = {}
     for name in ("free", "test1", "test2"):
-        out[name] = simulate(AnalyticController(robot), make_scenario(name, robot))
+        ctrl = AnalyticController(robot, config=paper_config())
+        out[name] = simulate(ctrl, make_scenario(name, robot), ideal_sim())
     return out
 
 
@@ -60,7 +62,7 @@ def test_test2_stops_when_f_exceeds_08_and_holds_still(runs, robot):
     assert hold.sum() > 1000
     assert (log["q"][hold] == log["q"][hold][0]).all()
     assert (log["distance"][hold, 0] == log["distance"][hold][0, 0]).all()
-    np.testing.assert_array_equal(log["dq"][log["stopped"]], 0.0)
+    np.testing.assert_array_equal(log["dq_command"][log["stopped"]], 0.0)
     assert m["reached_goal"]  # resumes after withdrawal
 
 
@@ -97,7 +99,7 @@ def test_invariants_over_random_approaches(robot, seed):
     assert checks["moving_under_stop_rule"] == 0  # a stop rule: exactly zero
     assert checks["velocity_violations"] == 0  # eq. (3) and nominal limits
     assert checks["position_violations"] == 0
-    np.testing.assert_array_equal(log["dq"][log["stopped"]], 0.0)
+    np.testing.assert_array_equal(log["dq_command"][log["stopped"]], 0.0)
 
 
 def test_whole_body_lost_stops_with_a_reason(robot):

@@ -14,6 +14,7 @@ from qpavoid.cli import main
 from qpavoid.io import LOG_KEYS, load_log
 from qpavoid.recording import Recording, save_csv, save_npz
 from qpavoid.scenarios import make_scenario
+from qpavoid.sensor import SensorConfig
 
 METRIC_KEYS = (
     "reached_goal",
@@ -120,11 +121,14 @@ def test_replay_a_recording(robot, tmp_path, fmt):
     m = json.loads((out / "metrics.json").read_text())
     assert m["scenario"] == "rec"
     log = load_log(out)
-    # The controller saw the recording's frames, sample-and-hold from its first frame, and
-    # the last frame held after it ended.
+    # The controller saw the recording's frames through a Kinect (one latency late, with
+    # millimetres of noise), sample-and-hold from its first frame, the last held after it.
     k = np.searchsorted(log["t"], 2.0)
-    np.testing.assert_allclose(log["joints"][k], rec.frame_at(100.0 + 2.0)[0])
-    np.testing.assert_allclose(log["joints"][-1], rec.joints[-1])
+    sensor = SensorConfig()
+    seen = rec.frame_at(100.0 + 2.0 - sensor.latency_s)[0]
+    np.testing.assert_allclose(log["joints"][k], seen, atol=6 * sensor.noise_m)
+    np.testing.assert_allclose(log["joints"][-1], rec.joints[-1], atol=6 * sensor.noise_m)
+    assert m["safety"] == "paper" and m["bench"] == "real" and m["distance_method"] == "capsules"
 
 
 def test_errors_are_reported(tmp_path, capsys):
@@ -166,7 +170,9 @@ def test_version_and_help_show_defaults(tmp_path, capsys):
     help_text = " ".join(capsys.readouterr().out.split())
     for option, default in (
         ("--controller", "analytic"),
-        ("--distance", "spheres"),
+        ("--distance", "capsules"),
+        ("--safety", "paper"),
+        ("--bench", "real"),
         ("--max-time", "40.0"),
         ("--rate", "500.0"),
         ("--out", "runs/NAME"),

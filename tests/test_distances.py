@@ -135,14 +135,12 @@ def _kinematics(segments):
     return Kinematics(np.zeros(6), np.zeros((9, 3)), None, segments, None, np.eye(4), None)
 
 
-def _check_capsules(robot, human, table, rseg, hseg):
+def _check_capsules(robot, human, table, rseg, hseg, widen=None):
+    # widen: (K,) what the geometry adds to each human capsule (uncertainty, fingers), m.
+    r_human = human.capsule_radii + (0.0 if widen is None else widen)
     for i in range(len(rseg)):
         for j in range(len(hseg)):
-            ref = (
-                segment_segment(*rseg[i], *hseg[j])
-                - robot.capsule_radii[i]
-                - human.capsule_radii[j]
-            )
+            ref = segment_segment(*rseg[i], *hseg[j]) - robot.capsule_radii[i] - r_human[j]
             assert table.distance[i, j] == pytest.approx(ref, abs=1e-6), (i, j)
             if ref > 1e-6:
                 # Witness points on the surfaces, the vector along their difference.
@@ -150,9 +148,7 @@ def _check_capsules(robot, human, table, rseg, hseg):
                 assert point_segment(rp, *rseg[i]) == pytest.approx(
                     robot.capsule_radii[i], abs=1e-6
                 )
-                assert point_segment(hp, *hseg[j]) == pytest.approx(
-                    human.capsule_radii[j], abs=1e-6
-                )
+                assert point_segment(hp, *hseg[j]) == pytest.approx(r_human[j], abs=1e-6)
                 np.testing.assert_allclose(rp - hp, ref * table.vector[i, j], atol=1e-6)
             assert np.linalg.norm(table.vector[i, j]) == pytest.approx(1.0)
 
@@ -165,7 +161,8 @@ def test_capsules_random_against_analytic(robot, human):
         kin = robot.kinematics(q, jacobians=False)
         geo = human.geometry(random_posture(rng, kin.points, spread_m=0.15))
         t = caps(kin, geo)
-        _check_capsules(robot, human, t, kin.segments, geo.segments)
+        widen = geo.part_margin + geo.reach_margin
+        _check_capsules(robot, human, t, kin.segments, geo.segments, widen)
         s = t.robot_s
         assert np.all((s >= 0) & (s <= 1))
 

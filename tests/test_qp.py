@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 import qpsolvers
+from conftest import ideal_sim, paper_config
 
 import qpavoid
 from qpavoid.analytic import AnalyticController
@@ -31,11 +32,11 @@ SOLVER_TOL = 1e-5
 )
 def test_nobody_near_qp_equals_analytic_at_every_tick(robot, rate_hz):
     """In `free` both controllers solve eq. (8): same command within 1e-4 rad/s."""
-    cfg = ControllerConfig(control_period_s=1.0 / rate_hz)
+    cfg = paper_config(control_period_s=1.0 / rate_hz)
     result = simulate(
         QPController(robot, config=cfg),
         make_scenario("free", robot),
-        SimConfig(control_rate_hz=rate_hz),
+        ideal_sim(control_rate_hz=rate_hz),
     )
     log = result.log
     analytic = AnalyticController(robot, config=cfg)

@@ -3,7 +3,8 @@
 ``tests/data/qp_commands_{100,500}hz.npz`` hold the commanded joint velocities (key
 ``SCENARIO/METHOD/dq``, (T, 6) rad/s) of the QP controller in closed loop on ``free``,
 ``test1`` and ``test2``, recorded with the code of commit 41fe3c2 (before issue 8's
-restructure). Refactoring and speed work must keep every tick within 1e-7 rad/s.
+restructure), on the paper's bench (``bench="ideal"``: perfect sensor, exact arm) with the
+paper's rules. Refactoring and speed work must keep every tick within 1e-7 rad/s.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ def assert_same_commands(scenario: str, distance: str, rate_hz: float) -> None:
             distance=distance,
             rate_hz=rate_hz,
             max_time_s=40.0,
+            bench="ideal",  # the bench the fixtures were recorded on
             measure_truth=False,
         )
     )

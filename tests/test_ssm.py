@@ -8,12 +8,15 @@ import pytest
 from qpavoid.ssm import (
     SSMConfig,
     human_speed,
+    joint_speed_limits,
     max_approach_speed,
     protective_distance,
+    speed_scale,
     stopping_distance,
 )
 
-CFG = SSMConfig()  # a = 2 m/s², T_r = 0.15 s, C + Z_d + Z_r = 0.075 m
+# T_r = 0.01 s, T_s = 0.1 s, C + Z_d + Z_r = 0.02 + 0.03 + 0.005 = 0.055 m
+CFG = SSMConfig(reaction_time_s=0.01, stop_time_s=0.1, max_acceleration_radps2=(8.0, 4.0))
 
 
 def test_human_speed_zones_of_iso_13855():
@@ -21,27 +24,50 @@ def test_human_speed_zones_of_iso_13855():
 
 
 def test_protective_distance_by_hand():
-    # d = 0.5 m (v_h = 2.0): S_p(v) = 2 (0.15 + v/2) + 0.15 v + v²/4 + 0.075
-    v = 0.2
-    assert protective_distance(v, 0.5, CFG) == pytest.approx(0.3 + 0.2 + 0.03 + 0.01 + 0.075)
-    assert stopping_distance(0.4, CFG) == pytest.approx(0.04)
-    assert stopping_distance(-0.4, CFG) == 0.0  # moving away: no stopping distance
+    # d = 0.5 m (v_h = 2.0), frame 0.07 s old, v_r = 0.2 m/s:
+    # S_h = 2.0 (0.07 + 0.01 + 0.1) = 0.36, S_r = 0.002, S_s = 0.2 · 0.1 / 2 = 0.01
+    assert protective_distance(0.2, 0.5, 0.07, CFG) == pytest.approx(0.36 + 0.002 + 0.01 + 0.055)
+    assert stopping_distance(0.4, CFG) == pytest.approx(0.02)
+    # beyond 0.5 m the person is taken at 1.6 m/s
+    assert protective_distance(0.0, 0.6, 0.07, CFG) == pytest.approx(1.6 * 0.18 + 0.055)
 
 
-@pytest.mark.parametrize("d, v", [(0.5, 0.106242), (1.0, 0.619921)])
-def test_max_approach_speed_by_hand(d, v):
-    # 0.25 v² + 1.15 v − 0.125 = 0 at 0.5 m; 0.25 v² + 0.95 v − 0.685 = 0 at 1.0 m
-    assert max_approach_speed(d, CFG) == pytest.approx(v, abs=1e-6)
+@pytest.mark.parametrize("d, age, v", [(0.5, 0.07, 0.085 / 0.06), (0.3, 0.07, -0.115 / 0.06)])
+def test_max_approach_speed_by_hand(d, age, v):
+    # (d − 2.0 · 0.18 − 0.055) / (0.01 + 0.05)
+    assert max_approach_speed(d, age, CFG) == pytest.approx(v, abs=1e-9)
 
 
 def test_max_approach_speed_is_the_root_of_s_p_equals_d():
     rng = np.random.default_rng(0)
     d = rng.uniform(0.0, 2.0, 1000)
-    v = max_approach_speed(d, CFG)
-    ok = v >= 0
-    assert ok.sum() > 500 and (~ok).sum() > 50
-    np.testing.assert_allclose(protective_distance(v[ok], d[ok], CFG), d[ok], atol=1e-12)
-    # where negative, even a robot at rest is too close: S_p(0) > d
-    assert np.all(protective_distance(0.0, d[~ok], CFG) > d[~ok])
-    # more uncertainty never allows a faster approach
-    assert np.all(max_approach_speed(d, CFG, 0.05) <= v + 1e-15)
+    age = rng.uniform(0.0, 0.1, 1000)
+    v = max_approach_speed(d, age, CFG)
+    assert (v >= 0).sum() > 500 and (v < 0).sum() > 100
+    np.testing.assert_allclose(protective_distance(v, d, age, CFG), d, atol=1e-12)
+    # an older frame never allows a faster approach
+    assert np.all(max_approach_speed(d, age + 0.05, CFG) < v)
+    assert max_approach_speed(np.inf, 0.0, CFG) == np.inf  # a part not seen: no bound
+
+
+def test_joint_speed_limits_keep_the_stop_within_its_budget():
+    np.testing.assert_allclose(joint_speed_limits(CFG, 3), [0.8, 0.4, 0.4])
+
+
+def test_speed_scale_by_hand_and_against_a_grid():
+    assert speed_scale(np.array([0.5, -0.2]), np.array([0.25, 1.0])) == pytest.approx(0.5)
+    assert speed_scale(np.array([0.5]), np.array([-0.1])) is None  # a retreat is needed
+    assert speed_scale(np.array([-0.5]), np.array([-0.1])) == 1.0  # already retreating fast
+    assert speed_scale(np.array([-0.5]), np.array([-0.4])) == 1.0
+    assert speed_scale(np.array([-0.5]), np.array([-0.6])) is None  # not fast enough
+    assert speed_scale(np.array([0.0]), np.array([-0.1])) is None
+    rng = np.random.default_rng(1)
+    grid = np.linspace(0.0, 1.0, 2001)
+    for _ in range(300):
+        v, b = rng.normal(0, 1, 4), rng.normal(0.3, 0.5, 4)
+        ok = np.all(grid[:, None] * v[None] <= b[None] + 1e-12, axis=1)
+        s = speed_scale(v, b)
+        if s is None:
+            assert not ok.any()
+        else:
+            assert np.all(s * v <= b + 1e-12) and s >= grid[ok].max() - 1e-3

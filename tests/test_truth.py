@@ -22,7 +22,9 @@ def test_a_recording_is_interpolated_between_its_frames():
 
 def test_truth_equals_the_seen_frame_at_capture_instants():
     """A generated motion is seen exactly when captured: there truth = the seen capsules."""
-    run = simulate_one(RunSpec(scenario="test1", rate_hz=90.0, max_time_s=12.0))
+    run = simulate_one(
+        RunSpec(scenario="test1", distance="spheres", bench="ideal", rate_hz=90.0, max_time_s=12.0)
+    )
     log, m = run.sim.log, run.metrics
     fresh = log["frame_age_s"] < 1e-9  # ticks at a capture instant
     assert fresh.sum() > 100

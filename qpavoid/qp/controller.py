@@ -18,6 +18,7 @@ from .position_limits import PositionLimit
 from .problem import Assembler, QPProblem
 from .regularization import Regularization
 from .repulsion import EERepulsionTask, L2RepulsionTask
+from .separation import SeparationLimit
 from .variables import Variables
 from .velocity_damper import VelocityDamper
 from .velocity_limits import VelocityLimit
@@ -38,7 +39,8 @@ class QPController(Controller):
         subject to  u_L2ᵀ J_L2 q̇ + s_L2 ≥ u_L2ᵀ J_L2 q̇₈ + |v_rep,L2|     L2RepulsionTask
                     u_EEᵀ J_EE q̇ + s_EE ≥ u_EEᵀ (v_PL + K e) + |v_EE|  EERepulsionTask
                     s_L2, s_EE ≥ 0
-                    −nᵀ J_p q̇ ≤ ξ (d − d_s) / (d_i − d_s)        VelocityDamper, every pair
+                    −nᵀ J_p q̇ ≤ ξ (d − d_s) / (d_i − d_s) [− v_h,n] VelocityDamper, every pair
+                   [−nᵀ J_p q̇ ≤ v_max(d)                         SeparationLimit, ssm]
                     |q̇| ≤ q̇_max, A1 and A2 scaled by (1 − f)     VelocityLimit, eq. (3)
                     γ (q_min − q)/dt ≤ q̇ ≤ γ (q_max − q)/dt      PositionLimit
 
@@ -96,6 +98,7 @@ class QPController(Controller):
             VelocityDamper(
                 x, d_stop, w.damper_influence_m, w.damper_gain_mps, len(self.human.parts)
             ),
+            SeparationLimit(x, len(robot.sets) * len(self.human.parts)),
             VelocityLimit(x),
             PositionLimit(x, robot.q_min, robot.q_max, w.position_limit_gain),
         ]
@@ -119,11 +122,11 @@ class QPController(Controller):
         # a bound or a damper by more than the solver's tolerance is never applied; within
         # it, the bounds (joint limits) are then met exactly.
         lb, ub = prob.lb[dq], prob.ub[dq]
-        damper = prob.rows[VelocityDamper.name]
+        hard = np.r_[prob.rows[VelocityDamper.name], prob.rows[SeparationLimit.name]]
         excess = max(
             float(np.max(lb - x[dq])),
             float(np.max(x[dq] - ub)),
-            float(np.max(prob.G[damper] @ x - prob.h[damper], initial=-np.inf)),
+            float(np.max(prob.G[hard] @ x - prob.h[hard], initial=-np.inf)),
         )
         if excess > FEASIBILITY_TOL:
             return self.command(

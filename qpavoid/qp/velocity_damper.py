@@ -10,6 +10,10 @@ distance d_s (Faverjon and Tournassoud's damper). d_s is the stop distance of th
 paper's rules: 0.05 m for L2 and EE, and for L1 the distance at which f reaches 0.8
 (eq. 2 inverted, 0.0423 m). A row exists for every pair (fixed structure); pairs beyond
 d_i, or not seen, get the bound +inf.
+
+With speed and separation monitoring (``safety="ssm"``) the bound is reduced by the part's
+own speed towards the set (``Tick.human_approach``): the robot slows, or retreats, before
+a fast hand closes the gap.
 """
 
 from __future__ import annotations
@@ -66,5 +70,8 @@ class VelocityDamper(QPPiece):
             normal = table.vector.reshape(-1, 3)[active]
             G[active, self.variables.dq] = -np.einsum("ak,akv->av", normal, Jp)
             ds = self.d_stop[active]
-            h[active] = self.gain * (d[active] - ds) / (self.influence_m - ds)
+            h[active] = (
+                self.gain * (d[active] - ds) / (self.influence_m - ds)
+                - tick.human_approach.ravel()[active]
+            )
         return Constraint(G, h)

@@ -1,0 +1,198 @@
+"""Frames judged by what they are: lost and inferred joints, frozen frames, the person's speed.
+
+The controller sees the person only through camera frames. :class:`Tracker` turns the
+stream of frames into what the distances may trust (:class:`Perceived`):
+
+* **A joint that stops being tracked does not vanish.** It stays at its last known
+  position with an uncertainty radius growing at the largest human speed
+  (``max_human_speed_mps``, ISO 13855's 2.0 m/s) since it was last seen, bounded by the
+  reach of its nearest tracked ancestor (a lost hand is within a forearm and hand of a
+  tracked elbow: then it is placed there, with that reach as its radius). The distances
+  widen each part by the largest radius of its joints, so a lost limb pushes the robot
+  away or stops it instead of disappearing.
+* **Inferred joints** (the SDK's guesses for occluded joints) carry
+  ``inferred_uncertainty_m`` plus the same growth since the joint was last Tracked: an
+  Inferred joint that has not moved for a second is a second old.
+* **Frozen frames**: a real depth sensor never repeats a skeleton bit for bit;
+  ``identical`` counts consecutive bit-identical skeletons and the controller treats more
+  than ``max_identical_frames`` as stale.
+* **Out-of-order frames** (a capture time not after the last one) are ignored.
+* **The person's velocity**, per joint, from an α-β filter on the frames' positions and
+  capture times (docs/safety.md measures its lag and noise), and per part as the velocity
+  of its fastest joint.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from .frames import N_KINECT_JOINTS, HumanFrame, JointType, TrackingState
+
+J = JointType
+
+#: Each joint's parent in the Kinect v2 skeleton (the upper body; -1 for the root).
+PARENT = np.full(N_KINECT_JOINTS, -1)
+for _child, _parent in (
+    (J.SpineMid, J.SpineBase),
+    (J.SpineShoulder, J.SpineMid),
+    (J.Neck, J.SpineShoulder),
+    (J.Head, J.Neck),
+    (J.ShoulderLeft, J.SpineShoulder),
+    (J.ElbowLeft, J.ShoulderLeft),
+    (J.WristLeft, J.ElbowLeft),
+    (J.HandLeft, J.WristLeft),
+    (J.HandTipLeft, J.HandLeft),
+    (J.ThumbLeft, J.HandLeft),
+    (J.ShoulderRight, J.SpineShoulder),
+    (J.ElbowRight, J.ShoulderRight),
+    (J.WristRight, J.ElbowRight),
+    (J.HandRight, J.WristRight),
+    (J.HandTipRight, J.HandRight),
+    (J.ThumbRight, J.HandRight),
+):
+    PARENT[int(_child)] = int(_parent)
+
+
+@dataclass(frozen=True)
+class PerceptionConfig:
+    """How much the controller trusts a frame.
+
+    Attributes
+    ----------
+    max_human_speed_mps
+        How fast a lost joint's uncertainty grows, m/s (ISO 13855: 2.0 m/s for hands and
+        arms within 0.5 m).
+    inferred_uncertainty_m
+        Uncertainty of an Inferred joint, m, on top of its growth since last Tracked
+        (docs/safety.md: the error of inferred joints is several times that of tracked ones).
+    max_identical_frames
+        More consecutive bit-identical skeletons than this are a frozen sensor (stale);
+        None switches the check off (for a perfect simulated sensor, whose still person
+        is bit-identical). Default 3: 0.1 s at 30 Hz.
+    velocity_alpha, velocity_beta
+        Gains of the α-β velocity filter (position and velocity correction).
+    """
+
+    max_human_speed_mps: float = 2.0
+    inferred_uncertainty_m: float = 0.10
+    max_identical_frames: int | None = 3
+    velocity_alpha: float = 0.5
+    velocity_beta: float = 0.3
+
+
+class Perceived(NamedTuple):
+    """What the controller may trust of the latest frame.
+
+    Attributes
+    ----------
+    frame
+        The frame with every joint ever seen at its best known position (lost joints
+        filled in and flagged Inferred).
+    joint_radius
+        (25,) uncertainty of each joint, m (0 for a tracked joint).
+    joint_velocity
+        (25, 3) filtered velocity of each joint, m/s (0 where unknown).
+    identical
+        How many frames in a row repeated the previous skeleton bit for bit.
+    capture_time_s
+        Capture time of the newest frame accepted, s (the caller's clock).
+    """
+
+    frame: HumanFrame
+    joint_radius: np.ndarray
+    joint_velocity: np.ndarray
+    identical: int
+    capture_time_s: float
+
+    @classmethod
+    def untracked(cls, frame: HumanFrame) -> Perceived:
+        """A frame taken as it is (no memory, no uncertainty, no velocity)."""
+        n = N_KINECT_JOINTS
+        return cls(frame, np.zeros(n), np.zeros((n, 3)), 0, float("nan"))
+
+
+class Tracker:
+    """Memory of the person across frames (one per controller; :meth:`update` per frame)."""
+
+    def __init__(self, cfg: PerceptionConfig | None = None):
+        self.cfg = cfg or PerceptionConfig()
+        n = N_KINECT_JOINTS
+        self.position = np.full((n, 3), np.nan)
+        self.velocity = np.zeros((n, 3))
+        self.last_seen = np.full(n, -np.inf)
+        self.last_tracked = np.full(n, -np.inf)
+        self.bone = np.zeros(n)  # distance to the parent when both were last seen
+        self._last: HumanFrame | None = None
+        self._perceived: Perceived | None = None
+
+    def update(self, frame: HumanFrame, capture_time_s: float) -> Perceived:
+        """Take a new frame captured at ``capture_time_s`` (s) and return what to trust."""
+        cfg = self.cfg
+        if self._perceived is not None and capture_time_s <= self._perceived.capture_time_s:
+            return self._perceived  # out of order or repeated: keep the newer one
+        last = self._last
+        identical = 0
+        if last is not None and self._perceived is not None:
+            same = np.array_equal(frame.joints, last.joints, equal_nan=True) and np.array_equal(
+                frame.state, last.state
+            )
+            identical = self._perceived.identical + 1 if same else 0
+        seen = frame.usable
+        tracked = seen & (frame.state == TrackingState.Tracked)
+        z = frame.joints
+        # α-β filter on joints seen now and before; a joint seen for the first time starts
+        # at rest where it is.
+        dt = capture_time_s - self.last_seen
+        both = seen & np.isfinite(dt)
+        if both.any():
+            d = dt[both, None]
+            predicted = self.position[both] + self.velocity[both] * d
+            residual = z[both] - predicted
+            self.position[both] = predicted + cfg.velocity_alpha * residual
+            self.velocity[both] = self.velocity[both] + cfg.velocity_beta * residual / d
+        fresh = seen & ~both
+        self.position[fresh], self.velocity[fresh] = z[fresh], 0.0
+        self.velocity[~seen] = 0.0
+        self.last_seen[seen] = capture_time_s
+        self.last_tracked[tracked] = capture_time_s
+        parent_seen = PARENT >= 0
+        pair = seen & parent_seen & seen[np.maximum(PARENT, 0)]
+        self.bone[pair] = np.linalg.norm(z[pair] - z[PARENT[pair]], axis=1)
+
+        joints = np.where(seen[:, None], z, self.position)
+        radius = np.zeros(N_KINECT_JOINTS)
+        inferred = seen & ~tracked
+        radius[inferred] = cfg.inferred_uncertainty_m + cfg.max_human_speed_mps * np.maximum(
+            capture_time_s - self.last_tracked[inferred], 0.0
+        )
+        lost = ~seen & np.isfinite(self.last_seen)
+        radius[lost] = cfg.max_human_speed_mps * (capture_time_s - self.last_seen[lost])
+        for j in np.flatnonzero(lost):  # bounded by the reach of a tracked ancestor
+            reach, a = self.bone[j], PARENT[j]
+            while a >= 0 and not tracked[a]:
+                reach, a = reach + self.bone[a], PARENT[a]
+            if a >= 0 and reach < radius[j]:
+                joints[j], radius[j] = z[a], reach
+        state = frame.state.copy()
+        state[lost] = TrackingState.Inferred
+        self._last = frame
+        self._perceived = Perceived(
+            HumanFrame(joints, state),
+            radius,
+            np.where(seen[:, None], self.velocity, 0.0),
+            identical,
+            float(capture_time_s),
+        )
+        return self._perceived
+
+
+def part_velocities(velocity: np.ndarray, part_joints: np.ndarray) -> np.ndarray:
+    """(K, 3) velocity of each part: that of its fastest joint, m/s.
+
+    ``velocity`` (25, 3) per joint; ``part_joints`` (K, 25) bool membership.
+    """
+    speed = np.where(part_joints, np.linalg.norm(velocity, axis=1)[None, :], -1.0)
+    return velocity[speed.argmax(axis=1)]
