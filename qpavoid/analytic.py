@@ -118,12 +118,6 @@ class AnalyticController(Controller):
             approach = -np.einsum("ak,akv,v->a", table.vector.reshape(-1, 3)[active], Jp, dq)
             s = speed_scale(approach, tick.approach_limit.ravel()[active])
             if s is None:
-                k = active[int(np.argmin(tick.approach_limit.ravel()[active]))]
-                i, j = divmod(int(k), table.distance.shape[1])
-                reason = (
-                    f"speed and separation: {table.part_names[j]} {table.distance[i, j]:.3f} m "
-                    f"from {table.set_names[i]}"
-                )
-                return self.command(tick, None, reason=reason)
+                return self.command(tick, None, reason=self.separation_reason(tick))
             dq, scale = dq * s, scale * s
         return self.command(tick, dq, scale, tick.v_rep_L2, tick.v_rep_EE)

@@ -15,6 +15,8 @@ joint angle or path time) raise :class:`~qpavoid.errors.InputError` before any o
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -33,7 +35,7 @@ from .laws import (
 )
 from .perception import Perceived, Tracker, part_velocities
 from .robot import Robot, joint_columns
-from .ssm import joint_speed_limits, separation_bounds
+from .ssm import joint_speed_limits, reaction_time, separation_bounds
 from .task import ArcPath, pose_error
 from .tick import Command, ControllerConfig, Tick
 
@@ -74,7 +76,9 @@ class Controller:
         self.scaled_cols = joint_columns(robot, self.config.scaled_joints, "scaled_joints")
         self.tracker = Tracker(self.config.perception)
         self.part_joints = self.human.part_joints()
-        self.ssm_joint_limits = joint_speed_limits(self.config.ssm, robot.nv)
+        ssm = self.config.ssm
+        self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, self.config.control_period_s))
+        self.ssm_joint_limits = joint_speed_limits(ssm, robot.nv)
         self._clock_s = 0.0  # the controller's own clock: control periods since it started
         self._frame: tuple[HumanFrame, float | None] | None = None
         self._perceived: Perceived | None = None
@@ -140,7 +144,7 @@ class Controller:
         limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)  # eq. (3)
         if self.config.safety == "ssm":
             v_parts = part_velocities(perceived.joint_velocity, self.part_joints)
-            approach_limit, human_approach = separation_bounds(table, v_parts, age, self.config.ssm)
+            approach_limit, human_approach = separation_bounds(table, v_parts, age, self.ssm)
         else:
             approach_limit = np.full(table.distance.shape, np.inf)
             human_approach = np.zeros(table.distance.shape)
@@ -187,6 +191,16 @@ class Controller:
             age,
             approach_limit,
             human_approach,
+        )
+
+    @staticmethod
+    def separation_reason(tick: Tick) -> str:
+        """Why speed and separation monitoring stops the robot: the tightest pair."""
+        table = tick.table
+        i, j = np.unravel_index(int(np.argmin(tick.approach_limit)), table.distance.shape)
+        return (
+            f"speed and separation: {table.part_names[j]} {table.distance[i, j]:.3f} m "
+            f"from {table.set_names[i]}"
         )
 
     def task_joint_velocities(self, tick: Tick) -> np.ndarray:

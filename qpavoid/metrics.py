@@ -40,7 +40,9 @@ def end_of_run(
     table = last.table
     s, k = np.unravel_index(int(np.argmin(table.distance)), table.distance.shape)
     closest = float(table.distance[s, k])
-    by_rule = last.stopped and last.reason.startswith(("f = ", "d_L2", "d_EE"))
+    by_rule = last.stopped and last.reason.startswith(
+        ("f = ", "d_L2", "d_EE", "speed and separation")
+    )
     if by_rule or closest < avoidance.rho_rep_m:
         held = {
             "set": robot.set_names[s],

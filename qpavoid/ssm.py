@@ -29,6 +29,7 @@ Units: m, s, m/s, rad/s².
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,8 +49,11 @@ class SSMConfig:
     Attributes
     ----------
     human_speed_near_mps, human_speed_far_mps, human_speed_zone_m
-        ISO 13855 §6.2.3 approach speed of the body: 2.0 m/s when the separation is at most
+        ISO 13855 approach speed of a hand or arm: 2.0 m/s when the separation is at most
         0.5 m, 1.6 m/s beyond.
+    body_parts, body_speed_mps
+        Parts that move with the body, not the arm (the head and trunk of a seated person),
+        and their speed: ISO 13855's approach speed of the body, 1.6 m/s.
     reaction_time_s
         T_r: from the controller's tick to the arm starting to brake: one control period
         and the arm's reaction (:data:`~qpavoid.braking.IIWA14_REACTION_TIME_S`), s.
@@ -69,18 +73,22 @@ class SSMConfig:
     human_speed_near_mps: float = 2.0
     human_speed_far_mps: float = 1.6
     human_speed_zone_m: float = 0.5
-    reaction_time_s: float = 0.002 + IIWA14_REACTION_TIME_S
-    stop_time_s: float = 0.1
+    body_parts: tuple[str, ...] = ("head", "trunk")
+    body_speed_mps: float = 1.6
+    reaction_time_s: float = IIWA14_REACTION_TIME_S
+    stop_time_s: float = 0.06
     max_acceleration_radps2: tuple[float, ...] = IIWA14_MAX_ACCELERATION_RADPS2
     intrusion_m: float = 0.02
     sensing_uncertainty_m: float = 0.03
     robot_uncertainty_m: float = 0.005
 
 
-def human_speed(separation_m: ArrayLike, cfg: SSMConfig) -> np.ndarray:
-    """ISO 13855 approach speed of the person: 2.0 m/s within 0.5 m, 1.6 m/s beyond (v_h)."""
+def human_speed(separation_m: ArrayLike, cfg: SSMConfig, body: ArrayLike = False) -> np.ndarray:
+    """v_h (ISO 13855): a hand or arm 2.0 m/s within 0.5 m, 1.6 m/s beyond; ``body`` parts
+    (head, trunk; broadcast against ``separation_m``) 1.6 m/s."""
     d = np.asarray(separation_m, dtype=float)
-    return np.where(d <= cfg.human_speed_zone_m, cfg.human_speed_near_mps, cfg.human_speed_far_mps)
+    arm = np.where(d <= cfg.human_speed_zone_m, cfg.human_speed_near_mps, cfg.human_speed_far_mps)
+    return np.where(body, cfg.body_speed_mps, arm)
 
 
 def human_distance(
@@ -112,6 +120,7 @@ def protective_distance(
     separation_m: ArrayLike,
     frame_age_s: ArrayLike,
     cfg: SSMConfig,
+    body: ArrayLike = False,
 ) -> np.ndarray:
     """S_p = S_h + S_r + S_s + C + Z_d + Z_r (ISO/TS 15066 eq. 1), m.
 
@@ -125,9 +134,11 @@ def protective_distance(
         T_f: the age of the frame d was measured on.
     cfg
         The constants.
+    body
+        True for a part that moves with the body (:func:`human_speed`).
     """
     return (
-        human_distance(human_speed(separation_m, cfg), frame_age_s, cfg)
+        human_distance(human_speed(separation_m, cfg, body), frame_age_s, cfg)
         + reaction_distance(robot_speed_mps, cfg)
         + stopping_distance(robot_speed_mps, cfg)
         + fixed_terms(cfg)
@@ -135,7 +146,7 @@ def protective_distance(
 
 
 def max_approach_speed(
-    separation_m: ArrayLike, frame_age_s: ArrayLike, cfg: SSMConfig
+    separation_m: ArrayLike, frame_age_s: ArrayLike, cfg: SSMConfig, body: ArrayLike = False
 ) -> np.ndarray:
     """The largest v_r with ``S_p(v_r) ≤ d``: ``(d − S_h − C − Z_d − Z_r) / (T_r + T_s/2)``.
 
@@ -143,7 +154,7 @@ def max_approach_speed(
     or stop); −inf stays −inf and +inf (a part not seen) gives +inf.
     """
     d = np.asarray(separation_m, dtype=float)
-    room = d - human_distance(human_speed(d, cfg), frame_age_s, cfg) - fixed_terms(cfg)
+    room = d - human_distance(human_speed(d, cfg, body), frame_age_s, cfg) - fixed_terms(cfg)
     return room / (cfg.reaction_time_s + cfg.stop_time_s / 2.0)
 
 
@@ -177,6 +188,15 @@ def separation_bounds(
     velocity (``part_velocity`` (K, 3), m/s) along the direction from the part to the set,
     where positive (approaching).
     """
-    limit = max_approach_speed(table.distance, frame_age_s, cfg)
+    body = np.isin(table.part_names, cfg.body_parts)[None, :]
+    limit = max_approach_speed(table.distance, frame_age_s, cfg, body)
     towards = np.einsum("skx,kx->sk", table.vector, part_velocity)  # vector: human -> robot
     return limit, np.maximum(towards, 0.0)
+
+
+def reaction_time(cfg: SSMConfig, control_period_s: float) -> float:
+    """T_r of a controller ticking every ``control_period_s``: a decision waits up to one
+    period to be revised, then the arm's reaction, in whole periods (as the simulation's
+    arm, :class:`~qpavoid.braking.ArmResponse`), s."""
+    periods = math.ceil(cfg.reaction_time_s / control_period_s - 1e-9)
+    return control_period_s * (1 + periods)

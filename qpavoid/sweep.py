@@ -11,6 +11,8 @@ Each run is checked, tick by tick, for what must never happen:
 * the robot moving while the *exact capsule* distance of a set is below that set's stop
   threshold (0.05 m for L2 and EE; for L1 the distance where f = 0.8), whichever distance
   method the controller itself uses.
+
+The adversarial sweep, judged against the true motion, is :mod:`qpavoid.strike_sweep`.
 """
 
 from __future__ import annotations

@@ -114,9 +114,10 @@ class QPController(Controller):
         sol = self.backend.solve(prob)
         info = {"solver": self.backend.name, "status": sol.status, "iterations": sol.iterations}
         if not sol.found or sol.x is None:
-            return self.command(
-                tick, None, reason=f"QP not solved ({self.backend.name}: {sol.status})", info=info
-            )
+            reason = f"QP not solved ({self.backend.name}: {sol.status})"
+            if (tick.approach_limit < 0.0).any():  # no command keeps the separation
+                reason = f"{self.separation_reason(tick)} ({reason})"
+            return self.command(tick, None, reason=reason, info=info)
         x, dq = sol.x, self.variables.dq
         # Hard rows, checked against the problem we meant to solve: a solution that breaks
         # a bound or a damper by more than the solver's tolerance is never applied; within
