@@ -1,0 +1,160 @@
+"""What the controller may trust: lost, inferred and frozen joints, velocities, fingers, sensor."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from qpavoid.braking import ArmResponse, BrakingConfig, stop_time
+from qpavoid.frames import HumanFrame, JointType, TrackingState
+from qpavoid.human import KinectHuman
+from qpavoid.perception import PerceptionConfig, Tracker, part_velocities
+from qpavoid.posture import Operator
+from qpavoid.sensor import Sensor, SensorConfig, SensorFault
+
+J = JointType
+HAND = int(J.HandRight)
+WRIST = int(J.WristRight)
+
+
+def frame(joints, state=None) -> HumanFrame:
+    return HumanFrame.check(np.array(joints, dtype=float), state)
+
+
+def test_a_lost_joint_stays_with_an_uncertainty_growing_at_human_speed():
+    rest = Operator().rest()
+    tracker = Tracker(PerceptionConfig())
+    tracker.update(frame(rest), 0.0)
+    lost = rest.copy()
+    lost[[HAND, WRIST, int(J.ElbowRight), int(J.HandTipRight), int(J.ThumbRight)]] = np.nan
+    p = tracker.update(frame(lost), 0.1)
+    # kept where it was last seen, flagged Inferred, radius 2.0 m/s x 0.1 s = 0.2 m ...
+    np.testing.assert_array_equal(p.frame.joints[HAND], rest[HAND])
+    assert p.frame.state[HAND] == TrackingState.Inferred
+    assert p.joint_radius[HAND] == pytest.approx(0.2)
+    # ... until the reach of the tracked shoulder is smaller: then it sits at the shoulder
+    p = tracker.update(frame(lost), 1.0)
+    shoulder = rest[int(J.ShoulderRight)]
+    arm = (
+        np.linalg.norm(rest[int(J.ElbowRight)] - shoulder)
+        + np.linalg.norm(rest[WRIST] - rest[int(J.ElbowRight)])
+        + np.linalg.norm(rest[HAND] - rest[WRIST])
+    )
+    np.testing.assert_array_equal(p.frame.joints[HAND], shoulder)
+    assert p.joint_radius[HAND] == pytest.approx(arm)
+    # the hand part never vanishes from the geometry: its margin is its farthest joint's
+    # radius, the fingertip's (one bone beyond the hand)
+    geo = KinectHuman().geometry(p.frame, joint_radius=p.joint_radius)
+    k = KinectHuman().part_names.index("right_hand")
+    tip = arm + np.linalg.norm(rest[int(J.HandTipRight)] - rest[HAND])
+    assert geo.segment_valid[k] and geo.part_margin[k] == pytest.approx(tip)
+
+
+def test_inferred_joints_carry_more_uncertainty_the_longer_they_are_not_tracked():
+    rest = Operator().rest()
+    tracker = Tracker(PerceptionConfig(inferred_uncertainty_m=0.1))
+    tracker.update(frame(rest), 0.0)
+    state = np.full(25, 2)
+    state[HAND] = TrackingState.Inferred
+    p = tracker.update(frame(rest, state), 0.5)
+    assert p.joint_radius[HAND] == pytest.approx(0.1 + 2.0 * 0.5)
+    assert p.joint_radius[WRIST] == 0.0
+
+
+def test_frozen_frames_are_counted_and_out_of_order_frames_ignored():
+    rest = Operator().rest()
+    tracker = Tracker()
+    counts = [tracker.update(frame(rest), k / 30).identical for k in range(5)]
+    assert counts == [0, 1, 2, 3, 4]
+    moved = rest + 1e-6
+    assert tracker.update(frame(moved), 5 / 30).identical == 0
+    old = tracker.update(frame(rest + 1.0), 1 / 30)  # captured before the last one
+    np.testing.assert_array_equal(old.frame.joints, moved)
+
+
+def test_velocity_filter_lag_and_noise_on_a_known_motion():
+    """A hand moving at 1 m/s, seen at 30 Hz with 2 mm noise: the α-β estimate converges
+    within 0.3 s and its noise stays below 0.1 m/s (docs/safety.md has the full numbers)."""
+    rng = np.random.default_rng(0)
+    tracker = Tracker()
+    v = np.array([1.0, 0.0, 0.0])
+    est = []
+    for k in range(90):
+        t = k / 30
+        joints = Operator().rest()
+        joints[HAND] += v * max(t - 1.0, 0.0)  # starts moving at t = 1 s
+        joints += rng.normal(0.0, 0.002, joints.shape)
+        est.append(tracker.update(frame(joints), t).joint_velocity[HAND])
+    est = np.array(est)
+    t = np.arange(90) / 30
+    assert np.abs(est[t < 1.0]).max() < 0.3  # still: noise only
+    settled = t > 1.3
+    np.testing.assert_allclose(est[settled].mean(axis=0), v, atol=0.05)
+    assert est[settled, 0].std() < 0.1
+    # the part takes its fastest joint's velocity
+    joint_v = np.zeros((25, 3))
+    joint_v[HAND] = v
+    joint_v[WRIST] = 0.5 * v
+    parts = KinectHuman().part_joints()
+    k = KinectHuman().part_names.index("right_hand")
+    np.testing.assert_array_equal(part_velocities(joint_v, parts)[k], v)
+
+
+def test_fingers_widen_the_hand_capsule_by_how_far_they_stick_out():
+    joints = Operator().rest()
+    wrist, hand = joints[WRIST], joints[HAND]
+    axis = (hand - wrist) / np.linalg.norm(hand - wrist)
+    joints[int(J.HandTipRight)] = hand + 0.12 * axis  # beyond the hand along its axis
+    joints[int(J.ThumbRight)] = hand  # inside
+    human = KinectHuman()
+    geo = human.geometry(joints)
+    k = human.part_names.index("right_hand")
+    assert geo.reach_margin[k] == pytest.approx(0.12 - 0.05)  # capsule radius 0.05 m
+    joints[int(J.HandTipRight)] = np.nan  # a lost finger widens nothing
+    assert human.geometry(joints).reach_margin[k] == pytest.approx(0.0)
+
+
+class Still:
+    def frame_at(self, t):
+        return Operator().rest(), np.full(25, 2)
+
+
+def test_sensor_latency_noise_and_faults():
+    cfg = SensorConfig(latency_s=0.06, noise_m=0.002, seed=1)
+    sensor = Sensor(Still(), cfg)
+    for t in (0.0, 0.1, 0.5, 1.234):
+        f, captured = sensor.frame_at(t)
+        assert captured == pytest.approx(np.floor((t - 0.06) * 30 + 1e-9) / 30)
+    noise = np.array(
+        [sensor.frame_at(k / 30 + 0.07)[0].joints - Operator().rest() for k in range(300)]
+    )
+    assert noise.std() == pytest.approx(0.002, rel=0.05)
+    faults = (
+        SensorFault("freeze", 1.0, 1.5),
+        SensorFault("lost", 2.0, 2.5, (HAND,)),
+        SensorFault("gap", 3.0, 3.5),
+    )
+    sensor = Sensor(Still(), SensorConfig(latency_s=0.0, faults=faults))
+    frozen = [sensor.frame_at(1.0 + k / 30) for k in range(10)]
+    assert all(np.array_equal(f.joints, frozen[0][0].joints) for f, _ in frozen)
+    assert frozen[-1][1] > frozen[0][1]  # time stamps advance
+    f, _ = sensor.frame_at(2.2)
+    assert np.isnan(f.joints[HAND]).all() and f.state[HAND] == TrackingState.NotTracked
+    _, captured = sensor.frame_at(3.4)
+    assert captured < 3.0  # nothing delivered in the gap
+
+
+def test_a_stop_is_a_ramp_after_the_reaction_time():
+    dt = 0.002
+    arm = ArmResponse(BrakingConfig(reaction_time_s=0.004, max_acceleration_radps2=(8.0,)), 2, dt)
+    dq = np.array([0.4, -0.2])
+    for _ in range(200):
+        arm(dq)
+    np.testing.assert_allclose(arm.dq, dq)
+    out = np.array([arm(np.zeros(2)).copy() for _ in range(40)])
+    np.testing.assert_allclose(out[:2], [dq, dq])  # 2 ticks of reaction
+    # then both joints fall together (the path is kept), A1 at 8 rad/s²: zero after 0.05 s
+    np.testing.assert_allclose(out[2], dq * (1 - 8 * dt / 0.4))
+    assert stop_time(dq, [8.0, 8.0]) == pytest.approx(0.05)
+    first_zero = int(np.flatnonzero(~out.any(axis=1))[0])
+    assert first_zero == 2 + 24  # 0.05 s / 2 ms = 25 steps, the 25th lands on zero
