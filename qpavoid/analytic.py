@@ -118,6 +118,6 @@ class AnalyticController(Controller):
             approach = -np.einsum("ak,akv,v->a", table.vector.reshape(-1, 3)[active], Jp, dq)
             s = speed_scale(approach, tick.approach_limit.ravel()[active])
             if s is None:
-                return self.command(tick, None, reason=self.separation_reason(tick))
+                return self.command(tick, None, reason=tick.separation_reason())
             dq, scale = dq * s, scale * s
         return self.command(tick, dq, scale, tick.v_rep_L2, tick.v_rep_EE)

@@ -35,7 +35,7 @@ from .laws import (
 )
 from .perception import Perceived, Tracker, part_velocities
 from .robot import Robot, joint_columns
-from .ssm import joint_speed_limits, reaction_time, separation_bounds
+from .ssm import StopTimeBudget, joint_speed_limits, reaction_time, separation_bounds
 from .task import ArcPath, pose_error
 from .tick import Command, ControllerConfig, Tick
 
@@ -78,7 +78,7 @@ class Controller:
         self.part_joints = self.human.part_joints()
         ssm = self.config.ssm
         self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, self.config.control_period_s))
-        self.ssm_joint_limits = joint_speed_limits(ssm, robot.nv)
+        self.stop_budget = StopTimeBudget(self.ssm, robot.nv, self.config.control_period_s)
         self._clock_s = 0.0  # the controller's own clock: control periods since it started
         self._frame: tuple[HumanFrame, float | None] | None = None
         self._perceived: Perceived | None = None
@@ -143,13 +143,13 @@ class Controller:
         f = float(l1_factor(dmin[self.i_L1], cfg))  # eq. (2)
         limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)  # eq. (3)
         if self.config.safety == "ssm":
+            ssm = replace(self.ssm, stop_time_s=self.stop_budget.budget())
             v_parts = part_velocities(perceived.joint_velocity, self.part_joints)
-            approach_limit, human_approach = separation_bounds(table, v_parts, age, self.ssm)
+            approach_limit, human_approach = separation_bounds(table, v_parts, age, ssm)
+            limits = np.minimum(limits, joint_speed_limits(ssm, self.robot.nv))
         else:
             approach_limit = np.full(table.distance.shape, np.inf)
             human_approach = np.zeros(table.distance.shape)
-        if self.config.safety == "ssm":
-            limits = np.minimum(limits, self.ssm_joint_limits)
         j = table.closest_part(self.i_L2)
         v_rep_L2 = repulsive_velocity(
             table.distance[self.i_L2, j], table.vector[self.i_L2, j], cfg
@@ -191,16 +191,6 @@ class Controller:
             age,
             approach_limit,
             human_approach,
-        )
-
-    @staticmethod
-    def separation_reason(tick: Tick) -> str:
-        """Why speed and separation monitoring stops the robot: the tightest pair."""
-        table = tick.table
-        i, j = np.unravel_index(int(np.argmin(tick.approach_limit)), table.distance.shape)
-        return (
-            f"speed and separation: {table.part_names[j]} {table.distance[i, j]:.3f} m "
-            f"from {table.set_names[i]}"
         )
 
     def task_joint_velocities(self, tick: Tick) -> np.ndarray:
@@ -247,6 +237,8 @@ class Controller:
                         f"(q = {tick.q[k]:.4f} rad)"
                     )
         stopped = bool(reason) or dq is None
+        if self.config.safety == "ssm":
+            self.stop_budget.record(np.zeros(self.robot.nv) if stopped else np.asarray(dq))
         zero3 = np.zeros(3)
         return Command(
             dq=np.zeros(self.robot.nv) if stopped else np.asarray(dq, dtype=float),

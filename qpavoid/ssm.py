@@ -30,12 +30,13 @@ Units: m, s, m/s, rad/s².
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .braking import IIWA14_MAX_ACCELERATION_RADPS2, IIWA14_REACTION_TIME_S, per_joint
+from .braking import IIWA14_MAX_ACCELERATION_RADPS2, IIWA14_REACTION_TIME_S, per_joint, stop_time
 from .distance_table import DistanceTable
 
 #: A bound on an approach speed above this cannot bind (no iiwa point moves so fast), m/s.
@@ -58,7 +59,9 @@ class SSMConfig:
         T_r: from the controller's tick to the arm starting to brake: one control period
         and the arm's reaction (:data:`~qpavoid.braking.IIWA14_REACTION_TIME_S`), s.
     stop_time_s
-        T_s: the stopping-time budget, s; every joint is kept within ``a_j T_s``.
+        T_s,max: the longest stop the controllers allow, s; each tick's budget is shorter
+        while the robot moves slowly (:class:`StopTimeBudget`), and every joint is kept
+        within ``a_j T_s``.
     max_acceleration_radps2
         a_j: the arm's joint deceleration limits, rad/s² (A1 first; as in
         :class:`~qpavoid.braking.BrakingConfig`).
@@ -200,3 +203,42 @@ def reaction_time(cfg: SSMConfig, control_period_s: float) -> float:
     arm, :class:`~qpavoid.braking.ArmResponse`), s."""
     periods = math.ceil(cfg.reaction_time_s / control_period_s - 1e-9)
     return control_period_s * (1 + periods)
+
+
+class StopTimeBudget:
+    """T_s of each tick: as short as the arm's recent commands allow (build once per controller).
+
+    The arm may still be following any command of the last few ticks (its reaction, then a
+    ramp of at most 2 T_s,max), so its stop takes at most the longest stop time of those
+    commands; a new command may lengthen it by one control period (the arm cannot speed up
+    faster anyway). The tick's budget is therefore
+
+        T_s = min(T_s,max, max_recent T_s(q̇) + Δt)
+
+    and the controllers keep every joint within ``a_j T_s`` (:func:`joint_speed_limits`), so
+    the budget holds for the command they send. A robot at rest needs no braking time:
+    the protective distance shrinks to ``v_h (T_f + T_r + Δt) + C + Z_d + Z_r``.
+
+    Parameters
+    ----------
+    cfg
+        The constants (``stop_time_s`` is T_s,max; ``reaction_time_s`` the full T_r).
+    nv
+        Number of joints.
+    control_period_s
+        Δt, s.
+    """
+
+    def __init__(self, cfg: SSMConfig, nv: int, control_period_s: float):
+        self.a = per_joint(cfg.max_acceleration_radps2, nv)
+        self.cap, self.dt = cfg.stop_time_s, control_period_s
+        ticks = math.ceil((cfg.reaction_time_s + 2.0 * cfg.stop_time_s) / control_period_s) + 2
+        self.history: deque[float] = deque([0.0], maxlen=ticks)
+
+    def budget(self) -> float:
+        """This tick's T_s, s."""
+        return min(self.cap, max(self.history) + self.dt)
+
+    def record(self, dq: np.ndarray) -> None:
+        """Remember the command sent (rad/s)."""
+        self.history.append(stop_time(dq, self.a))

@@ -196,3 +196,12 @@ class Tick:
     frame_age_s: float
     approach_limit: np.ndarray
     human_approach: np.ndarray
+
+    def separation_reason(self) -> str:
+        """Why speed and separation monitoring stops the robot: the tightest pair."""
+        table = self.table
+        i, j = np.unravel_index(int(np.argmin(self.approach_limit)), table.distance.shape)
+        return (
+            f"speed and separation: {table.part_names[j]} {table.distance[i, j]:.3f} m "
+            f"from {table.set_names[i]}"
+        )

@@ -7,6 +7,7 @@ import pytest
 
 from qpavoid.ssm import (
     SSMConfig,
+    StopTimeBudget,
     human_speed,
     joint_speed_limits,
     max_approach_speed,
@@ -71,3 +72,17 @@ def test_speed_scale_by_hand_and_against_a_grid():
             assert not ok.any()
         else:
             assert np.all(s * v <= b + 1e-12) and s >= grid[ok].max() - 1e-3
+
+
+def test_stop_time_budget_grows_one_period_a_tick_and_remembers_the_arm_s_lag():
+    budget = StopTimeBudget(CFG, 2, 0.01)  # a = (8, 4) rad/s², T_s,max = 0.1 s, T_r = 0.01 s
+    assert budget.budget() == pytest.approx(0.01)  # at rest: one period to speed up in
+    budget.record(np.array([0.16, 0.04]))  # stop times 0.02 and 0.01 s
+    assert budget.budget() == pytest.approx(0.03)
+    budget.record(np.array([2.0, 0.0]))
+    assert budget.budget() == pytest.approx(0.1)  # capped at T_s,max
+    for _ in range(budget.history.maxlen - 1):  # (0.01 + 2 · 0.1) / 0.01 + 2 = 23 ticks
+        budget.record(np.zeros(2))
+    assert budget.history.maxlen == 23 and budget.budget() == pytest.approx(0.1)  # remembered
+    budget.record(np.zeros(2))
+    assert budget.budget() == pytest.approx(0.01)  # forgotten once the arm must have followed

@@ -116,7 +116,7 @@ class QPController(Controller):
         if not sol.found or sol.x is None:
             reason = f"QP not solved ({self.backend.name}: {sol.status})"
             if (tick.approach_limit < 0.0).any():  # no command keeps the separation
-                reason = f"{self.separation_reason(tick)} ({reason})"
+                reason = f"{tick.separation_reason()} ({reason})"
             return self.command(tick, None, reason=reason, info=info)
         x, dq = sol.x, self.variables.dq
         # Hard rows, checked against the problem we meant to solve: a solution that breaks
