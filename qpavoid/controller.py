@@ -78,7 +78,7 @@ class Controller:
         self.part_joints = self.human.part_joints()
         ssm = self.config.ssm
         self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, self.config.control_period_s))
-        self.stop_budget = StopTimeBudget(self.ssm, robot.nv, self.config.control_period_s)
+        self.stop_budget = StopTimeBudget(self.ssm, robot.joint_names, self.config.control_period_s)
         self._clock_s = 0.0  # the controller's own clock: control periods since it started
         self._frame: tuple[HumanFrame, float | None] | None = None
         self._perceived: Perceived | None = None
@@ -146,7 +146,7 @@ class Controller:
             ssm = replace(self.ssm, stop_time_s=self.stop_budget.budget())
             v_parts = part_velocities(perceived.joint_velocity, self.part_joints)
             approach_limit, human_approach = separation_bounds(table, v_parts, age, ssm)
-            limits = np.minimum(limits, joint_speed_limits(ssm, self.robot.nv))
+            limits = np.minimum(limits, joint_speed_limits(ssm, self.robot.joint_names))
         else:
             approach_limit = np.full(table.distance.shape, np.inf)
             human_approach = np.zeros(table.distance.shape)

@@ -140,7 +140,7 @@ def simulate(
     other_name = "capsules" if controller.config.distance == "spheres" else "spheres"
     other = distance_method(other_name, robot, controller.human)
     sensor = Sensor(motion, cfg.sensor)
-    arm = None if cfg.braking is None else ArmResponse(cfg.braking, robot.nv, dt)
+    arm = None if cfg.braking is None else ArmResponse(cfg.braking, robot.joint_names, dt)
     truth = TrueClearance(robot, controller.human, motion) if cfg.measure_truth else None
     goal = path.reference(path.duration_s)[0]
 

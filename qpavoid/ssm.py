@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,7 +64,7 @@ class SSMConfig:
         while the robot moves slowly (:class:`StopTimeBudget`), and every joint is kept
         within ``a_j T_s``.
     max_acceleration_radps2
-        a_j: the arm's joint deceleration limits, rad/s² (A1 first; as in
+        a_j: the arm's joint deceleration limits, ``(joint name, rad/s²)`` pairs (as in
         :class:`~qpavoid.braking.BrakingConfig`).
     intrusion_m
         C: how far a hand reaches past its modelled capsule (the fingers beyond HandTip).
@@ -80,7 +81,7 @@ class SSMConfig:
     body_speed_mps: float = 1.6
     reaction_time_s: float = IIWA14_REACTION_TIME_S
     stop_time_s: float = 0.06
-    max_acceleration_radps2: tuple[float, ...] = IIWA14_MAX_ACCELERATION_RADPS2
+    max_acceleration_radps2: tuple[tuple[str, float], ...] = IIWA14_MAX_ACCELERATION_RADPS2
     intrusion_m: float = 0.02
     sensing_uncertainty_m: float = 0.03
     robot_uncertainty_m: float = 0.005
@@ -161,9 +162,9 @@ def max_approach_speed(
     return room / (cfg.reaction_time_s + cfg.stop_time_s / 2.0)
 
 
-def joint_speed_limits(cfg: SSMConfig, nv: int) -> np.ndarray:
-    """(nv,) |q̇_j| ≤ a_j T_s: the joint speeds from which a stop takes at most T_s, rad/s."""
-    return per_joint(cfg.max_acceleration_radps2, nv) * cfg.stop_time_s
+def joint_speed_limits(cfg: SSMConfig, joint_names: Sequence[str]) -> np.ndarray:
+    """|q̇_j| ≤ a_j T_s: the joint speeds from which a stop takes at most T_s, rad/s."""
+    return per_joint(cfg.max_acceleration_radps2, joint_names) * cfg.stop_time_s
 
 
 def speed_scale(approach_mps: np.ndarray, limit_mps: np.ndarray) -> float | None:
@@ -223,14 +224,14 @@ class StopTimeBudget:
     ----------
     cfg
         The constants (``stop_time_s`` is T_s,max; ``reaction_time_s`` the full T_r).
-    nv
-        Number of joints.
+    joint_names
+        The arm's active joints.
     control_period_s
         Δt, s.
     """
 
-    def __init__(self, cfg: SSMConfig, nv: int, control_period_s: float):
-        self.a = per_joint(cfg.max_acceleration_radps2, nv)
+    def __init__(self, cfg: SSMConfig, joint_names: Sequence[str], control_period_s: float):
+        self.a = per_joint(cfg.max_acceleration_radps2, joint_names)
         self.cap, self.dt = cfg.stop_time_s, control_period_s
         ticks = math.ceil((cfg.reaction_time_s + 2.0 * cfg.stop_time_s) / control_period_s) + 2
         self.history: deque[float] = deque([0.0], maxlen=ticks)

@@ -146,7 +146,8 @@ def test_sensor_latency_noise_and_faults():
 
 def test_a_stop_is_a_ramp_after_the_reaction_time():
     dt = 0.002
-    arm = ArmResponse(BrakingConfig(reaction_time_s=0.004, max_acceleration_radps2=(8.0,)), 2, dt)
+    limits = (("A1", 8.0), ("A2", 8.0))
+    arm = ArmResponse(BrakingConfig(0.004, limits), ("A1", "A2"), dt)
     dq = np.array([0.4, -0.2])
     for _ in range(200):
         arm(dq)

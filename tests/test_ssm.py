@@ -17,7 +17,9 @@ from qpavoid.ssm import (
 )
 
 # T_r = 0.01 s, T_s = 0.1 s, C + Z_d + Z_r = 0.02 + 0.03 + 0.005 = 0.055 m
-CFG = SSMConfig(reaction_time_s=0.01, stop_time_s=0.1, max_acceleration_radps2=(8.0, 4.0))
+CFG = SSMConfig(
+    reaction_time_s=0.01, stop_time_s=0.1, max_acceleration_radps2=(("A1", 8.0), ("A2", 4.0))
+)
 
 
 def test_human_speed_zones_of_iso_13855():
@@ -52,7 +54,7 @@ def test_max_approach_speed_is_the_root_of_s_p_equals_d():
 
 
 def test_joint_speed_limits_keep_the_stop_within_its_budget():
-    np.testing.assert_allclose(joint_speed_limits(CFG, 3), [0.8, 0.4, 0.4])
+    np.testing.assert_allclose(joint_speed_limits(CFG, ("A2", "A1")), [0.4, 0.8])
 
 
 def test_speed_scale_by_hand_and_against_a_grid():
@@ -75,7 +77,9 @@ def test_speed_scale_by_hand_and_against_a_grid():
 
 
 def test_stop_time_budget_grows_one_period_a_tick_and_remembers_the_arm_s_lag():
-    budget = StopTimeBudget(CFG, 2, 0.01)  # a = (8, 4) rad/s², T_s,max = 0.1 s, T_r = 0.01 s
+    budget = StopTimeBudget(
+        CFG, ("A1", "A2"), 0.01
+    )  # a = (8, 4) rad/s², T_s,max = 0.1 s, T_r = 0.01 s
     assert budget.budget() == pytest.approx(0.01)  # at rest: one period to speed up in
     budget.record(np.array([0.16, 0.04]))  # stop times 0.02 and 0.01 s
     assert budget.budget() == pytest.approx(0.03)
