@@ -38,9 +38,9 @@ IIWA14_MAX_ACCELERATION_RADPS2 = (
     ("A7", 15.72),
 )
 
-#: From a command to the arm starting to follow it, s (one FRI period and the drives'
-#: response): docs/safety.md.
-IIWA14_REACTION_TIME_S = 0.004
+#: From a command to the arm starting to follow it, s: one period of the iiwa's FRI link as
+#: Drake configures it (5 ms); docs/safety.md.
+IIWA14_REACTION_TIME_S = 0.005
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,7 @@ from .metrics import describe
 from .recording import load_recording
 from .runs import BENCHES, CONTROLLERS, DISTANCES, LIMIT_MODES, RunSpec, run_one
 from .scenarios import SCENARIOS
+from .sensor import KINECT_V2_LATENCY_S
 from .tick import SAFETY_MODES
 
 DESCRIPTION = (
@@ -114,36 +115,16 @@ def build_parser() -> Parser:
         metavar="FILE",
         help="replay a recording (NPZ or CSV, docs/formats.md) instead of a scenario",
     )
+    for flag, choices, help_text in (
+        ("--controller", CONTROLLERS, "the paper's controller or its QP variant"),
+        ("--distance", DISTANCES, "exact capsules (cover the shoulder) or the paper's spheres"),
+        ("--safety", SAFETY_MODES, "the paper's rules, or ISO/TS 15066 SSM on top of them"),
+        ("--bench", BENCHES, "real: Kinect latency and noise, iiwa braking; ideal: the paper's"),
+        ("--limit-mode", LIMIT_MODES, "analytic only: enforce eq. (3) by scaling or clipping"),
+    ):
+        run.add_argument(flag, choices=choices, default=choices[0], help=help_text)
     run.add_argument(
-        "--controller",
-        choices=CONTROLLERS,
-        default="analytic",
-        help="the paper's controller or its QP variant",
-    )
-    run.add_argument(
-        "--distance",
-        choices=DISTANCES,
-        default="capsules",
-        help="exact capsules (cover the shoulder) or the paper's spheres (for its figures)",
-    )
-    run.add_argument(
-        "--safety",
-        choices=SAFETY_MODES,
-        default="paper",
-        help="the paper's rules, or ISO/TS 15066 speed and separation monitoring on top",
-    )
-    run.add_argument(
-        "--bench",
-        choices=BENCHES,
-        default="real",
-        help="real: Kinect v2 latency and noise, iiwa braking; ideal: the paper's bench",
-    )
-    run.add_argument(
-        "--limit-mode",
-        choices=LIMIT_MODES,
-        default="scale",
-        help="analytic controller only: enforce eq. (3) by scaling the whole "
-        "velocity or clipping each joint",
+        "--latency", type=float, default=KINECT_V2_LATENCY_S, metavar="S", help="sensor latency, s"
     )
     run.add_argument(
         "--solver",
@@ -240,6 +221,7 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
         distance=args.distance,
         safety=args.safety,
         bench=args.bench,
+        latency_s=args.latency,
         max_time_s=args.max_time,
         rate_hz=args.rate,
         limit_mode=args.limit_mode,

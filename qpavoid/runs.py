@@ -29,7 +29,7 @@ from .qp import QPConfig, QPController
 from .recording import load_recording
 from .robot import Robot, load_robot
 from .scenarios import check_scenario_name, make_scenario
-from .sensor import SensorConfig
+from .sensor import KINECT_V2_LATENCY_S, SensorConfig
 from .simulation import HumanMotion, SimConfig, SimResult, simulate
 from .tick import SAFETY_MODES
 
@@ -37,16 +37,16 @@ from .tick import SAFETY_MODES
 CONTROLLERS = ("analytic", "qp")
 #: Distance methods by name: exact capsules (coal, the default) and the paper's spheres (eq. 1).
 DISTANCES = ("capsules", "spheres")
-#: Benches: ``real`` (a Kinect v2 sensor, the iiwa's reaction and braking) or ``ideal``
-#: (the paper's: the true skeleton every frame, an arm that follows its command at once).
+#: Benches: ``real`` (Kinect v2, the iiwa's reaction and braking) or ``ideal`` (the paper's).
 BENCHES = ("real", "ideal")
+#: A frame is stale once older than the latency plus this, s: a frame (33 ms) and 7 ms.
+STALE_AFTER_LATENCY_S = 0.04
 #: QP solvers that come with an extra of ours, and its name (``pip install "qpavoid[solvers]"``).
 SOLVER_EXTRAS = {"daqp": "solvers", "proxqp": "solvers"}
 
 #: Accepted ranges: control rate (Hz) from the camera's 30 Hz to 10 kHz; a run's cap (s)
 #: from a few frames to an hour (an hour at 500 Hz logs 1.8 M ticks, about 1.5 GB).
-RATE_RANGE_HZ = (30.0, 10_000.0)
-MAX_TIME_RANGE_S = (0.1, 3600.0)
+RATE_RANGE_HZ, MAX_TIME_RANGE_S = (30.0, 10_000.0), (0.1, 3600.0)
 
 #: Redundancy mode (docs/qp.md): weight of the elbow-clearance cost, and a regularisation
 #: large enough to give the end effector's null-space direction curvature (with 1e-7
@@ -97,6 +97,9 @@ class RunSpec:
         the paper's bench, the true skeleton every frame and an arm that follows its
         command at once (the frozen-frame check is off: a perfect sensor films a still
         person bit for bit).
+    latency_s
+        The real bench's sensor latency, s (default: the Kinect v2's, docs/safety.md); a
+        frame older than the latency plus 40 ms (one frame and 7 ms) is stale.
     max_time_s
         Cap on the run, s (default 40: the 15 s path plus room for stops).
     rate_hz
@@ -124,6 +127,7 @@ class RunSpec:
     distance: str = "capsules"
     safety: str = "paper"
     bench: str = "real"
+    latency_s: float = KINECT_V2_LATENCY_S
     max_time_s: float = 40.0
     rate_hz: float = 500.0
     limit_mode: str = "scale"
@@ -152,6 +156,7 @@ class RunSpec:
         check_choice("distance method", self.distance, DISTANCES)
         check_choice("safety mode (--safety)", self.safety, SAFETY_MODES)
         check_choice("bench (--bench)", self.bench, BENCHES)
+        check_range("the sensor latency (--latency)", self.latency_s, 0.0, 1.0, "s")
         check_choice("limit mode", self.limit_mode, LIMIT_MODES)
         check_range("the run's cap (--max-time)", self.max_time_s, *MAX_TIME_RANGE_S, "s")
         check_range("the control rate (--rate)", self.rate_hz, *RATE_RANGE_HZ, "Hz")
@@ -196,6 +201,7 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
     config = ControllerConfig(
         distance=spec.distance,
         control_period_s=1.0 / spec.rate_hz,
+        max_frame_age_s=spec.latency_s + STALE_AFTER_LATENCY_S,
         safety=spec.safety,
         perception=PerceptionConfig(max_identical_frames=None)
         if spec.bench == "ideal"
@@ -249,7 +255,9 @@ def simulate_one(
         motion,
         SimConfig(
             control_rate_hz=spec.rate_hz,
-            sensor=SensorConfig.ideal() if spec.bench == "ideal" else SensorConfig(),
+            sensor=SensorConfig.ideal()
+            if spec.bench == "ideal"
+            else SensorConfig(latency_s=spec.latency_s),
             braking=None if spec.bench == "ideal" else BrakingConfig(),
             max_time_s=spec.max_time_s,
             goal_tolerance_m=spec.goal_tolerance_m,
@@ -262,6 +270,7 @@ def simulate_one(
         scenario=spec.label,
         safety=spec.safety,
         bench=spec.bench,
+        latency_s=spec.latency_s if spec.bench == "real" else 0.0,
         redundant=bool(spec.redundant),
         solver=getattr(getattr(controller, "backend", None), "name", None),
     )

@@ -30,10 +30,13 @@ from .errors import InputError
 from .frames import HumanFrame, HumanMotion, TrackingState
 from .recording import Recording
 
-#: Kinect v2 skeleton latency, s: see docs/safety.md ("Sensor") for the measurement.
+#: Kinect v2 latency, s: "~60 ms with processing" in Microsoft's sensor specification (as
+#: published by VGLeaks, 2013); an end-to-end measurement including the display found
+#: about 0.12 s. docs/safety.md ("Sensor") and both runs.
 KINECT_V2_LATENCY_S = 0.06
 
-#: Kinect v2 joint jitter (standard deviation per axis of a still joint), m: docs/safety.md.
+#: Joint noise, standard deviation per axis, m: our assumption (no published value found),
+#: small on purpose; a real sensor is never noiseless, which the frozen-frame check needs.
 KINECT_V2_NOISE_M = 0.002
 
 #: The kinds of :class:`SensorFault`.

@@ -19,6 +19,7 @@ import numpy as np
 from .jobs import map_jobs
 from .robot import load_robot
 from .runs import RunSpec, build_controller
+from .sensor import KINECT_V2_LATENCY_S, SensorConfig
 from .simulation import SimConfig, simulate
 from .strikes import strike_case, strike_motion, strike_sensor
 
@@ -68,6 +69,7 @@ def check_strike(
     safety: str = "ssm",
     rate_hz: float = 100.0,
     max_speed_mps: float = 2.0,
+    latency_s: float = KINECT_V2_LATENCY_S,
 ) -> StrikeCheck:
     """Simulate the strike of ``seed`` on the real bench and judge it against the truth."""
     case = strike_case(seed, max_speed_mps)
@@ -77,6 +79,7 @@ def check_strike(
         safety=safety,
         rate_hz=rate_hz,
         max_time_s=case.duration_s,
+        latency_s=latency_s,
     )
     robot = load_robot(spec.robot)
     sim = simulate(
@@ -84,7 +87,7 @@ def check_strike(
         strike_motion(case, robot),
         SimConfig(
             control_rate_hz=rate_hz,
-            sensor=strike_sensor(case),
+            sensor=strike_sensor(case, SensorConfig(latency_s=latency_s, seed=case.seed)),
             max_time_s=case.duration_s,
             measure_truth=True,
         ),
@@ -109,7 +112,7 @@ def check_strike(
     )
 
 
-def _check_strike(args: tuple[int, str, str, float, float]) -> StrikeCheck:
+def _check_strike(args: tuple[int, str, str, float, float, float]) -> StrikeCheck:
     return check_strike(*args)
 
 
@@ -119,13 +122,14 @@ def strike_sweep(
     safety: str = "ssm",
     rate_hz: float = 100.0,
     max_speed_mps: float = 2.0,
+    latency_s: float = KINECT_V2_LATENCY_S,
     workers: int | None = None,
     executor: Executor | None = None,
     progress: bool = False,
 ) -> list[StrikeCheck]:
     """:func:`check_strike` over ``seeds`` (in parallel; results in the order of ``seeds``)."""
     RunSpec(scenario="free", controller=controller, safety=safety, rate_hz=rate_hz)  # checks
-    jobs = [(int(s), controller, safety, rate_hz, max_speed_mps) for s in seeds]
+    jobs = [(int(s), controller, safety, rate_hz, max_speed_mps, latency_s) for s in seeds]
     return map_jobs(
         _check_strike,
         jobs,
