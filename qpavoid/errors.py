@@ -20,6 +20,7 @@ import pickle
 from pathlib import Path
 
 __all__ = [
+    "CalibrationError",
     "IKNotConvergedError",
     "InputError",
     "QpavoidError",
@@ -97,6 +98,32 @@ class RecordingError(InputError):
     ):
         super().__init__(message, name=name, value=value)
         self.path = path
+
+
+class CalibrationError(InputError):
+    """A sensor calibration file is missing, malformed, or does not fit the data.
+
+    Attributes
+    ----------
+    path
+        The calibration file, if known.
+    sensor
+        The sensor at fault (a name in the file or in the data), if known.
+    name, value
+        The key at fault and its value (as for :class:`InputError`).
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        path: str | Path | None = None,
+        sensor: str | None = None,
+        name: str | None = None,
+        value: object = None,
+    ):
+        super().__init__(message, name=name, value=value)
+        self.path, self.sensor = path, sensor
 
 
 class IKNotConvergedError(InputError):

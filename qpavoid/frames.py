@@ -60,6 +60,20 @@ class TrackingState(IntEnum):
     Tracked = 2
 
 
+def _mirror() -> np.ndarray:
+    names = [j.name for j in JointType]
+    swap = {"Left": "Right", "Right": "Left"}
+    out = []
+    for name in names:
+        side = next((k for k in swap if name.endswith(k)), None)
+        out.append(names.index(name[: -len(side)] + swap[side]) if side else names.index(name))
+    return np.array(out)
+
+
+#: ``MIRROR[j]``: joint j's counterpart on the other side (itself on the spine): the
+#: relabelling that undoes a Kinect v2 left/right swap (``joints[MIRROR]``).
+MIRROR = _mirror()
+
 #: The tracking states a frame may carry.
 VALID_STATES = tuple(int(s) for s in TrackingState)
 

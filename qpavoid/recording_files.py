@@ -186,6 +186,17 @@ def read_csv_table(path: Path, names: list[str], expected: str) -> np.ndarray:
         Without the path (:func:`read_file` adds it): not UTF-8 text, a wrong header, a
         short row or a cell that is not a number. ``expected`` ends format messages.
     """
+    return read_csv_columns(path, names, expected)[0]
+
+
+def read_csv_columns(
+    path: Path, names: list[str], expected: str, text: Sequence[str] = ()
+) -> tuple[np.ndarray, dict[str, list[str]]]:
+    """:func:`read_csv_table` where the columns named in ``text`` hold words, not numbers.
+
+    Returns the numbers (rows, len(names)), NaN in the text columns, and each text
+    column's cells (stripped) by name.
+    """
     kind = _file_kind(path)
     if kind != "text":
         raise RecordingError(f"not a CSV text file ({_KIND_TEXT[kind]}); {expected}")
@@ -193,18 +204,24 @@ def read_csv_table(path: Path, names: list[str], expected: str) -> np.ndarray:
         with path.open("r", encoding="utf-8-sig", newline="") as handle:
             rows = csv.reader(handle)
             _check_csv_header(next(rows, None), names)
-            values = [
-                _parse_csv_row(row, line, names)
-                for line, row in enumerate(rows, start=2)
-                if any(cell.strip() for cell in row)
-            ]
+            text_at = [names.index(name) for name in text]
+            words: dict[str, list[str]] = {name: [] for name in text}
+            values = []
+            for line, row in enumerate(rows, start=2):
+                if not any(cell.strip() for cell in row):
+                    continue
+                if text_at and len(row) == len(names):
+                    for name, i in zip(text, text_at, strict=True):
+                        words[name].append(row[i].strip())
+                        row = [*row[:i], "nan", *row[i + 1 :]]
+                values.append(_parse_csv_row(row, line, names))
     except UnicodeDecodeError as exc:  # past the first 4 kB that _file_kind looked at
         raise RecordingError(
             f"not a CSV text file (invalid UTF-8: {one_line(exc)}); {expected}"
         ) from exc
     except csv.Error as exc:  # a NUL byte, a field too long...
         raise RecordingError(f"not a readable CSV file ({one_line(exc)}); {expected}") from exc
-    return np.array(values, dtype=float).reshape(len(values), len(names))
+    return np.array(values, dtype=float).reshape(len(values), len(names)), words
 
 
 def _check_csv_header(header: list[str] | None, expected: list[str]) -> None:

@@ -1,0 +1,160 @@
+"""Who is who: sensor bodies matched to people across sensors and over time, mirrors undone.
+
+Each sensor numbers the bodies it sees (a Kinect v2 body id, 0-5) on its own. A
+:class:`PersonTrack` is one person as the fusion knows them, with a stable ``id``.
+:func:`associate` assigns each sensor's bodies to tracks by the distance between torso
+centres (an optimal assignment per sensor, scipy's ``linear_sum_assignment``, within
+``gate_m``); a body already assigned keeps its track while it stays within the gate, so
+ids do not jump. A body that fits no track starts a new one.
+
+A Kinect v2 assumes the person faces it: for a person facing away it labels the left
+side as the right one. :func:`mirror_cost` compares a body with a reference skeleton as
+labelled and with left and right swapped (``frames.MIRROR``); the fusion relabels the
+body when the swapped labelling fits better by a margin.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from .frames import MIRROR, N_KINECT_JOINTS, JointType
+
+J = JointType
+
+#: Joints whose mean is a body's torso centre (the most stable part of a Kinect skeleton).
+TORSO = np.array(
+    [
+        J.SpineBase,
+        J.SpineMid,
+        J.SpineShoulder,
+        J.Neck,
+        J.ShoulderLeft,
+        J.ShoulderRight,
+        J.HipLeft,
+        J.HipRight,
+    ]
+)
+#: Joints that change under a left/right swap (the others are on the spine).
+SIDED = np.flatnonzero(MIRROR != np.arange(N_KINECT_JOINTS))
+
+
+@dataclass
+class PersonTrack:
+    """One person across sensors and time (the fusion's memory of them).
+
+    Attributes
+    ----------
+    id
+        Stable id, from 0 in order of first appearance.
+    joints
+        (25, 3) last fused joints, base frame, m (NaN where never seen).
+    velocity
+        (25, 3) filtered joint velocities, m/s.
+    last_seen
+        (25,) time each joint was last fused from some sensor, s (-inf never).
+    bone
+        (25,) running estimate of the length of the bone from each joint to its parent, m
+        (0 until measured).
+    seen_s
+        Last time any sensor saw the person, s.
+    """
+
+    id: int
+    joints: np.ndarray
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros((N_KINECT_JOINTS, 3)))
+    last_seen: np.ndarray = field(default_factory=lambda: np.full(N_KINECT_JOINTS, -np.inf))
+    bone: np.ndarray = field(default_factory=lambda: np.zeros(N_KINECT_JOINTS))
+    seen_s: float = -np.inf
+
+    def centre(self) -> np.ndarray:
+        """Torso centre, m (NaN if no joint is known)."""
+        return torso_centre(self.joints, np.isfinite(self.joints).all(axis=1))
+
+    def predicted(self, t: float, horizon_s: float) -> np.ndarray:
+        """(25, 3) joints moved along their velocity to time ``t`` (at most ``horizon_s``)."""
+        dt = np.clip(t - self.last_seen, 0.0, horizon_s)
+        dt[~np.isfinite(dt)] = 0.0
+        return self.joints + self.velocity * dt[:, None]
+
+
+def torso_centre(joints: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """Mean of the usable torso joints (of all usable joints if none), m; NaN if none."""
+    for pick in (TORSO[usable[TORSO]], np.flatnonzero(usable)):
+        if pick.size:
+            return np.asarray(joints[pick].mean(axis=0))
+    return np.full(3, np.nan)
+
+
+def mirror_cost(
+    joints: np.ndarray, usable: np.ndarray, reference: np.ndarray
+) -> tuple[float, float]:
+    """Median distance of the sided joints to ``reference``, as labelled and mirrored, m.
+
+    Only joints usable in ``joints`` (and their mirror) and finite in ``reference`` count;
+    (inf, inf) when none does.
+    """
+    ref_ok = np.isfinite(reference).all(axis=1)
+    keep = SIDED[usable[SIDED] & ref_ok[SIDED]]
+    keep_m = SIDED[usable[MIRROR[SIDED]] & ref_ok[SIDED]]
+    if keep.size == 0 or keep_m.size == 0:
+        return float("inf"), float("inf")
+    as_is = np.median(np.linalg.norm(joints[keep] - reference[keep], axis=1))
+    mirrored = np.median(np.linalg.norm(joints[MIRROR[keep_m]] - reference[keep_m], axis=1))
+    return float(as_is), float(mirrored)
+
+
+def associate(
+    centres: dict[int, np.ndarray],
+    tracks: list[PersonTrack],
+    previous: dict[int, int],
+    gate_m: float,
+    taken: set[int],
+) -> dict[int, int | None]:
+    """Assign one sensor's bodies to tracks.
+
+    Parameters
+    ----------
+    centres
+        Torso centre of each body of the sensor, by body id, m.
+    tracks
+        The tracks that may take them (their ``centre()`` is where they are).
+    previous
+        This sensor's earlier assignment, body id → track id.
+    gate_m
+        Farthest a body may be from a track's centre to join it, m.
+    taken
+        Track ids this sensor may not use (none here; the caller passes the ones already
+        used by this sensor's other bodies).
+
+    Returns
+    -------
+    dict
+        Body id → track id, or None for a body that fits no track (a new person).
+    """
+    by_id = {tr.id: tr for tr in tracks}
+    out: dict[int, int | None] = {}
+    used = set(taken)
+    for body, c in centres.items():  # a body keeps its track while it stays within the gate
+        tid = previous.get(body)
+        if tid in by_id and tid not in used and _dist(c, by_id[tid].centre()) <= gate_m:
+            out[body], _ = tid, used.add(tid)
+    bodies = [b for b in centres if b not in out]
+    free = [tr for tr in tracks if tr.id not in used]
+    if bodies and free:
+        cost = np.array([[_dist(centres[b], tr.centre()) for tr in free] for b in bodies])
+        big = 1e6
+        rows, cols = linear_sum_assignment(np.where(cost <= gate_m, cost, big))
+        for r, c in zip(rows, cols, strict=True):
+            if cost[r, c] <= gate_m:
+                out[bodies[r]] = free[c].id
+    for b in bodies:
+        out.setdefault(b, None)
+    return out
+
+
+def _dist(a: np.ndarray, b: np.ndarray) -> float:
+    d = float(np.linalg.norm(a - b))
+    return d if np.isfinite(d) else float("inf")

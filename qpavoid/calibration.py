@@ -1,0 +1,215 @@
+"""Sensor calibration: where each camera is, as a rigid transform into the robot base frame.
+
+A calibration file (TOML) names any number of sensors, each with the 4×4 rigid transform
+from its camera frame to the robot base frame, m (docs/sensors.md)::
+
+    [sensors.kinect_left]
+    base_from_camera = [[r11, r12, r13, tx],
+                        [r21, r22, r23, ty],
+                        [r31, r32, r33, tz],
+                        [0, 0, 0, 1]]
+    time_offset_s = 0.0     # optional: added to the sensor's time stamps (its clock -> ours)
+    weight = 1.0            # optional: trust in this sensor relative to the others
+
+A transform whose rotation block is not a rotation (``RᵀR = I`` and ``det R = +1`` within
+:data:`RIGID_TOLERANCE`), whose last row is not ``[0, 0, 0, 1]`` or that holds a
+non-finite number is refused; so are unknown keys (a typo must not pass silently). The
+rotation is then re-orthonormalised by scipy (``Rotation.from_matrix``), so that six
+printed decimals do not turn into a scale error.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ._checks import one_line
+from .errors import CalibrationError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.10: the same parser, as a package
+    import tomli as tomllib
+
+__all__ = ["Calibration", "SensorCalibration", "load_calibration"]
+
+#: How far a printed rotation may be from orthonormal: ``max |RᵀR − I|`` and ``|det R − 1|``.
+#: 1e-4 admits a matrix written with five or six decimals, and refuses a scale or a shear.
+RIGID_TOLERANCE = 1e-4
+#: The keys a sensor's table may hold.
+SENSOR_KEYS = ("base_from_camera", "time_offset_s", "weight")
+
+
+@dataclass(frozen=True)
+class SensorCalibration:
+    """One sensor's place and clock.
+
+    Attributes
+    ----------
+    name
+        The sensor's name (as in the data: a recording's ``sensor``, a datagram's ``sensor``).
+    base_from_camera
+        (4, 4) rigid transform from the camera frame to the robot base frame, m.
+    time_offset_s
+        Added to the sensor's time stamps to put them on the controller's clock, s
+        (default 0: the sensors' clocks are already synchronised, e.g. by PTP).
+    weight
+        Trust in this sensor's joints relative to the others' (default 1).
+    """
+
+    name: str
+    base_from_camera: np.ndarray
+    time_offset_s: float = 0.0
+    weight: float = 1.0
+
+    def to_base(self, joints: np.ndarray) -> np.ndarray:
+        """Joint positions (..., 3) in the camera frame → the robot base frame, m."""
+        T = self.base_from_camera
+        return np.asarray(joints, dtype=float) @ T[:3, :3].T + T[:3, 3]
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The sensors of a cell, by name (:func:`load_calibration`)."""
+
+    sensors: Mapping[str, SensorCalibration]
+    path: str | None = None
+
+    def __getitem__(self, name: str) -> SensorCalibration:
+        try:
+            return self.sensors[name]
+        except KeyError:
+            raise CalibrationError(
+                f"{self._where()}has no sensor {name!r} (sensors: "
+                f"{', '.join(sorted(self.sensors)) or 'none'})",
+                path=self.path,
+                sensor=name,
+                name="sensor",
+                value=name,
+            ) from None
+
+    def check_names(self, names: Iterable[str]) -> None:
+        """Raise :class:`CalibrationError` for the first name that is not a sensor here."""
+        for name in names:
+            self[name]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The sensors' names, in the file's order."""
+        return tuple(self.sensors)
+
+    def _where(self) -> str:
+        return f"calibration {self.path}: " if self.path else "calibration "
+
+    @classmethod
+    def from_dict(cls, data: Mapping, path: str | None = None) -> Calibration:
+        """A calibration from the parsed TOML (``{"sensors": {name: {...}}}``)."""
+        where = f"calibration {path}: " if path else "calibration: "
+        sensors = data.get("sensors") if isinstance(data, Mapping) else None
+        extra = sorted(set(data) - {"sensors"}) if isinstance(data, Mapping) else []
+        if extra:
+            raise CalibrationError(
+                f"{where}unknown top-level key {extra[0]!r} (expected [sensors.NAME] tables)",
+                path=path,
+                name=extra[0],
+            )
+        if not isinstance(sensors, Mapping) or not sensors:
+            raise CalibrationError(
+                f"{where}no sensor: expected at least one [sensors.NAME] table", path=path
+            )
+        out = {}
+        for name, table in sensors.items():
+            out[name] = _sensor(name, table, where, path)
+        return cls(out, path)
+
+
+def _sensor(name: str, table: object, where: str, path: str | None) -> SensorCalibration:
+    def fail(message: str, key: str | None = None, value: object = None) -> CalibrationError:
+        return CalibrationError(
+            f"{where}sensor {name!r}: {message}", path=path, sensor=name, name=key, value=value
+        )
+
+    if not isinstance(table, Mapping):
+        raise fail("must be a table with base_from_camera")
+    unknown = sorted(set(table) - set(SENSOR_KEYS))
+    if unknown:
+        raise fail(
+            f"unknown key {unknown[0]!r} (keys: {', '.join(SENSOR_KEYS)})", unknown[0], table
+        )
+    if "base_from_camera" not in table:
+        raise fail("base_from_camera is missing (a 4x4 rigid transform, m)", "base_from_camera")
+    T = _rigid(table["base_from_camera"], fail)
+    offset, weight = table.get("time_offset_s", 0.0), table.get("weight", 1.0)
+    for key, value, positive in (("time_offset_s", offset, False), ("weight", weight, True)):
+        if (
+            not isinstance(value, (int, float))
+            or isinstance(value, bool)
+            or not math.isfinite(value)
+            or (positive and value <= 0)
+        ):
+            kind = "a positive number" if positive else "a finite number, s"
+            raise fail(f"{key} must be {kind}, got {value!r}", key, value)
+    return SensorCalibration(name, T, float(offset), float(weight))
+
+
+def _rigid(value: object, fail: object) -> np.ndarray:
+    """A 4×4 rigid transform from nested lists, re-orthonormalised, or ``fail(...)`` raised."""
+    assert callable(fail)
+    key = "base_from_camera"
+    try:
+        T = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise fail(f"{key} must be 4 rows of 4 numbers, got {value!r}", key, value) from None
+    if T.shape != (4, 4):
+        raise fail(f"{key} must be 4 rows of 4 numbers (shape (4, 4)), got {T.shape}", key, T)
+    if not np.isfinite(T).all():
+        raise fail(f"{key} has a non-finite entry", key, T)
+    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=RIGID_TOLERANCE):
+        raise fail(f"{key}'s last row must be [0, 0, 0, 1], got {T[3].tolist()}", key, T)
+    R = T[:3, :3]
+    orth = float(np.abs(R.T @ R - np.eye(3)).max())
+    det = float(np.linalg.det(R))
+    if orth > RIGID_TOLERANCE or abs(det - 1.0) > RIGID_TOLERANCE:
+        raise fail(
+            f"{key} is not rigid: its rotation block has max |RᵀR − I| = {orth:.2g} and "
+            f"det R = {det:.6g} (a rotation has 0 and 1, within {RIGID_TOLERANCE})",
+            key,
+            T,
+        )
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_matrix(R).as_matrix()
+    out[:3, 3] = T[:3, 3]
+    out.setflags(write=False)
+    return out
+
+
+def load_calibration(path: str | Path) -> Calibration:
+    """Read a calibration file (TOML, see the module docstring).
+
+    Raises
+    ------
+    CalibrationError
+        If the file cannot be read or parsed, holds no sensor, an unknown key, or a
+        transform that is malformed or not rigid; the message names the file, the sensor
+        and the key.
+    """
+    p = str(path)
+    try:
+        text = Path(p).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CalibrationError(
+            f"cannot read calibration {p}: {one_line(exc)}", path=p, name="path", value=p
+        ) from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise CalibrationError(
+            f"calibration {p} is not valid TOML: {one_line(exc)}", path=p
+        ) from None
+    return Calibration.from_dict(data, p)

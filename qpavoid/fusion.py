@@ -1,0 +1,359 @@
+"""Skeleton fusion: several sensors' bodies → one skeleton per person in the base frame.
+
+The paper tracks the operator with two Kinect v2 to beat occlusion and leaves the merging
+to "another paper". :class:`Fuser` takes time-stamped :class:`~qpavoid.sensor_recording.
+BodyFrame` s of any number of calibrated sensors, in any interleaving, and at a fusion time
+``t`` returns every person it knows (:class:`FusedFrame`):
+
+1. **In the base frame, on one clock**: each frame is moved by its sensor's calibration
+   and its time stamp by the sensor's ``time_offset_s``.
+2. **Aligned in time, never from the future**: a sensor contributes its newest frame
+   captured at or before ``t`` and no older than ``max_age_s``. The frame is moved along
+   the person's filtered joint velocity to ``t``, by at most ``max_extrapolation_s``
+   (default 0: measured on 50 mm noise, moving a joint along a noisy velocity costs more
+   than the 0-33 ms of hold it removes; docs/sensors.md).
+3. **Who is who** (:mod:`qpavoid.association`): bodies are matched to people by their
+   torso centres, per sensor and over time (stable ids); a body whose left and right fit
+   the person better swapped is relabelled (a Kinect facing the person's back).
+4. **Per joint**: the positions of the sensors that see it are averaged with weights
+   ``state weight × sensor weight × freshness``. Where two sensors disagree by more than
+   ``outlier_threshold_m``, one is chosen, by tracking state first, then by agreement
+   with the person's predicted motion and the consistency of the bone to its parent, and
+   the candidates far from it are dropped (recorded in :attr:`FusedPerson.outliers`).
+   A joint no sensor sees stays missing (NaN, NotTracked): never invented.
+5. **Confidence** of a joint in [0, 1]: the sum over the sensors kept of
+   ``confidence_tracked`` (0.5) or ``confidence_inferred`` (0.15) times freshness, capped
+   at 1: two fresh sensors tracking a joint give 1, one gives 0.5.
+
+A person no sensor sees any more is reported with every joint missing (the controller's
+tracker keeps them, with growing uncertainty) for ``person_timeout_s``, then dropped.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from .association import PersonTrack, associate, mirror_cost, torso_centre
+from .calibration import Calibration
+from .frames import MIRROR, N_KINECT_JOINTS, HumanFrame, JointType, TrackingState
+from .perception import PARENT
+from .sensor_recording import BodyFrame
+
+__all__ = ["FusedFrame", "FusedPerson", "Fuser", "FusionConfig", "OutlierChoice"]
+
+
+@dataclass(frozen=True)
+class FusionConfig:
+    """How sensors are merged (module docstring; docs/sensors.md measures the defaults).
+
+    Attributes
+    ----------
+    max_age_s
+        A sensor's frame older than this at the fusion time is not used, s (0.1: three
+        Kinect frames, the controller's own stale limit on the real bench).
+    max_extrapolation_s
+        Farthest a frame is moved along the person's velocity to the fusion time, s.
+    weight_tracked, weight_inferred
+        Averaging weights of a Tracked and an Inferred joint (the SDK: an Inferred
+        joint's "confidence ... is very low").
+    confidence_tracked, confidence_inferred
+        What one fresh sensor adds to a joint's confidence.
+    outlier_threshold_m
+        Two sensors farther apart than this on one joint disagree, m (0.2: about three
+        standard deviations of the difference of two 50 mm sensors).
+    mirror_margin_m
+        A body is relabelled left/right when that fits the person better by this much, m.
+    association_gate_m
+        Farthest a body's torso centre may be from a person's to be that person, m.
+    person_timeout_s
+        A person seen by no sensor for this long is dropped, s (the cell's sensors must
+        cover every approach to the robot: docs/sensors.md).
+    velocity_alpha, velocity_beta
+        Gains of the α-β filter on each person's fused joints.
+    """
+
+    max_age_s: float = 0.1
+    max_extrapolation_s: float = 0.0
+    weight_tracked: float = 1.0
+    weight_inferred: float = 0.2
+    confidence_tracked: float = 0.5
+    confidence_inferred: float = 0.15
+    outlier_threshold_m: float = 0.2
+    mirror_margin_m: float = 0.05
+    association_gate_m: float = 0.6
+    person_timeout_s: float = 2.0
+    velocity_alpha: float = 0.5
+    velocity_beta: float = 0.3
+
+
+class OutlierChoice(NamedTuple):
+    """Sensors that disagreed on a joint: the one ``chosen`` and the ones dropped."""
+
+    joint: int
+    chosen: str
+    rejected: tuple[str, ...]
+
+
+class FusedPerson(NamedTuple):
+    """One person at the fusion time.
+
+    Attributes
+    ----------
+    id
+        Stable id (:class:`~qpavoid.association.PersonTrack`).
+    frame
+        Joints in the robot base frame, m, and states (NaN and NotTracked where no
+        sensor sees the joint).
+    confidence
+        (25,) per joint, in [0, 1].
+    sensors
+        Names of the sensors that contributed.
+    outliers
+        Joints on which sensors disagreed, and who was believed.
+    mirrored
+        Sensors whose body was relabelled left/right.
+    """
+
+    id: int
+    frame: HumanFrame
+    confidence: np.ndarray
+    sensors: tuple[str, ...]
+    outliers: tuple[OutlierChoice, ...]
+    mirrored: tuple[str, ...]
+
+
+class FusedFrame(NamedTuple):
+    """Every person known at fusion time ``t`` (s, controller clock)."""
+
+    t: float
+    people: tuple[FusedPerson, ...]
+
+
+#: Frames kept per (sensor, body).
+HISTORY = 4
+
+
+class _Contribution(NamedTuple):
+    sensor: str
+    joints: np.ndarray  # (25, 3) base frame
+    state: np.ndarray
+    age: float
+
+
+class Fuser:
+    """Streaming fusion of calibrated sensors (module docstring).
+
+    Parameters
+    ----------
+    calibration
+        The sensors; a frame from any other sensor is refused by :meth:`add`.
+    config
+        Fusion settings.
+    """
+
+    def __init__(self, calibration: Calibration, config: FusionConfig | None = None):
+        self.calibration = calibration
+        self.cfg = config or FusionConfig()
+        self.tracks: list[PersonTrack] = []
+        self.counters: Counter[str] = Counter()
+        # each body's newest frames (a few, so that a fusion time just before the newest
+        # frame still finds the one before it), oldest first
+        self._latest: dict[tuple[str, int], list[tuple[float, np.ndarray, np.ndarray]]] = {}
+        self._assigned: dict[str, dict[int, int]] = {s: {} for s in calibration.names}
+        self._next_id = 0
+
+    def add(self, frame: BodyFrame) -> bool:
+        """Take one body frame; False if it is not newer than that body's last (dropped).
+
+        Raises
+        ------
+        CalibrationError
+            If the frame's sensor is not in the calibration.
+        """
+        cal = self.calibration[frame.sensor]
+        t = float(frame.t) + cal.time_offset_s
+        key = (frame.sensor, int(frame.body))
+        history = self._latest.setdefault(key, [])
+        if history and t <= history[-1][0]:
+            self.counters["out_of_order_or_duplicate"] += 1
+            return False
+        state = np.asarray(frame.state, dtype=np.int8)
+        joints = cal.to_base(frame.joints)
+        usable = np.isfinite(joints).all(axis=1) & (state != TrackingState.NotTracked)
+        history.append((t, np.where(usable[:, None], joints, np.nan), state))
+        del history[:-HISTORY]
+        return True
+
+    def fuse(self, t: float) -> FusedFrame:
+        """Every known person at time ``t`` (s, controller clock), from frames captured by ``t``."""
+        cfg = self.cfg
+        per_track: dict[int, list[_Contribution]] = {}
+        for sensor in self.calibration.names:
+            bodies = {}
+            for (s, body), history in self._latest.items():
+                if s == sensor:
+                    c = next((c for c in reversed(history) if c[0] <= t), None)
+                    if c is not None and t - cfg.max_age_s <= c[0]:
+                        bodies[body] = c
+            centres = {}
+            for body, (_, joints, _) in bodies.items():
+                centre = torso_centre(joints, np.isfinite(joints).all(axis=1))
+                if np.isfinite(centre).all():
+                    centres[body] = centre
+            mapping = associate(
+                centres, self.tracks, self._assigned[sensor], cfg.association_gate_m, set()
+            )
+            self._assigned[sensor] = {b: tid for b, tid in mapping.items() if tid is not None}
+            for body, tid in mapping.items():
+                tc, joints, state = bodies[body]
+                if tid is None:
+                    track = PersonTrack(self._next_id, joints.copy())
+                    self._next_id += 1
+                    self.tracks.append(track)
+                    self._assigned[sensor][body] = tid = track.id
+                per_track.setdefault(tid, []).append(_Contribution(sensor, joints, state, t - tc))
+        people = []
+        for track in list(self.tracks):
+            contributions = per_track.get(track.id)
+            if contributions:
+                people.append(self._fuse_person(track, contributions, t))
+            elif t - track.seen_s > cfg.person_timeout_s:
+                self.tracks.remove(track)
+            else:
+                missing = HumanFrame(
+                    np.full((N_KINECT_JOINTS, 3), np.nan),
+                    np.zeros(N_KINECT_JOINTS, dtype=np.int8),
+                )
+                people.append(FusedPerson(track.id, missing, np.zeros(N_KINECT_JOINTS), (), (), ()))
+        return FusedFrame(float(t), tuple(people))
+
+    def _fuse_person(
+        self, track: PersonTrack, contributions: list[_Contribution], t: float
+    ) -> FusedPerson:
+        cfg = self.cfg
+        recent = t - track.seen_s <= 0.5
+        if not recent:  # a new person: the first contribution is the others' reference
+            contributions.sort(key=_reference_rank)
+        reference = track.predicted(t, 0.1) if recent else contributions[0].joints
+        mirrored = []
+        for i, c in enumerate(contributions):
+            if not recent and i == 0:
+                continue
+            as_is, swapped = mirror_cost(c.joints, np.isfinite(c.joints).all(axis=1), reference)
+            if swapped + cfg.mirror_margin_m < as_is:
+                contributions[i] = c._replace(joints=c.joints[MIRROR], state=c.state[MIRROR])
+                mirrored.append(c.sensor)
+                self.counters["mirrored_corrected"] += 1
+        P = np.stack([c.joints for c in contributions])  # (S, 25, 3)
+        ages = np.array([c.age for c in contributions])
+        step = np.minimum(ages, cfg.max_extrapolation_s)
+        P = P + track.velocity[None] * step[:, None, None]
+        usable = np.isfinite(P).all(axis=2)
+        tracked = np.stack([c.state == TrackingState.Tracked for c in contributions]) & usable
+        fresh = np.clip(1.0 - 0.5 * ages / cfg.max_age_s, 0.0, 1.0)[:, None]
+        sensor_w = np.array([self.calibration[c.sensor].weight for c in contributions])[:, None]
+        W = np.where(tracked, cfg.weight_tracked, cfg.weight_inferred) * usable * fresh * sensor_w
+        conf = np.where(tracked, cfg.confidence_tracked, cfg.confidence_inferred) * usable * fresh
+        outliers = []
+        if len(contributions) > 1:
+            diff = np.linalg.norm(P[:, None] - P[None, :], axis=3)  # (S, S, 25), NaN unusable
+            disagree = np.nanmax(np.where(np.isnan(diff), -1.0, diff), axis=(0, 1))
+            prediction = track.predicted(t, 0.1) if recent else None
+            for j in np.flatnonzero(disagree > cfg.outlier_threshold_m):
+                keep = self._resolve(j, P[:, j], tracked[:, j], usable[:, j], prediction, track)
+                W[~keep, j], conf[~keep, j] = 0.0, 0.0
+                names = [c.sensor for c in contributions]
+                chosen = names[int(np.flatnonzero(keep)[0])]
+                dropped = tuple(
+                    n for n, k, u in zip(names, keep, usable[:, j], strict=True) if u and not k
+                )
+                outliers.append(OutlierChoice(int(j), chosen, dropped))
+                self.counters["outliers_resolved"] += 1
+        total = W.sum(axis=0)
+        seen = total > 0
+        joints = np.full((N_KINECT_JOINTS, 3), np.nan)
+        joints[seen] = (np.nan_to_num(P[:, seen]) * W[:, seen, None]).sum(axis=0) / total[
+            seen, None
+        ]
+        state = np.zeros(N_KINECT_JOINTS, dtype=np.int8)
+        state[seen] = np.where(
+            (tracked & (W > 0)).any(axis=0)[seen], TrackingState.Tracked, TrackingState.Inferred
+        )
+        self._update(track, joints, seen, state == TrackingState.Tracked, t)
+        return FusedPerson(
+            track.id,
+            HumanFrame(joints, state),
+            np.minimum(conf.sum(axis=0), 1.0),
+            tuple(n for n in self.calibration.names if any(c.sensor == n for c in contributions)),
+            tuple(outliers),
+            tuple(mirrored),
+        )
+
+    def _resolve(
+        self,
+        j: int,
+        p: np.ndarray,
+        tracked: np.ndarray,
+        usable: np.ndarray,
+        prediction: np.ndarray | None,
+        track: PersonTrack,
+    ) -> np.ndarray:
+        """Which candidates of joint ``j`` to keep when they disagree: (S,) bool."""
+        err = np.zeros(len(p))
+        if prediction is not None and np.isfinite(prediction[j]).all():
+            err += np.linalg.norm(p - prediction[j], axis=1)
+        parent = PARENT[j]
+        if parent >= 0 and track.bone[j] > 0 and prediction is not None:
+            anchor = prediction[parent]
+            if np.isfinite(anchor).all():
+                err += np.abs(np.linalg.norm(p - anchor, axis=1) - track.bone[j])
+        score = np.where(usable, np.where(tracked, 0.0, 1e3) + np.nan_to_num(err, nan=1e2), np.inf)
+        best = int(np.argmin(score))
+        return usable & (np.linalg.norm(p - p[best], axis=1) <= self.cfg.outlier_threshold_m)
+
+    def _update(
+        self,
+        track: PersonTrack,
+        joints: np.ndarray,
+        seen: np.ndarray,
+        tracked: np.ndarray,
+        t: float,
+    ) -> None:
+        """The person's memory after a fusion: α-β joints and velocities, bone lengths."""
+        cfg = self.cfg
+        dt = t - track.last_seen
+        both = seen & np.isfinite(dt) & (dt > 0)
+        if both.any():
+            d = dt[both, None]
+            pred = track.joints[both] + track.velocity[both] * d
+            r = joints[both] - pred
+            track.joints[both] = pred + cfg.velocity_alpha * r
+            track.velocity[both] += cfg.velocity_beta * r / d
+        first = seen & ~np.isfinite(dt)
+        track.joints[first], track.velocity[first] = joints[first], 0.0
+        track.last_seen[seen] = t
+        track.seen_s = t
+        has_parent = PARENT >= 0
+        pair = tracked & has_parent & tracked[np.maximum(PARENT, 0)]
+        length = np.linalg.norm(joints[pair] - joints[PARENT[pair]], axis=1)
+        old = track.bone[pair]
+        track.bone[pair] = np.where(old > 0, 0.9 * old + 0.1 * length, length)
+
+
+def _reference_rank(c: _Contribution) -> tuple[bool, int]:
+    """Sort key of a new person's contributions: the best reference first.
+
+    A Kinect labels every body as if it faced the sensor, so a sensor behind the person
+    swaps left and right. Operators face their robot: a skeleton whose labelled front
+    (``(ShoulderLeft − ShoulderRight) × up``) points towards the robot's base is taken
+    first, then the one with more Tracked joints.
+    """
+    left, right = c.joints[JointType.ShoulderLeft], c.joints[JointType.ShoulderRight]
+    chest = c.joints[JointType.SpineShoulder]
+    front = np.cross(left - right, [0.0, 0.0, 1.0])
+    faces_robot = bool(np.dot(front, -chest) > 0)  # NaN compares False
+    return (not faces_robot, -int((c.state == TrackingState.Tracked).sum()))

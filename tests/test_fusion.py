@@ -1,0 +1,191 @@
+"""Skeleton fusion against a known truth: error, time alignment, outliers, mirrors, people."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from qpavoid.calibration import Calibration, SensorCalibration
+from qpavoid.errors import CalibrationError
+from qpavoid.frames import MIRROR, JointType, TrackingState
+from qpavoid.fusion import Fuser, FusionConfig
+from qpavoid.posture import Operator
+from qpavoid.scenarios import make_scenario
+from qpavoid.sensor_recording import BodyFrame
+from qpavoid.two_sensors import TwoSensorConfig, look_at, two_sensor_data
+
+J = JointType
+HAND = int(J.HandRight)
+TRACKED = np.full(25, TrackingState.Tracked, dtype=np.int8)
+
+
+def calibration(*names: str) -> Calibration:
+    """Sensors at different places (camera frames really differ from the base frame)."""
+    sensors = {}
+    for k, name in enumerate(names):
+        T = look_at(np.array([1.5 * (-1) ** k, 2.5, 1.3]), np.array([0.15, 1.0, 0.4]))
+        sensors[name] = SensorCalibration(name, T)
+    return Calibration(sensors)
+
+
+def seen_by(cal: Calibration, sensor: str, joints: np.ndarray) -> np.ndarray:
+    """``joints`` (base frame) as ``sensor`` reports them (its camera frame)."""
+    T = np.linalg.inv(cal[sensor].base_from_camera)
+    return joints @ T[:3, :3].T + T[:3, 3]
+
+
+def body(cal, sensor, t, joints, state=TRACKED, body_id=0) -> BodyFrame:
+    return BodyFrame(sensor, body_id, t, seen_by(cal, sensor, joints), state.copy())
+
+
+def errors(fuser_names, data, motion):
+    """Mean joint error (m) and coverage of a fusion of ``fuser_names`` over the data."""
+    cal = Calibration({n: data.calibration[n] for n in fuser_names})
+    rows = [
+        (f.t + cal[f.sensor].time_offset_s, f)
+        for name in fuser_names
+        for f in data.recordings[name].frames()
+    ]
+    rows.sort(key=lambda r: r[0])
+    fuser = Fuser(cal)
+    err, cover = [], []
+    for t, f in rows:
+        fuser.add(f)
+        people = fuser.fuse(t).people
+        assert len(people) == 1
+        truth = motion.frame_at(t)[0]
+        joints = people[0].frame.joints
+        ok = np.isfinite(joints).all(axis=1)
+        err.extend(np.linalg.norm(joints[ok] - truth[ok], axis=1))
+        cover.append(ok.mean())
+    return float(np.mean(err)), float(np.mean(cover))
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_two_sensors_fused_beat_either_sensor_alone(robot, seed):
+    motion = make_scenario("test1", robot)
+    data = two_sensor_data([motion], 8.0, TwoSensorConfig(seed=seed))
+    left = errors(["kinect_left"], data, motion)
+    right = errors(["kinect_right"], data, motion)
+    both = errors(["kinect_left", "kinect_right"], data, motion)
+    assert 0.035 < left[0] < 0.07 and 0.035 < right[0] < 0.07  # 50 mm sensors
+    assert both[0] < 0.85 * min(left[0], right[0])
+    assert both[1] >= max(left[1], right[1])
+
+
+def test_a_frame_from_the_future_is_never_used():
+    cal = calibration("a")
+    rest = Operator().rest()
+    fuser = Fuser(cal)
+    fuser.add(body(cal, "a", 0.0, rest))
+    fuser.add(body(cal, "a", 0.1, rest + [0.0, 0.0, 0.3]))
+    # at t = 0.05 only the frame of t = 0 exists
+    out = fuser.fuse(0.05).people[0].frame.joints
+    np.testing.assert_allclose(out, rest, atol=1e-9)
+
+
+def test_old_frames_are_not_used_and_a_lost_person_is_reported_missing_then_dropped():
+    cal = calibration("a")
+    rest = Operator().rest()
+    fuser = Fuser(cal, FusionConfig(max_age_s=0.1, person_timeout_s=1.0))
+    fuser.add(body(cal, "a", 0.0, rest))
+    assert np.isfinite(fuser.fuse(0.05).people[0].frame.joints).all()
+    gone = fuser.fuse(0.5).people[0]  # too old: every joint missing, never invented
+    assert np.isnan(gone.frame.joints).all() and (gone.frame.state == 0).all()
+    assert gone.confidence.max() == 0.0
+    assert fuser.fuse(1.2).people == ()
+
+
+def test_a_joint_no_sensor_sees_stays_missing_and_one_sensor_halves_confidence():
+    cal = calibration("a", "b")
+    rest = Operator().rest()
+    lost = rest.copy()
+    lost[HAND] = np.nan
+    fuser = Fuser(cal)
+    fuser.add(body(cal, "a", 0.0, lost))
+    fuser.add(body(cal, "b", 0.0, lost))
+    person = fuser.fuse(0.0).people[0]
+    assert np.isnan(person.frame.joints[HAND]).all()
+    assert person.frame.state[HAND] == TrackingState.NotTracked
+    np.testing.assert_allclose(
+        person.frame.joints[~np.isnan(lost[:, 0])], rest[~np.isnan(lost[:, 0])], atol=1e-9
+    )
+    assert person.confidence[int(J.Head)] == pytest.approx(1.0)
+    fuser.add(body(cal, "a", 1 / 30, rest))  # sensor b silent: a alone, a fresh frame
+    person = fuser.fuse(1 / 30).people[0]
+    assert person.confidence[HAND] == pytest.approx(0.5)
+    assert person.sensors == ("a", "b")  # b's frame of t = 0 is still young enough
+
+
+def test_disagreeing_sensors_are_settled_by_tracking_state_then_by_motion():
+    cal = calibration("a", "b")
+    rest = Operator().rest()
+    off = rest.copy()
+    off[HAND] += [0.0, 0.0, 0.4]
+    inferred = TRACKED.copy()
+    inferred[HAND] = TrackingState.Inferred
+    fuser = Fuser(cal)
+    fuser.add(body(cal, "a", 0.0, rest))
+    fuser.add(body(cal, "b", 0.0, off, inferred))
+    person = fuser.fuse(0.0).people[0]
+    np.testing.assert_allclose(person.frame.joints[HAND], rest[HAND], atol=1e-9)
+    assert person.outliers == ((HAND, "a", ("b",)),)
+    # both Tracked: the one that continues the person's motion wins, whichever sensor
+    for t in (1 / 30, 2 / 30):
+        fuser.add(body(cal, "a", t, off))
+        fuser.add(body(cal, "b", t, rest))
+        person = fuser.fuse(t).people[0]
+        np.testing.assert_allclose(person.frame.joints[HAND], rest[HAND], atol=1e-9)
+        assert person.outliers[0].chosen == "b"
+    assert fuser.counters["outliers_resolved"] == 3
+
+
+def test_a_mirrored_sensor_is_relabelled():
+    cal = calibration("a", "b")
+    rest = Operator().rest()
+    rest[HAND] += [0.0, -0.3, 0.2]  # the right hand up and forward: left and right differ
+    fuser = Fuser(cal)
+    for k in range(3):
+        t = k / 30
+        fuser.add(body(cal, "a", t, rest))
+        swapped = body(cal, "b", t, rest)
+        fuser.add(swapped._replace(joints=swapped.joints[MIRROR]))
+        person = fuser.fuse(t).people[0]
+        np.testing.assert_allclose(person.frame.joints, rest, atol=1e-9)
+        assert person.mirrored == ("b",)
+        assert person.outliers == ()
+
+
+def test_bodies_are_matched_across_sensors_and_keep_their_ids():
+    cal = calibration("a", "b")
+    one = Operator().rest()
+    two = one + [1.2, 0.0, 0.0]
+    fuser = Fuser(cal)
+    ids = []
+    for k in range(5):
+        t = k / 30
+        step = [0.0, 0.0, 0.01 * k]
+        # the sensors number the people differently
+        fuser.add(body(cal, "a", t, one + step, body_id=0))
+        fuser.add(body(cal, "a", t, two - step, body_id=1))
+        fuser.add(body(cal, "b", t + 0.01, two - step, body_id=4))
+        fuser.add(body(cal, "b", t + 0.01, one + step, body_id=2))
+        people = fuser.fuse(t + 0.01).people
+        assert len(people) == 2 and all(p.sensors == ("a", "b") for p in people)
+        by_id = {p.id: p.frame.joints for p in people}
+        ids.append(sorted(by_id))
+        np.testing.assert_allclose(by_id[0], one + step, atol=1e-9)
+        np.testing.assert_allclose(by_id[1], two - step, atol=1e-9)
+    assert ids == [[0, 1]] * 5
+
+
+def test_duplicates_out_of_order_and_unknown_sensors():
+    cal = calibration("a")
+    rest = Operator().rest()
+    fuser = Fuser(cal)
+    assert fuser.add(body(cal, "a", 0.1, rest))
+    assert not fuser.add(body(cal, "a", 0.1, rest))
+    assert not fuser.add(body(cal, "a", 0.05, rest))
+    assert fuser.counters["out_of_order_or_duplicate"] == 2
+    with pytest.raises(CalibrationError, match="no sensor 'z'"):
+        fuser.add(BodyFrame("z", 0, 0.2, rest, TRACKED))
