@@ -38,7 +38,7 @@ TORSO = np.array(
     ]
 )
 #: Joints that change under a left/right swap (the others are on the spine).
-SIDED = np.flatnonzero(MIRROR != np.arange(N_KINECT_JOINTS))
+SIDED = np.flatnonzero(np.arange(N_KINECT_JOINTS) != MIRROR)
 
 
 @dataclass
@@ -139,8 +139,14 @@ def associate(
     used = set(taken)
     for body, c in centres.items():  # a body keeps its track while it stays within the gate
         tid = previous.get(body)
-        if tid in by_id and tid not in used and _dist(c, by_id[tid].centre()) <= gate_m:
-            out[body], _ = tid, used.add(tid)
+        if (
+            tid is not None
+            and tid in by_id
+            and tid not in used
+            and _dist(c, by_id[tid].centre()) <= gate_m
+        ):
+            out[body] = tid
+            used.add(tid)
     bodies = [b for b in centres if b not in out]
     free = [tr for tr in tracks if tr.id not in used]
     if bodies and free:

@@ -264,7 +264,9 @@ class Fuser:
             disagree = np.nanmax(np.where(np.isnan(diff), -1.0, diff), axis=(0, 1))
             prediction = track.predicted(t, 0.1) if recent else None
             for j in np.flatnonzero(disagree > cfg.outlier_threshold_m):
-                keep = self._resolve(j, P[:, j], tracked[:, j], usable[:, j], prediction, track)
+                keep = self._resolve(
+                    int(j), P[:, j], tracked[:, j], usable[:, j], prediction, track
+                )
                 W[~keep, j], conf[~keep, j] = 0.0, 0.0
                 names = [c.sensor for c in contributions]
                 chosen = names[int(np.flatnonzero(keep)[0])]

@@ -78,7 +78,7 @@ def test_a_frame_from_the_future_is_never_used():
     rest = Operator().rest()
     fuser = Fuser(cal)
     fuser.add(body(cal, "a", 0.0, rest))
-    fuser.add(body(cal, "a", 0.1, rest + [0.0, 0.0, 0.3]))
+    fuser.add(body(cal, "a", 0.1, rest + np.array([0.0, 0.0, 0.3])))
     # at t = 0.05 only the frame of t = 0 exists
     out = fuser.fuse(0.05).people[0].frame.joints
     np.testing.assert_allclose(out, rest, atol=1e-9)
@@ -159,7 +159,7 @@ def test_a_mirrored_sensor_is_relabelled():
 def test_bodies_are_matched_across_sensors_and_keep_their_ids():
     cal = calibration("a", "b")
     one = Operator().rest()
-    two = one + [1.2, 0.0, 0.0]
+    two = one + np.array([1.2, 0.0, 0.0])
     fuser = Fuser(cal)
     ids = []
     for k in range(5):
