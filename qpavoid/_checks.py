@@ -42,6 +42,13 @@ def as_array(
         With ``name`` set as above and ``value`` the value given (the converted array for
         a wrong shape or a non-finite entry).
     """
+    kind = np.asarray(value).dtype.kind if not isinstance(value, np.ndarray) else value.dtype.kind
+    if kind not in "iuf":  # no bools, complex numbers, strings or objects taken as numbers
+        raise InputError(
+            f"{name} must be numeric (real numbers), got {np.asarray(value).dtype} values",
+            name=arg_name(name),
+            value=value,
+        )
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:

@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .frames import MIRROR, N_KINECT_JOINTS, JointType
+from .frames import MIRROR, N_KINECT_JOINTS, JointType, TrackingState
+from .perception import PARENT
 
 J = JointType
 
@@ -69,6 +70,37 @@ class PersonTrack:
     bone: np.ndarray = field(default_factory=lambda: np.zeros(N_KINECT_JOINTS))
     seen_s: float = -np.inf
 
+    def update(
+        self,
+        joints: np.ndarray,
+        seen: np.ndarray,
+        tracked: np.ndarray,
+        t: float,
+        alpha: float,
+        beta: float,
+    ) -> None:
+        """Take the fused ``joints`` at ``t``: α-β joints and velocities, bone lengths.
+
+        ``seen`` (25,) marks the joints fused now, ``tracked`` those fused from a Tracked
+        joint (the bone lengths learn only from those).
+        """
+        dt = t - self.last_seen
+        both = seen & np.isfinite(dt) & (dt > 0)
+        if both.any():
+            d = dt[both, None]
+            pred = self.joints[both] + self.velocity[both] * d
+            r = joints[both] - pred
+            self.joints[both] = pred + alpha * r
+            self.velocity[both] += beta * r / d
+        first = seen & ~np.isfinite(dt)
+        self.joints[first], self.velocity[first] = joints[first], 0.0
+        self.last_seen[seen] = t
+        self.seen_s = t
+        pair = tracked & (PARENT >= 0) & tracked[np.maximum(PARENT, 0)]
+        length = np.linalg.norm(joints[pair] - joints[PARENT[pair]], axis=1)
+        old = self.bone[pair]
+        self.bone[pair] = np.where(old > 0, 0.9 * old + 0.1 * length, length)
+
     def centre(self) -> np.ndarray:
         """Torso centre, m (NaN if no joint is known)."""
         return torso_centre(self.joints, np.isfinite(self.joints).all(axis=1))
@@ -104,6 +136,20 @@ def mirror_cost(
     as_is = np.median(np.linalg.norm(joints[keep] - reference[keep], axis=1))
     mirrored = np.median(np.linalg.norm(joints[MIRROR[keep_m]] - reference[keep_m], axis=1))
     return float(as_is), float(mirrored)
+
+
+def reference_rank(joints: np.ndarray, state: np.ndarray) -> tuple[bool, int]:
+    """Sort key of a new person's bodies: the best reference for the others first.
+
+    A Kinect labels every body as if it faced the sensor, so a sensor behind the person
+    swaps left and right. Operators face their robot: a body whose labelled front
+    (``(ShoulderLeft − ShoulderRight) × up``) points towards the robot's base comes
+    first, then the one with more Tracked joints.
+    """
+    left, right = joints[J.ShoulderLeft], joints[J.ShoulderRight]
+    front = np.cross(left - right, [0.0, 0.0, 1.0])
+    faces_robot = bool(np.dot(front, -joints[J.SpineShoulder]) > 0)  # NaN compares False
+    return (not faces_robot, -int((state == TrackingState.Tracked).sum()))
 
 
 def associate(

@@ -33,7 +33,8 @@ from .laws import (
     scaled_velocity_limits,
     stop_reason,
 )
-from .perception import Perceived, Tracker, part_velocities
+from .people import NOBODY, People, as_people, closest_of
+from .perception import PeopleTracker, Perceived, part_velocities
 from .robot import Robot, joint_columns
 from .ssm import StopTimeBudget, joint_speed_limits, reaction_time, separation_bounds
 from .task import ArcPath, pose_error
@@ -74,42 +75,45 @@ class Controller:
         self.K = np.r_[[self.config.gain_position] * 3, [self.config.gain_orientation] * 3]
         self.i_L1, self.i_L2, self.i_EE = (robot.set_index(n) for n in ("L1", "L2", "EE"))
         self.scaled_cols = joint_columns(robot, self.config.scaled_joints, "scaled_joints")
-        self.tracker = Tracker(self.config.perception)
+        self.trackers = PeopleTracker(self.config.perception)
         self.part_joints = self.human.part_joints()
         ssm = self.config.ssm
         self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, self.config.control_period_s))
         self.stop_budget = StopTimeBudget(self.ssm, robot.joint_names, self.config.control_period_s)
         self._clock_s = 0.0  # the controller's own clock: control periods since it started
-        self._frame: tuple[HumanFrame, float | None] | None = None
-        self._perceived: Perceived | None = None
-        self._geometry: HumanGeometry | None = None
+        self._frame: tuple[People, float | None] | None = None
+        self._perceived: list[Perceived] = []
+        self._geometry: list[HumanGeometry] = []
+        #: The frame of the person closest to the robot at the last tick (for logs).
+        self.closest_frame: HumanFrame | None = None
 
     def perceive(
-        self, frame: HumanFrame, frame_age_s: float, frame_time_s: float | None = None
-    ) -> tuple[Perceived, HumanGeometry]:
-        """The tracker's view of ``frame`` and its geometry, updated once per new frame.
+        self, people: People, frame_age_s: float, frame_time_s: float | None = None
+    ) -> tuple[list[Perceived], list[HumanGeometry]]:
+        """Each tracker's view of ``people`` and their geometries, updated once per new frame.
 
-        A new frame is a new :class:`HumanFrame` object, or (when the caller gives capture
+        A new frame is a new :class:`People` object, or (when the caller gives capture
         times) a new ``frame_time_s``; its capture time is ``frame_time_s`` or, without
-        one, the controller's clock minus ``frame_age_s``.
+        one, the controller's clock minus ``frame_age_s``. A person no longer in the
+        frame is forgotten (fusion reports a lost person until it may drop them).
         """
-        key = (frame, frame_time_s)
-        if self._frame is None or frame is not self._frame[0] or frame_time_s != self._frame[1]:
+        key = (people, frame_time_s)
+        if self._frame is None or people is not self._frame[0] or frame_time_s != self._frame[1]:
             captured = self._clock_s - frame_age_s if frame_time_s is None else frame_time_s
-            self._perceived = self.tracker.update(frame, captured)
-            self._geometry = self.human.geometry(
-                self._perceived.frame, joint_radius=self._perceived.joint_radius
-            )
+            self._perceived = self.trackers.update(people.ids, people.frames, captured)
+            self._geometry = [
+                self.human.geometry(p.frame, joint_radius=p.joint_radius) for p in self._perceived
+            ]
             self._frame = key
-        assert self._perceived is not None and self._geometry is not None
         return self._perceived, self._geometry
 
-    def geometry(self, frame: HumanFrame) -> HumanGeometry:
-        """The geometry the distances used for ``frame`` if it is the last frame perceived,
-        else the frame's own geometry (nothing filled in, no uncertainty)."""
-        if self._frame is not None and frame is self._frame[0] and self._geometry is not None:
+    def geometry(self, frame: HumanFrame | People) -> list[HumanGeometry]:
+        """The geometries the distances used for ``frame`` if it is the last frame
+        perceived, else the frame's own (nothing filled in, no uncertainty)."""
+        if self._frame is not None and frame is self._frame[0] and self._geometry:
             return self._geometry
-        return self.human.geometry(frame)
+        people = frame if isinstance(frame, People) else as_people(frame)
+        return [self.human.geometry(f) for f in people.frames] or [self.human.geometry(NOBODY)]
 
     def measure(
         self,
@@ -129,22 +133,25 @@ class Controller:
         """
         t = finite_number(t, "t (path time, s)")
         kin = self.robot.kinematics(q)
-        frame = HumanFrame.check(joints, state)
+        people = as_people(joints, state)
         self._clock_s += self.config.control_period_s
         age = frame_age_s
-        if age <= self.config.max_frame_age_s:
-            perceived, geo = self.perceive(frame, age, frame_time_s)
-        else:  # stale or NaN: the robot stops on it; the tracker does not learn from it
-            perceived = Perceived.untracked(frame)
-            geo = self.geometry(frame)
-        table = self.distances(kin, geo)
+        if age <= self.config.max_frame_age_s and people.ids:
+            percs, geos = self.perceive(people, age, frame_time_s)
+        else:  # stale or NaN: the robot stops on it; the trackers do not learn from it
+            percs = [Perceived.untracked(f) for f in people.frames or (NOBODY,)]
+            geos = self.geometry(people)
+        table, who = closest_of([self.distances(kin, g) for g in geos])
         dmin = table.min_per_set()
+        nearest = int(who.flat[np.argmin(table.distance)]) if np.isfinite(dmin).any() else 0
+        perceived, geo = percs[nearest], geos[nearest]
+        frame = self.closest_frame = people.frames[nearest] if people.ids else NOBODY
         cfg = self.config.avoidance
         f = float(l1_factor(dmin[self.i_L1], cfg))  # eq. (2)
         limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)  # eq. (3)
         if self.config.safety == "ssm":
             ssm = replace(self.ssm, stop_time_s=self.stop_budget.budget())
-            v_parts = part_velocities(perceived.joint_velocity, self.part_joints)
+            v_parts = part_velocities([p.joint_velocity for p in percs], self.part_joints, who)
             approach_limit, human_approach = separation_bounds(table, v_parts, age, ssm)
             limits = np.minimum(limits, joint_speed_limits(ssm, self.robot.joint_names))
         else:
@@ -162,10 +169,9 @@ class Controller:
         frozen = self.config.perception.max_identical_frames
         if not age <= self.config.max_frame_age_s:  # NaN too
             reason = f"human frame is stale ({age:.3f} s old, max {self.config.max_frame_age_s} s)"
-        elif frozen is not None and perceived.identical > frozen:
-            reason = (
-                f"human frame is frozen ({perceived.identical + 1} identical skeletons in a row)"
-            )
+        elif frozen is not None and min(p.identical for p in percs) > frozen:
+            n = min(p.identical for p in percs) + 1
+            reason = f"human frame is frozen ({n} identical skeletons in a row)"
         elif self.config.require_human and not np.isfinite(table.distance).any():
             reason = "no body part of the operator is tracked"
         else:
@@ -272,7 +278,9 @@ class Controller:
         q
             (nq,) joint angles, rad.
         joints
-            (25, 3) Kinect joints of the latest frame, m, robot base frame; NaN = lost.
+            (25, 3) Kinect joints of the latest frame, m, robot base frame; NaN = lost; or
+            :class:`~qpavoid.people.People` (several people: every distance, rule and
+            constraint uses the closest of them).
         state
             (25,) tracking states (0 not tracked, 1 inferred, 2 tracked), or None.
         t

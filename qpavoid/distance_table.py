@@ -66,7 +66,7 @@ class DistanceTable:
 
     @cached_property
     def _witnesses(self) -> tuple[np.ndarray, np.ndarray]:
-        if self.method == "capsules":
+        if len(self._witness) == 2:  # capsules, or computed already (several people)
             return self._witness
         # spheres: the centres moved by their radii along the direction.
         P, H, r_robot, r_human = self._witness

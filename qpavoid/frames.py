@@ -20,6 +20,9 @@ from .errors import InputError
 
 #: Joints per Kinect v2 skeleton.
 N_KINECT_JOINTS = 25
+#: Farthest a joint may be from the robot's base, m: a Kinect v2 sees to 4.5 m; a larger
+#: number is a unit error (mm) or garbage, never a person.
+MAX_COORDINATE_M = 100.0
 
 
 class JointType(IntEnum):
@@ -131,6 +134,16 @@ def check_joints(joints: object, times: np.ndarray | None = None) -> np.ndarray:
             f"joints has an infinite coordinate at {_where(frame, times)}joint "
             f"{JointType(joint).name}, axis {'xyz'[axis]}: "
             f"{float(arr[tuple([*frame, joint, axis])])!r}",
+            name="joints",
+            value=arr,
+        )
+    far = np.abs(arr) > MAX_COORDINATE_M
+    if np.any(far):
+        *frame, joint, axis = (int(i) for i in np.argwhere(far)[0])
+        raise InputError(
+            f"joints has a coordinate beyond {MAX_COORDINATE_M:g} m at {_where(frame, times)}"
+            f"joint {JointType(joint).name}, axis {'xyz'[axis]}: "
+            f"{float(arr[tuple([*frame, joint, axis])])!r} (not metres?)",
             name="joints",
             value=arr,
         )

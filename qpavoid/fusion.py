@@ -37,9 +37,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .association import PersonTrack, associate, mirror_cost, torso_centre
+from .association import PersonTrack, associate, mirror_cost, reference_rank, torso_centre
 from .calibration import Calibration
-from .frames import MIRROR, N_KINECT_JOINTS, HumanFrame, JointType, TrackingState
+from .frames import MIRROR, N_KINECT_JOINTS, HumanFrame, TrackingState
 from .perception import PARENT
 from .sensor_recording import BodyFrame
 
@@ -237,7 +237,7 @@ class Fuser:
         cfg = self.cfg
         recent = t - track.seen_s <= 0.5
         if not recent:  # a new person: the first contribution is the others' reference
-            contributions.sort(key=_reference_rank)
+            contributions.sort(key=lambda c: reference_rank(c.joints, c.state))
         reference = track.predicted(t, 0.1) if recent else contributions[0].joints
         mirrored = []
         for i, c in enumerate(contributions):
@@ -285,7 +285,9 @@ class Fuser:
         state[seen] = np.where(
             (tracked & (W > 0)).any(axis=0)[seen], TrackingState.Tracked, TrackingState.Inferred
         )
-        self._update(track, joints, seen, state == TrackingState.Tracked, t)
+        track.update(
+            joints, seen, state == TrackingState.Tracked, t, cfg.velocity_alpha, cfg.velocity_beta
+        )
         return FusedPerson(
             track.id,
             HumanFrame(joints, state),
@@ -316,46 +318,3 @@ class Fuser:
         score = np.where(usable, np.where(tracked, 0.0, 1e3) + np.nan_to_num(err, nan=1e2), np.inf)
         best = int(np.argmin(score))
         return usable & (np.linalg.norm(p - p[best], axis=1) <= self.cfg.outlier_threshold_m)
-
-    def _update(
-        self,
-        track: PersonTrack,
-        joints: np.ndarray,
-        seen: np.ndarray,
-        tracked: np.ndarray,
-        t: float,
-    ) -> None:
-        """The person's memory after a fusion: α-β joints and velocities, bone lengths."""
-        cfg = self.cfg
-        dt = t - track.last_seen
-        both = seen & np.isfinite(dt) & (dt > 0)
-        if both.any():
-            d = dt[both, None]
-            pred = track.joints[both] + track.velocity[both] * d
-            r = joints[both] - pred
-            track.joints[both] = pred + cfg.velocity_alpha * r
-            track.velocity[both] += cfg.velocity_beta * r / d
-        first = seen & ~np.isfinite(dt)
-        track.joints[first], track.velocity[first] = joints[first], 0.0
-        track.last_seen[seen] = t
-        track.seen_s = t
-        has_parent = PARENT >= 0
-        pair = tracked & has_parent & tracked[np.maximum(PARENT, 0)]
-        length = np.linalg.norm(joints[pair] - joints[PARENT[pair]], axis=1)
-        old = track.bone[pair]
-        track.bone[pair] = np.where(old > 0, 0.9 * old + 0.1 * length, length)
-
-
-def _reference_rank(c: _Contribution) -> tuple[bool, int]:
-    """Sort key of a new person's contributions: the best reference first.
-
-    A Kinect labels every body as if it faced the sensor, so a sensor behind the person
-    swaps left and right. Operators face their robot: a skeleton whose labelled front
-    (``(ShoulderLeft − ShoulderRight) × up``) points towards the robot's base is taken
-    first, then the one with more Tracked joints.
-    """
-    left, right = c.joints[JointType.ShoulderLeft], c.joints[JointType.ShoulderRight]
-    chest = c.joints[JointType.SpineShoulder]
-    front = np.cross(left - right, [0.0, 0.0, 1.0])
-    faces_robot = bool(np.dot(front, -chest) > 0)  # NaN compares False
-    return (not faces_robot, -int((c.state == TrackingState.Tracked).sum()))

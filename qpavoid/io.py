@@ -82,8 +82,9 @@ def load_log(path: str | Path) -> dict[str, np.ndarray]:
 def check_output_dir(path: str | Path) -> Path:
     """``path`` if it is a folder that can be written or created there; else :class:`InputError`.
 
-    Nothing is created: the check runs before a job starts, so that a bad ``--out`` fails in
-    a second, not after the simulation.
+    Nothing is left behind (a temporary folder is made and removed in the deepest existing
+    folder, the one test that holds everywhere): the check runs before a job starts, so
+    that a bad ``--out`` fails in a second, not after the simulation.
     """
     out = Path(path)
     if out.exists() and not out.is_dir():
@@ -99,12 +100,15 @@ def check_output_dir(path: str | Path) -> Path:
             name="--out",
             value=str(out),
         )
-    if not os.access(probe, os.W_OK | os.X_OK):
+    try:  # os.access trusts permission bits; /proc, read-only mounts... only a try tells
+        tempfile.TemporaryDirectory(prefix=".qpavoid-check.", dir=probe).cleanup()
+    except OSError as exc:
         raise InputError(
-            f"--out {str(out)!r}: cannot write in {str(probe)!r} (permission denied)",
+            f"--out {str(out)!r}: cannot write in {str(probe)!r} "
+            f"({exc.strerror or 'permission denied'})",
             name="--out",
             value=str(out),
-        )
+        ) from None
     return out
 
 

@@ -5,14 +5,20 @@ stream of frames into what the distances may trust (:class:`Perceived`):
 
 * **A joint that stops being tracked does not vanish.** It stays at its last known
   position with an uncertainty radius growing at the largest human speed
-  (``max_human_speed_mps``, ISO 13855's 2.0 m/s) since it was last seen, bounded by the
-  reach of its nearest tracked ancestor (a lost hand is within a forearm and hand of a
-  tracked elbow: then it is placed there, with that reach as its radius). The distances
-  widen each part by the largest radius of its joints, so a lost limb pushes the robot
-  away or stops it instead of disappearing.
+  (``max_human_speed_mps``, ISO 13855's 2.0 m/s) since it was last seen.
 * **Inferred joints** (the SDK's guesses for occluded joints) carry
   ``inferred_uncertainty_m`` plus the same growth since the joint was last Tracked: an
   Inferred joint that has not moved for a second is a second old.
+* **Every joint not tracked now, lost, Inferred or never seen at all, is within the reach
+  of its nearest tracked ancestor**: the bones between, each at the longest it has been
+  seen or :data:`MAX_BONE_M`, whichever is larger (a Kinect folds a forearm onto the elbow
+  just before losing the hand; that frame must not shrink the reach). Where that bound is
+  the tighter one the joint is placed at the ancestor with the reach as its radius (a
+  hand never seen, under a tracked shoulder, is a ball of an arm's length there). The
+  distances widen each part by the largest radius of its joints, so a hidden limb pushes
+  the robot away or stops it instead of disappearing; an Inferred hand is bounded too,
+  so it cannot stop the robot for good. A joint with nothing tracked above it and never
+  seen stays missing (nothing to bound it by).
 * **Frozen frames**: a real depth sensor never repeats a skeleton bit for bit;
   ``identical`` counts consecutive bit-identical skeletons and the controller treats more
   than ``max_identical_frames`` as stale.
@@ -54,6 +60,32 @@ for _child, _parent in (
     (J.ThumbRight, J.HandRight),
 ):
     PARENT[int(_child)] = int(_parent)
+
+
+#: Upper bound on each bone's length (from a joint to its parent), m: our choice, about
+#: 25 % above average adult male segment lengths (upper arm 0.40, forearm 0.33, wrist to
+#: hand 0.12, hand to fingertip 0.15, thumb 0.12; spine, neck and head likewise). A
+#: longer bone once seen raises its own bound. 0 for joints outside the upper body.
+MAX_BONE_M = np.zeros(N_KINECT_JOINTS)
+for _joint, _length in (
+    (J.SpineMid, 0.35),
+    (J.SpineShoulder, 0.35),
+    (J.Neck, 0.15),
+    (J.Head, 0.25),
+    (J.ShoulderLeft, 0.25),
+    (J.ShoulderRight, 0.25),
+    (J.ElbowLeft, 0.40),
+    (J.ElbowRight, 0.40),
+    (J.WristLeft, 0.33),
+    (J.WristRight, 0.33),
+    (J.HandLeft, 0.12),
+    (J.HandRight, 0.12),
+    (J.HandTipLeft, 0.15),
+    (J.HandTipRight, 0.15),
+    (J.ThumbLeft, 0.12),
+    (J.ThumbRight, 0.12),
+):
+    MAX_BONE_M[int(_joint)] = _length
 
 
 @dataclass(frozen=True)
@@ -124,7 +156,7 @@ class Tracker:
         self.velocity = np.zeros((n, 3))
         self.last_seen = np.full(n, -np.inf)
         self.last_tracked = np.full(n, -np.inf)
-        self.bone = np.zeros(n)  # distance to the parent when both were last seen
+        self.bone = MAX_BONE_M.copy()  # longest bone to the parent: seen, or the bound
         self._last: HumanFrame | None = None
         self._perceived: Perceived | None = None
 
@@ -160,7 +192,9 @@ class Tracker:
         self.last_tracked[tracked] = capture_time_s
         parent_seen = PARENT >= 0
         pair = seen & parent_seen & seen[np.maximum(PARENT, 0)]
-        self.bone[pair] = np.linalg.norm(z[pair] - z[PARENT[pair]], axis=1)
+        self.bone[pair] = np.maximum(
+            self.bone[pair], np.linalg.norm(z[pair] - z[PARENT[pair]], axis=1)
+        )
 
         joints = np.where(seen[:, None], z, self.position)
         radius = np.zeros(N_KINECT_JOINTS)
@@ -170,14 +204,22 @@ class Tracker:
         )
         lost = ~seen & np.isfinite(self.last_seen)
         radius[lost] = cfg.max_human_speed_mps * (capture_time_s - self.last_seen[lost])
-        for j in np.flatnonzero(lost):  # bounded by the reach of a tracked ancestor
+        never = ~seen & ~np.isfinite(self.last_seen)
+        radius[never] = np.inf
+        # Any joint not tracked now lies within the reach of its nearest tracked ancestor
+        # (the bones between, each at its longest: seen, or the anthropometric bound, so
+        # a foreshortened frame before a loss cannot shrink it): there it is placed when
+        # that is the tighter bound. This also covers joints never seen at all.
+        for j in np.flatnonzero(~tracked & (PARENT >= 0)):
             reach, a = self.bone[j], PARENT[j]
             while a >= 0 and not tracked[a]:
                 reach, a = reach + self.bone[a], PARENT[a]
             if a >= 0 and reach < radius[j]:
                 joints[j], radius[j] = z[a], reach
+        placed = ~seen & np.isfinite(joints).all(axis=1)
+        radius[~np.isfinite(joints).all(axis=1)] = 0.0  # never seen, nothing tracked above it
         state = frame.state.copy()
-        state[lost] = TrackingState.Inferred
+        state[placed] = TrackingState.Inferred
         self._last = frame
         self._perceived = Perceived(
             HumanFrame(joints, state),
@@ -189,10 +231,42 @@ class Tracker:
         return self._perceived
 
 
-def part_velocities(velocity: np.ndarray, part_joints: np.ndarray) -> np.ndarray:
-    """(K, 3) velocity of each part: that of its fastest joint, m/s.
+class PeopleTracker:
+    """One :class:`Tracker` per person id; a person no longer reported is forgotten."""
 
-    ``velocity`` (25, 3) per joint; ``part_joints`` (K, 25) bool membership.
+    def __init__(self, cfg: PerceptionConfig | None = None):
+        self.cfg = cfg or PerceptionConfig()
+        self.trackers: dict[int, Tracker] = {}
+
+    def person(self, pid: int) -> Tracker:
+        """Person ``pid``'s tracker (made on first use)."""
+        return self.trackers.setdefault(pid, Tracker(self.cfg))
+
+    def update(
+        self, ids: tuple[int, ...], frames: tuple[HumanFrame, ...], capture_time_s: float
+    ) -> list[Perceived]:
+        """Each person's :meth:`Tracker.update`, in the order of ``ids``."""
+        self.trackers = {i: self.person(i) for i in ids}
+        return [
+            self.trackers[i].update(f, capture_time_s) for i, f in zip(ids, frames, strict=True)
+        ]
+
+
+def part_velocities(
+    velocity: list[np.ndarray], part_joints: np.ndarray, who: np.ndarray | None = None
+) -> np.ndarray:
+    """Velocity of each body part, m/s: that of its fastest joint.
+
+    ``velocity`` holds each person's (25, 3) joint velocities; ``part_joints`` (K, 25)
+    bool membership. Without ``who``, (K, 3) of the first person; with ``who`` (S, K) (the
+    person closest to each robot set and part, :func:`~qpavoid.people.closest_of`),
+    (S, K, 3): the velocity of each pair's own person's part.
     """
-    speed = np.where(part_joints, np.linalg.norm(velocity, axis=1)[None, :], -1.0)
-    return velocity[speed.argmax(axis=1)]
+    out = []
+    for v in velocity:
+        speed = np.where(part_joints, np.linalg.norm(v, axis=1)[None, :], -1.0)
+        out.append(v[speed.argmax(axis=1)])
+    parts = np.stack(out)  # (P, K, 3)
+    if who is None:
+        return parts[0]
+    return parts[who, np.arange(who.shape[1])[None, :]]

@@ -263,6 +263,8 @@ def _parse_csv_row(row: list[str], line: int, names: list[str]) -> list[float]:
             f"CSV line {line} has {len(row)} values, expected {len(names)}", name="line", value=line
         )
     try:
+        if any("_" in cell for cell in row):  # float() takes 1_000; a CSV cell may not
+            raise ValueError
         return [float(cell) for cell in row]
     except ValueError:
         col = next(i for i, cell in enumerate(row) if not _is_float(cell))
@@ -279,4 +281,4 @@ def _is_float(text: str) -> bool:
         float(text)
     except ValueError:
         return False
-    return True
+    return "_" not in text

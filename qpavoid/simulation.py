@@ -42,6 +42,7 @@ from .controller import Controller
 from .distances import distance_method
 from .frames import N_KINECT_JOINTS, HumanMotion
 from .metrics import end_of_run, run_metrics, truth_metrics
+from .people import closest_of
 from .sensor import Sensor, SensorConfig
 from .task import inverse_kinematics
 from .truth import TrueClearance
@@ -178,7 +179,7 @@ def simulate(
         cmd = controller.step(q, human, None, tau, t - captured_s, captured_s)
         tick_us = (time.perf_counter_ns() - t0) / 1e3
         kin = robot.kinematics(q, jacobians=False)
-        other_table = other(kin, controller.geometry(human))
+        other_table = closest_of([other(kin, g) for g in controller.geometry(human)])[0]
         if truth is not None:
             log["true_distance"][k] = truth(kin, t)
 
@@ -193,7 +194,7 @@ def simulate(
         was_stopped = cmd.stopped
 
         log["t"][k], log["q"][k], log["dq"][k], log["dq_command"][k] = t, q, dq, cmd.dq
-        log["joints"][k], log["state"][k] = human
+        log["joints"][k], log["state"][k] = controller.closest_frame or human
         log["stopped"][k], log["f"][k] = cmd.stopped, cmd.f
         log["distance"][k], log["distance_other"][k] = cmd.distance, other_table.min_per_set()
         log["v_rep_L2"][k], log["v_rep_EE"][k] = cmd.v_rep_L2, cmd.v_rep_EE

@@ -190,11 +190,13 @@ def separation_bounds(
 
     The bound is :func:`max_approach_speed` of the pair's distance; the part's speed is its
     velocity (``part_velocity`` (K, 3), m/s) along the direction from the part to the set,
-    where positive (approaching).
+    where positive (approaching). With several people, ``part_velocity`` may be (S, K, 3):
+    the velocity of the part of the person closest to each set.
     """
     body = np.isin(table.part_names, cfg.body_parts)[None, :]
     limit = max_approach_speed(table.distance, frame_age_s, cfg, body)
-    towards = np.einsum("skx,kx->sk", table.vector, part_velocity)  # vector: human -> robot
+    v = np.broadcast_to(part_velocity, table.vector.shape)  # (K, 3) or per pair (S, K, 3)
+    towards = np.einsum("skx,skx->sk", table.vector, v)  # vector: human -> robot
     return limit, np.maximum(towards, 0.0)
 
 

@@ -8,7 +8,7 @@ import pytest
 from qpavoid.braking import ArmResponse, BrakingConfig, stop_time
 from qpavoid.frames import HumanFrame, JointType, TrackingState
 from qpavoid.human import KinectHuman
-from qpavoid.perception import PerceptionConfig, Tracker, part_velocities
+from qpavoid.perception import MAX_BONE_M, PerceptionConfig, Tracker, part_velocities
 from qpavoid.posture import Operator
 from qpavoid.sensor import Sensor, SensorConfig, SensorFault
 
@@ -35,19 +35,59 @@ def test_a_lost_joint_stays_with_an_uncertainty_growing_at_human_speed():
     # ... until the reach of the tracked shoulder is smaller: then it sits at the shoulder
     p = tracker.update(frame(lost), 1.0)
     shoulder = rest[int(J.ShoulderRight)]
+
+    def bone(j, parent):  # the longest seen, or the anthropometric bound
+        return max(np.linalg.norm(rest[j] - rest[parent]), MAX_BONE_M[j])
+
     arm = (
-        np.linalg.norm(rest[int(J.ElbowRight)] - shoulder)
-        + np.linalg.norm(rest[WRIST] - rest[int(J.ElbowRight)])
-        + np.linalg.norm(rest[HAND] - rest[WRIST])
+        bone(int(J.ElbowRight), int(J.ShoulderRight))
+        + bone(WRIST, int(J.ElbowRight))
+        + bone(HAND, WRIST)
     )
+    assert arm == pytest.approx(0.40 + 0.33 + 0.12)  # the operator's arm is within bounds
     np.testing.assert_array_equal(p.frame.joints[HAND], shoulder)
     assert p.joint_radius[HAND] == pytest.approx(arm)
     # the hand part never vanishes from the geometry: its margin is its farthest joint's
     # radius, the fingertip's (one bone beyond the hand)
     geo = KinectHuman().geometry(p.frame, joint_radius=p.joint_radius)
     k = KinectHuman().part_names.index("right_hand")
-    tip = arm + np.linalg.norm(rest[int(J.HandTipRight)] - rest[HAND])
+    tip = arm + bone(int(J.HandTipRight), HAND)
     assert geo.segment_valid[k] and geo.part_margin[k] == pytest.approx(tip)
+
+
+def test_a_foreshortened_frame_before_a_loss_does_not_shrink_the_reach():
+    rest = Operator().rest()
+    tracker = Tracker(PerceptionConfig())
+    tracker.update(frame(rest), 0.0)
+    folded = rest.copy()  # the Kinect collapses the forearm and hand onto the elbow
+    for j in (WRIST, HAND, int(J.HandTipRight), int(J.ThumbRight)):
+        folded[j] = rest[int(J.ElbowRight)]
+    tracker.update(frame(folded), 1 / 30)
+    lost = rest.copy()
+    lost[[WRIST, HAND, int(J.HandTipRight), int(J.ThumbRight)]] = np.nan
+    p = tracker.update(frame(lost), 1.0)
+    np.testing.assert_array_equal(p.frame.joints[HAND], rest[int(J.ElbowRight)])
+    assert p.joint_radius[HAND] == pytest.approx(0.33 + 0.12)
+
+
+def test_a_limb_never_seen_is_within_reach_of_its_tracked_ancestor():
+    rest = Operator().rest()
+    hidden = rest.copy()
+    arm = [int(J.ElbowRight), WRIST, HAND, int(J.HandTipRight), int(J.ThumbRight)]
+    hidden[arm] = np.nan
+    state = np.full(25, 2)
+    state[arm] = TrackingState.NotTracked
+    p = Tracker(PerceptionConfig()).update(frame(hidden, state), 0.0)
+    shoulder = rest[int(J.ShoulderRight)]
+    for j, reach in ((HAND, 0.85), (int(J.HandTipRight), 1.0), (int(J.ElbowRight), 0.40)):
+        np.testing.assert_array_equal(p.frame.joints[j], shoulder)
+        assert p.joint_radius[j] == pytest.approx(reach)
+        assert p.frame.state[j] == TrackingState.Inferred
+    # the hand part is in the geometry with the fingertip's reach: a real hand anywhere
+    # within reach of the shoulder is inside it
+    geo = KinectHuman().geometry(p.frame, joint_radius=p.joint_radius)
+    k = KinectHuman().part_names.index("right_hand")
+    assert geo.segment_valid[k] and geo.part_margin[k] == pytest.approx(1.0)
 
 
 def test_inferred_joints_carry_more_uncertainty_the_longer_they_are_not_tracked():
@@ -56,9 +96,16 @@ def test_inferred_joints_carry_more_uncertainty_the_longer_they_are_not_tracked(
     tracker.update(frame(rest), 0.0)
     state = np.full(25, 2)
     state[HAND] = TrackingState.Inferred
-    p = tracker.update(frame(rest, state), 0.5)
-    assert p.joint_radius[HAND] == pytest.approx(0.1 + 2.0 * 0.5)
+    p = tracker.update(frame(rest, state), 0.005)
+    assert p.joint_radius[HAND] == pytest.approx(0.1 + 2.0 * 0.005)
+    np.testing.assert_array_equal(p.frame.joints[HAND], rest[HAND])
     assert p.joint_radius[WRIST] == 0.0
+    # once that is more than the reach of the tracked wrist, the hand is bounded by it
+    # (an Inferred hand can never stop the robot for good)
+    for t in (0.5, 5.0, 50.0):
+        p = tracker.update(frame(rest, state), t)
+        np.testing.assert_array_equal(p.frame.joints[HAND], rest[WRIST])
+        assert p.joint_radius[HAND] == pytest.approx(0.12)
 
 
 def test_frozen_frames_are_counted_and_out_of_order_frames_ignored():
@@ -97,7 +144,7 @@ def test_velocity_filter_lag_and_noise_on_a_known_motion():
     joint_v[WRIST] = 0.5 * v
     parts = KinectHuman().part_joints()
     k = KinectHuman().part_names.index("right_hand")
-    np.testing.assert_array_equal(part_velocities(joint_v, parts)[k], v)
+    np.testing.assert_array_equal(part_velocities([joint_v], parts)[k], v)
 
 
 def test_fingers_widen_the_hand_capsule_by_how_far_they_stick_out():

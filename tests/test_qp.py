@@ -208,6 +208,9 @@ def test_redundancy_moves_the_elbow_away_keeping_the_end_effector(robot7):
         joints = np.full((25, 3), np.nan)  # only one hand is tracked
         joints[JointType.WristRight] = elbow + sign * 0.35 * side
         joints[JointType.HandRight] = elbow + sign * 0.33 * side
+        # the fingers seen too (unseen, they could be a bone beyond the hand)
+        joints[JointType.HandTipRight] = elbow + sign * 0.32 * side
+        joints[JointType.ThumbRight] = elbow + sign * 0.33 * side
         speeds = []
         for weight in (0.0, 0.05):
             ctrl = QPController(robot7, path, qp=QPConfig(elbow_weight=weight, regularization=1e-4))

@@ -1,0 +1,130 @@
+"""Several people at once: one frame of everybody in view, and motions of several people.
+
+Fusion (:mod:`qpavoid.fusion`) reports every person it knows; the controllers take them
+all as one :class:`People` and measure every distance, rule and constraint against the
+closest of them, per robot set and body part (:func:`closest_of`). A single
+:class:`~qpavoid.frames.HumanFrame` is one person with id 0.
+
+:class:`Crowd` is the true motion of several people (each a scenario or a recording on
+one shared clock): the simulation's sensor films all of them and the truth measures the
+clearance to the nearest.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from .distance_table import DistanceTable
+from .errors import InputError
+from .frames import HumanFrame, HumanMotion
+from .recording import Recording
+
+__all__ = ["NOBODY", "Crowd", "People", "as_people", "closest_of"]
+
+#: Nobody in view: a frame with no usable joint (every distance +inf).
+NOBODY = HumanFrame(np.full((25, 3), np.nan), np.zeros(25, dtype=np.int8))
+
+
+class People(NamedTuple):
+    """Everybody in one frame: stable ids and each person's frame (base frame, m)."""
+
+    ids: tuple[int, ...]
+    frames: tuple[HumanFrame, ...]
+
+    @classmethod
+    def check(cls, ids: Sequence[int], frames: Sequence[object]) -> People:
+        """People from ids and raw frames (each checked by :meth:`HumanFrame.check`)."""
+        ids = tuple(int(i) for i in ids)
+        if len(ids) != len(frames) or len(set(ids)) != len(ids):
+            raise InputError(
+                f"people need one unique id per frame, got ids {ids} for {len(frames)} frames",
+                name="ids",
+                value=ids,
+            )
+        return cls(ids, tuple(HumanFrame.check(f) for f in frames))
+
+
+def as_people(joints: object, state: object = None) -> People:
+    """``joints`` as :class:`People`: itself, or one checked frame with id 0."""
+    if isinstance(joints, People):
+        return joints
+    return People((0,), (HumanFrame.check(joints, state),))
+
+
+def closest_of(tables: Sequence[DistanceTable]) -> tuple[DistanceTable, np.ndarray]:
+    """Per robot set and body part, the entry of the closest person.
+
+    Returns the combined table (witness points computed) and ``who`` (S, K): the index
+    of the person each entry comes from.
+    """
+    if len(tables) == 1:
+        return tables[0], np.zeros(tables[0].distance.shape, dtype=np.intp)
+    D = np.stack([t.distance for t in tables])
+    who = np.argmin(D, axis=0)
+
+    def pick(name: str) -> np.ndarray:
+        a = np.stack([getattr(t, name) for t in tables])
+        idx = who.reshape(1, *who.shape, *([1] * (a.ndim - 3)))
+        return np.take_along_axis(a, idx, axis=0)[0]
+
+    first = tables[0]
+    return (
+        DistanceTable(
+            first.method,
+            pick("distance"),
+            pick("vector"),
+            pick("robot_index"),
+            pick("robot_s"),
+            pick("human_index"),
+            first.set_names,
+            first.part_names,
+            (pick("robot_point"), pick("human_point")),
+        ),
+        who,
+    )
+
+
+class Crowd:
+    """The true motion of several people on one clock (a :class:`~qpavoid.frames.HumanMotion`).
+
+    Parameters
+    ----------
+    motions
+        Each person's motion by id: generated (run clock) or recordings (their own clock,
+        shared: the run starts at the earliest first frame). A recording's person is
+        absent before its first frame and holds its last frame after its end.
+    """
+
+    def __init__(self, motions: Mapping[int, HumanMotion]):
+        if not motions:
+            raise InputError("a crowd needs at least one person", name="motions")
+        self.motions = dict(motions)
+        starts = [float(m.t[0]) for m in self.motions.values() if isinstance(m, Recording)]
+        self.t0 = min(starts) if starts else 0.0
+        ends = [float(m.t[-1]) for m in self.motions.values() if isinstance(m, Recording)]
+        self.duration_s = max(ends) - self.t0 if ends else float("inf")
+
+    def _frames(self, t: float, frame_of: object) -> People:
+        assert callable(frame_of)
+        ids, frames = [], []
+        for pid, motion in self.motions.items():
+            if isinstance(motion, Recording):
+                if self.t0 + t < motion.t[0]:
+                    continue
+                frame = frame_of(motion, self.t0 + t)
+            else:
+                frame = frame_of(motion, t)
+            ids.append(pid)
+            frames.append(frame if isinstance(frame, HumanFrame) else HumanFrame.check(*frame))
+        return People(tuple(ids), tuple(frames))
+
+    def frame_at(self, t: float) -> People:
+        """Everybody present at run time ``t`` (sample and hold), s."""
+        return self._frames(t, lambda m, s: m.frame_at(s))
+
+    def true_frames(self, t: float, true_frame: object) -> People:
+        """Everybody present at run time ``t``, each by ``true_frame(motion, time)``."""
+        return self._frames(t, true_frame)
