@@ -4,6 +4,8 @@
                          [--safety paper|ssm] [--bench real|ideal] [--out DIR]
     qpavoid run --human FILE [...]
     qpavoid compare [--scenarios NAME ...] [--human FILE ...] [--random N] [--out DIR]
+    qpavoid fuse A.npz B.npz --sensors calib.toml --out fused.npz
+    qpavoid replay A.npz B.npz --to HOST:PORT [--rate 30]
 
 Every argument is checked before any work starts; every failure is one line
 ``qpavoid: error: ...`` on standard error with exit status 2 (130 when interrupted),
@@ -15,18 +17,17 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Callable, Sequence
-from importlib.metadata import PackageNotFoundError, version
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, NoReturn
 
-from . import __version__
+from .cli_args import HelpFormatter, Parser, count, package_version, positive_float, workers
+from .cli_sensors import add_sensor_commands
 from .compare import compare
 from .errors import QpavoidError
 from .io import check_output_dir
 from .jobs import progress_bar
 from .metrics import describe
-from .recording import load_recording
+from .motions import check_inputs
 from .runs import BENCHES, CONTROLLERS, DISTANCES, LIMIT_MODES, RunSpec, run_one
 from .scenarios import SCENARIOS
 from .sensor import KINECT_V2_LATENCY_S
@@ -38,61 +39,11 @@ DESCRIPTION = (
 )
 
 
-class Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line, ``qpavoid: error: ...``, exit 2."""
-
-    def error(self, message: str) -> NoReturn:
-        where = self.prog.removeprefix("qpavoid").strip()
-        hint = f"; see 'qpavoid {where} --help'" if where else "; see 'qpavoid --help'"
-        self.exit(2, f"qpavoid: error: {message}{hint}\n")
-
-
-class HelpFormatter(argparse.HelpFormatter):
-    """Help texts that end with the option's default, where it has a meaningful one."""
-
-    def _get_help_string(self, action: argparse.Action) -> str:
-        text = action.help or ""
-        default = action.default
-        if default is None or default is False or default == [] or "default" in text:
-            return text
-        shown = " ".join(map(str, default)) if isinstance(default, list) else default
-        return f"{text} (default: {shown})"
-
-
-def _number(kind: type, check: Callable[[Any], bool], what: str) -> Callable[[str], Any]:
-    def parse(text: str) -> Any:
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}") from None
-        if not check(value):
-            raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}")
-        return value
-
-    return parse
-
-
-def _positive_finite(x: float) -> bool:
-    return 0.0 < x < float("inf")
-
-
-positive_float = _number(float, _positive_finite, "a positive finite number")
-count = _number(int, lambda n: n >= 0, "a whole number >= 0")
-workers = _number(int, lambda n: n >= 1, "a whole number >= 1")
-
-
-def _version() -> str:
-    try:
-        return version("qpavoid")
-    except PackageNotFoundError:  # running from a source tree
-        return __version__
-
-
 def build_parser() -> Parser:
     """The ``qpavoid`` argument parser."""
     fmt = HelpFormatter
     parser = Parser(prog="qpavoid", description=DESCRIPTION, formatter_class=fmt)
-    parser.add_argument("--version", action="version", version=f"qpavoid {_version()}")
+    parser.add_argument("--version", action="version", version=f"qpavoid {package_version()}")
     sub = parser.add_subparsers(
         dest="command", required=True, metavar="COMMAND", parser_class=Parser
     )
@@ -112,8 +63,16 @@ def build_parser() -> Parser:
     )
     run.add_argument(
         "--human",
+        nargs="+",
         metavar="FILE",
-        help="replay a recording (NPZ or CSV, docs/formats.md) instead of a scenario",
+        help="replay a recording (NPZ or CSV, docs/formats.md) instead of a scenario; "
+        "with --sensors, per-sensor recordings, fused",
+    )
+    run.add_argument(
+        "--sensors",
+        metavar="TOML",
+        help="calibration of the sensors (docs/sensors.md), for per-sensor --human files "
+        "or --listen",
     )
     for flag, choices, help_text in (
         ("--controller", CONTROLLERS, "the paper's controller or its QP variant"),
@@ -176,6 +135,7 @@ def build_parser() -> Parser:
     )
     _add_common(cmp)
     cmp.set_defaults(parser=cmp)
+    add_sensor_commands(sub)
     return parser
 
 
@@ -214,9 +174,12 @@ def _add_common(p: argparse.ArgumentParser) -> None:
 def _run(args: argparse.Namespace, parser: Parser) -> str:
     if args.scenario and args.human:
         parser.error("give either SCENARIO or --human FILE, not both")
+    files = tuple(args.human or ())
     spec = RunSpec(
         scenario=args.scenario,
-        human_file=args.human,
+        human_file=files[0] if files and not args.sensors else None,
+        sensor_files=files if args.sensors else (),
+        sensors=args.sensors,
         controller=args.controller,
         distance=args.distance,
         safety=args.safety,
@@ -232,8 +195,7 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
     )
     out = Path(args.out or Path("runs") / spec.label.replace(":", "-"))
     check_output_dir(out)
-    if args.human:
-        load_recording(args.human)  # a bad file fails before the run
+    check_inputs(files, args.sensors)  # a bad file fails before the run
     with progress_bar(spec.max_time_s, spec.label, "s", not args.quiet) as bar:
 
         def advance(t: float) -> None:
@@ -270,7 +232,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        text = _run(args, args.parser) if args.command == "run" else _compare(args)
+        if args.command == "run":
+            text = _run(args, args.parser)
+        elif args.command == "compare":
+            text = _compare(args)
+        else:
+            text = args.handler(args)
     except QpavoidError as exc:
         return _fail(f"qpavoid: error: {exc}", 2)
     except OSError as exc:

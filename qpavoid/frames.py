@@ -185,6 +185,7 @@ def _number_text(value: object) -> str:
 class HumanMotion(Protocol):
     """Anything that gives the Kinect frame at a time: generated scenarios, recordings."""
 
-    def frame_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """The frame shown at time t: a :class:`HumanFrame`, or (joints (25, 3), state (25,))."""
+    def frame_at(self, t: float) -> tuple:
+        """The frame shown at time t: a :class:`HumanFrame`, (joints (25, 3), state (25,)),
+        or several people (:class:`~qpavoid.people.People`)."""
         ...

@@ -73,7 +73,12 @@ class FusionConfig:
         A person seen by no sensor for this long is dropped, s (the cell's sensors must
         cover every approach to the robot: docs/sensors.md).
     velocity_alpha, velocity_beta
-        Gains of the α-β filter on each person's fused joints.
+        Gains of the α-β filter on each person's fused joints (0.3, 0.05: measured on
+        50 mm sensors and 2 m/s strikes, docs/sensors.md).
+    smooth
+        Report the filtered joints (True) or the weighted mean of the sensors (False).
+        Filtered: 24 mm mean error instead of 37, and a smaller worst case on strikes
+        at 2 m/s (docs/sensors.md).
     """
 
     max_age_s: float = 0.1
@@ -86,8 +91,9 @@ class FusionConfig:
     mirror_margin_m: float = 0.05
     association_gate_m: float = 0.6
     person_timeout_s: float = 2.0
-    velocity_alpha: float = 0.5
-    velocity_beta: float = 0.3
+    velocity_alpha: float = 0.3
+    velocity_beta: float = 0.05
+    smooth: bool = True
 
 
 class OutlierChoice(NamedTuple):
@@ -290,7 +296,9 @@ class Fuser:
         )
         return FusedPerson(
             track.id,
-            HumanFrame(joints, state),
+            HumanFrame(
+                np.where(seen[:, None], track.joints, np.nan) if cfg.smooth else joints, state
+            ),
             np.minimum(conf.sum(axis=0), 1.0),
             tuple(n for n in self.calibration.names if any(c.sensor == n for c in contributions)),
             tuple(outliers),

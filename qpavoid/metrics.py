@@ -160,9 +160,16 @@ def _ending(m: dict[str, Any]) -> str:
     return str(m.get("end_reason", "goal reached" if m["reached_goal"] else "time cap"))
 
 
+#: Stop events :func:`describe` lists (the rest are counted).
+STOPS_SHOWN = 4
+
+
 def describe(m: dict[str, Any]) -> str:
     """A run's metrics as a few readable lines."""
-    stops = "; ".join(f"{e['t']:.2f} s: {e['reason']}" for e in m["stop_events"]) or "none"
+    events = m["stop_events"]
+    stops = "; ".join(f"{e['t']:.2f} s: {e['reason']}" for e in events[:STOPS_SHOWN]) or "none"
+    if len(events) > STOPS_SHOWN:
+        stops += f"; and {len(events) - STOPS_SHOWN} more (metrics.json: stop_events)"
     md = m["min_distance_m"]
     return (
         f"{m['scenario']}: controller {m['controller']}, distances {m['distance_method']}\n"

@@ -15,8 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import qpsolvers
-
+from . import motions
 from . import plots as plotting
 from ._checks import check_choice, check_range
 from .analytic import LIMIT_MODES, AnalyticConfig, AnalyticController
@@ -26,9 +25,9 @@ from .errors import InputError
 from .io import staged_output, write_run
 from .perception import PerceptionConfig
 from .qp import QPConfig, QPController
-from .recording import load_recording
+from .qp.backends import check_solver
 from .robot import Robot, load_robot
-from .scenarios import check_scenario_name, make_scenario
+from .scenarios import check_scenario_name
 from .sensor import KINECT_V2_LATENCY_S, SensorConfig
 from .simulation import HumanMotion, SimConfig, SimResult, simulate
 from .tick import SAFETY_MODES
@@ -41,8 +40,6 @@ DISTANCES = ("capsules", "spheres")
 BENCHES = ("real", "ideal")
 #: A frame is stale once older than the latency plus this, s: a frame (33 ms) and 7 ms.
 STALE_AFTER_LATENCY_S = 0.04
-#: QP solvers that come with an extra of ours, and its name (``pip install "qpavoid[solvers]"``).
-SOLVER_EXTRAS = {"daqp": "solvers", "proxqp": "solvers"}
 
 #: Accepted ranges: control rate (Hz) from the camera's 30 Hz to 10 kHz; a run's cap (s)
 #: from a few frames to an hour (an hour at 500 Hz logs 1.8 M ticks, about 1.5 GB).
@@ -53,23 +50,6 @@ RATE_RANGE_HZ, MAX_TIME_RANGE_S = (30.0, 10_000.0), (0.1, 3600.0)
 #: OSQP cannot reach its tolerance there).
 REDUNDANT_ELBOW_WEIGHT = 0.05
 REDUNDANT_REGULARIZATION = 1e-4
-
-
-def check_solver(name: str) -> str:
-    """``name`` if qpsolvers has that solver installed; else say which extra brings it."""
-    if name in qpsolvers.available_solvers:
-        return name
-    hint = (
-        f'; install it with pip install "qpavoid[{SOLVER_EXTRAS[name]}]"'
-        if name in SOLVER_EXTRAS
-        else ""
-    )
-    raise InputError(
-        f"QP solver {name!r} is not installed (installed: "
-        f"{', '.join(sorted(qpsolvers.available_solvers))}){hint}",
-        name="solver",
-        value=name,
-    )
 
 
 @dataclass(frozen=True)
@@ -119,6 +99,9 @@ class RunSpec:
     measure_truth
         Measure every tick's clearance to where the person really is (``true_*`` metrics,
         :mod:`qpavoid.truth`); on by default, it doubles the simulation's time.
+    sensor_files, sensors
+        Per-sensor recordings and their calibration file (docs/sensors.md): fused, and
+        the fusion replayed as the truth (``human_file`` is then the first of them).
     """
 
     scenario: str | None = None
@@ -136,8 +119,13 @@ class RunSpec:
     redundant: bool = False
     goal_tolerance_m: float = 1e-3
     measure_truth: bool = True
+    sensor_files: tuple[str, ...] = ()
+    sensors: str | None = None
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "sensor_files", tuple(str(f) for f in self.sensor_files))
+        if self.sensor_files and self.human_file is None:
+            object.__setattr__(self, "human_file", self.sensor_files[0])
         if self.scenario is None and self.human_file is None:
             raise InputError(
                 "give a SCENARIO (test1, test2, free, random:SEED) or --human FILE",
@@ -173,6 +161,7 @@ class RunSpec:
             )
         if self.solver is not None:
             check_solver(self.solver)
+        motions.check_human_files(self.sensor_files, self.sensors)
 
     @property
     def label(self) -> str:
@@ -225,10 +214,9 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
 
 
 def load_motion(spec: RunSpec, robot: Robot) -> HumanMotion:
-    """The human motion ``spec`` names: a generated scenario or a recording."""
-    if spec.human_file is not None:
-        return load_recording(spec.human_file)
-    return make_scenario(str(spec.scenario), robot)
+    """The human motion ``spec`` names (:func:`qpavoid.motions.load_motion`)."""
+    files = spec.sensor_files or ((spec.human_file,) if spec.human_file else ())
+    return motions.load_motion(robot, spec.scenario, files, spec.sensors)
 
 
 def simulate_one(

@@ -28,6 +28,7 @@ import numpy as np
 
 from .errors import InputError
 from .frames import HumanFrame, HumanMotion, TrackingState
+from .people import People
 from .recording import Recording
 
 #: Kinect v2 latency, s: "~60 ms with processing" in Microsoft's sensor specification (as
@@ -132,8 +133,10 @@ class Sensor:
         self.motion, self.cfg = motion, cfg
         self.recording = motion if isinstance(motion, Recording) else None
         self.t0 = float(self.recording.t[0]) if self.recording is not None else 0.0
-        self._cache: dict[int, tuple[HumanFrame, float, float, bool]] = {}
-        self._held: tuple[int, HumanFrame, float] | None = None
+        # a crowd of recordings ends with its last frame: after it, frames grow old
+        self.end_s = float(getattr(motion, "duration_s", math.inf))
+        self._cache: dict[int, tuple[HumanFrame | People, float, float, bool]] = {}
+        self._held: tuple[int, HumanFrame | People, float] | None = None
 
     def _capture_time(self, k: int) -> float:
         """Capture time of frame k on the run clock, s."""
@@ -145,15 +148,15 @@ class Sensor:
         """The last frame captured at or before run time t."""
         if self.recording is not None:
             return self.recording.index_at(self.t0 + t) if t >= 0.0 else -1
-        return math.floor(t * self.cfg.frame_rate_hz + 1e-9)
+        return math.floor(min(t, self.end_s) * self.cfg.frame_rate_hz + 1e-9)
 
-    def _true(self, k: int, captured: float) -> HumanFrame:
+    def _true(self, k: int, captured: float) -> HumanFrame | People:
         if self.recording is not None:
             return self.recording.frame_at(self.t0 + max(captured, 0.0))
         frame = self.motion.frame_at(max(captured, 0.0))
-        return frame if isinstance(frame, HumanFrame) else HumanFrame.check(*frame)
+        return frame if isinstance(frame, (HumanFrame, People)) else HumanFrame.check(*frame)
 
-    def _frame(self, k: int) -> tuple[HumanFrame, float, float, bool]:
+    def _frame(self, k: int) -> tuple[HumanFrame | People, float, float, bool]:
         """Frame k: (content, capture time, delivery time, dropped)."""
         if k in self._cache:
             return self._cache[k]
@@ -169,32 +172,51 @@ class Sensor:
             if fault.kind == "freeze" and fault.active(captured):
                 source_k = self._last_index_before(fault.start_s - 1e-9)
                 source = self._capture_time(source_k)
+        content: HumanFrame | People
         if source_k != k:
             content = self._frame(source_k)[0]  # bit for bit the frame before the freeze
         else:
-            joints, state = self._true(k, source)
-            joints = joints.copy()
-            state = state.copy()
-            for fault in cfg.faults:
-                if fault.kind in ("lost", "inferred") and fault.active(captured):
-                    idx = list(fault.joints)
-                    if fault.kind == "lost":
-                        joints[idx] = np.nan
-                        state[idx] = TrackingState.NotTracked
-                    else:
-                        at_start = self._true(-1, fault.start_s).joints
-                        joints[idx] = at_start[idx]
-                        state[idx] = TrackingState.Inferred
-            if cfg.noise_m > 0.0:
-                joints = joints + rng.normal(0.0, cfg.noise_m, joints.shape)
-            content = HumanFrame(joints, state)
+            truth = self._true(k, source)
+            if isinstance(truth, People):
+                content = People(
+                    truth.ids,
+                    tuple(
+                        self._degrade(f, captured, rng, pid)
+                        for pid, f in zip(truth.ids, truth.frames, strict=True)
+                    ),
+                )
+            else:
+                content = self._degrade(truth, captured, rng, None)
         out = (content, captured, captured + delay, dropped)
         self._cache[k] = out
         if len(self._cache) > 256:
             self._cache.pop(next(iter(self._cache)))
         return out
 
-    def frame_at(self, t: float) -> tuple[HumanFrame, float]:
+    def _degrade(
+        self, frame: HumanFrame, captured: float, rng: np.random.Generator, pid: int | None
+    ) -> HumanFrame:
+        """One person's frame as the sensor reports it: lost and inferred faults, noise."""
+        joints, state = frame.joints.copy(), frame.state.copy()
+        for fault in self.cfg.faults:
+            if fault.kind in ("lost", "inferred") and fault.active(captured):
+                idx = list(fault.joints)
+                if fault.kind == "lost":
+                    joints[idx] = np.nan
+                    state[idx] = TrackingState.NotTracked
+                else:
+                    at_start = self._true(-1, fault.start_s)
+                    if isinstance(at_start, People):
+                        if pid not in at_start.ids:
+                            continue
+                        at_start = at_start.frames[at_start.ids.index(pid)]
+                    joints[idx] = at_start.joints[idx]
+                    state[idx] = TrackingState.Inferred
+        if self.cfg.noise_m > 0.0:
+            joints = joints + rng.normal(0.0, self.cfg.noise_m, joints.shape)
+        return HumanFrame(joints, state)
+
+    def frame_at(self, t: float) -> tuple[HumanFrame | People, float]:
         """The frame the controller holds at run time ``t`` and its capture time (run clock).
 
         The newest frame delivered by ``t`` (never a frame older than the one in hand). A
@@ -210,7 +232,7 @@ class Sensor:
         # person as at t = 0); a recording starts with its first frame.
         first = 0 if self.recording is not None else k - 16
         oldest = first if held is None else held[0] + 1
-        best: tuple[int, HumanFrame, float] | None = None
+        best: tuple[int, HumanFrame | People, float] | None = None
         while k >= oldest:  # the newest frame delivered by now (jitter may hold some back)
             content, captured, delivered, dropped = self._frame(k)
             if not dropped and delivered <= t:

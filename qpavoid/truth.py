@@ -18,6 +18,7 @@ import numpy as np
 from .capsules import CapsuleDistance
 from .frames import HumanFrame, HumanMotion
 from .human import KinectHuman
+from .people import Crowd
 from .recording import Recording
 from .robot import Kinematics, Robot
 
@@ -30,6 +31,7 @@ def true_frame(motion: HumanMotion, t: float) -> HumanFrame:
     ``motion.frame_at(t)``.
     """
     if not isinstance(motion, Recording):
+        assert not isinstance(motion, Crowd), "a crowd's people are sampled one by one"
         frame = motion.frame_at(t)
         return frame if isinstance(frame, HumanFrame) else HumanFrame.check(*frame)
     i = motion.index_at(t)
@@ -57,9 +59,14 @@ class TrueClearance:
     def __init__(self, robot: Robot, human: KinectHuman, motion: HumanMotion):
         self.human, self.motion = human, motion
         self.capsules = CapsuleDistance(robot, human)
+        self.n_sets = len(robot.sets)
         self.t0 = float(np.asarray(getattr(motion, "t", [0.0]))[0])
 
     def __call__(self, kin: Kinematics, t: float) -> np.ndarray:
         """(S,) the smallest true distance of each robot set at run time ``t``, m."""
+        if isinstance(self.motion, Crowd):  # the nearest of everybody present
+            people = self.motion.true_frames(t, true_frame).frames
+            per_person = [self.capsules(kin, self.human.geometry(f)).min_per_set() for f in people]
+            return np.min(per_person, axis=0) if per_person else np.full(self.n_sets, np.inf)
         geometry = self.human.geometry(true_frame(self.motion, self.t0 + t))
         return self.capsules(kin, geometry).min_per_set()

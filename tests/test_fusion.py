@@ -17,6 +17,7 @@ from qpavoid.two_sensors import TwoSensorConfig, look_at, two_sensor_data
 J = JointType
 HAND = int(J.HandRight)
 TRACKED = np.full(25, TrackingState.Tracked, dtype=np.int8)
+RAW = FusionConfig(smooth=False)  # the sensors' weighted mean, exact where they agree
 
 
 def calibration(*names: str) -> Calibration:
@@ -47,7 +48,7 @@ def errors(fuser_names, data, motion):
         for f in data.recordings[name].frames()
     ]
     rows.sort(key=lambda r: r[0])
-    fuser = Fuser(cal)
+    fuser = Fuser(cal)  # the defaults: filtered, for one sensor as for two
     err, cover = [], []
     for t, f in rows:
         fuser.add(f)
@@ -76,7 +77,7 @@ def test_two_sensors_fused_beat_either_sensor_alone(robot, seed):
 def test_a_frame_from_the_future_is_never_used():
     cal = calibration("a")
     rest = Operator().rest()
-    fuser = Fuser(cal)
+    fuser = Fuser(cal, RAW)
     fuser.add(body(cal, "a", 0.0, rest))
     fuser.add(body(cal, "a", 0.1, rest + np.array([0.0, 0.0, 0.3])))
     # at t = 0.05 only the frame of t = 0 exists
@@ -87,7 +88,7 @@ def test_a_frame_from_the_future_is_never_used():
 def test_old_frames_are_not_used_and_a_lost_person_is_reported_missing_then_dropped():
     cal = calibration("a")
     rest = Operator().rest()
-    fuser = Fuser(cal, FusionConfig(max_age_s=0.1, person_timeout_s=1.0))
+    fuser = Fuser(cal, FusionConfig(max_age_s=0.1, person_timeout_s=1.0, smooth=False))
     fuser.add(body(cal, "a", 0.0, rest))
     assert np.isfinite(fuser.fuse(0.05).people[0].frame.joints).all()
     gone = fuser.fuse(0.5).people[0]  # too old: every joint missing, never invented
@@ -101,7 +102,7 @@ def test_a_joint_no_sensor_sees_stays_missing_and_one_sensor_halves_confidence()
     rest = Operator().rest()
     lost = rest.copy()
     lost[HAND] = np.nan
-    fuser = Fuser(cal)
+    fuser = Fuser(cal, RAW)
     fuser.add(body(cal, "a", 0.0, lost))
     fuser.add(body(cal, "b", 0.0, lost))
     person = fuser.fuse(0.0).people[0]
@@ -124,7 +125,7 @@ def test_disagreeing_sensors_are_settled_by_tracking_state_then_by_motion():
     off[HAND] += [0.0, 0.0, 0.4]
     inferred = TRACKED.copy()
     inferred[HAND] = TrackingState.Inferred
-    fuser = Fuser(cal)
+    fuser = Fuser(cal, RAW)
     fuser.add(body(cal, "a", 0.0, rest))
     fuser.add(body(cal, "b", 0.0, off, inferred))
     person = fuser.fuse(0.0).people[0]
@@ -144,7 +145,7 @@ def test_a_mirrored_sensor_is_relabelled():
     cal = calibration("a", "b")
     rest = Operator().rest()
     rest[HAND] += [0.0, -0.3, 0.2]  # the right hand up and forward: left and right differ
-    fuser = Fuser(cal)
+    fuser = Fuser(cal, RAW)
     for k in range(3):
         t = k / 30
         fuser.add(body(cal, "a", t, rest))
@@ -160,7 +161,7 @@ def test_bodies_are_matched_across_sensors_and_keep_their_ids():
     cal = calibration("a", "b")
     one = Operator().rest()
     two = one + np.array([1.2, 0.0, 0.0])
-    fuser = Fuser(cal)
+    fuser = Fuser(cal, RAW)
     ids = []
     for k in range(5):
         t = k / 30
@@ -182,7 +183,7 @@ def test_bodies_are_matched_across_sensors_and_keep_their_ids():
 def test_duplicates_out_of_order_and_unknown_sensors():
     cal = calibration("a")
     rest = Operator().rest()
-    fuser = Fuser(cal)
+    fuser = Fuser(cal, RAW)
     assert fuser.add(body(cal, "a", 0.1, rest))
     assert not fuser.add(body(cal, "a", 0.1, rest))
     assert not fuser.add(body(cal, "a", 0.05, rest))

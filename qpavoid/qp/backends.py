@@ -21,9 +21,30 @@ import osqp
 import qpsolvers
 import scipy.sparse as sp
 
-from ..errors import SolverError
+from ..errors import InputError, SolverError
 from .config import QPConfig
 from .problem import QPProblem, QPSolution
+
+#: QP solvers that come with an extra of ours, and its name (``pip install "qpavoid[solvers]"``).
+SOLVER_EXTRAS = {"daqp": "solvers", "proxqp": "solvers"}
+
+
+def check_solver(name: str) -> str:
+    """``name`` if qpsolvers has that solver installed; else say which extra brings it."""
+    if name in qpsolvers.available_solvers:
+        return name
+    hint = (
+        f'; install it with pip install "qpavoid[{SOLVER_EXTRAS[name]}]"'
+        if name in SOLVER_EXTRAS
+        else ""
+    )
+    raise InputError(
+        f"QP solver {name!r} is not installed (installed: "
+        f"{', '.join(sorted(qpsolvers.available_solvers))}){hint}",
+        name="solver",
+        value=name,
+    )
+
 
 #: ProxQP's absolute tolerance: at OSQP's 1e-7 its answers differ from daqp's by up to
 #: 4e-5 rad/s on recorded ticks; at 1e-9 by less than 1e-6 (docs/qp.md).
