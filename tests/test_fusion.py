@@ -39,7 +39,7 @@ def body(cal, sensor, t, joints, state=TRACKED, body_id=0) -> BodyFrame:
     return BodyFrame(sensor, body_id, t, seen_by(cal, sensor, joints), state.copy())
 
 
-def errors(fuser_names, data, motion):
+def errors(fuser_names, data, motion, config=None):
     """Mean joint error (m) and coverage of a fusion of ``fuser_names`` over the data."""
     cal = Calibration({n: data.calibration[n] for n in fuser_names})
     rows = [
@@ -48,7 +48,7 @@ def errors(fuser_names, data, motion):
         for f in data.recordings[name].frames()
     ]
     rows.sort(key=lambda r: r[0])
-    fuser = Fuser(cal)  # the defaults: filtered, for one sensor as for two
+    fuser = Fuser(cal, config)
     err, cover = [], []
     for t, f in rows:
         fuser.add(f)
@@ -66,12 +66,19 @@ def errors(fuser_names, data, motion):
 def test_two_sensors_fused_beat_either_sensor_alone(robot, seed):
     motion = make_scenario("test1", robot)
     data = two_sensor_data([motion], 8.0, TwoSensorConfig(seed=seed))
-    left = errors(["kinect_left"], data, motion)
-    right = errors(["kinect_right"], data, motion)
-    both = errors(["kinect_left", "kinect_right"], data, motion)
-    assert 0.035 < left[0] < 0.07 and 0.035 < right[0] < 0.07  # 50 mm sensors
-    assert both[0] < 0.85 * min(left[0], right[0])
-    assert both[1] >= max(left[1], right[1])
+    raw = {n: errors([n], data, motion, RAW) for n in ("kinect_left", "kinect_right")}
+    for err, cover in raw.values():  # what each sensor reports: 50 mm mean error
+        assert 0.04 < err < 0.065
+    worst_cover = max(c for _, c in raw.values())
+    # the sensors' weighted mean beats either sensor by 15 % or more ...
+    mean = errors(["kinect_left", "kinect_right"], data, motion, RAW)
+    assert mean[0] < 0.85 * min(e for e, _ in raw.values()) and mean[1] >= worst_cover
+    # ... and the default (filtered) output beats the sensors' own data by 40 %, and
+    # either sensor filtered alone
+    fused = errors(["kinect_left", "kinect_right"], data, motion)
+    assert fused[0] < 0.6 * min(e for e, _ in raw.values()) and fused[1] >= worst_cover
+    for name in raw:
+        assert fused[0] < errors([name], data, motion)[0]
 
 
 def test_a_frame_from_the_future_is_never_used():
