@@ -3,6 +3,8 @@
     qpavoid run SCENARIO [--controller analytic|qp] [--distance capsules|spheres]
                          [--safety paper|ssm] [--bench real|ideal] [--out DIR]
     qpavoid run --human FILE [...]
+    qpavoid run --human A.npz B.npz --sensors calib.toml [...]
+    qpavoid run --listen HOST:PORT --sensors calib.toml --out DIR [...]
     qpavoid compare [--scenarios NAME ...] [--human FILE ...] [--random N] [--out DIR]
     qpavoid fuse A.npz B.npz --sensors calib.toml --out fused.npz
     qpavoid replay A.npz B.npz --to HOST:PORT [--rate 30]
@@ -20,6 +22,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from .calibration import load_calibration
 from .cli_args import HelpFormatter, Parser, count, package_version, positive_float, workers
 from .cli_sensors import add_sensor_commands
 from .compare import compare
@@ -28,7 +31,8 @@ from .io import check_output_dir
 from .jobs import progress_bar
 from .metrics import describe
 from .motions import check_inputs
-from .runs import BENCHES, CONTROLLERS, DISTANCES, LIMIT_MODES, RunSpec, run_one
+from .run_spec import BENCHES, CONTROLLERS, DISTANCES, LIMIT_MODES
+from .runs import RunSpec, run_one
 from .scenarios import SCENARIOS
 from .sensor import KINECT_V2_LATENCY_S
 from .tick import SAFETY_MODES
@@ -67,6 +71,12 @@ def build_parser() -> Parser:
         metavar="FILE",
         help="replay a recording (NPZ or CSV, docs/formats.md) instead of a scenario; "
         "with --sensors, per-sensor recordings, fused",
+    )
+    run.add_argument(
+        "--listen",
+        metavar="HOST:PORT",
+        help="drive the simulated robot in real time from live skeletons on UDP "
+        "(docs/sensors.md), with --sensors; Ctrl-C ends the run and writes it",
     )
     run.add_argument(
         "--sensors",
@@ -180,6 +190,7 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
         human_file=files[0] if files and not args.sensors else None,
         sensor_files=files if args.sensors else (),
         sensors=args.sensors,
+        listen=args.listen,
         controller=args.controller,
         distance=args.distance,
         safety=args.safety,
@@ -195,7 +206,10 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
     )
     out = Path(args.out or Path("runs") / spec.label.replace(":", "-"))
     check_output_dir(out)
-    check_inputs(files, args.sensors)  # a bad file fails before the run
+    if args.listen:
+        load_calibration(args.sensors)  # a bad file fails before the run
+    else:
+        check_inputs(files, args.sensors)
     with progress_bar(spec.max_time_s, spec.label, "s", not args.quiet) as bar:
 
         def advance(t: float) -> None:

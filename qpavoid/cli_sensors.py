@@ -18,6 +18,7 @@ from .cli_args import HelpFormatter, positive_float
 from .errors import InputError
 from .fused import fuse_recordings, save_fused_npz
 from .io import check_output_dir
+from .live import parse_address, replay
 from .sensor_recording import load_sensor_recording
 
 __all__ = ["add_sensor_commands", "fuse_command"]
@@ -53,13 +54,17 @@ def add_sensor_commands(sub: argparse._SubParsersAction) -> None:
     replay.add_argument("files", nargs="+", metavar="FILE", help="per-sensor recordings")
     replay.add_argument("--to", required=True, metavar="HOST:PORT", help="where to send")
     replay.add_argument(
+        "--sensors",
+        metavar="TOML",
+        help="the sensors' calibration: their clock offsets set the order (default: none)",
+    )
+    replay.add_argument(
         "--rate",
         type=positive_float,
         default=30.0,
         metavar="HZ",
         help="frames per second of each sensor (the recordings' own times set the order)",
     )
-    replay.add_argument("--speed", type=positive_float, default=1.0, help="replay speed factor")
     replay.set_defaults(parser=replay, handler=replay_command)
 
 
@@ -89,5 +94,19 @@ def fuse_command(args: argparse.Namespace) -> str:
 
 
 def replay_command(args: argparse.Namespace) -> str:
-    """``qpavoid replay``: stream recordings over UDP (:mod:`qpavoid.live`)."""
-    raise InputError("replay is not available yet", name="replay")
+    """``qpavoid replay``: stream recordings over UDP (:func:`qpavoid.live.replay`)."""
+    address = parse_address(args.to, "--to")
+    if not 1.0 <= args.rate <= 1000.0:
+        raise InputError(f"--rate must be 1 to 1000 Hz, got {args.rate}", name="--rate")
+    calibration = load_calibration(args.sensors) if args.sensors else None
+    recordings = [load_sensor_recording(f) for f in args.files]
+    if calibration is not None:
+        for rec in recordings:
+            calibration.check_names(rec.sensors)
+    try:
+        sent = replay(recordings, address, args.rate, calibration)
+    except OSError as exc:
+        raise InputError(
+            f"cannot send to {args.to}: {exc.strerror or exc}", name="--to", value=args.to
+        ) from None
+    return f"sent {sent} datagrams to {address[0]}:{address[1]}"

@@ -28,7 +28,8 @@ from .io import check_output_dir, staged_output
 from .jobs import map_jobs
 from .recording import load_recording
 from .robot import load_robot
-from .runs import CONTROLLERS, DISTANCES, RunSpec, simulate_one
+from .run_spec import CONTROLLERS, DISTANCES
+from .runs import RunSpec, simulate_one
 
 Series = dict[str, np.ndarray]
 

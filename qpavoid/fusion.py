@@ -37,10 +37,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .association import PersonTrack, associate, mirror_cost, reference_rank, torso_centre
+from .association import PersonTrack, associate, believed, mirror_cost, reference_rank, torso_centre
 from .calibration import Calibration
 from .frames import MIRROR, N_KINECT_JOINTS, HumanFrame, TrackingState
-from .perception import PARENT
 from .sensor_recording import BodyFrame
 
 __all__ = ["FusedFrame", "FusedPerson", "Fuser", "FusionConfig", "OutlierChoice"]
@@ -133,10 +132,12 @@ class FusedPerson(NamedTuple):
 
 
 class FusedFrame(NamedTuple):
-    """Every person known at fusion time ``t`` (s, controller clock)."""
+    """Every person known at fusion time ``t`` (s, controller clock), and the capture time
+    of the newest frame used (``-inf`` if none: nobody seen by a fresh frame)."""
 
     t: float
     people: tuple[FusedPerson, ...]
+    captured_s: float = float("-inf")
 
 
 #: Frames kept per (sensor, body).
@@ -235,7 +236,8 @@ class Fuser:
                     np.zeros(N_KINECT_JOINTS, dtype=np.int8),
                 )
                 people.append(FusedPerson(track.id, missing, np.zeros(N_KINECT_JOINTS), (), (), ()))
-        return FusedFrame(float(t), tuple(people))
+        ages = [c.age for cs in per_track.values() for c in cs]
+        return FusedFrame(float(t), tuple(people), float(t - min(ages)) if ages else -np.inf)
 
     def _fuse_person(
         self, track: PersonTrack, contributions: list[_Contribution], t: float
@@ -270,8 +272,14 @@ class Fuser:
             disagree = np.nanmax(np.where(np.isnan(diff), -1.0, diff), axis=(0, 1))
             prediction = track.predicted(t, 0.1) if recent else None
             for j in np.flatnonzero(disagree > cfg.outlier_threshold_m):
-                keep = self._resolve(
-                    int(j), P[:, j], tracked[:, j], usable[:, j], prediction, track
+                keep = believed(
+                    int(j),
+                    P[:, j],
+                    tracked[:, j],
+                    usable[:, j],
+                    prediction,
+                    track.bone,
+                    cfg.outlier_threshold_m,
                 )
                 W[~keep, j], conf[~keep, j] = 0.0, 0.0
                 names = [c.sensor for c in contributions]
@@ -304,25 +312,3 @@ class Fuser:
             tuple(outliers),
             tuple(mirrored),
         )
-
-    def _resolve(
-        self,
-        j: int,
-        p: np.ndarray,
-        tracked: np.ndarray,
-        usable: np.ndarray,
-        prediction: np.ndarray | None,
-        track: PersonTrack,
-    ) -> np.ndarray:
-        """Which candidates of joint ``j`` to keep when they disagree: (S,) bool."""
-        err = np.zeros(len(p))
-        if prediction is not None and np.isfinite(prediction[j]).all():
-            err += np.linalg.norm(p - prediction[j], axis=1)
-        parent = PARENT[j]
-        if parent >= 0 and track.bone[j] > 0 and prediction is not None:
-            anchor = prediction[parent]
-            if np.isfinite(anchor).all():
-                err += np.abs(np.linalg.norm(p - anchor, axis=1) - track.bone[j])
-        score = np.where(usable, np.where(tracked, 0.0, 1e3) + np.nan_to_num(err, nan=1e2), np.inf)
-        best = int(np.argmin(score))
-        return usable & (np.linalg.norm(p - p[best], axis=1) <= self.cfg.outlier_threshold_m)

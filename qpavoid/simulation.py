@@ -30,9 +30,12 @@ correct controller keeps at 0).
 from __future__ import annotations
 
 import math
+import signal
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -40,9 +43,10 @@ import pinocchio as pin
 from .braking import ArmResponse, BrakingConfig
 from .controller import Controller
 from .distances import distance_method
-from .frames import N_KINECT_JOINTS, HumanMotion
+from .errors import InputError
+from .frames import N_KINECT_JOINTS, HumanFrame, HumanMotion
 from .metrics import end_of_run, run_metrics, truth_metrics
-from .people import closest_of
+from .people import People, closest_of
 from .sensor import Sensor, SensorConfig
 from .task import inverse_kinematics
 from .truth import TrueClearance
@@ -92,12 +96,20 @@ class SimResult:
     metrics: dict = field(default_factory=dict)
 
 
+class FrameSource(Protocol):
+    """What the controller is shown: ``frame_at(t)`` → (frame or people, capture time), s."""
+
+    def frame_at(self, t: float) -> tuple[HumanFrame | People, float]: ...
+
+
 def simulate(
     controller: Controller,
-    motion: HumanMotion,
+    motion: HumanMotion | None,
     config: SimConfig | None = None,
     q0: np.ndarray | None = None,
     progress: Callable[[float], None] | None = None,
+    source: FrameSource | None = None,
+    realtime: bool = False,
 ) -> SimResult:
     """Run the controller in closed loop against ``motion`` along ``controller.path``.
 
@@ -114,6 +126,12 @@ def simulate(
     progress
         Called with the simulated time (s) at every new human frame, e.g. to move a
         progress bar; ``None`` for none.
+    source
+        Where the controller's frames come from instead of a sensor filming ``motion``
+        (a live source, :class:`~qpavoid.live.LiveSource`); there is no truth then.
+    realtime
+        Tick on the wall clock (a live run); Ctrl-C then ends the run, which is summed
+        up as usual with ``end_reason`` "interrupted".
 
     Returns
     -------
@@ -140,9 +158,19 @@ def simulate(
     n_max = math.floor(cfg.max_time_s * cfg.control_rate_hz + 1e-9) + 1
     other_name = "capsules" if controller.config.distance == "spheres" else "spheres"
     other = distance_method(other_name, robot, controller.human)
-    sensor = Sensor(motion, cfg.sensor)
+    sensor: FrameSource
+    if source is not None:
+        sensor = source
+    elif motion is not None:
+        sensor = Sensor(motion, cfg.sensor)
+    else:
+        raise InputError("simulate needs a motion or a frame source", name="motion")
     arm = None if cfg.braking is None else ArmResponse(cfg.braking, robot.joint_names, dt)
-    truth = TrueClearance(robot, controller.human, motion) if cfg.measure_truth else None
+    truth = (
+        TrueClearance(robot, controller.human, motion)
+        if cfg.measure_truth and motion is not None and source is None
+        else None
+    )
     goal = path.reference(path.duration_s)[0]
 
     log: dict[str, np.ndarray] = {
@@ -168,53 +196,70 @@ def simulate(
     stop_events = []
     vel_violations = pos_violations = 0
     tau, was_stopped, last_progress = 0.0, False, -1.0
-    reached, n = False, 0
-    for k in range(n_max):
-        t = k * dt
-        human, captured_s = sensor.frame_at(t)
-        if progress is not None and t - last_progress >= 1.0 / 30.0:
-            progress(t)
-            last_progress = t
-        t0 = time.perf_counter_ns()
-        cmd = controller.step(q, human, None, tau, t - captured_s, captured_s)
-        tick_us = (time.perf_counter_ns() - t0) / 1e3
-        kin = robot.kinematics(q, jacobians=False)
-        other_table = closest_of([other(kin, g) for g in controller.geometry(human)])[0]
-        if truth is not None:
-            log["true_distance"][k] = truth(kin, t)
+    reached, overruns, n = False, 0, 0
+    interrupt = _Interrupt(realtime)
+    wall0 = time.perf_counter()
+    try:
+        for k in range(n_max):
+            t = k * dt
+            if realtime:
+                if interrupt.requested and k > 0:
+                    break
+                wait = wall0 + t - time.perf_counter()
+                if wait > 0:
+                    time.sleep(wait)
+                else:
+                    overruns += wait < -dt
+            human, captured_s = sensor.frame_at(t)
+            if progress is not None and t - last_progress >= 1.0 / 30.0:
+                progress(t)
+                last_progress = t
+            t0 = time.perf_counter_ns()
+            cmd = controller.step(q, human, None, tau, t - captured_s, captured_s)
+            tick_us = (time.perf_counter_ns() - t0) / 1e3
+            kin = robot.kinematics(q, jacobians=False)
+            other_table = closest_of([other(kin, g) for g in controller.geometry(human)])[0]
+            if truth is not None:
+                log["true_distance"][k] = truth(kin, t)
 
-        dq = cmd.dq if arm is None else arm(cmd.dq)
-        if np.any(np.abs(dq) > robot.dq_max * (1 + 1e-9)):
-            vel_violations += 1
-            dq = np.clip(dq, -robot.dq_max, robot.dq_max)
-        if np.any(q > robot.q_max + 1e-12) or np.any(q < robot.q_min - 1e-12):
-            pos_violations += 1
-        if cmd.stopped and not was_stopped:
-            stop_events.append({"t": round(t, 6), "reason": cmd.reason})
-        was_stopped = cmd.stopped
+            dq = cmd.dq if arm is None else arm(cmd.dq)
+            if np.any(np.abs(dq) > robot.dq_max * (1 + 1e-9)):
+                vel_violations += 1
+                dq = np.clip(dq, -robot.dq_max, robot.dq_max)
+            if np.any(q > robot.q_max + 1e-12) or np.any(q < robot.q_min - 1e-12):
+                pos_violations += 1
+            if cmd.stopped and not was_stopped:
+                stop_events.append({"t": round(t, 6), "reason": cmd.reason})
+            was_stopped = cmd.stopped
 
-        log["t"][k], log["q"][k], log["dq"][k], log["dq_command"][k] = t, q, dq, cmd.dq
-        log["joints"][k], log["state"][k] = controller.closest_frame or human
-        log["stopped"][k], log["f"][k] = cmd.stopped, cmd.f
-        log["distance"][k], log["distance_other"][k] = cmd.distance, other_table.min_per_set()
-        log["v_rep_L2"][k], log["v_rep_EE"][k] = cmd.v_rep_L2, cmd.v_rep_EE
-        log["ee_pos"][k], log["ee_ref"][k] = cmd.ee_pos, cmd.ee_ref
-        log["tau"][k], log["tick_us"][k], log["frame_age_s"][k] = tau, tick_us, t - captured_s
-        n = k + 1
+            log["t"][k], log["q"][k], log["dq"][k], log["dq_command"][k] = t, q, dq, cmd.dq
+            log["joints"][k], log["state"][k] = controller.closest_frame or human
+            log["stopped"][k], log["f"][k] = cmd.stopped, cmd.f
+            log["distance"][k], log["distance_other"][k] = cmd.distance, other_table.min_per_set()
+            log["v_rep_L2"][k], log["v_rep_EE"][k] = cmd.v_rep_L2, cmd.v_rep_EE
+            log["ee_pos"][k], log["ee_ref"][k] = cmd.ee_pos, cmd.ee_ref
+            log["tau"][k], log["tick_us"][k], log["frame_age_s"][k] = tau, tick_us, t - captured_s
+            n = k + 1
 
-        if tau >= path.duration_s and not cmd.stopped:
-            T = robot.end_effector(q)
-            pos_err = np.linalg.norm(T[:3, 3] - goal[:3, 3])
-            rot_err = _rot_err(goal, T)
-            if pos_err < cfg.goal_tolerance_m and rot_err < cfg.goal_tolerance_rad:
-                reached = True
-                break
-        q = q + dq * dt
-        tau = min(tau + cmd.time_scale * dt, path.duration_s)
+            if tau >= path.duration_s and not cmd.stopped:
+                T = robot.end_effector(q)
+                pos_err = np.linalg.norm(T[:3, 3] - goal[:3, 3])
+                rot_err = _rot_err(goal, T)
+                if pos_err < cfg.goal_tolerance_m and rot_err < cfg.goal_tolerance_rad:
+                    reached = True
+                    break
+            q = q + dq * dt
+            tau = min(tau + cmd.time_scale * dt, path.duration_s)
 
+    finally:
+        interrupt.restore()
     log = {key: v[:n] for key, v in log.items()}
     avoidance = controller.config.avoidance
     ending = end_of_run(reached, cmd, robot, avoidance, log, goal)
+    if interrupt.requested:
+        ending["end_reason"] = "interrupted"
+    if realtime:
+        ending["realtime_overruns"] = int(overruns)
     ending |= truth_metrics(log, robot, avoidance, stop_events, dt)
     return SimResult(
         log,
@@ -232,6 +277,25 @@ def simulate(
         )
         | ending,
     )
+
+
+class _Interrupt:
+    """Ctrl-C during a real-time run: noted, so that the loop ends at the next tick and the
+    run is written as usual (the handler is ours only in the main thread, then restored)."""
+
+    def __init__(self, active: bool):
+        self.requested = False
+        self._previous = None
+        if active and threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._note)
+
+    def _note(self, signum: int, frame: object) -> None:
+        self.requested = True
+
+    def restore(self) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+            self._previous = None
 
 
 def _rot_err(A: np.ndarray, B: np.ndarray) -> float:

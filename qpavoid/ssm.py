@@ -155,9 +155,12 @@ def max_approach_speed(
     """The largest v_r with ``S_p(v_r) ≤ d``: ``(d − S_h − C − Z_d − Z_r) / (T_r + T_s/2)``.
 
     Negative where even a robot at rest is too close (it must move away at least that fast,
-    or stop); −inf stays −inf and +inf (a part not seen) gives +inf.
+    or stop); −inf stays −inf and +inf (a part not seen) gives +inf. A frame of infinite
+    or unknown age allows no approach at all (−inf; the controller stops on it anyway).
     """
     d = np.asarray(separation_m, dtype=float)
+    if not np.all(np.isfinite(frame_age_s)):
+        return np.full(d.shape, -np.inf)
     room = d - human_distance(human_speed(d, cfg, body), frame_age_s, cfg) - fixed_terms(cfg)
     return room / (cfg.reaction_time_s + cfg.stop_time_s / 2.0)
 

@@ -1,0 +1,232 @@
+"""Live skeletons over UDP: a listener for the controller, and a replayer that feeds it.
+
+:class:`Listener` receives datagrams (:mod:`qpavoid.wire`) on a UDP socket in a thread of
+its own. Invalid ones are dropped and counted by reason (never a crash, never a stall);
+valid ones wait in a bounded queue where, under a flood, the newest win (the oldest are
+dropped and counted as ``overflow``), so the control loop only ever takes what arrived
+since its last tick, at most ``queue_size`` frames.
+
+:class:`LiveSource` is what the control loop asks each tick: it drains the listener,
+moves each frame's time stamp onto the run clock, fuses (:class:`~qpavoid.fusion.Fuser`;
+out-of-order and duplicate frames are dropped there) and returns everybody with the
+capture time of the newest frame used, so the controller judges the age of what it sees:
+no fresh frame for the stale limit, and it stops.
+
+:func:`replay` streams per-sensor recordings to a listener in real time, as live sensors
+would: the whole path runs on one machine over loopback.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from collections import Counter, deque
+from collections.abc import Callable, Sequence
+from itertools import pairwise
+
+from .calibration import Calibration
+from .errors import InputError
+from .fusion import Fuser, FusionConfig
+from .people import People
+from .sensor_recording import BodyFrame, SensorRecording
+from .wire import WireError, Workspace, decode, encode
+
+__all__ = ["Listener", "LiveSource", "parse_address", "replay"]
+
+
+def parse_address(text: str, name: str = "--listen") -> tuple[str, int]:
+    """``HOST:PORT`` as ``(host, port)``; :class:`InputError` if it is not one."""
+    host, sep, port = str(text).rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise InputError(
+            f"{name} must be HOST:PORT (e.g. 127.0.0.1:5005), got {text!r}", name=name, value=text
+        )
+    return host.strip("[]"), int(port)
+
+
+class Listener:
+    """UDP datagrams in, checked :class:`BodyFrame` s out (module docstring).
+
+    Parameters
+    ----------
+    address
+        ``(host, port)`` to bind (port 0: any free port; :attr:`address` tells which).
+    calibration
+        The sensors; a datagram from another is dropped (``unknown_sensor``).
+    workspace
+        Where a joint may be in the base frame; a datagram with a joint outside is dropped.
+    queue_size
+        Most frames waiting for the control loop; beyond, the oldest are dropped.
+    """
+
+    def __init__(
+        self,
+        address: tuple[str, int],
+        calibration: Calibration,
+        workspace: Workspace | None = None,
+        queue_size: int = 256,
+    ):
+        self.calibration = calibration
+        self.workspace = workspace or Workspace()
+        self.counters: Counter[str] = Counter()
+        self._queue: deque[BodyFrame] = deque(maxlen=queue_size)
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
+        self._sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            self._sock.bind(address)
+        except OSError as exc:
+            self._sock.close()
+            raise InputError(
+                f"cannot listen on {address[0]}:{address[1]}: {exc.strerror or exc}",
+                name="--listen",
+                value=address,
+            ) from None
+        self._sock.settimeout(0.05)
+        self.address: tuple[str, int] = self._sock.getsockname()[:2]
+        self._thread = threading.Thread(target=self._receive, name="qpavoid-udp", daemon=True)
+
+    def __enter__(self) -> Listener:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop the thread and close the socket."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=1.0)
+        self._sock.close()
+
+    def _receive(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data = self._sock.recv(65536)
+            except TimeoutError:
+                continue
+            except OSError:  # closed under us
+                return
+            self.counters["received"] += 1
+            try:
+                frame = decode(data, self.calibration, self.workspace)
+            except WireError as exc:
+                self.counters[f"dropped_{exc.reason}"] += 1
+                continue
+            with self._lock:
+                if len(self._queue) == self._queue.maxlen:
+                    self.counters["dropped_overflow"] += 1
+                self._queue.append(frame)
+
+    def drain(self) -> list[BodyFrame]:
+        """Every frame that arrived since the last call, oldest first."""
+        with self._lock:
+            frames = list(self._queue)
+            self._queue.clear()
+        return frames
+
+
+class LiveSource:
+    """The control loop's view of live sensors: ``frame_at(t)`` → (people, capture time).
+
+    Parameters
+    ----------
+    listener
+        Where the frames come from.
+    fusion
+        Fusion settings.
+    clock
+        Wall clock (s) that datagram time stamps share; the run clock is its time since
+        the first :meth:`frame_at`.
+    """
+
+    def __init__(
+        self,
+        listener: Listener,
+        fusion: FusionConfig | None = None,
+        clock: Callable[[], float] = time.time,
+    ):
+        self.listener = listener
+        self.fuser = Fuser(listener.calibration, fusion)
+        self.clock = clock
+        self.start_s: float | None = None  # the wall time of run time 0, set on first use
+        self.counters = self.fuser.counters  # out of order, duplicates, outliers, late
+        self._captured = float("-inf")
+
+    def report(self) -> dict[str, int]:
+        """What came in and what was dropped, by reason (``metrics.json``: ``input``)."""
+        counts = Counter(self.listener.counters)
+        counts.update({k: v for k, v in self.counters.items() if v})
+        return dict(sorted(counts.items()))
+
+    def frame_at(self, t: float) -> tuple[People, float]:
+        """Everybody fused at run time ``t`` and the capture time (run clock) of the newest
+        frame used (``-inf`` before the first)."""
+        if self.start_s is None:
+            self.start_s = self.clock() - t
+        max_age = self.fuser.cfg.max_age_s
+        for frame in self.listener.drain():
+            frame = frame._replace(t=frame.t - self.start_s)
+            offset = self.listener.calibration[frame.sensor].time_offset_s
+            if frame.t + offset < t - max_age:
+                self.counters["late"] += 1
+            elif frame.t + offset > t + max_age:  # a clock ahead of ours: never trusted
+                self.counters["from_the_future"] += 1
+            else:
+                self.fuser.add(frame)
+        fused = self.fuser.fuse(t)
+        if fused.captured_s > self._captured:
+            self._captured = fused.captured_s
+        people = People(tuple(p.id for p in fused.people), tuple(p.frame for p in fused.people))
+        return people, self._captured
+
+
+def replay(
+    recordings: Sequence[SensorRecording],
+    address: tuple[str, int],
+    rate_hz: float = 30.0,
+    calibration: Calibration | None = None,
+    clock: Callable[[], float] = time.time,
+    sleep: Callable[[float], None] = time.sleep,
+    mangle: Callable[[int, bytes], Sequence[bytes]] | None = None,
+) -> int:
+    """Send ``recordings`` to ``address`` as live sensors would; returns datagrams sent.
+
+    Frames go in the order of their capture times (each sensor's time stamps plus its
+    ``time_offset_s`` in ``calibration``, 0 without one), paced so that the median frame
+    interval of a sensor's body lasts ``1 / rate_hz`` (the recordings' own rate: real
+    time). Each is stamped with its send time on ``clock`` as its sensor's clock shows
+    it (minus the offset), so the listener's calibration puts it back. ``mangle(i,
+    datagram)`` (tests) may replace datagram i by any datagrams, to inject faults.
+    """
+
+    def offset(sensor: str) -> float:
+        return calibration[sensor].time_offset_s if calibration is not None else 0.0
+
+    frames = sorted(
+        (f for rec in recordings for f in rec.frames()), key=lambda f: f.t + offset(f.sensor)
+    )
+    if not frames:
+        return 0
+    streams: dict[tuple[str, int], list[float]] = {}
+    for f in frames:
+        streams.setdefault((f.sensor, f.body), []).append(f.t)
+    steps = sorted(b - a for times in streams.values() for a, b in pairwise(times))
+    scale = (1.0 / rate_hz) / steps[len(steps) // 2] if steps else 1.0
+    family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
+    sent = 0
+    with socket.socket(family, socket.SOCK_DGRAM) as sock:
+        start, t0 = clock(), frames[0].t + offset(frames[0].sensor)
+        for i, frame in enumerate(frames):
+            due = start + (frame.t + offset(frame.sensor) - t0) * scale
+            wait = due - clock()
+            if wait > 0:
+                sleep(wait)
+            data = encode(frame._replace(t=clock() - offset(frame.sensor)))
+            for datagram in mangle(i, data) if mangle else (data,):
+                sock.sendto(datagram, address)
+                sent += 1
+    return sent
