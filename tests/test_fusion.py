@@ -67,7 +67,7 @@ def test_two_sensors_fused_beat_either_sensor_alone(robot, seed):
     motion = make_scenario("test1", robot)
     data = two_sensor_data([motion], 8.0, TwoSensorConfig(seed=seed))
     raw = {n: errors([n], data, motion, RAW) for n in ("kinect_left", "kinect_right")}
-    for err, cover in raw.values():  # what each sensor reports: 50 mm mean error
+    for err, _cover in raw.values():  # what each sensor reports: 50 mm mean error
         assert 0.04 < err < 0.065
     worst_cover = max(c for _, c in raw.values())
     # the sensors' weighted mean beats either sensor by 15 % or more ...

@@ -20,7 +20,6 @@ from qpavoid.fusion import FusionConfig
 from qpavoid.live import Listener, LiveSource, parse_address, replay
 from qpavoid.posture import Operator
 from qpavoid.qp import QPController
-from qpavoid.robot import load_robot
 from qpavoid.scenarios import make_scenario
 from qpavoid.sensor_recording import BodyFrame, save_sensor_npz
 from qpavoid.simulation import SimConfig, simulate
@@ -184,7 +183,7 @@ def test_the_command_line_listens_and_ctrl_c_writes_the_run(tmp_path):
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     time.sleep(2.5)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        for k in range(15):
+        for _k in range(15):
             sock.sendto(encode(frame(t=time.time())._replace(body=0)), ("127.0.0.1", port))
             sock.sendto(b"junk", ("127.0.0.1", port))
             time.sleep(1 / 30)
