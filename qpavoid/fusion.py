@@ -37,7 +37,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .association import PersonTrack, associate, believed, mirror_cost, reference_rank, torso_centre
+from .association import (
+    SIDED,
+    PersonTrack,
+    associate,
+    believed,
+    mirror_cost,
+    reference_rank,
+    torso_centre,
+)
 from .calibration import Calibration
 from .frames import MIRROR, N_KINECT_JOINTS, HumanFrame, TrackingState
 from .sensor_recording import BodyFrame
@@ -142,6 +150,16 @@ class FusedFrame(NamedTuple):
 
 #: Frames kept per (sensor, body).
 HISTORY = 4
+#: A body whose sided joints are on average this close to the person's prediction is not
+#: checked for a left/right swap (a swap moves them by a shoulder's width), m.
+MIRROR_CHECK_M = 0.1
+
+
+class _Frame(NamedTuple):
+    t: float  # capture time, controller clock, s
+    joints: np.ndarray  # (25, 3) base frame, NaN where not usable
+    state: np.ndarray
+    centre: np.ndarray  # torso centre, m
 
 
 class _Contribution(NamedTuple):
@@ -169,7 +187,7 @@ class Fuser:
         self.counters: Counter[str] = Counter()
         # each body's newest frames (a few, so that a fusion time just before the newest
         # frame still finds the one before it), oldest first
-        self._latest: dict[tuple[str, int], list[tuple[float, np.ndarray, np.ndarray]]] = {}
+        self._latest: dict[str, dict[int, list[_Frame]]] = {s: {} for s in calibration.names}
         self._assigned: dict[str, dict[int, int]] = {s: {} for s in calibration.names}
         self._next_id = 0
 
@@ -183,15 +201,15 @@ class Fuser:
         """
         cal = self.calibration[frame.sensor]
         t = float(frame.t) + cal.time_offset_s
-        key = (frame.sensor, int(frame.body))
-        history = self._latest.setdefault(key, [])
-        if history and t <= history[-1][0]:
+        history = self._latest[frame.sensor].setdefault(int(frame.body), [])
+        if history and t <= history[-1].t:
             self.counters["out_of_order_or_duplicate"] += 1
             return False
         state = np.asarray(frame.state, dtype=np.int8)
         joints = cal.to_base(frame.joints)
         usable = np.isfinite(joints).all(axis=1) & (state != TrackingState.NotTracked)
-        history.append((t, np.where(usable[:, None], joints, np.nan), state))
+        joints = np.where(usable[:, None], joints, np.nan)
+        history.append(_Frame(t, joints, state, torso_centre(joints, usable)))
         del history[:-HISTORY]
         return True
 
@@ -201,22 +219,17 @@ class Fuser:
         per_track: dict[int, list[_Contribution]] = {}
         for sensor in self.calibration.names:
             bodies = {}
-            for (s, body), history in self._latest.items():
-                if s == sensor:
-                    c = next((c for c in reversed(history) if c[0] <= t), None)
-                    if c is not None and t - cfg.max_age_s <= c[0]:
-                        bodies[body] = c
-            centres = {}
-            for body, (_, joints, _) in bodies.items():
-                centre = torso_centre(joints, np.isfinite(joints).all(axis=1))
-                if np.isfinite(centre).all():
-                    centres[body] = centre
+            for body, history in self._latest[sensor].items():
+                c = next((c for c in reversed(history) if c.t <= t), None)
+                if c is not None and t - cfg.max_age_s <= c.t and not np.isnan(c.centre[0]):
+                    bodies[body] = c
+            centres = {body: c.centre for body, c in bodies.items()}
             mapping = associate(
                 centres, self.tracks, self._assigned[sensor], cfg.association_gate_m, set()
             )
             self._assigned[sensor] = {b: tid for b, tid in mapping.items() if tid is not None}
             for body, tid in mapping.items():
-                tc, joints, state = bodies[body]
+                tc, joints, state, _ = bodies[body]
                 if tid is None:
                     track = PersonTrack(self._next_id, joints.copy())
                     self._next_id += 1
@@ -246,32 +259,48 @@ class Fuser:
         recent = t - track.seen_s <= 0.5
         if not recent:  # a new person: the first contribution is the others' reference
             contributions.sort(key=lambda c: reference_rank(c.joints, c.state))
-        reference = track.predicted(t, 0.1) if recent else contributions[0].joints
+        prediction = track.predicted(t, 0.1) if recent else None
+        reference = prediction if prediction is not None else contributions[0].joints
         mirrored = []
         for i, c in enumerate(contributions):
             if not recent and i == 0:
                 continue
-            as_is, swapped = mirror_cost(c.joints, np.isfinite(c.joints).all(axis=1), reference)
+            gap = np.sqrt(((c.joints[SIDED] - reference[SIDED]) ** 2).sum(axis=1))
+            if not np.nanmean(gap) > MIRROR_CHECK_M:  # NaN (nothing to compare): no check
+                continue
+            as_is, swapped = mirror_cost(c.joints, ~np.isnan(c.joints[:, 0]), reference)
             if swapped + cfg.mirror_margin_m < as_is:
                 contributions[i] = c._replace(joints=c.joints[MIRROR], state=c.state[MIRROR])
                 mirrored.append(c.sensor)
                 self.counters["mirrored_corrected"] += 1
-        P = np.stack([c.joints for c in contributions])  # (S, 25, 3)
-        ages = np.array([c.age for c in contributions])
-        step = np.minimum(ages, cfg.max_extrapolation_s)
-        P = P + track.velocity[None] * step[:, None, None]
-        usable = np.isfinite(P).all(axis=2)
-        tracked = np.stack([c.state == TrackingState.Tracked for c in contributions]) & usable
-        fresh = np.clip(1.0 - 0.5 * ages / cfg.max_age_s, 0.0, 1.0)[:, None]
-        sensor_w = np.array([self.calibration[c.sensor].weight for c in contributions])[:, None]
-        W = np.where(tracked, cfg.weight_tracked, cfg.weight_inferred) * usable * fresh * sensor_w
-        conf = np.where(tracked, cfg.confidence_tracked, cfg.confidence_inferred) * usable * fresh
+        P = np.stack([c.joints for c in contributions])  # (S, 25, 3), NaN not usable
+        if cfg.max_extrapolation_s > 0.0:
+            step = np.minimum([c.age for c in contributions], cfg.max_extrapolation_s)
+            P = P + track.velocity[None] * step[:, None, None]
+        usable = ~np.isnan(P[:, :, 0])
+        tracked = (np.stack([c.state for c in contributions]) == TrackingState.Tracked) & usable
+        fresh = [min(max(1.0 - 0.5 * c.age / cfg.max_age_s, 0.0), 1.0) for c in contributions]
+        scale = np.array(
+            [
+                f * self.calibration[c.sensor].weight
+                for f, c in zip(fresh, contributions, strict=True)
+            ]
+        )[:, None]
+        W = (
+            usable * cfg.weight_inferred + tracked * (cfg.weight_tracked - cfg.weight_inferred)
+        ) * scale
+        conf = (
+            usable * cfg.confidence_inferred
+            + tracked * (cfg.confidence_tracked - cfg.confidence_inferred)
+        ) * np.array(fresh)[:, None]
         outliers = []
         if len(contributions) > 1:
-            diff = np.linalg.norm(P[:, None] - P[None, :], axis=3)  # (S, S, 25), NaN unusable
-            disagree = np.nanmax(np.where(np.isnan(diff), -1.0, diff), axis=(0, 1))
-            prediction = track.predicted(t, 0.1) if recent else None
-            for j in np.flatnonzero(disagree > cfg.outlier_threshold_m):
+            if len(contributions) == 2:
+                gap = np.sqrt(((P[0] - P[1]) ** 2).sum(axis=1))  # NaN where one does not see
+            else:
+                gap = np.sqrt(((P[:, None] - P[None, :]) ** 2).sum(axis=3))  # (S, S, 25)
+                gap = np.where(np.isnan(gap), -1.0, gap).max(axis=(0, 1))
+            for j in np.flatnonzero(gap > cfg.outlier_threshold_m):
                 keep = believed(
                     int(j),
                     P[:, j],
@@ -291,14 +320,13 @@ class Fuser:
                 self.counters["outliers_resolved"] += 1
         total = W.sum(axis=0)
         seen = total > 0
-        joints = np.full((N_KINECT_JOINTS, 3), np.nan)
-        joints[seen] = (np.nan_to_num(P[:, seen]) * W[:, seen, None]).sum(axis=0) / total[
-            seen, None
-        ]
-        state = np.zeros(N_KINECT_JOINTS, dtype=np.int8)
-        state[seen] = np.where(
-            (tracked & (W > 0)).any(axis=0)[seen], TrackingState.Tracked, TrackingState.Inferred
-        )
+        with np.errstate(invalid="ignore", divide="ignore"):  # 0 / 0 where no sensor sees
+            joints = np.einsum("sj,sjx->jx", W, np.where(usable[:, :, None], P, 0.0))
+            joints /= total[:, None]
+        joints[~seen] = np.nan
+        state = np.where(seen, np.where((tracked & (W > 0)).any(axis=0), 2, 1), 0).astype(
+            np.int8
+        )  # Tracked, Inferred, NotTracked
         track.update(
             joints, seen, state == TrackingState.Tracked, t, cfg.velocity_alpha, cfg.velocity_beta
         )

@@ -1,0 +1,111 @@
+"""Skeleton fusion: its error against a known truth and its time per frame (docs/sensors.md).
+
+    python benchmarks/fusion.py [--seeds 5] [--seconds 10] [--json FILE]
+
+1. Error: two simulated Kinect v2 (50 mm mean error, occlusions, mirroring, a 13 ms phase
+   and a 0.25 s clock offset; :mod:`qpavoid.two_sensors`) film a known motion; the mean and
+   99th-percentile joint error of each sensor alone and of the fusion, raw (the sensors'
+   weighted mean) and filtered (the default), over the fused frames.
+2. Time: ``Fuser.add`` of one frame plus ``Fuser.fuse`` at every capture time, for 1 and 6
+   people seen by two sensors (median and p99 after warm-up), next to the paper's 4 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from qpavoid.calibration import Calibration
+from qpavoid.fusion import Fuser, FusionConfig
+from qpavoid.robot import load_robot
+from qpavoid.scenarios import make_scenario
+from qpavoid.strikes import strike_case, strike_motion
+from qpavoid.two_sensors import TwoSensorConfig, two_sensor_data
+
+BOTH = ("kinect_left", "kinect_right")
+
+
+class Shifted:
+    """Another person: a motion moved along x, m."""
+
+    def __init__(self, motion, dx: float):
+        self.motion, self.dx = motion, dx
+
+    def frame_at(self, t: float):
+        joints, state = self.motion.frame_at(t)
+        return joints + np.array([self.dx, 0.0, 0.0]), state
+
+
+def play(data, names, config, truth=None):
+    """Fuse ``names``' frames in capture order; errors (m) against ``truth`` and times (s)."""
+    cal = Calibration({n: data.calibration[n] for n in names})
+    rows = sorted(
+        (f.t + cal[f.sensor].time_offset_s, f) for n in names for f in data.recordings[n].frames()
+    )
+    fuser = Fuser(cal, config)
+    errors, times = [], []
+    for t, f in rows:
+        t0 = time.perf_counter()
+        fuser.add(f)
+        out = fuser.fuse(t)
+        times.append(time.perf_counter() - t0)
+        if truth is not None and out.people:
+            joints = out.people[0].frame.joints
+            true = truth.frame_at(t)[0]
+            ok = np.isfinite(joints).all(axis=1)
+            errors.extend(np.linalg.norm(joints[ok] - true[ok], axis=1))
+    return np.array(errors), np.array(times[len(times) // 10 :])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--seconds", type=float, default=10.0)
+    ap.add_argument("--json")
+    args = ap.parse_args()
+    robot = load_robot("iiwa14")
+    raw, filtered = FusionConfig(smooth=False), FusionConfig()
+    errors: dict[str, list] = {}
+    for seed in range(args.seeds):
+        for name, motion in (
+            ("free", make_scenario("free", robot)),
+            ("strike 2 m/s", strike_motion(strike_case(seed, 2.0), robot)),
+        ):
+            data = two_sensor_data([motion], args.seconds, TwoSensorConfig(seed=seed))
+            for label, names, cfg in (
+                ("left alone (raw)", BOTH[:1], raw),
+                ("right alone (raw)", BOTH[1:], raw),
+                ("fused, raw mean", BOTH, raw),
+                ("left alone, filtered", BOTH[:1], filtered),
+                ("fused, filtered (default)", BOTH, filtered),
+            ):
+                e, _ = play(data, names, cfg, motion)
+                errors.setdefault(f"{name}: {label}", []).append(e)
+    result: dict = {"error_mm": {}, "time_us": {}}
+    print("joint error against the truth, mm (mean / p99 / max)")
+    for key, parts in errors.items():
+        e = np.concatenate(parts) * 1e3
+        stats = [float(np.mean(e)), float(np.percentile(e, 99)), float(e.max())]
+        result["error_mm"][key] = dict(zip(("mean", "p99", "max"), stats, strict=True))
+        print(f"  {key:45s} {stats[0]:6.1f} {stats[1]:6.1f} {stats[2]:6.1f}")
+    print("time per frame (add + fuse), us (median / p99); the paper: 4000 us")
+    base = make_scenario("free", robot)
+    for people in (1, 6):
+        motions = [Shifted(base, 0.8 * k) for k in range(people)]
+        data = two_sensor_data(motions, 4.0, TwoSensorConfig(seed=0))
+        _, t = play(data, BOTH, filtered)
+        stats = [float(np.median(t) * 1e6), float(np.percentile(t, 99) * 1e6)]
+        result["time_us"][f"{people} people, 2 sensors"] = dict(
+            zip(("median", "p99"), stats, strict=True)
+        )
+        print(f"  {people} people, 2 sensors: {stats[0]:7.1f} {stats[1]:7.1f}")
+    if args.json:
+        with open(args.json, "w") as handle:
+            json.dump(result, handle, indent=1)
+
+
+if __name__ == "__main__":
+    main()
