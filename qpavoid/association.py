@@ -18,6 +18,7 @@ Where sensors disagree on a joint, :func:`believed` chooses whom to believe.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -152,6 +153,34 @@ def reference_rank(joints: np.ndarray, state: np.ndarray) -> tuple[bool, int]:
     front = np.cross(left - right, [0.0, 0.0, 1.0])
     faces_robot = bool(np.dot(front, -joints[J.SpineShoulder]) > 0)  # NaN compares False
     return (not faces_robot, -int((state == TrackingState.Tracked).sum()))
+
+
+#: A body whose sided joints are on average this close to the person's prediction is not
+#: checked for a left/right swap (a swap moves them by a shoulder's width), m.
+MIRROR_CHECK_M = 0.1
+
+
+class _Body(Protocol):
+    @property
+    def joints(self) -> np.ndarray: ...
+
+    @property
+    def state(self) -> np.ndarray: ...
+
+
+def unmirrored(
+    body: _Body, reference: np.ndarray, margin_m: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """``body``'s joints and states relabelled left/right if that fits ``reference``
+    better by ``margin_m`` (:func:`mirror_cost`), else None. Sided joints within
+    :data:`MIRROR_CHECK_M` of the reference on average are not checked."""
+    gap = np.sqrt(((body.joints[SIDED] - reference[SIDED]) ** 2).sum(axis=1))
+    if not np.nanmean(gap) > MIRROR_CHECK_M:  # NaN (nothing to compare): no check
+        return None
+    as_is, swapped = mirror_cost(body.joints, ~np.isnan(body.joints[:, 0]), reference)
+    if swapped + margin_m < as_is:
+        return body.joints[MIRROR], body.state[MIRROR]
+    return None
 
 
 def associate(

@@ -104,6 +104,22 @@ class Calibration:
         """The sensors' names, in the file's order."""
         return tuple(self.sensors)
 
+    def to_toml(self) -> str:
+        """The calibration as the text of a calibration file (:func:`load_calibration`)."""
+        lines = []
+        for cal in self.sensors.values():
+            rows = ",\n                    ".join(
+                "[" + ", ".join(repr(float(v)) for v in row) + "]" for row in cal.base_from_camera
+            )
+            lines += [
+                f"[sensors.{cal.name}]",
+                f"base_from_camera = [{rows}]",
+                f"time_offset_s = {cal.time_offset_s!r}",
+                f"weight = {cal.weight!r}",
+                "",
+            ]
+        return "\n".join(lines)
+
     def _where(self) -> str:
         return f"calibration {self.path}: " if self.path else "calibration "
 

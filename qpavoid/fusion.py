@@ -1,29 +1,20 @@
 """Skeleton fusion: several sensors' bodies → one skeleton per person in the base frame.
 
-The paper tracks the operator with two Kinect v2 to beat occlusion and leaves the merging
-to "another paper". :class:`Fuser` takes time-stamped :class:`~qpavoid.sensor_recording.
-BodyFrame` s of any number of calibrated sensors, in any interleaving, and at a fusion time
-``t`` returns every person it knows (:class:`FusedFrame`):
+:class:`Fuser` takes time-stamped :class:`~qpavoid.sensor_recording.BodyFrame` s of any
+number of calibrated sensors, in any interleaving; at a fusion time ``t`` it returns
+every person it knows (:class:`FusedFrame`). docs/sensors.md gives each step and measures
+it:
 
-1. **In the base frame, on one clock**: each frame is moved by its sensor's calibration
-   and its time stamp by the sensor's ``time_offset_s``.
-2. **Aligned in time, never from the future**: a sensor contributes its newest frame
-   captured at or before ``t`` and no older than ``max_age_s``. The frame is moved along
-   the person's filtered joint velocity to ``t``, by at most ``max_extrapolation_s``
-   (default 0: measured on 50 mm noise, moving a joint along a noisy velocity costs more
-   than the 0-33 ms of hold it removes; docs/sensors.md).
-3. **Who is who** (:mod:`qpavoid.association`): bodies are matched to people by their
-   torso centres, per sensor and over time (stable ids); a body whose left and right fit
-   the person better swapped is relabelled (a Kinect facing the person's back).
-4. **Per joint**: the positions of the sensors that see it are averaged with weights
-   ``state weight × sensor weight × freshness``. Where two sensors disagree by more than
-   ``outlier_threshold_m``, one is chosen, by tracking state first, then by agreement
-   with the person's predicted motion and the consistency of the bone to its parent, and
-   the candidates far from it are dropped (recorded in :attr:`FusedPerson.outliers`).
-   A joint no sensor sees stays missing (NaN, NotTracked): never invented.
-5. **Confidence** of a joint in [0, 1]: the sum over the sensors kept of
-   ``confidence_tracked`` (0.5) or ``confidence_inferred`` (0.15) times freshness, capped
-   at 1: two fresh sensors tracking a joint give 1, one gives 0.5.
+1. each frame into the base frame and onto one clock (the sensor's calibration);
+2. per sensor, its newest frame captured at or before ``t`` (never from the future) and
+   no older than ``max_age_s``;
+3. bodies matched to people, left/right swaps undone (:mod:`qpavoid.association`);
+4. per joint, the sensors that see it averaged by ``state weight × sensor weight ×
+   freshness``; where they disagree by more than ``outlier_threshold_m`` one is believed
+   and the others dropped (recorded); a joint no sensor sees stays missing, never
+   invented;
+5. the result filtered (α-β) and given a per-joint confidence in [0, 1] (0.5 per fresh
+   sensor tracking it, 0.15 per one inferring it, capped at 1).
 
 A person no sensor sees any more is reported with every joint missing (the controller's
 tracker keeps them, with growing uncertainty) for ``person_timeout_s``, then dropped.
@@ -38,16 +29,16 @@ from typing import NamedTuple
 import numpy as np
 
 from .association import (
-    SIDED,
     PersonTrack,
     associate,
     believed,
-    mirror_cost,
     reference_rank,
     torso_centre,
+    unmirrored,
 )
 from .calibration import Calibration
-from .frames import MIRROR, N_KINECT_JOINTS, HumanFrame, TrackingState
+from .frames import N_KINECT_JOINTS, HumanFrame, TrackingState
+from .people import NOBODY
 from .sensor_recording import BodyFrame
 
 __all__ = ["FusedFrame", "FusedPerson", "Fuser", "FusionConfig", "OutlierChoice"]
@@ -83,9 +74,8 @@ class FusionConfig:
         Gains of the α-β filter on each person's fused joints (0.3, 0.05: measured on
         50 mm sensors and 2 m/s strikes, docs/sensors.md).
     smooth
-        Report the filtered joints (True) or the weighted mean of the sensors (False).
-        Filtered: 24 mm mean error instead of 37, and a smaller worst case on strikes
-        at 2 m/s (docs/sensors.md).
+        Report the filtered joints (True: 24 mm mean error instead of 37 from 50 mm
+        sensors, docs/sensors.md) or the sensors' weighted mean (False).
     """
 
     max_age_s: float = 0.1
@@ -150,9 +140,6 @@ class FusedFrame(NamedTuple):
 
 #: Frames kept per (sensor, body).
 HISTORY = 4
-#: A body whose sided joints are on average this close to the person's prediction is not
-#: checked for a left/right swap (a swap moves them by a shoulder's width), m.
-MIRROR_CHECK_M = 0.1
 
 
 class _Frame(NamedTuple):
@@ -244,11 +231,7 @@ class Fuser:
             elif t - track.seen_s > cfg.person_timeout_s:
                 self.tracks.remove(track)
             else:
-                missing = HumanFrame(
-                    np.full((N_KINECT_JOINTS, 3), np.nan),
-                    np.zeros(N_KINECT_JOINTS, dtype=np.int8),
-                )
-                people.append(FusedPerson(track.id, missing, np.zeros(N_KINECT_JOINTS), (), (), ()))
+                people.append(FusedPerson(track.id, NOBODY, np.zeros(N_KINECT_JOINTS), (), (), ()))
         ages = [c.age for cs in per_track.values() for c in cs]
         return FusedFrame(float(t), tuple(people), float(t - min(ages)) if ages else -np.inf)
 
@@ -263,14 +246,9 @@ class Fuser:
         reference = prediction if prediction is not None else contributions[0].joints
         mirrored = []
         for i, c in enumerate(contributions):
-            if not recent and i == 0:
-                continue
-            gap = np.sqrt(((c.joints[SIDED] - reference[SIDED]) ** 2).sum(axis=1))
-            if not np.nanmean(gap) > MIRROR_CHECK_M:  # NaN (nothing to compare): no check
-                continue
-            as_is, swapped = mirror_cost(c.joints, ~np.isnan(c.joints[:, 0]), reference)
-            if swapped + cfg.mirror_margin_m < as_is:
-                contributions[i] = c._replace(joints=c.joints[MIRROR], state=c.state[MIRROR])
+            fixed = unmirrored(c, reference, cfg.mirror_margin_m) if recent or i else None
+            if fixed is not None:
+                contributions[i] = c._replace(joints=fixed[0], state=fixed[1])
                 mirrored.append(c.sensor)
                 self.counters["mirrored_corrected"] += 1
         P = np.stack([c.joints for c in contributions])  # (S, 25, 3), NaN not usable
