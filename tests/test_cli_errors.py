@@ -11,10 +11,13 @@ import shutil
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import qpsolvers
 
 from qpavoid.cli import main
+from qpavoid.posture import Operator
+from qpavoid.sensor_recording import SensorRecording, save_sensor_npz
 
 
 def qpavoid_cli(*args: str, cwd) -> subprocess.CompletedProcess:
@@ -59,6 +62,23 @@ BAD_INPUTS = [
     (["run", "test1", "--controller", "nosuch"], "--controller"),
     (["run", "test1", "--robot", "nosuch"], "unknown robot 'nosuch'"),
     (["nosuch"], "invalid choice"),
+    # sensors, fusion and live input (issue 10)
+    (["fuse", "a.npz"], "--sensors"),
+    (["fuse", "a.npz", "--sensors", "bad.toml"], "not rigid"),
+    (["fuse", "a.npz", "--sensors", "nosuch.toml"], "nosuch.toml"),
+    (["fuse", "zz.npz", "--sensors", "calib.toml"], "no sensor 'zz'"),
+    (["fuse", "a.npz", "--sensors", "calib.toml", "--out", "x.csv"], ".npz"),
+    (["fuse", "text.npz", "--sensors", "calib.toml"], "text.npz"),
+    (["run", "--human", "a.npz"], "--sensors"),
+    (["run", "--human", "a.npz", "zz.npz"], "--sensors"),
+    (["run", "--human", "a.npz", "zz.npz", "--sensors", "calib.toml"], "no sensor 'zz'"),
+    (["run", "test1", "--sensors", "calib.toml"], "--sensors"),
+    (["run", "--listen", "127.0.0.1:9"], "--listen"),
+    (["run", "--listen", "nohost"], "HOST:PORT"),
+    (["run", "test1", "--listen", "127.0.0.1:9", "--sensors", "calib.toml"], "--listen"),
+    (["replay", "a.npz", "--to", "x"], "HOST:PORT"),
+    (["replay", "a.npz", "--to", "127.0.0.1:9", "--rate", "0"], "--rate"),
+    (["replay", "text.npz", "--to", "127.0.0.1:9"], "text.npz"),
 ]
 
 
@@ -67,6 +87,16 @@ def workdir(tmp_path_factory):
     d = tmp_path_factory.mktemp("cli")
     (d / "afile").write_text("")
     (d / "text.npz").write_text("hello, not an archive\n")
+    (d / "calib.toml").write_text(
+        "[sensors.a]\nbase_from_camera = [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n"
+    )
+    (d / "bad.toml").write_text(
+        "[sensors.a]\nbase_from_camera = [[2,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n"
+    )
+    rest = Operator().rest()
+    for name in ("a", "zz"):
+        rec = SensorRecording([name], [0.0], [0], rest[None], np.full((1, 25), 2))
+        save_sensor_npz(d / f"{name}.npz", rec)
     return d
 
 

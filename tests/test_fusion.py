@@ -197,3 +197,27 @@ def test_duplicates_out_of_order_and_unknown_sensors():
     assert fuser.counters["out_of_order_or_duplicate"] == 2
     with pytest.raises(CalibrationError, match="no sensor 'z'"):
         fuser.add(BodyFrame("z", 0, 0.2, rest, TRACKED))
+
+
+def test_the_example_and_qpavoid_fuse_write_a_fused_recording(tmp_path):
+    """examples/two_sensors.py, then `qpavoid fuse` as a user types them."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    example = Path(__file__).parents[1] / "examples" / "two_sensors.py"
+    r = subprocess.run(
+        [sys.executable, str(example), str(tmp_path)], capture_output=True, text=True, timeout=120
+    )
+    assert r.returncode == 0, r.stderr
+    files = [str(tmp_path / "kinect_left.npz"), str(tmp_path / "kinect_right.npz")]
+    out = tmp_path / "fused.npz"
+    cmd = [sys.executable, "-m", "qpavoid", "fuse", *files]
+    cmd += ["--sensors", str(tmp_path / "calib.toml"), "--out", str(out)]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "1 person" in r.stdout and f"wrote {out}" in r.stdout
+    with np.load(out) as data:
+        assert set(data.files) == {"t", "joints", "state", "confidence"}
+        assert data["confidence"].shape == data["state"].shape
+        assert data["confidence"].min() >= 0.0 and data["confidence"].max() <= 1.0

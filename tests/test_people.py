@@ -1,4 +1,4 @@
-"""Several people: the controllers use the closest of them, the truth the nearest, files carry ids."""
+"""Several people: the controllers use the closest, the truth the nearest, files carry ids."""
 
 from __future__ import annotations
 
