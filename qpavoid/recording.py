@@ -21,15 +21,15 @@ from pathlib import Path
 import numpy as np
 
 from ._checks import as_array, finite_number
-from .errors import InputError, RecordingError
+from .errors import InputError
 from .frames import N_KINECT_JOINTS, HumanFrame, check_joints, check_states
 from .recording_files import (
     CSV_EXPECTED,
     CSV_JOINT_FIELDS,
-    FORMATS_DOC,
     NPZ_ARRAYS,
     NPZ_EXPECTED,
     csv_header,
+    read_by_suffix,
     read_csv_table,
     read_file,
     read_npz,
@@ -209,16 +209,7 @@ def load_recording(path: str | Path) -> Recording:
         naming the path, the problem and what was expected; ``path`` is set, and
         ``name`` and ``value`` name the array or column at fault when there is one.
     """
-    path = Path(path)
-    readers = {".npz": _load_npz, ".csv": _load_csv}
-    reader = readers.get(path.suffix.lower())
-    if reader is None:
-        raise RecordingError(
-            f"unknown recording format {path.suffix!r} for {str(path)!r}: "
-            "expected a .npz or .csv file",
-            path=path,
-        )
-    return read_file(path, reader, "recording", f"see {FORMATS_DOC}")
+    return read_by_suffix(path, {".npz": _load_npz, ".csv": _load_csv}, "recording")
 
 
 def _load_npz(path: Path) -> Recording:

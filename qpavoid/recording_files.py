@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import codecs
 import csv
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -91,6 +91,20 @@ def read_file(path: Path, reader: Callable[[Path], T], what: str, hint: str = ""
         raise RecordingError(
             f"{path}: cannot read the {what} file ({exc.strerror or one_line(exc)})", path=path
         ) from exc
+
+
+def read_by_suffix(path: str | Path, readers: Mapping[str, Callable[[Path], T]], what: str) -> T:
+    """``path`` read by the reader of its suffix (``.npz``, ``.csv``; any letter case)
+    through :func:`read_file`; an unknown suffix is a :class:`RecordingError`."""
+    path = Path(path)
+    reader = readers.get(path.suffix.lower())
+    if reader is None:
+        raise RecordingError(
+            f"unknown recording format {path.suffix!r} for {str(path)!r}: "
+            f"expected a {' or '.join(readers)} file",
+            path=path,
+        )
+    return read_file(path, reader, what, f"see {FORMATS_DOC}")
 
 
 def _file_kind(path: Path) -> str:

@@ -28,14 +28,13 @@ from typing import NamedTuple
 import numpy as np
 
 from ._checks import as_array
-from .errors import InputError, RecordingError
+from .errors import InputError
 from .frames import N_KINECT_JOINTS, check_joints, check_states
 from .recording_files import (
     CSV_JOINT_FIELDS,
-    FORMATS_DOC,
     csv_header,
+    read_by_suffix,
     read_csv_columns,
-    read_file,
     read_npz,
 )
 
@@ -211,16 +210,7 @@ def load_sensor_recording(path: str | Path) -> SensorRecording:
         On a missing or unreadable file, a file without ``sensor`` (a base-frame
         recording), or invalid content; one line naming the file and the problem.
     """
-    path = Path(path)
-    readers = {".npz": _load_npz, ".csv": _load_csv}
-    reader = readers.get(path.suffix.lower())
-    if reader is None:
-        raise RecordingError(
-            f"unknown recording format {path.suffix!r} for {str(path)!r}: "
-            "expected a .npz or .csv file",
-            path=path,
-        )
-    return read_file(path, reader, "per-sensor recording", f"see {FORMATS_DOC}")
+    return read_by_suffix(path, {".npz": _load_npz, ".csv": _load_csv}, "per-sensor recording")
 
 
 def _load_npz(path: Path) -> SensorRecording:
