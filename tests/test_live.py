@@ -115,13 +115,17 @@ def test_loopback_replay_with_faults_never_moves_on_stale_or_invalid_data(robot)
     motion = make_scenario("free", robot)
     data = two_sensor_data([motion], 3.0, TwoSensorConfig(seed=4))
     recordings = list(data.recordings.values())
-    log_of_mangling = []
+    held: list[bytes] = []
 
     def mangle(i: int, datagram: bytes) -> list[bytes]:
         k = i % 40
         if k == 5:
-            log_of_mangling.append("duplicate")
-            return [datagram, datagram]
+            return [datagram, datagram]  # a duplicate
+        if k == 25:  # held back: it arrives after its sensor's next frame (out of order)
+            held.append(datagram)
+            return []
+        if k == 29:
+            return [datagram, held.pop()]
         if k == 9:
             return [b"\x00garbage"]
         if k == 13:
@@ -166,7 +170,8 @@ def test_loopback_replay_with_faults_never_moves_on_stale_or_invalid_data(robot)
     assert len(stopped_for_gap) >= 2  # at the start (no frame yet) and in the gap
     for reason in ("bad_json", "bad_version", "outside_workspace"):
         assert report[f"dropped_{reason}"] >= 2, report
-    assert report["out_of_order_or_duplicate"] >= 2 and report["late"] >= 2, report
+    # duplicates and the held-back frames (every 40th, twice each in 3 s, minus the gap)
+    assert report["out_of_order_or_duplicate"] >= 4 and report["late"] >= 2, report
 
 
 def test_the_command_line_listens_and_ctrl_c_writes_the_run(tmp_path):
