@@ -185,54 +185,49 @@ def unmirrored(
 
 def associate(
     centres: dict[int, np.ndarray],
-    tracks: list[PersonTrack],
+    track_centres: dict[int, np.ndarray],
     previous: dict[int, int],
     gate_m: float,
-    taken: set[int],
 ) -> dict[int, int | None]:
-    """Assign one sensor's bodies to tracks.
+    """Assign one sensor's bodies to people.
 
     Parameters
     ----------
     centres
         Torso centre of each body of the sensor, by body id, m.
-    tracks
-        The tracks that may take them (their ``centre()`` is where they are).
+    track_centres
+        Torso centre of each person (track) that may take them, by track id, m.
     previous
         This sensor's earlier assignment, body id → track id.
     gate_m
-        Farthest a body may be from a track's centre to join it, m.
-    taken
-        Track ids this sensor may not use (none here; the caller passes the ones already
-        used by this sensor's other bodies).
+        Farthest a body may be from a person's centre to be that person, m.
 
     Returns
     -------
     dict
-        Body id → track id, or None for a body that fits no track (a new person).
+        Body id → track id, or None for a body that fits nobody (a new person).
     """
-    by_id = {tr.id: tr for tr in tracks}
     out: dict[int, int | None] = {}
-    used = set(taken)
-    for body, c in centres.items():  # a body keeps its track while it stays within the gate
+    used: set[int] = set()
+    for body, c in centres.items():  # a body keeps its person while within the gate
         tid = previous.get(body)
         if (
             tid is not None
-            and tid in by_id
+            and tid in track_centres
             and tid not in used
-            and _dist(c, by_id[tid].centre()) <= gate_m
+            and _dist(c, track_centres[tid]) <= gate_m
         ):
             out[body] = tid
             used.add(tid)
     bodies = [b for b in centres if b not in out]
-    free = [tr for tr in tracks if tr.id not in used]
+    free = [tid for tid in track_centres if tid not in used]
     if bodies and free:
-        cost = np.array([[_dist(centres[b], tr.centre()) for tr in free] for b in bodies])
+        cost = np.array([[_dist(centres[b], track_centres[tid]) for tid in free] for b in bodies])
         big = 1e6
         rows, cols = linear_sum_assignment(np.where(cost <= gate_m, cost, big))
         for r, c in zip(rows, cols, strict=True):
             if cost[r, c] <= gate_m:
-                out[bodies[r]] = free[c].id
+                out[bodies[r]] = free[c]
     for b in bodies:
         out.setdefault(b, None)
     return out

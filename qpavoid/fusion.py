@@ -2,22 +2,20 @@
 
 :class:`Fuser` takes time-stamped :class:`~qpavoid.sensor_recording.BodyFrame` s of any
 number of calibrated sensors, in any interleaving; at a fusion time ``t`` it returns
-every person it knows (:class:`FusedFrame`). docs/sensors.md gives each step and measures
-it:
+every person it knows (:class:`FusedFrame`). docs/sensors.md details and measures it:
 
 1. each frame into the base frame and onto one clock (the sensor's calibration);
 2. per sensor, its newest frame captured at or before ``t`` (never from the future) and
    no older than ``max_age_s``;
 3. bodies matched to people, left/right swaps undone (:mod:`qpavoid.association`);
 4. per joint, the sensors that see it averaged by ``state weight × sensor weight ×
-   freshness``; where they disagree by more than ``outlier_threshold_m`` one is believed
-   and the others dropped (recorded); a joint no sensor sees stays missing, never
-   invented;
+   freshness``; where they disagree by more than ``outlier_threshold_m`` one is believed,
+   the others dropped (recorded); a joint no sensor sees stays missing, never invented;
 5. the result filtered (α-β) and given a per-joint confidence in [0, 1] (0.5 per fresh
    sensor tracking it, 0.15 per one inferring it, capped at 1).
 
-A person no sensor sees any more is reported with every joint missing (the controller's
-tracker keeps them, with growing uncertainty) for ``person_timeout_s``, then dropped.
+A person no sensor sees any more is reported with every joint missing for
+``person_timeout_s`` (the controller's tracker bounds them meanwhile), then dropped.
 """
 
 from __future__ import annotations
@@ -74,8 +72,8 @@ class FusionConfig:
         Gains of the α-β filter on each person's fused joints (0.3, 0.05: measured on
         50 mm sensors and 2 m/s strikes, docs/sensors.md).
     smooth
-        Report the filtered joints (True: 24 mm mean error instead of 37 from 50 mm
-        sensors, docs/sensors.md) or the sensors' weighted mean (False).
+        Report the filtered joints (True: 24 mm mean error, not 37, from 50 mm sensors)
+        or the sensors' weighted mean (False).
     """
 
     max_age_s: float = 0.1
@@ -204,6 +202,7 @@ class Fuser:
         """Every known person at time ``t`` (s, controller clock), from frames captured by ``t``."""
         cfg = self.cfg
         per_track: dict[int, list[_Contribution]] = {}
+        track_centres = {tr.id: tr.centre() for tr in self.tracks}
         for sensor in self.calibration.names:
             bodies = {}
             for body, history in self._latest[sensor].items():
@@ -212,7 +211,7 @@ class Fuser:
                     bodies[body] = c
             centres = {body: c.centre for body, c in bodies.items()}
             mapping = associate(
-                centres, self.tracks, self._assigned[sensor], cfg.association_gate_m, set()
+                centres, track_centres, self._assigned[sensor], cfg.association_gate_m
             )
             self._assigned[sensor] = {b: tid for b, tid in mapping.items() if tid is not None}
             for body, tid in mapping.items():
@@ -221,6 +220,7 @@ class Fuser:
                     track = PersonTrack(self._next_id, joints.copy())
                     self._next_id += 1
                     self.tracks.append(track)
+                    track_centres[track.id] = bodies[body].centre
                     self._assigned[sensor][body] = tid = track.id
                 per_track.setdefault(tid, []).append(_Contribution(sensor, joints, state, t - tc))
         people = []
