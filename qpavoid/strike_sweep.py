@@ -46,6 +46,14 @@ class StrikeCheck:
         Time the arm moved / the controller held a stop, s.
     max_stop_speed_mps
         The fastest robot point when a stop began, m/s (0 if none).
+    ticks_moving_below_stop_distance
+        Ticks in which the arm moved while a set was truly closer than its stop distance.
+    reached_goal, duration_s
+        Whether the path's goal was reached, and when the run ended, s.
+    limit_violations
+        Ticks over a joint's velocity or position limit.
+    tick_us_median, tick_us_p99
+        The controller's time per tick, µs (measured: not reproducible).
     """
 
     seed: int
@@ -61,6 +69,12 @@ class StrikeCheck:
     moving_s: float
     stopped_s: float
     max_stop_speed_mps: float
+    ticks_moving_below_stop_distance: int = 0
+    reached_goal: bool = False
+    duration_s: float = 0.0
+    limit_violations: int = 0
+    tick_us_median: float = 0.0
+    tick_us_p99: float = 0.0
 
 
 def check_strike(
@@ -70,15 +84,23 @@ def check_strike(
     rate_hz: float = 100.0,
     max_speed_mps: float = 2.0,
     latency_s: float = KINECT_V2_LATENCY_S,
+    distance: str = "capsules",
+    max_time_s: float | None = None,
 ) -> StrikeCheck:
-    """Simulate the strike of ``seed`` on the real bench and judge it against the truth."""
+    """Simulate the strike of ``seed`` on the real bench and judge it against the truth.
+
+    The run lasts the strike (``max_time_s=None``) or until the goal, capped at
+    ``max_time_s`` (s).
+    """
     case = strike_case(seed, max_speed_mps)
+    max_time_s = case.duration_s if max_time_s is None else max_time_s
     spec = RunSpec(
         scenario="free",
         controller=controller,
+        distance=distance,
         safety=safety,
         rate_hz=rate_hz,
-        max_time_s=case.duration_s,
+        max_time_s=max_time_s,
         latency_s=latency_s,
     )
     robot = load_robot(spec.robot)
@@ -88,7 +110,7 @@ def check_strike(
         SimConfig(
             control_rate_hz=rate_hz,
             sensor=strike_sensor(case, SensorConfig(latency_s=latency_s, seed=case.seed)),
-            max_time_s=case.duration_s,
+            max_time_s=max_time_s,
             measure_truth=True,
         ),
     )
@@ -109,10 +131,16 @@ def check_strike(
         float(moving.sum() / rate_hz),
         float(m["stopped_s"]),
         max((e.get("robot_speed_mps", 0.0) for e in m["stop_events"]), default=0.0),
+        int(m["ticks_moving_below_stop_distance"] or 0),
+        bool(m["reached_goal"]),
+        float(m["duration_s"]),
+        int(m["joint_velocity_limit_violations"] + m["joint_position_limit_violations"]),
+        float(m["tick_us"]["median"]),
+        float(m["tick_us"]["p99"]),
     )
 
 
-def _check_strike(args: tuple[int, str, str, float, float, float]) -> StrikeCheck:
+def _check_strike(args: tuple) -> StrikeCheck:
     return check_strike(*args)
 
 
@@ -126,10 +154,17 @@ def strike_sweep(
     workers: int | None = None,
     executor: Executor | None = None,
     progress: bool = False,
+    distance: str = "capsules",
+    max_time_s: float | None = None,
 ) -> list[StrikeCheck]:
     """:func:`check_strike` over ``seeds`` (in parallel; results in the order of ``seeds``)."""
-    RunSpec(scenario="free", controller=controller, safety=safety, rate_hz=rate_hz)  # checks
-    jobs = [(int(s), controller, safety, rate_hz, max_speed_mps, latency_s) for s in seeds]
+    RunSpec(  # checks the names before any work
+        scenario="free", controller=controller, distance=distance, safety=safety, rate_hz=rate_hz
+    )
+    jobs = [
+        (int(s), controller, safety, rate_hz, max_speed_mps, latency_s, distance, max_time_s)
+        for s in seeds
+    ]
     return map_jobs(
         _check_strike,
         jobs,

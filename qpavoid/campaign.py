@@ -1,0 +1,170 @@
+"""Safety campaigns: many randomized strikes, judged against the truth, on any executor.
+
+A campaign (``qpavoid sweep``) runs ``n`` adversarial cases (:mod:`qpavoid.strikes`: a
+hand, or both, driven from rest into every robot set, the shoulder or the base at up to
+2 m/s, with lost, inferred or frozen limbs, frame gaps and jitter on a Kinect with its
+latency) from seed ``seed`` on, each along the whole path (until the goal, or a cap),
+and sums them up (:func:`summarize_campaign`). Every run depends on its seed alone, so a
+summary is the same whatever the number of workers and wherever they run: a local
+process pool, or Ray (:class:`RayExecutor`; a cluster when ``RAY_ADDRESS`` is set). Only
+the tick times (``timing``) are measured, not reproduced.
+
+:func:`write_campaign` writes ``summary.json``, ``runs.json`` and, in ``worst/``, the true
+motion of the worst runs as replayable recordings (``qpavoid run --human``) with their
+case beside them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Executor
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import InputError
+from .frames import HumanFrame
+from .io import staged_output
+from .recording import Recording, save_npz
+from .robot import load_robot
+from .strike_sweep import StrikeCheck, strike_sweep
+from .strikes import strike_case, strike_motion
+
+__all__ = ["RayExecutor", "run_campaign", "summarize_campaign", "write_campaign"]
+
+#: A run lasts until the goal or this cap, s: the 15 s path, a strike's stops and margin.
+CAMPAIGN_MAX_TIME_S = 30.0
+#: How many of the worst runs are written out.
+WORST = 5
+
+
+class RayExecutor(Executor):
+    """``map`` on Ray: a cluster when ``RAY_ADDRESS`` is set, else a local Ray of
+    ``workers`` CPUs. Results come back in the order of the items (``pip install
+    "qpavoid[cluster]"``)."""
+
+    def __init__(self, workers: int | None = None):
+        try:
+            import ray
+        except ImportError:  # the optional dependency
+            raise InputError(
+                'the ray executor needs Ray: pip install "qpavoid[cluster]"',
+                name="--executor",
+                value="ray",
+            ) from None
+        self.ray = ray
+        if not ray.is_initialized():
+            address = os.environ.get("RAY_ADDRESS")
+            if address:
+                ray.init(address=address, log_to_driver=False)
+            else:
+                ray.init(
+                    num_cpus=workers or os.cpu_count(),
+                    include_dashboard=False,
+                    log_to_driver=False,
+                )
+
+    def map(self, fn: Callable[..., Any], *iterables: Iterable[Any], **_: Any) -> Iterator[Any]:
+        """``fn`` over the items as Ray tasks; results yielded in order as they complete."""
+        remote = self.ray.remote(fn)
+        refs = [remote.remote(*args) for args in zip(*iterables, strict=True)]
+        for ref in refs:
+            yield self.ray.get(ref)
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Leave Ray as it is (a cluster outlives the campaign)."""
+
+
+def run_campaign(
+    n: int,
+    controller: str,
+    distance: str = "capsules",
+    safety: str = "ssm",
+    seed: int = 0,
+    workers: int | None = None,
+    executor: Executor | None = None,
+    progress: bool = False,
+    rate_hz: float = 100.0,
+    max_speed_mps: float = 2.0,
+) -> list[StrikeCheck]:
+    """``n`` strikes from seed ``seed`` on, each until the goal (capped), in seed order."""
+    if n < 1:
+        raise InputError(f"--n must be at least 1, got {n}", name="--n", value=n)
+    return strike_sweep(
+        range(seed, seed + n),
+        controller,
+        safety,
+        rate_hz=rate_hz,
+        max_speed_mps=max_speed_mps,
+        workers=workers,
+        executor=executor,
+        progress=progress,
+        distance=distance,
+        max_time_s=CAMPAIGN_MAX_TIME_S,
+    )
+
+
+def summarize_campaign(runs: list[StrikeCheck]) -> dict[str, Any]:
+    """The campaign's totals: everything but ``timing`` is reproducible from the seeds."""
+    clear = np.array([r.min_true_clearance_moving_m for r in runs])
+    moved = np.isfinite(clear)
+
+    def mm(x: float) -> float:
+        return round(float(x) * 1e3, 3)
+
+    return {
+        "runs": len(runs),
+        "runs_moving_in_true_contact": sum(r.ticks_moving_in_true_contact > 0 for r in runs),
+        "runs_moving_below_stop_distance": sum(
+            r.ticks_moving_below_stop_distance > 0 for r in runs
+        ),
+        "true_clearance_moving_mm": {
+            "min": mm(clear[moved].min()) if moved.any() else None,
+            "p01": mm(np.percentile(clear[moved], 1)) if moved.any() else None,
+            "median": mm(np.median(clear[moved])) if moved.any() else None,
+        },
+        "fraction_reaching_goal": sum(r.reached_goal for r in runs) / len(runs),
+        "mean_time_stopped_s": round(float(np.mean([r.stopped_s for r in runs])), 6),
+        "mean_duration_s": round(float(np.mean([r.duration_s for r in runs])), 6),
+        "runs_with_limit_violations": sum(r.limit_violations > 0 for r in runs),
+        "timing": {
+            "tick_us_median": float(np.median([r.tick_us_median for r in runs])),
+            "tick_us_p99": float(np.percentile([r.tick_us_p99 for r in runs], 99)),
+        },
+    }
+
+
+def worst_runs(runs: list[StrikeCheck], count: int = WORST) -> list[StrikeCheck]:
+    """The ``count`` runs that came closest to the person while moving (contact first)."""
+    return sorted(
+        runs, key=lambda r: (-r.ticks_moving_in_true_contact, r.min_true_clearance_moving_m)
+    )[:count]
+
+
+def true_recording(run: StrikeCheck, max_speed_mps: float, rate_hz: float = 30.0) -> Recording:
+    """The true motion of ``run``'s strike (drawn with ``max_speed_mps``), sampled at
+    ``rate_hz`` for the run's duration."""
+    motion = strike_motion(strike_case(run.seed, max_speed_mps), load_robot("iiwa14"))
+    times = np.arange(0.0, run.duration_s + 1.0 / rate_hz, 1.0 / rate_hz)
+    frames = [HumanFrame.check(*motion.frame_at(t)) for t in times]
+    return Recording(
+        times, np.array([f.joints for f in frames]), np.array([f.state for f in frames])
+    )
+
+
+def write_campaign(out: str | Path, settings: dict[str, Any], runs: list[StrikeCheck]) -> dict:
+    """Write ``summary.json``, ``runs.json`` and ``worst/`` into ``out``; return the summary."""
+    summary = {"settings": settings, **summarize_campaign(runs)}
+    with staged_output(out) as stage:
+        (stage / "summary.json").write_text(json.dumps(summary, indent=1))
+        (stage / "runs.json").write_text(json.dumps([asdict(r) for r in runs], indent=1))
+        worst = stage / "worst"
+        worst.mkdir()
+        for r in worst_runs(runs):
+            save_npz(worst / f"seed{r.seed}.npz", true_recording(r, settings["max_speed_mps"]))
+            (worst / f"seed{r.seed}.json").write_text(json.dumps(asdict(r), indent=1))
+    return summary
