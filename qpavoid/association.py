@@ -41,6 +41,9 @@ TORSO = np.array(
         J.HipRight,
     ]
 )
+#: Joints with a parent, and their parents (the skeleton's bones).
+_CHILD = np.flatnonzero(PARENT >= 0)
+_PARENT = PARENT[_CHILD]
 #: Joints that change under a left/right swap (the others are on the spine).
 SIDED = np.flatnonzero(np.arange(N_KINECT_JOINTS) != MIRROR)
 
@@ -99,10 +102,11 @@ class PersonTrack:
         self.joints[first], self.velocity[first] = joints[first], 0.0
         self.last_seen[seen] = t
         self.seen_s = t
-        pair = tracked & (PARENT >= 0) & tracked[np.maximum(PARENT, 0)]
-        length = np.linalg.norm(joints[pair] - joints[PARENT[pair]], axis=1)
-        old = self.bone[pair]
-        self.bone[pair] = np.where(old > 0, 0.9 * old + 0.1 * length, length)
+        ok = tracked[_CHILD] & tracked[_PARENT]
+        step = joints[_CHILD] - joints[_PARENT]
+        length = np.sqrt((step * step).sum(axis=1))
+        old = self.bone[_CHILD]
+        self.bone[_CHILD] = np.where(ok, np.where(old > 0, 0.9 * old + 0.1 * length, length), old)
 
     def centre(self) -> np.ndarray:
         """Torso centre, m (NaN if no joint is known)."""
@@ -117,6 +121,9 @@ class PersonTrack:
 
 def torso_centre(joints: np.ndarray, usable: np.ndarray) -> np.ndarray:
     """Mean of the usable torso joints (of all usable joints if none), m; NaN if none."""
+    centre = joints[TORSO].sum(axis=0) * (1.0 / len(TORSO))
+    if not np.isnan(centre[0]) and usable[TORSO].all():  # the usual case, fast
+        return np.asarray(centre)
     for pick in (TORSO[usable[TORSO]], np.flatnonzero(usable)):
         if pick.size:
             return np.asarray(joints[pick].mean(axis=0))
@@ -174,8 +181,13 @@ def unmirrored(
     """``body``'s joints and states relabelled left/right if that fits ``reference``
     better by ``margin_m`` (:func:`mirror_cost`), else None. Sided joints within
     :data:`MIRROR_CHECK_M` of the reference on average are not checked."""
-    gap = np.sqrt(((body.joints[SIDED] - reference[SIDED]) ** 2).sum(axis=1))
-    if not np.nanmean(gap) > MIRROR_CHECK_M:  # NaN (nothing to compare): no check
+    step = body.joints[SIDED] - reference[SIDED]
+    gap = np.sqrt((step * step).sum(axis=1))
+    mean = gap.sum() / len(gap)
+    if np.isnan(mean):  # some joints missing: the mean of the others (np.nanmean is slow)
+        known = gap[~np.isnan(gap)]
+        mean = known.mean() if known.size else np.nan
+    if not mean > MIRROR_CHECK_M:  # NaN (nothing to compare): no check
         return None
     as_is, swapped = mirror_cost(body.joints, ~np.isnan(body.joints[:, 0]), reference)
     if swapped + margin_m < as_is:

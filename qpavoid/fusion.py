@@ -192,7 +192,7 @@ class Fuser:
             return False
         state = np.asarray(frame.state, dtype=np.int8)
         joints = cal.to_base(frame.joints)
-        usable = np.isfinite(joints).all(axis=1) & (state != TrackingState.NotTracked)
+        usable = ~np.isnan(joints[:, 0]) & (state != TrackingState.NotTracked)  # NaN spreads
         joints = np.where(usable[:, None], joints, np.nan)
         history.append(_Frame(t, joints, state, torso_centre(joints, usable)))
         del history[:-HISTORY]
@@ -251,12 +251,12 @@ class Fuser:
                 contributions[i] = c._replace(joints=fixed[0], state=fixed[1])
                 mirrored.append(c.sensor)
                 self.counters["mirrored_corrected"] += 1
-        P = np.stack([c.joints for c in contributions])  # (S, 25, 3), NaN not usable
+        P = np.array([c.joints for c in contributions])  # (S, 25, 3), NaN not usable
         if cfg.max_extrapolation_s > 0.0:
             step = np.minimum([c.age for c in contributions], cfg.max_extrapolation_s)
             P = P + track.velocity[None] * step[:, None, None]
         usable = ~np.isnan(P[:, :, 0])
-        tracked = (np.stack([c.state for c in contributions]) == TrackingState.Tracked) & usable
+        tracked = (np.array([c.state for c in contributions]) == TrackingState.Tracked) & usable
         fresh = [min(max(1.0 - 0.5 * c.age / cfg.max_age_s, 0.0), 1.0) for c in contributions]
         scale = np.array(
             [
