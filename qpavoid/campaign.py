@@ -90,8 +90,10 @@ def run_campaign(
     progress: bool = False,
     rate_hz: float = 100.0,
     max_speed_mps: float = 2.0,
+    max_time_s: float = CAMPAIGN_MAX_TIME_S,
 ) -> list[StrikeCheck]:
-    """``n`` strikes from seed ``seed`` on, each until the goal (capped), in seed order."""
+    """``n`` strikes from seed ``seed`` on, each until the goal (or ``max_time_s``), in
+    seed order."""
     if n < 1:
         raise InputError(f"--n must be at least 1, got {n}", name="--n", value=n)
     return strike_sweep(
@@ -104,7 +106,7 @@ def run_campaign(
         executor=executor,
         progress=progress,
         distance=distance,
-        max_time_s=CAMPAIGN_MAX_TIME_S,
+        max_time_s=max_time_s,
     )
 
 

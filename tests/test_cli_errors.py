@@ -79,6 +79,13 @@ BAD_INPUTS = [
     (["replay", "a.npz", "--to", "x"], "HOST:PORT"),
     (["replay", "a.npz", "--to", "127.0.0.1:9", "--rate", "0"], "--rate"),
     (["replay", "text.npz", "--to", "127.0.0.1:9"], "text.npz"),
+    # safety campaigns (issue 11)
+    (["sweep", "--n", "3", "--out", "c"], "--controller"),
+    (["sweep", "--n", "0", "--controller", "qp", "--out", "c"], "--n"),
+    (["sweep", "--n", "x", "--controller", "qp", "--out", "c"], "--n"),
+    (["sweep", "--n", "3", "--controller", "qp", "--out", "afile"], "is a file"),
+    (["sweep", "--n", "3", "--controller", "qp", "--out", "c", "--executor", "dask"], "--executor"),
+    (["sweep", "--n", "3", "--controller", "qp", "--out", "c", "--workers", "0"], "--workers"),
 ]
 
 
