@@ -9,6 +9,7 @@
     qpavoid fuse A.npz B.npz --sensors calib.toml --out fused.npz
     qpavoid replay A.npz B.npz --to HOST:PORT [--rate 30]
     qpavoid sweep --n N --controller analytic|qp [--executor local|ray] --out DIR
+    qpavoid bench [--json FILE] [--quick]
 
 Every argument is checked before any work starts; every failure is one line
 ``qpavoid: error: ...`` on standard error with exit status 2 (130 when interrupted),
@@ -25,6 +26,7 @@ from pathlib import Path
 
 from .calibration import load_calibration
 from .cli_args import HelpFormatter, Parser, count, package_version, positive_float, workers
+from .cli_bench import add_bench_command
 from .cli_campaign import add_campaign_command
 from .cli_sensors import add_sensor_commands
 from .compare import compare
@@ -149,6 +151,7 @@ def build_parser() -> Parser:
     cmp.set_defaults(parser=cmp)
     add_sensor_commands(sub)
     add_campaign_command(sub)
+    add_bench_command(sub)
     return parser
 
 
