@@ -33,7 +33,7 @@ from .laws import (
     scaled_velocity_limits,
     stop_reason,
 )
-from .people import NOBODY, People, as_people, closest_of
+from .people import NOBODY, People, as_people, closest_of, same_frames
 from .perception import PeopleTracker, Perceived, part_velocities
 from .robot import Robot, joint_columns
 from .ssm import StopTimeBudget, joint_speed_limits, reaction_time, separation_bounds
@@ -81,24 +81,25 @@ class Controller:
         self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, self.config.control_period_s))
         self.stop_budget = StopTimeBudget(self.ssm, robot.joint_names, self.config.control_period_s)
         self._clock_s = 0.0  # the controller's own clock: control periods since it started
-        self._frame: tuple[People, float | None] | None = None
-        self._perceived: list[Perceived] = []
-        self._geometry: list[HumanGeometry] = []
-        #: The frame of the person closest to the robot at the last tick (for logs).
-        self.closest_frame: HumanFrame | None = None
+        self._frame: tuple[People, float | None] | None = None  # the last frame perceived
+        self._perceived, self._geometry = list[Perceived](), list[HumanGeometry]()
+        self.closest_frame: HumanFrame | None = None  # the closest person's, last tick
 
     def perceive(
         self, people: People, frame_age_s: float, frame_time_s: float | None = None
     ) -> tuple[list[Perceived], list[HumanGeometry]]:
         """Each tracker's view of ``people`` and their geometries, updated once per new frame.
 
-        A new frame is a new :class:`People` object, or (when the caller gives capture
-        times) a new ``frame_time_s``; its capture time is ``frame_time_s`` or, without
-        one, the controller's clock minus ``frame_age_s``. A person no longer in the
-        frame is forgotten (fusion reports a lost person until it may drop them).
+        New: new frame objects (:func:`~qpavoid.people.same_frames`) or, given capture
+        times, a new ``frame_time_s``; captured at ``frame_time_s`` or the controller's
+        clock minus ``frame_age_s``. A person no longer in the frame is forgotten.
         """
         key = (people, frame_time_s)
-        if self._frame is None or people is not self._frame[0] or frame_time_s != self._frame[1]:
+        if (
+            self._frame is None
+            or not same_frames(people, self._frame[0])
+            or frame_time_s != self._frame[1]
+        ):
             captured = self._clock_s - frame_age_s if frame_time_s is None else frame_time_s
             self._perceived = self.trackers.update(people.ids, people.frames, captured)
             self._geometry = [
@@ -108,11 +109,10 @@ class Controller:
         return self._perceived, self._geometry
 
     def geometry(self, frame: HumanFrame | People) -> list[HumanGeometry]:
-        """The geometries the distances used for ``frame`` if it is the last frame
-        perceived, else the frame's own (nothing filled in, no uncertainty)."""
-        if self._frame is not None and frame is self._frame[0] and self._geometry:
-            return self._geometry
+        """The geometries used for ``frame`` if last perceived, else its own (raw)."""
         people = frame if isinstance(frame, People) else as_people(frame)
+        if self._frame is not None and same_frames(people, self._frame[0]) and self._geometry:
+            return self._geometry
         return [self.human.geometry(f) for f in people.frames] or [self.human.geometry(NOBODY)]
 
     def measure(

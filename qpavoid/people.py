@@ -22,7 +22,7 @@ from .errors import InputError
 from .frames import HumanFrame, HumanMotion
 from .recording import Recording
 
-__all__ = ["NOBODY", "Crowd", "People", "as_people", "closest_of"]
+__all__ = ["NOBODY", "Crowd", "People", "as_people", "closest_of", "same_frames"]
 
 #: Nobody in view: a frame with no usable joint (every distance +inf).
 NOBODY = HumanFrame(np.full((25, 3), np.nan), np.zeros(25, dtype=np.int8))
@@ -52,6 +52,12 @@ def as_people(joints: object, state: object = None) -> People:
     if isinstance(joints, People):
         return joints
     return People((0,), (HumanFrame.check(joints, state),))
+
+
+def same_frames(a: People, b: People) -> bool:
+    """The same people in the same frame objects: a frame wrapped anew (a single
+    :class:`HumanFrame` made :class:`People` every tick) is not a new frame."""
+    return a.ids == b.ids and all(x is y for x, y in zip(a.frames, b.frames, strict=True))
 
 
 def closest_of(tables: Sequence[DistanceTable]) -> tuple[DistanceTable, np.ndarray]:

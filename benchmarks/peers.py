@@ -1,0 +1,234 @@
+"""qpavoid against pink and mink: the same arm, path and moving hand, in one process.
+
+    pip install ".[peers]"          # pin-pink, mink and mujoco
+    python benchmarks/peers.py [--seconds 15] [--json FILE]
+
+Each variant tracks the same planned end-effector path (qpavoid's ``ArcPath``: pose and
+twist) at 100 Hz in closed loop (``q += v dt``) while the hand of the paper's Test 1 moves
+near the end effector and L2; all variants step in one loop, interleaved tick by tick, so
+they share the machine's state. Per variant: the time of one tick (median, p99, µs) and
+the clearance it keeps from the moving hand (the distance from the hand point to the
+nearest capsule of the arm, minus a 0.05 m hand radius, m), the largest distance of the
+flange from its reference (mm) and how far its path clock is behind at the end (s:
+qpavoid's waits while it stops; the peers always chase the reference of the moment).
+
+* **qpavoid**: ``QPController.step`` (persistent OSQP), spheres and capsules, the paper's
+  rules, one person (the whole skeleton, as every tick sees it).
+* **pink**: ``solve_ik`` with a ``FrameTask`` (the flange), a ``PostureTask`` (1e-3),
+  configuration and velocity limits and **one** ``BodySphericalBarrier`` between the
+  flange and a frame placed at the hand each tick (d_min 0.15 m), on our reduced
+  Pinocchio model (A3 locked, as qpavoid's), on osqp and daqp.
+* **mink**: ``solve_ik`` with a ``FrameTask`` (a site at the flange), a ``PostureTask``,
+  configuration and velocity limits and a ``CollisionAvoidanceLimit`` between the six
+  moving links' collision cylinders and a mocap sphere at the hand (the URDF loaded into
+  MuJoCo; A3 free: MuJoCo has no locked joint), on osqp and daqp.
+
+Neither peer puts the hand's own motion into its constraints; qpavoid's numbers here are
+with the paper's rules (``--safety ssm`` adds the separation rows: docs/safety.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+import warnings
+from importlib.resources import files
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+import qpavoid
+from qpavoid.frames import JointType
+from qpavoid.geometry import point_segment_distance
+from qpavoid.perception import PerceptionConfig
+from qpavoid.qp import QPController
+from qpavoid.robot import load_robot
+from qpavoid.scenarios import make_scenario
+from qpavoid.task import ArcPath, inverse_kinematics
+
+RATE_HZ = 100.0
+
+
+def ideal(**kw):
+    """qpavoid's settings for a noise-free hand given every tick: no frozen-frame check
+    (a perfect sensor films a still person bit for bit)."""
+    return qpavoid.ControllerConfig(
+        control_period_s=1.0 / RATE_HZ,
+        perception=PerceptionConfig(max_identical_frames=None),
+        **kw,
+    )
+
+
+HAND_RADIUS_M = 0.05
+URDF = Path(str(files("qpavoid.robots"))) / "iiwa14" / "iiwa14.urdf"
+
+
+class Pink:
+    def __init__(self, robot, solver: str):
+        import pink
+        from pink.barriers import BodySphericalBarrier
+        from pink.tasks import FrameTask, PostureTask
+
+        self.pink, self.solver = pink, solver
+        self.model = robot.model.copy()
+        self.hand = self.model.addFrame(
+            pin.Frame("hand", 0, 0, pin.SE3.Identity(), pin.FrameType.OP_FRAME)
+        )
+        self.data = self.model.createData()
+        self.task = FrameTask("flange", position_cost=1.0, orientation_cost=1.0)
+        self.posture = PostureTask(cost=1e-3)
+        self.barrier = BodySphericalBarrier(("flange", "hand"), d_min=0.15)
+
+    def step(self, q, hand, target: pin.SE3) -> np.ndarray:
+        self.model.frames[self.hand].placement = pin.SE3(np.eye(3), hand)
+        conf = self.pink.Configuration(self.model, self.data, q)
+        self.task.set_target(target)
+        self.posture.set_target(q)
+        return self.pink.solve_ik(
+            conf,
+            [self.task, self.posture],
+            1.0 / RATE_HZ,
+            solver=self.solver,
+            barriers=[self.barrier],
+            safety_break=False,
+        )
+
+
+class Mink:
+    def __init__(self, solver: str):
+        import mink
+        import mujoco
+
+        spec = mujoco.MjSpec.from_file(str(URDF))
+        # the flange (0.045 m beyond link_7, fused into it by MuJoCo) as a site to track
+        spec.body("link_7").add_site(name="flange", pos=[0.0, 0.0, 0.045])
+        body = spec.worldbody.add_body(name="hand", mocap=True)
+        body.add_geom(name="hand", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[HAND_RADIUS_M, 0, 0])
+        self.model = spec.compile()
+        self.mink, self.solver = mink, solver
+        self.conf = mink.Configuration(self.model)
+        links = [
+            self.model.geom(i).name or i
+            for i in range(self.model.ngeom)
+            if self.model.geom_bodyid[i] > 1 and self.model.geom(i).name != "hand"
+        ]
+        self.task = mink.FrameTask("flange", "site", position_cost=1.0, orientation_cost=1.0)
+        self.posture = mink.PostureTask(self.model, cost=1e-3)
+        self.limits = [
+            mink.ConfigurationLimit(self.model),
+            mink.VelocityLimit(self.model, {f"A{k}": 1.4 for k in range(1, 8)}),
+            mink.CollisionAvoidanceLimit(
+                self.model,
+                [(links, ["hand"])],
+                minimum_distance_from_collisions=0.05,
+                collision_detection_distance=0.3,
+            ),
+        ]
+        self.mocap = self.model.body("hand").mocapid[0]
+
+    def step(self, q7, hand, target: pin.SE3) -> np.ndarray:
+        self.conf.data.mocap_pos[self.mocap] = hand
+        self.conf.update(q7)
+        self.task.set_target(
+            self.mink.SE3.from_rotation_and_translation(
+                self.mink.SO3.from_matrix(target.rotation), target.translation
+            )
+        )
+        self.posture.set_target(q7)
+        return self.mink.solve_ik(
+            self.conf, [self.task, self.posture], 1.0 / RATE_HZ, self.solver, limits=self.limits
+        )
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=15.0)
+    ap.add_argument("--json")
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+    robot = load_robot("iiwa14")
+    path, motion = ArcPath(), make_scenario("test1", robot)
+    q0 = inverse_kinematics(robot, path.reference(0.0)[0])
+    variants = {
+        "qpavoid QP, spheres (persistent OSQP)": (
+            "qp",
+            QPController(robot, config=ideal(distance="spheres")),
+        ),
+        "qpavoid QP, capsules (persistent OSQP)": (
+            "qp",
+            QPController(robot, config=ideal(distance="capsules")),
+        ),
+    }
+    for solver in ("osqp", "daqp"):
+        variants[f"pink + 1 barrier, {solver}"] = ("pink", Pink(robot, solver))
+        variants[f"mink + CollisionAvoidanceLimit, {solver}"] = ("mink", Mink(solver))
+    state = {
+        name: q0.copy() if kind != "mink" else np.insert(q0, 2, 0.0)
+        for name, (kind, _) in variants.items()
+    }
+    times: dict[str, list[float]] = {name: [] for name in variants}
+    clock = dict.fromkeys(variants, 0.0)  # each variant's path time, s
+    clear: dict[str, list[float]] = {name: [] for name in variants}
+    error: dict[str, list[float]] = {name: [] for name in variants}
+    robot7 = load_robot("iiwa14", locked=())
+    dt = 1.0 / RATE_HZ
+    for k in range(int(args.seconds * RATE_HZ)):
+        t = k * dt
+        frame = qpavoid.HumanFrame.check(*motion.frame_at(t))
+        hand = frame.joints[JointType.HandRight]
+        target = pin.SE3(path.reference(t)[0])
+        for name, (kind, ctrl) in variants.items():
+            q, tau = state[name], clock[name]
+            t0 = time.perf_counter_ns()
+            if kind == "qp":  # qpavoid's path clock waits while it stops (its semantics)
+                cmd = ctrl.step(q, frame, None, tau)
+                v, clock[name] = cmd.dq, tau + cmd.time_scale * dt
+            else:  # the peers chase the reference of the moment
+                v, clock[name] = ctrl.step(q, hand, target), t + dt
+            times[name].append((time.perf_counter_ns() - t0) / 1e3)
+            state[name] = q + v * dt
+            q7 = state[name] if kind == "mink" else np.insert(state[name], 2, 0.0)
+            clear[name].append(_clearance7(robot7, q7, hand))
+            ref = path.reference(clock[name])[0][:3, 3]
+            error[name].append(float(np.linalg.norm(robot7.end_effector(q7)[:3, 3] - ref)))
+    rows = {}
+    print(f"{int(args.seconds * RATE_HZ)} ticks at {RATE_HZ:.0f} Hz, variants interleaved\n")
+    print(
+        f"{'variant':48s} {'median µs':>10s} {'p99 µs':>8s} {'clearance m':>12s} "
+        f"{'path mm':>8s} {'behind s':>8s}"
+    )
+    for name in variants:
+        tt = np.array(times[name][10:])
+        rows[name] = {
+            "median_us": float(np.median(tt)),
+            "p99_us": float(np.percentile(tt, 99)),
+            "min_clearance_m": float(np.min(clear[name])),
+            "max_path_error_mm": float(np.max(error[name]) * 1e3),
+            "path_time_behind_s": float(args.seconds - clock[name]),
+        }
+        r = rows[name]
+        print(
+            f"{name:48s} {r['median_us']:10.0f} {r['p99_us']:8.0f} "
+            f"{r['min_clearance_m']:12.3f} {r['max_path_error_mm']:8.1f} "
+            f"{r['path_time_behind_s']:8.2f}"
+        )
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+
+
+def _clearance7(robot7, q7: np.ndarray, hand: np.ndarray) -> float:
+    """The hand's clearance from the arm's capsules (qpavoid's 7-joint model), m."""
+    seg = robot7.capsules(q7)
+    radii = [s.capsule_radius_m for s in robot7.sets]
+    return float(
+        min(
+            point_segment_distance(hand, a, b) - r - HAND_RADIUS_M
+            for (a, b), r in zip(seg, radii, strict=True)
+        )
+    )
+
+
+if __name__ == "__main__":
+    main()
