@@ -13,9 +13,8 @@ stable (docs/performance.md):
   qpsolvers solver installed;
 * ``ticks``: ``<controller>/<distance>/<safety>`` for both controllers, both methods,
   both safety modes;
-* ``scaling``: ``robot_points/<n>`` (sphere table, n robot spheres), ``people/<n>`` (QP
-  tick, capsules, SSM, n people), ``active_rows/<k>`` (persistent OSQP solve with k
-  active damper and separation rows);
+* ``scaling``: ``robot_points/<n>`` (sphere table, n robot spheres) and ``people/<n>``
+  (QP tick, capsules, SSM, n people, a new camera frame every other tick);
 * ``paper_budget_us``: the paper's 33 ms frame, 21 ms for distances and avoidance,
   9 ms distances, 2 ms avoidance.
 
@@ -136,7 +135,7 @@ def run_bench(quick: bool = False) -> dict[str, Any]:
                 result["ticks"][f"{kind}/{distance}/{safety}"] = _timed(
                     partial(_step, ctrl), states, repeat
                 )
-    result["scaling"] = _scaling(robot, human, states, problems, quick)
+    result["scaling"] = _scaling(robot, human, states, quick)
     result["paper_budget_us"] = PAPER_BUDGET_US
     return result
 
@@ -159,9 +158,9 @@ def _fusion_timing(motion: Any, quick: bool) -> dict[str, float]:
 
 
 def _scaling(
-    robot: Any, human: KinectHuman, states: list, problems: list, quick: bool
+    robot: Any, human: KinectHuman, states: list, quick: bool
 ) -> dict[str, dict[str, float]]:
-    """Time against robot spheres, people and active constraints."""
+    """Time against robot spheres and people."""
     out: dict[str, dict[str, float]] = {}
     geos = [human.geometry(s[1]) for s in states[:50]]
     rng = np.random.default_rng(0)
@@ -191,19 +190,6 @@ def _scaling(
             made[id(s[1])] = people
             crowd.append((s[0], people, s[2]))
         out[f"people/{n}"] = _timed(partial(_step, ctrl), crowd, 1)
-    by_rows: dict[int, list] = {}
-    for prob in problems:
-        rows = prob.rows
-        active = sum(
-            int(np.isfinite(prob.h[r]).sum())
-            for name, r in rows.items()
-            if name in ("velocity_damper", "separation")
-        )
-        by_rows.setdefault(active, []).append(prob)
-    solver = QPController(robot, config=ControllerConfig(control_period_s=0.01)).backend
-    for k in sorted(by_rows):
-        if len(by_rows[k]) >= 3:
-            out[f"active_rows/{k}"] = _timed(solver.solve, by_rows[k], 1)
     return out
 
 
