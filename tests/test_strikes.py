@@ -104,3 +104,40 @@ def test_strike_sweep_200_cases_no_contact_while_moving():
         for seed in range(100):
             check = check_strike(seed, controller, "ssm")
             assert check.ticks_moving_in_true_contact == 0, check
+
+
+@pytest.mark.parametrize("controller", ["qp", "analytic"])
+def test_an_arm_never_seen_that_appears_inside_the_robot_finds_it_stationary(
+    robot, tmp_path, controller
+):
+    """An adversarial tester's case: the right arm NotTracked from the first frame, then
+    seen already inside the end effector (7 ticks in true contact before the arm was
+    bounded by the reach of the tracked shoulder)."""
+    from qpavoid.frames import JointType as J
+    from qpavoid.posture import Operator
+    from qpavoid.runs import simulate_one
+    from qpavoid.task import ArcPath, inverse_kinematics
+
+    t = np.arange(0.0, 3.0, 1 / 30)
+    joints = np.repeat(Operator().rest()[None], len(t), 0)
+    state = np.full((len(t), 25), 2, np.int8)
+    # the arm reaching into the flange of the start configuration, from the shoulder
+    shoulder = joints[0, J.ShoulderRight]
+    flange = robot.end_effector(inverse_kinematics(robot, ArcPath().reference(0.0)[0]))[:3, 3]
+    pose = {
+        J.ElbowRight: shoulder + 0.45 * (flange - shoulder),
+        J.WristRight: shoulder + 0.85 * (flange - shoulder),
+        J.HandRight: flange,
+        J.HandTipRight: flange + 0.05 * (flange - shoulder),
+        J.ThumbRight: flange,
+    }
+    seen = t >= 1.5
+    for j, p in pose.items():
+        joints[~seen, j], state[~seen, j] = np.nan, 0
+        joints[seen, j] = p
+    path = tmp_path / "hidden_arm.npz"
+    np.savez(path, t=t, joints=joints, state=state)
+    spec = RunSpec(human_file=str(path), controller=controller, safety="ssm", rate_hz=100.0)
+    run = simulate_one(RunSpec(**{**spec.__dict__, "max_time_s": 2.5}))
+    assert np.nanmin(run.sim.log["true_distance"]) < 0.0  # the arm really is inside
+    assert run.metrics["ticks_moving_in_true_contact"] == 0
