@@ -33,10 +33,16 @@ from .laws import (
     scaled_velocity_limits,
     stop_reason,
 )
-from .people import NOBODY, People, as_people, closest_of, same_frames
-from .perception import PeopleTracker, Perceived, part_velocities
+from .people import NOBODY, People, Perceiver, as_people, closest_of
+from .perception import Perceived
 from .robot import Robot, joint_columns
-from .ssm import StopTimeBudget, joint_speed_limits, reaction_time, separation_bounds
+from .ssm import (
+    StopTimeBudget,
+    joint_speed_limits,
+    reaction_time,
+    separation_bounds,
+    with_stop_time,
+)
 from .task import ArcPath, pose_error
 from .tick import Command, ControllerConfig, Tick
 
@@ -75,45 +81,26 @@ class Controller:
         self.K = np.r_[[self.config.gain_position] * 3, [self.config.gain_orientation] * 3]
         self.i_L1, self.i_L2, self.i_EE = (robot.set_index(n) for n in ("L1", "L2", "EE"))
         self.scaled_cols = joint_columns(robot, self.config.scaled_joints, "scaled_joints")
-        self.trackers = PeopleTracker(self.config.perception)
-        self.part_joints = self.human.part_joints()
+        self.perceiver = Perceiver(self.human, self.config.perception)
         ssm = self.config.ssm
         self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, self.config.control_period_s))
         self.stop_budget = StopTimeBudget(self.ssm, robot.joint_names, self.config.control_period_s)
+        self.accel = joint_speed_limits(replace(ssm, stop_time_s=1.0), robot.joint_names)  # a_j
         self._clock_s = 0.0  # the controller's own clock: control periods since it started
-        self._frame: tuple[People, float | None] | None = None  # the last frame perceived
-        self._perceived, self._geometry = list[Perceived](), list[HumanGeometry]()
         self.closest_frame: HumanFrame | None = None  # the closest person's, last tick
 
     def perceive(
         self, people: People, frame_age_s: float, frame_time_s: float | None = None
-    ) -> tuple[list[Perceived], list[HumanGeometry]]:
-        """Each tracker's view of ``people`` and their geometries, updated once per new frame.
-
-        New: new frame objects (:func:`~qpavoid.people.same_frames`) or, given capture
-        times, a new ``frame_time_s``; captured at ``frame_time_s`` or the controller's
-        clock minus ``frame_age_s``. A person no longer in the frame is forgotten.
-        """
-        key = (people, frame_time_s)
-        if (
-            self._frame is None
-            or not same_frames(people, self._frame[0])
-            or frame_time_s != self._frame[1]
-        ):
-            captured = self._clock_s - frame_age_s if frame_time_s is None else frame_time_s
-            self._perceived = self.trackers.update(people.ids, people.frames, captured)
-            self._geometry = [
-                self.human.geometry(p.frame, joint_radius=p.joint_radius) for p in self._perceived
-            ]
-            self._frame = key
-        return self._perceived, self._geometry
+    ) -> Perceiver:
+        """Everybody as the trackers see them (:class:`~qpavoid.people.Perceiver`), updated
+        once per new frame; captured at ``frame_time_s`` or, without one, the
+        controller's clock minus ``frame_age_s``."""
+        captured = self._clock_s - frame_age_s if frame_time_s is None else frame_time_s
+        return self.perceiver.update(people, frame_time_s, captured)
 
     def geometry(self, frame: HumanFrame | People) -> list[HumanGeometry]:
         """The geometries used for ``frame`` if last perceived, else its own (raw)."""
-        people = frame if isinstance(frame, People) else as_people(frame)
-        if self._frame is not None and same_frames(people, self._frame[0]) and self._geometry:
-            return self._geometry
-        return [self.human.geometry(f) for f in people.frames] or [self.human.geometry(NOBODY)]
+        return self.perceiver.geometries(frame)
 
     def measure(
         self,
@@ -137,10 +124,12 @@ class Controller:
         self._clock_s += self.config.control_period_s
         age = frame_age_s
         if age <= self.config.max_frame_age_s and people.ids:
-            percs, geos = self.perceive(people, age, frame_time_s)
+            seen = self.perceive(people, age, frame_time_s)
+            percs, geos, v_people = seen.perceived, seen.geometry, seen.part_velocity
         else:  # stale or NaN: the robot stops on it; the trackers do not learn from it
             percs = [Perceived.untracked(f) for f in people.frames or (NOBODY,)]
             geos = self.geometry(people)
+            v_people = np.zeros((len(percs), len(self.human.parts), 3))
         table, who = closest_of([self.distances(kin, g) for g in geos])
         dmin = table.min_per_set()
         nearest = int(who.flat[np.argmin(table.distance)]) if np.isfinite(dmin).any() else 0
@@ -150,10 +139,10 @@ class Controller:
         f = float(l1_factor(dmin[self.i_L1], cfg))  # eq. (2)
         limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)  # eq. (3)
         if self.config.safety == "ssm":
-            ssm = replace(self.ssm, stop_time_s=self.stop_budget.budget())
-            v_parts = part_velocities([p.joint_velocity for p in percs], self.part_joints, who)
+            ssm = with_stop_time(self.ssm, self.stop_budget.budget())
+            v_parts = v_people[who, np.arange(who.shape[1])[None, :]]  # each pair's person
             approach_limit, human_approach = separation_bounds(table, v_parts, age, ssm)
-            limits = np.minimum(limits, joint_speed_limits(ssm, self.robot.joint_names))
+            limits = np.minimum(limits, self.accel * ssm.stop_time_s)  # |q̇_j| ≤ a_j T_s
         else:
             approach_limit = np.full(table.distance.shape, np.inf)
             human_approach = np.zeros(table.distance.shape)

@@ -20,9 +20,11 @@ import numpy as np
 from .distance_table import DistanceTable
 from .errors import InputError
 from .frames import HumanFrame, HumanMotion
+from .human import HumanGeometry, KinectHuman
+from .perception import PeopleTracker, Perceived, PerceptionConfig, part_velocities
 from .recording import Recording
 
-__all__ = ["NOBODY", "Crowd", "People", "as_people", "closest_of", "same_frames"]
+__all__ = ["NOBODY", "Crowd", "People", "Perceiver", "as_people", "closest_of", "same_frames"]
 
 #: Nobody in view: a frame with no usable joint (every distance +inf).
 NOBODY = HumanFrame(np.full((25, 3), np.nan), np.zeros(25, dtype=np.int8))
@@ -91,6 +93,47 @@ def closest_of(tables: Sequence[DistanceTable]) -> tuple[DistanceTable, np.ndarr
         ),
         who,
     )
+
+
+class Perceiver:
+    """Everybody as the controller may trust them, updated once per new frame.
+
+    One :class:`~qpavoid.perception.Tracker` per person id
+    (:class:`~qpavoid.perception.PeopleTracker`), each person's geometry (widened by the
+    uncertainty of lost joints) and part velocities (K, 3), kept until the frame changes:
+    new frame objects (:func:`same_frames`) or a new capture time.
+    """
+
+    def __init__(self, human: KinectHuman, cfg: PerceptionConfig | None = None):
+        self.human = human
+        self.trackers = PeopleTracker(cfg)
+        self.part_joints = human.part_joints()
+        self.perceived: list[Perceived] = []
+        self.geometry: list[HumanGeometry] = []
+        self.part_velocity = np.zeros((0, len(human.parts), 3))
+        self._frame: tuple[People, float | None] | None = None
+
+    def update(self, people: People, frame_time_s: float | None, captured_s: float) -> Perceiver:
+        """Take ``people`` (captured at ``captured_s``) unless it is the frame in hand."""
+        last = self._frame
+        if last is None or not same_frames(people, last[0]) or frame_time_s != last[1]:
+            self.perceived = self.trackers.update(people.ids, people.frames, captured_s)
+            self.geometry = [
+                self.human.geometry(p.frame, joint_radius=p.joint_radius) for p in self.perceived
+            ]
+            self.part_velocity = np.stack(
+                [part_velocities([p.joint_velocity], self.part_joints) for p in self.perceived]
+            )
+            self._frame = (people, frame_time_s)
+        return self
+
+    def geometries(self, frame: HumanFrame | People) -> list[HumanGeometry]:
+        """The geometries perceived for ``frame`` if it is the frame in hand, else its own
+        (nothing filled in, no uncertainty; :data:`NOBODY`'s for nobody)."""
+        people = frame if isinstance(frame, People) else as_people(frame)
+        if self._frame is not None and same_frames(people, self._frame[0]) and self.geometry:
+            return self.geometry
+        return [self.human.geometry(f) for f in people.frames] or [self.human.geometry(NOBODY)]
 
 
 class Crowd:
