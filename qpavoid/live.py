@@ -116,6 +116,9 @@ class Listener:
             except WireError as exc:
                 self.counters[f"dropped_{exc.reason}"] += 1
                 continue
+            except Exception:  # a datagram must never end the listener: dropped, counted
+                self.counters["dropped_unreadable"] += 1
+                continue
             with self._lock:
                 if len(self._queue) == self._queue.maxlen:
                     self.counters["dropped_overflow"] += 1

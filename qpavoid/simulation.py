@@ -130,8 +130,9 @@ def simulate(
         Where the controller's frames come from instead of a sensor filming ``motion``
         (a live source, :class:`~qpavoid.live.LiveSource`); there is no truth then.
     realtime
-        Tick on the wall clock (a live run); Ctrl-C then ends the run, which is summed
-        up as usual with ``end_reason`` "interrupted".
+        Tick on the wall clock (a live run): a tick that comes late is stamped with the
+        wall time, so frame ages stay true when the loop falls behind; Ctrl-C ends the
+        run, which is summed up as usual with ``end_reason`` "interrupted".
 
     Returns
     -------
@@ -210,7 +211,12 @@ def simulate(
                     time.sleep(wait)
                 else:
                     overruns += wait < -dt
+                # the run clock is the wall clock: a late tick sees the time it really is,
+                # so the frames it holds are as old as they really are
+                t = max(t, time.perf_counter() - wall0)
             human, captured_s = sensor.frame_at(t)
+            if realtime:  # getting the frame took time too: the age is judged now
+                t = max(t, time.perf_counter() - wall0)
             if progress is not None and t - last_progress >= 1.0 / 30.0:
                 progress(t)
                 last_progress = t

@@ -121,13 +121,16 @@ def decode(data: bytes, calibration: Calibration, workspace: Workspace | None = 
     if not isinstance(body, int) or isinstance(body, bool) or not 0 <= body < MAX_BODIES:
         raise WireError(f"body {body!r}", reason="bad_field")
     if not isinstance(t, (int, float)) or isinstance(t, bool):
-        raise WireError(f"t {t!r}", reason="bad_field")
-    if not math.isfinite(t):
-        raise WireError(f"t {t!r}", reason="non_finite")
+        raise WireError(f"t {str(t)[:40]}", reason="bad_field")
     try:
+        t = float(t)  # a JSON integer may be too large for a float
         arr = np.array(rows, dtype=float)
+    except OverflowError:
+        raise WireError("a number too large for a float", reason="non_finite") from None
     except (TypeError, ValueError):
         raise WireError("joints are not 25 rows of 4 numbers", reason="bad_field") from None
+    if not math.isfinite(t):
+        raise WireError(f"t {t!r}", reason="non_finite")
     if arr.shape != (N_KINECT_JOINTS, 4) or not _all_numbers(rows):
         raise WireError(f"joints of shape {arr.shape}, expected (25, 4)", reason="bad_field")
     if not np.isfinite(arr).all():

@@ -16,6 +16,7 @@ import pytest
 
 from qpavoid.calibration import Calibration, SensorCalibration
 from qpavoid.controller import ControllerConfig
+from qpavoid.frames import HumanFrame
 from qpavoid.fusion import FusionConfig
 from qpavoid.live import Listener, LiveSource, parse_address, replay
 from qpavoid.posture import Operator
@@ -72,6 +73,9 @@ def mutate(**changes) -> bytes:
         (encode(frame()).replace(b'"t":10.0', b'"t":NaN'), "non_finite"),
         (mutate(joints=[[1e400, 0, 0, 2]] * 25), "non_finite"),
         (mutate(sensor="kinect_9"), "unknown_sensor"),
+        (mutate(t=10**309), "non_finite"),  # an integer too large for a float
+        (mutate(joints=[[10**309, 0, 0, 2]] * 25), "non_finite"),
+        (mutate(joints=[[0, 0, 0, 10**309]] * 25), "non_finite"),
         (mutate(joints=[[0.0, 0.0, 40.0, 2]] * 25), "outside_workspace"),
     ],
 )
@@ -218,3 +222,48 @@ def test_per_sensor_files_replay_from_the_command_line(tmp_path, robot):
     assert result.returncode == 0, result.stderr
     assert "sent 18 datagrams" in result.stdout
     assert {decode(d, data.calibration).sensor for d in got} == set(data.recordings)
+
+
+def test_a_late_control_loop_sees_its_frames_as_old_as_they_really_are(robot):
+    """An adversarial tester's case: when the loop falls behind (a stall, a flood), ticks
+    must be stamped with the wall time, or a frame 0.4 s old passes for a fresh one."""
+    rest = Operator().rest()
+
+    class Stalling:
+        """Frames captured every 1/30 s of wall time, delivered at once; one 0.4 s stall
+        of the loop at 0.5 s, after which delivery stops (frames only grow old)."""
+
+        def __init__(self):
+            self.stalled, self.start = False, None
+            self.true_age = []  # the wall time of each tick minus its frame's capture
+
+        def frame_at(self, t):
+            if self.start is None:  # the run's time 0
+                self.start = time.perf_counter() - t
+            now = time.perf_counter() - self.start
+            if now > 0.5 and not self.stalled:
+                self.stalled = True
+                time.sleep(0.4)
+                now = time.perf_counter() - self.start
+            k = min(int(now * 30), 15)  # frame k, captured at k / 30 s (none after 0.5 s)
+            self.true_age.append(now - k / 30)
+            return frames[k], k / 30
+
+    noise = np.random.default_rng(0).normal(0.0, 0.002, (16, 25, 3))  # never bit-identical
+    frames = [HumanFrame.check(rest + noise[k]) for k in range(16)]
+    source = Stalling()
+    controller = QPController(robot, config=ControllerConfig(control_period_s=0.01))
+    sim = simulate(
+        controller,
+        None,
+        SimConfig(control_rate_hz=100.0, max_time_s=1.2, measure_truth=False, braking=None),
+        source=source,
+        realtime=True,
+    )
+    log = sim.log
+    moving = np.any(log["dq_command"] != 0.0, axis=1)
+    true_age = np.array(source.true_age)[: len(moving)]
+    assert moving[true_age <= 0.05].any()  # it moved on fresh frames ...
+    assert (true_age[moving] <= 0.1).all()  # ... and never on a frame truly older than 0.1 s
+    np.testing.assert_allclose(log["frame_age_s"], true_age, atol=0.005)  # the log tells it
+    assert sim.metrics["realtime_overruns"] >= 1
