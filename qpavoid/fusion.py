@@ -305,6 +305,9 @@ class Fuser:
         state = np.where(seen, np.where((tracked & (W > 0)).any(axis=0), 2, 1), 0).astype(
             np.int8
         )  # Tracked, Inferred, NotTracked
+        # Sensors that disagree leave the joint in doubt, whichever was believed: Inferred,
+        # so the controller's tracker widens it (and keeps widening it while they disagree).
+        state[[o.joint for o in outliers if seen[o.joint]]] = TrackingState.Inferred
         track.update(
             joints, seen, state == TrackingState.Tracked, t, cfg.velocity_alpha, cfg.velocity_beta
         )

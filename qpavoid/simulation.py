@@ -128,7 +128,8 @@ def simulate(
         progress bar; ``None`` for none.
     source
         Where the controller's frames come from instead of a sensor filming ``motion``
-        (a live source, :class:`~qpavoid.live.LiveSource`); there is no truth then.
+        (a live source, :class:`~qpavoid.live.LiveSource`, or fused sensors); ``motion``,
+        if given, is then only the truth the run is judged against.
     realtime
         Tick on the wall clock (a live run): a tick that comes late is stamped with the
         wall time, so frame ages stay true when the loop falls behind; Ctrl-C ends the
@@ -169,7 +170,7 @@ def simulate(
     arm = None if cfg.braking is None else ArmResponse(cfg.braking, robot.joint_names, dt)
     truth = (
         TrueClearance(robot, controller.human, motion)
-        if cfg.measure_truth and motion is not None and source is None
+        if cfg.measure_truth and motion is not None
         else None
     )
     goal = path.reference(path.duration_s)[0]

@@ -138,6 +138,7 @@ def test_disagreeing_sensors_are_settled_by_tracking_state_then_by_motion():
     person = fuser.fuse(0.0).people[0]
     np.testing.assert_allclose(person.frame.joints[HAND], rest[HAND], atol=1e-9)
     assert person.outliers == ((HAND, "a", ("b",)),)
+    assert person.frame.state[HAND] == TrackingState.Inferred  # in doubt, whoever won
     # both Tracked: the one that continues the person's motion wins, whichever sensor
     for t in (1 / 30, 2 / 30):
         fuser.add(body(cal, "a", t, off))
@@ -221,3 +222,67 @@ def test_the_example_and_qpavoid_fuse_write_a_fused_recording(tmp_path):
         assert set(data.files) == {"t", "joints", "state", "confidence"}
         assert data["confidence"].shape == data["state"].shape
         assert data["confidence"].min() >= 0.0 and data["confidence"].max() <= 1.0
+
+
+class FusedSource:
+    """Two sensors' frames fused at every tick, as the controller would get them live."""
+
+    def __init__(self, data):
+        self.fuser = Fuser(data.calibration)
+        self.rows = sorted(
+            (f.t + data.calibration[f.sensor].time_offset_s, f)
+            for rec in data.recordings.values()
+            for f in rec.frames()
+        )
+        self.next = 0
+
+    def frame_at(self, t):
+        from qpavoid.people import People
+
+        while self.next < len(self.rows) and self.rows[self.next][0] <= t:
+            self.fuser.add(self.rows[self.next][1])
+            self.next += 1
+        fused = self.fuser.fuse(t)
+        people = People(tuple(p.id for p in fused.people), tuple(p.frame for p in fused.people))
+        return people, fused.captured_s
+
+
+@pytest.mark.parametrize("stuck", ["kinect_left", "kinect_right"])
+def test_a_sensor_stuck_on_a_still_arm_cannot_hide_a_strike(robot, stuck):
+    """An adversarial tester's case: one sensor sees the hand strike, the other keeps
+    reporting the arm at rest as Tracked. The fusion used to believe the still arm (the
+    fused hand stayed 600 mm from the real one); disputed joints are now Inferred and
+    widen until the robot stands."""
+    from qpavoid.controller import ControllerConfig
+    from qpavoid.frames import JointType
+    from qpavoid.qp import QPController
+    from qpavoid.simulation import SimConfig, simulate
+    from qpavoid.strikes import StrikeCase, strike_motion
+
+    case = StrikeCase(5, "EE", 1.5, "right", False, 2.0, "none")
+    motion = strike_motion(case, robot)
+    quiet = TwoSensorConfig(seed=3, occlusions_per_s=0.0, mirror_per_s=0.0, noise_mean_m=0.01)
+    data = two_sensor_data([motion], 4.0, quiet)
+    arm = [
+        int(j)
+        for j in (
+            JointType.ElbowRight,
+            JointType.WristRight,
+            JointType.HandRight,
+            JointType.HandTipRight,
+            JointType.ThumbRight,
+        )
+    ]
+    rec = data.recordings[stuck]
+    still = np.array(rec.joints)
+    still[:, arm] = still[0, arm]  # the arm as at the start, every frame, Tracked
+    data.recordings[stuck] = type(rec)(rec.sensor, rec.t, rec.body, still, rec.state)
+    ctrl = QPController(robot, config=ControllerConfig(safety="ssm", control_period_s=0.01))
+    sim = simulate(
+        ctrl,
+        motion,
+        SimConfig(control_rate_hz=100.0, max_time_s=3.5, measure_truth=True),
+        source=FusedSource(data),
+    )
+    assert np.nanmin(sim.log["true_distance"]) < 0.0  # the real hand reached the robot
+    assert sim.metrics["ticks_moving_in_true_contact"] == 0
