@@ -13,31 +13,87 @@ The modules follow the data flow of one control tick:
   :mod:`qpavoid.io`, :mod:`qpavoid.compare`, :mod:`qpavoid.sweep`, :mod:`qpavoid.cli`
 """
 
-from .analytic import AnalyticConfig, AnalyticController
-from .controller import Command, ControllerConfig
-from .distances import (
-    CapsuleDistance,
-    DistanceTable,
-    SphereDistance,
-    capsule_distances,
-    distance_method,
-    sphere_distances,
-)
-from .errors import (
-    IKNotConvergedError,
-    InputError,
-    QpavoidError,
-    RecordingError,
-    RobotDescriptionError,
-    SolverError,
-)
-from .frames import HumanFrame
-from .human import BodyPart, HumanGeometry, JointType, KinectHuman, TrackingState
-from .laws import AvoidanceConfig
-from .qp import QPConfig, QPController
-from .robot import ControlSet, Kinematics, Robot, load_robot
-from .simulation import SimConfig, simulate
-from .task import ArcPath, inverse_kinematics
+import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the names as type checkers and editors see them
+    from .analytic import AnalyticConfig, AnalyticController
+    from .controller import Command, ControllerConfig
+    from .distances import (
+        CapsuleDistance,
+        DistanceTable,
+        SphereDistance,
+        capsule_distances,
+        distance_method,
+        sphere_distances,
+    )
+    from .errors import (
+        IKNotConvergedError,
+        InputError,
+        QpavoidError,
+        RecordingError,
+        RobotDescriptionError,
+        SolverError,
+    )
+    from .frames import HumanFrame
+    from .human import BodyPart, HumanGeometry, JointType, KinectHuman, TrackingState
+    from .laws import AvoidanceConfig
+    from .qp import QPConfig, QPController
+    from .robot import ControlSet, Kinematics, Robot, load_robot
+    from .simulation import SimConfig, simulate
+    from .task import ArcPath, inverse_kinematics
+
+#: Where each public name lives: imported on first use (PEP 562), so that `import qpavoid`
+#: (and the command line's first moments, when Ctrl-C must already be handled) stays light.
+_LAZY = {
+    "AnalyticConfig": "analytic",
+    "AnalyticController": "analytic",
+    "ArcPath": "task",
+    "AvoidanceConfig": "laws",
+    "BodyPart": "human",
+    "CapsuleDistance": "distances",
+    "Command": "controller",
+    "ControlSet": "robot",
+    "ControllerConfig": "controller",
+    "DistanceTable": "distances",
+    "HumanFrame": "frames",
+    "HumanGeometry": "human",
+    "IKNotConvergedError": "errors",
+    "InputError": "errors",
+    "JointType": "human",
+    "KinectHuman": "human",
+    "Kinematics": "robot",
+    "QPConfig": "qp",
+    "QPController": "qp",
+    "QpavoidError": "errors",
+    "RecordingError": "errors",
+    "Robot": "robot",
+    "RobotDescriptionError": "errors",
+    "SimConfig": "simulation",
+    "SolverError": "errors",
+    "SphereDistance": "distances",
+    "TrackingState": "human",
+    "capsule_distances": "distances",
+    "distance_method": "distances",
+    "inverse_kinematics": "task",
+    "load_robot": "robot",
+    "simulate": "simulation",
+    "sphere_distances": "distances",
+}
+
+
+def __getattr__(name: str) -> object:
+    """``qpavoid.NAME`` for the public names, imported on first use."""
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'qpavoid' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_LAZY])
+
 
 __version__ = "0.1.0"
 

@@ -42,6 +42,12 @@ __all__ = ["Calibration", "SensorCalibration", "load_calibration"]
 #: How far a printed rotation may be from orthonormal: ``max |RᵀR − I|`` and ``|det R − 1|``.
 #: 1e-4 admits a matrix written with five or six decimals, and refuses a scale or a shear.
 RIGID_TOLERANCE = 1e-4
+#: Bounds on a sensor's settings: a camera within 100 m of the robot (a Kinect sees 4.5 m;
+#: more is a unit error), a clock offset within a day, a weight within 1e-3 to 1e3 of the
+#: others' (beyond, float arithmetic, not trust, would decide).
+MAX_TRANSLATION_M = 100.0
+MAX_TIME_OFFSET_S = 86_400.0
+MIN_WEIGHT, MAX_WEIGHT = 1e-3, 1e3
 #: The keys a sensor's table may hold.
 SENSOR_KEYS = ("base_from_camera", "time_offset_s", "weight")
 
@@ -162,15 +168,21 @@ def _sensor(name: str, table: object, where: str, path: str | None) -> SensorCal
         raise fail("base_from_camera is missing (a 4x4 rigid transform, m)", "base_from_camera")
     T = _rigid(table["base_from_camera"], fail)
     offset, weight = table.get("time_offset_s", 0.0), table.get("weight", 1.0)
-    for key, value, positive in (("time_offset_s", offset, False), ("weight", weight, True)):
+    for key, value, low, high, kind in (
+        ("time_offset_s", offset, -MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S, "s"),
+        ("weight", weight, MIN_WEIGHT, MAX_WEIGHT, "relative"),
+    ):
         if (
             not isinstance(value, (int, float))
             or isinstance(value, bool)
             or not math.isfinite(value)
-            or (positive and value <= 0)
+            or not low <= value <= high
         ):
-            kind = "a positive number" if positive else "a finite number, s"
-            raise fail(f"{key} must be {kind}, got {value!r}", key, value)
+            raise fail(
+                f"{key} must be a number from {low:g} to {high:g} ({kind}), got {value!r}",
+                key,
+                value,
+            )
     return SensorCalibration(name, T, float(offset), float(weight))
 
 
@@ -178,16 +190,32 @@ def _rigid(value: object, fail: object) -> np.ndarray:
     """A 4×4 rigid transform from nested lists, re-orthonormalised, or ``fail(...)`` raised."""
     assert callable(fail)
     key = "base_from_camera"
+    numbers = isinstance(value, list) and all(
+        isinstance(row, list)
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in row)
+        for row in value
+    )
+    if not numbers:  # no booleans, strings or deeper nesting taken as numbers
+        raise fail(f"{key} must be 4 rows of 4 numbers, got {str(value)[:80]}", key, value)
     try:
         T = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise fail(f"{key} must be 4 rows of 4 numbers, got {value!r}", key, value) from None
+    except (TypeError, ValueError, OverflowError):
+        raise fail(
+            f"{key} must be 4 rows of 4 numbers, got {str(value)[:80]}", key, value
+        ) from None
     if T.shape != (4, 4):
         raise fail(f"{key} must be 4 rows of 4 numbers (shape (4, 4)), got {T.shape}", key, T)
     if not np.isfinite(T).all():
         raise fail(f"{key} has a non-finite entry", key, T)
     if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=RIGID_TOLERANCE):
         raise fail(f"{key}'s last row must be [0, 0, 0, 1], got {T[3].tolist()}", key, T)
+    if np.abs(T[:3, 3]).max() > MAX_TRANSLATION_M:
+        raise fail(
+            f"{key}'s translation {T[:3, 3].tolist()} is beyond {MAX_TRANSLATION_M:g} m "
+            "(not metres?)",
+            key,
+            T,
+        )
     R = T[:3, :3]
     orth = float(np.abs(R.T @ R - np.eye(3)).max())
     det = float(np.linalg.det(R))
@@ -224,7 +252,7 @@ def load_calibration(path: str | Path) -> Calibration:
         ) from None
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
         raise CalibrationError(
             f"calibration {p} is not valid TOML: {one_line(exc)}", path=p
         ) from None

@@ -12,7 +12,8 @@ every person it knows (:class:`FusedFrame`). docs/sensors.md details and measure
    freshness``; where they disagree by more than ``outlier_threshold_m`` one is believed,
    the others dropped (recorded); a joint no sensor sees stays missing, never invented;
 5. the result filtered (α-β) and given a per-joint confidence in [0, 1] (0.5 per fresh
-   sensor tracking it, 0.15 per one inferring it, capped at 1).
+   sensor tracking it, 0.15 per one inferring it, capped at 1); a joint on which sensors
+   disagreed is Inferred, whoever was believed, so the controller widens it.
 
 A person no sensor sees any more is reported with every joint missing for
 ``person_timeout_s`` (the controller's tracker bounds them meanwhile), then dropped.
@@ -66,11 +67,10 @@ class FusionConfig:
     association_gate_m
         Farthest a body's torso centre may be from a person's to be that person, m.
     person_timeout_s
-        A person seen by no sensor for this long is dropped, s (the cell's sensors must
-        cover every approach to the robot: docs/sensors.md).
+        A person seen by no sensor for this long is dropped, s (sensors must cover every
+        approach to the robot).
     velocity_alpha, velocity_beta
-        Gains of the α-β filter on each person's fused joints (0.3, 0.05: measured on
-        50 mm sensors and 2 m/s strikes, docs/sensors.md).
+        Gains of the α-β filter on each person's fused joints (measured: docs/sensors.md).
     smooth
         Report the filtered joints (True: 24 mm mean error, not 37, from 50 mm sensors)
         or the sensors' weighted mean (False).
@@ -136,8 +136,7 @@ class FusedFrame(NamedTuple):
     captured_s: float = float("-inf")
 
 
-#: Frames kept per (sensor, body).
-HISTORY = 4
+HISTORY = 4  #: frames kept per (sensor, body)
 
 
 class _Frame(NamedTuple):
@@ -305,9 +304,7 @@ class Fuser:
         state = np.where(seen, np.where((tracked & (W > 0)).any(axis=0), 2, 1), 0).astype(
             np.int8
         )  # Tracked, Inferred, NotTracked
-        # Sensors that disagree leave the joint in doubt, whichever was believed: Inferred,
-        # so the controller's tracker widens it (and keeps widening it while they disagree).
-        state[[o.joint for o in outliers if seen[o.joint]]] = TrackingState.Inferred
+        state[[o.joint for o in outliers if seen[o.joint]]] = 1  # disputed: Inferred, widened
         track.update(
             joints, seen, state == TrackingState.Tracked, t, cfg.velocity_alpha, cfg.velocity_beta
         )

@@ -38,9 +38,13 @@ __all__ = ["Listener", "LiveSource", "parse_address", "replay"]
 def parse_address(text: str, name: str = "--listen") -> tuple[str, int]:
     """``HOST:PORT`` as ``(host, port)``; :class:`InputError` if it is not one."""
     host, sep, port = str(text).rpartition(":")
-    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+    ascii_port = port.isascii() and port.isdigit()  # "５００６" is a digit to Python
+    if not sep or not host or not ascii_port or not 1 <= int(port) <= 65535:
         raise InputError(
-            f"{name} must be HOST:PORT (e.g. 127.0.0.1:5005), got {text!r}", name=name, value=text
+            f"{name} must be HOST:PORT with a port from 1 to 65535 (e.g. 127.0.0.1:5005), "
+            f"got {text!r}",
+            name=name,
+            value=text,
         )
     return host.strip("[]"), int(port)
 

@@ -67,6 +67,15 @@ def test_six_decimals_pass_and_come_back_orthonormal(tmp_path):
         ("base_from_camera = [[1,0,0,0],[0,1,0,0],[0,0,1,0],['a',0,0,1]]", "4 rows of 4"),
         ("base_from_camera = [[1,0,0,nan],[0,1,0,0],[0,0,1,0],[0,0,0,1]]", "non-finite"),
         ("translation = [0, 0, 0]", "unknown key 'translation'"),
+        # found by an adversarial tester
+        ("base_from_camera = [[true,false,false,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]", "4 rows"),
+        ("base_from_camera = [[[[1]]],[0,1,0,0],[0,0,1,0],[0,0,0,1]]", "4 rows"),
+        ("base_from_camera = [[1,0,0,1e300],[0,1,0,0],[0,0,1,0],[0,0,0,1]]", "beyond 100 m"),
+        ("base_from_camera = [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\nweight = 1e308", "weight"),
+        (
+            "base_from_camera = [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\ntime_offset_s = 1e17",
+            "time_offset_s",
+        ),
         ("weight = 1", "base_from_camera is missing"),
         ("base_from_camera = [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\nweight = 0", "weight"),
         (
@@ -84,7 +93,12 @@ def test_malformed_transforms_and_keys_are_refused_by_name(tmp_path, body, words
 
 @pytest.mark.parametrize(
     ("text", "words"),
-    [("", "no sensor"), ("x = 1", "unknown top-level key"), ("[sensors", "not valid TOML")],
+    [
+        ("", "no sensor"),
+        ("x = 1", "unknown top-level key"),
+        ("[sensors", "not valid TOML"),
+        ("x = " + "[" * 5000 + "]" * 5000, "not valid TOML"),  # nested past Python's stack
+    ],
 )
 def test_files_without_sensors_are_refused(tmp_path, text, words):
     with pytest.raises(CalibrationError, match=words):

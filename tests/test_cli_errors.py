@@ -141,3 +141,22 @@ def test_default_out_and_last_line(workdir):
     assert r.stdout.strip().splitlines()[-1] == "wrote metrics.json, log.npz to runs/free/"
     assert r.stderr == ""  # no progress bar when not on a terminal
     shutil.rmtree(workdir / "runs")
+
+
+def test_ctrl_c_while_the_library_loads_is_one_line(tmp_path):
+    """An adversarial tester pressed Ctrl-C in the first second: Python's traceback."""
+    import signal
+    import time
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "qpavoid", "run", "free", "--out", str(tmp_path / "x")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    time.sleep(0.4)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip() == "qpavoid: interrupted; nothing written" and "Traceback" not in err
+    assert not (tmp_path / "x").exists()

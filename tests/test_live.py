@@ -88,7 +88,7 @@ def test_every_malformed_datagram_is_refused_with_its_reason(data, reason):
 def test_addresses():
     assert parse_address("127.0.0.1:5005") == ("127.0.0.1", 5005)
     assert parse_address("[::1]:7") == ("::1", 7)
-    for bad in ("5005", "host:", ":80", "h:99999", "h:x"):
+    for bad in ("5005", "host:", ":80", "h:99999", "h:x", "h:0", "127.0.0.1:５００６"):
         with pytest.raises(Exception, match="HOST:PORT"):
             parse_address(bad)
 
