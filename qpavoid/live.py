@@ -1,10 +1,12 @@
 """Live skeletons over UDP: a listener for the controller, and a replayer that feeds it.
 
+.. note:: The listener is a thread; a flood competes for Python's interpreter lock.
+
 :class:`Listener` receives datagrams (:mod:`qpavoid.wire`) on a UDP socket in a thread of
-its own. Invalid ones are dropped and counted by reason (never a crash, never a stall);
-valid ones wait in a bounded queue where, under a flood, the newest win (the oldest are
-dropped and counted as ``overflow``), so the control loop only ever takes what arrived
-since its last tick, at most ``queue_size`` frames.
+its own that does nothing but receive: they wait in a bounded queue where, under a
+flood, the newest win (the oldest are dropped and counted as ``overflow``). The control
+loop takes what arrived since its last tick, at most ``queue_size`` datagrams, and checks
+them: invalid ones are dropped and counted by reason (never a crash, never a stall).
 
 :class:`LiveSource` is what the control loop asks each tick: it drains the listener,
 moves each frame's time stamp onto the run clock, fuses (:class:`~qpavoid.fusion.Fuser`;
@@ -19,6 +21,7 @@ would: the whole path runs on one machine over loopback.
 from __future__ import annotations
 
 import socket
+import sys
 import threading
 import time
 from collections import Counter, deque
@@ -33,6 +36,9 @@ from .sensor_recording import BodyFrame, SensorRecording
 from .wire import WireError, Workspace, decode, encode
 
 __all__ = ["Listener", "LiveSource", "parse_address", "replay"]
+
+#: How often threads take turns while a listener runs, s (Python's default: 0.005).
+SWITCH_INTERVAL_S = 0.0005
 
 
 def parse_address(text: str, name: str = "--listen") -> tuple[str, int]:
@@ -61,7 +67,9 @@ class Listener:
     workspace
         Where a joint may be in the base frame; a datagram with a joint outside is dropped.
     queue_size
-        Most frames waiting for the control loop; beyond, the oldest are dropped.
+        Most datagrams waiting for the control loop; beyond, the oldest are dropped
+        (64: two sensors × six bodies × several frames; the loop checks at most this
+        many a tick, about 1 ms).
     """
 
     def __init__(
@@ -69,12 +77,12 @@ class Listener:
         address: tuple[str, int],
         calibration: Calibration,
         workspace: Workspace | None = None,
-        queue_size: int = 256,
+        queue_size: int = 64,
     ):
         self.calibration = calibration
         self.workspace = workspace or Workspace()
         self.counters: Counter[str] = Counter()
-        self._queue: deque[BodyFrame] = deque(maxlen=queue_size)
+        self._queue: deque[bytes] = deque(maxlen=queue_size)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
@@ -91,8 +99,14 @@ class Listener:
         self._sock.settimeout(0.05)
         self.address: tuple[str, int] = self._sock.getsockname()[:2]
         self._thread = threading.Thread(target=self._receive, name="qpavoid-udp", daemon=True)
+        self._switch: float | None = None
 
     def __enter__(self) -> Listener:
+        # While listening, threads take turns every 0.5 ms instead of Python's 5 ms, so a
+        # flood keeps the control loop waiting for the interpreter lock 0.5 ms at most
+        # (measured under a garbage flood: docs/sensors.md). Restored on close.
+        self._switch = sys.getswitchinterval()
+        sys.setswitchinterval(SWITCH_INTERVAL_S)
         self._thread.start()
         return self
 
@@ -101,12 +115,18 @@ class Listener:
 
     def close(self) -> None:
         """Stop the thread and close the socket."""
+        if self._switch is not None:
+            sys.setswitchinterval(self._switch)
+            self._switch = None
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=1.0)
         self._sock.close()
 
     def _receive(self) -> None:
+        """Receive only: raw datagrams into the bounded queue (newest win). The checks run
+        in :meth:`drain`, on the control loop's side, on at most ``queue_size`` datagrams
+        a tick: a flood costs this thread a ``recv`` and an ``append`` per datagram."""
         while not self._stop.is_set():
             try:
                 data = self._sock.recv(65536)
@@ -114,25 +134,26 @@ class Listener:
                 continue
             except OSError:  # closed under us
                 return
-            self.counters["received"] += 1
-            try:
-                frame = decode(data, self.calibration, self.workspace)
-            except WireError as exc:
-                self.counters[f"dropped_{exc.reason}"] += 1
-                continue
-            except Exception:  # a datagram must never end the listener: dropped, counted
-                self.counters["dropped_unreadable"] += 1
-                continue
             with self._lock:
+                self.counters["received"] += 1
                 if len(self._queue) == self._queue.maxlen:
                     self.counters["dropped_overflow"] += 1
-                self._queue.append(frame)
+                self._queue.append(data)
 
     def drain(self) -> list[BodyFrame]:
-        """Every frame that arrived since the last call, oldest first."""
+        """The valid frames among the datagrams that arrived since the last call, oldest
+        first; the others dropped and counted by reason."""
         with self._lock:
-            frames = list(self._queue)
+            raw = list(self._queue)
             self._queue.clear()
+        frames = []
+        for data in raw:
+            try:
+                frames.append(decode(data, self.calibration, self.workspace))
+            except WireError as exc:
+                self.counters[f"dropped_{exc.reason}"] += 1
+            except Exception:  # a datagram must never end the loop: dropped, counted
+                self.counters["dropped_unreadable"] += 1
         return frames
 
 

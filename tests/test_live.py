@@ -98,15 +98,17 @@ def test_a_flood_keeps_the_newest_frames_and_the_queue_bounded():
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
             for k in range(400):
                 sock.sendto(encode(frame(t=float(k))), listener.address)
-                if k % 50 == 0:
+                if k % 50 == 0 or k == 395:
                     sock.sendto(b"junk", listener.address)
         deadline = time.time() + 5.0
-        while listener.counters["received"] < 408 and time.time() < deadline:
+        while listener.counters["received"] < 409 and time.time() < deadline:
             time.sleep(0.01)
         frames = listener.drain()
-    assert listener.counters["dropped_bad_json"] == 8
-    assert len(frames) <= 16 and frames[-1].t == 399.0  # the newest win
-    assert listener.counters["dropped_overflow"] >= 400 - 16 - 400 // 2  # most were shed
+    received = listener.counters["received"]
+    assert 16 < received <= 409  # the kernel may shed some too; we count what came
+    assert listener.counters["dropped_overflow"] == received - 16  # only the newest 16 stay
+    assert listener.counters["dropped_bad_json"] == 1  # the junk among them, checked
+    assert len(frames) == 15 and frames[-1].t == 399.0  # the newest win, in order
 
 
 def test_a_busy_port_is_a_clear_error():
