@@ -95,9 +95,13 @@ def scaled_velocity_limits(
     np.ndarray
         (nv,) limits, or (T, nv) for (T,) ``f``.
     """
+    cols = slice(None) if joints is None else joints
+    if isinstance(f, float):  # one tick (the controllers' case): no broadcasting needed
+        limits = np.array(dq_max, dtype=float)
+        limits[cols] *= 1.0 - f
+        return limits
     f = np.asarray(f, dtype=float)
     limits = np.repeat(np.asarray(dq_max, dtype=float)[None], f.size, axis=0).reshape(*f.shape, -1)
-    cols = slice(None) if joints is None else joints
     limits[..., cols] *= (1.0 - f)[..., None]
     return limits
 

@@ -30,6 +30,7 @@ Units: m, s, m/s, rad/s².
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from collections import deque
 from collections.abc import Sequence
@@ -206,11 +207,20 @@ def separation_bounds(
     where positive (approaching). With several people, ``part_velocity`` may be (S, K, 3):
     the velocity of the part of the person closest to each set.
     """
-    body = np.isin(table.part_names, cfg.body_parts)[None, :]
+    body = _body_mask(tuple(table.part_names), tuple(cfg.body_parts))
     limit = max_approach_speed(table.distance, frame_age_s, cfg, body)
     v = np.broadcast_to(part_velocity, table.vector.shape)  # (K, 3) or per pair (S, K, 3)
     towards = np.einsum("skx,skx->sk", table.vector, v)  # vector: human -> robot
     return limit, np.maximum(towards, 0.0)
+
+
+@functools.lru_cache(maxsize=8)
+def _body_mask(part_names: tuple[str, ...], body_parts: tuple[str, ...]) -> np.ndarray:
+    """(1, K) True for the parts moving at the body's speed (``np.isin`` on strings costs
+    tens of µs: done once per model, not per tick)."""
+    mask = np.isin(part_names, body_parts)[None, :]
+    mask.setflags(write=False)
+    return mask
 
 
 def reaction_time(cfg: SSMConfig, control_period_s: float) -> float:

@@ -104,6 +104,7 @@ class QPController(Controller):
         ]
         self.assembler = Assembler(x.n, pieces)
         self.backend = make_backend(w, x.n, self.assembler.m)
+        self._hard: np.ndarray | None = None
 
     def problem(self, tick: Tick) -> QPProblem:
         """The QP of a tick (for inspection and cross-checks)."""
@@ -123,7 +124,10 @@ class QPController(Controller):
         # a bound or a damper by more than the solver's tolerance is never applied; within
         # it, the bounds (joint limits) are then met exactly.
         lb, ub = prob.lb[dq], prob.ub[dq]
-        hard = np.r_[prob.rows[VelocityDamper.name], prob.rows[SeparationLimit.name]]
+        if self._hard is None:  # the rows of the hard pieces (fixed by the assembler)
+            rows = [prob.rows[name] for name in (VelocityDamper.name, SeparationLimit.name)]
+            self._hard = np.concatenate([np.arange(r.start, r.stop) for r in rows])
+        hard = self._hard
         excess = max(
             float(np.max(lb - x[dq])),
             float(np.max(x[dq] - ub)),
