@@ -58,30 +58,32 @@ class CapsuleDistance:
         self._request = coal.DistanceRequest()
         self._request.enable_signed_distance = True
         self._result = coal.DistanceResult()
+        self._placed: HumanGeometry | None = None  # the geometry the human capsules show
 
-    def _place(self, segments: np.ndarray, valid: np.ndarray) -> None:
-        """Move every capsule (robot ones first, then human ones) onto its segment."""
+    def _place(self, segments: np.ndarray, valid: np.ndarray, first: int = 0) -> None:
+        """Move capsules ``first``, ``first + 1``, ... (robot ones, then human ones) onto
+        their segments."""
         axis = segments[:, 1] - segments[:, 0]
         length = np.sqrt(np.einsum("nk,nk->n", axis, axis))
         R = axis_rotations(unit(axis, FALLBACK_DIRECTION, norm=length))
         centre = 0.5 * (segments[:, 0] + segments[:, 1])
         half = (0.5 * length).tolist()
         for k in np.flatnonzero(valid).tolist():
-            self._shapes[k].halfLength = half[k]
-            self._tfs[k].setRotation(R[k])
-            self._tfs[k].setTranslation(centre[k])
+            self._shapes[first + k].halfLength = half[k]
+            self._tfs[first + k].setRotation(R[k])
+            self._tfs[first + k].setTranslation(centre[k])
 
     def __call__(self, kin: Kinematics, geo: HumanGeometry) -> DistanceTable:
         """Distance table between the robot capsules at ``kin`` and the human ``geo``."""
         seg = kin.segments
         n_sets, n_parts = self._shape
-        self._place(
-            np.concatenate([seg, np.nan_to_num(geo.segments)]),
-            np.concatenate([self._robot_valid, geo.segment_valid]),
-        )
-        radii = (self._human_radii + geo.part_margin + geo.reach_margin).tolist()
-        for j, r in enumerate(radii):
-            self._shapes[n_sets + j].radius = r
+        self._place(seg, self._robot_valid)
+        if geo is not self._placed:  # the person's capsules move once per camera frame
+            self._place(np.nan_to_num(geo.segments), geo.segment_valid, n_sets)
+            radii = (self._human_radii + geo.part_margin + geo.reach_margin).tolist()
+            for j, r in enumerate(radii):
+                self._shapes[n_sets + j].radius = r
+            self._placed = geo
         req, res = self._request, self._result
         parts = np.flatnonzero(geo.segment_valid).tolist()
         dist, rp, hp, normal, where = [], [], [], [], []
