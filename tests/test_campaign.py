@@ -89,3 +89,18 @@ def test_ray_gives_the_same_summary_as_local_processes():
     local = run_campaign(**kw, workers=2)
     on_ray = run_campaign(**kw, executor=RayExecutor(2))
     assert strip(summarize_campaign(local)) == strip(summarize_campaign(on_ray))
+
+
+def test_qpavoid_sweep_from_the_command_line(tmp_path):
+    import subprocess
+    import sys
+
+    out = tmp_path / "c"
+    cmd = [sys.executable, "-m", "qpavoid", "sweep", "--n", "1", "--controller", "analytic"]
+    r = subprocess.run([*cmd, "--seed", "4", "--out", str(out)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["settings"]["controller"] == "analytic" and summary["runs"] == 1
+    assert summary["runs_moving_in_true_contact"] == 0
+    assert (out / "worst" / "seed4.npz").is_file() and (out / "runs.json").is_file()
+    assert r.stdout.strip().endswith(f"wrote summary.json, runs.json and worst/ to {out}/")
