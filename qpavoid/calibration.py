@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 import sys
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -186,9 +186,8 @@ def _sensor(name: str, table: object, where: str, path: str | None) -> SensorCal
     return SensorCalibration(name, T, float(offset), float(weight))
 
 
-def _rigid(value: object, fail: object) -> np.ndarray:
+def _rigid(value: object, fail: Callable[..., CalibrationError]) -> np.ndarray:
     """A 4×4 rigid transform from nested lists, re-orthonormalised, or ``fail(...)`` raised."""
-    assert callable(fail)
     key = "base_from_camera"
     numbers = isinstance(value, list) and all(
         isinstance(row, list)

@@ -304,7 +304,7 @@ class Fuser:
         state = np.where(seen, np.where((tracked & (W > 0)).any(axis=0), 2, 1), 0).astype(
             np.int8
         )  # Tracked, Inferred, NotTracked
-        state[[o.joint for o in outliers if seen[o.joint]]] = 1  # disputed: Inferred, widened
+        state[[o.joint for o in outliers if seen[o.joint]]] = TrackingState.Inferred  # disputed
         track.update(
             joints, seen, state == TrackingState.Tracked, t, cfg.velocity_alpha, cfg.velocity_beta
         )

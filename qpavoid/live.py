@@ -1,12 +1,12 @@
 """Live skeletons over UDP: a listener for the controller, and a replayer that feeds it.
 
-.. note:: The listener is a thread; a flood competes for Python's interpreter lock.
-
 :class:`Listener` receives datagrams (:mod:`qpavoid.wire`) on a UDP socket in a thread of
 its own that does nothing but receive: they wait in a bounded queue where, under a
 flood, the newest win (the oldest are dropped and counted as ``overflow``). The control
 loop takes what arrived since its last tick, at most ``queue_size`` datagrams, and checks
-them: invalid ones are dropped and counted by reason (never a crash, never a stall).
+them: invalid ones are dropped and counted by reason (never a crash, never a stall). The
+listener is a thread: a flood still competes with the loop for Python's interpreter lock
+(measured in docs/sensors.md).
 
 :class:`LiveSource` is what the control loop asks each tick: it drains the listener,
 moves each frame's time stamp onto the run clock, fuses (:class:`~qpavoid.fusion.Fuser`;
