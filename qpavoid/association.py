@@ -17,13 +17,14 @@ Where sensors disagree on a joint, :func:`believed` chooses whom to believe.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from .frames import MIRROR, N_KINECT_JOINTS, JointType, TrackingState
+from .fusion_kernels import mean_gaps, subset_mean, update_track
 from .perception import PARENT
 
 J = JointType
@@ -41,9 +42,6 @@ TORSO = np.array(
         J.HipRight,
     ]
 )
-#: Joints with a parent, and their parents (the skeleton's bones).
-_CHILD = np.flatnonzero(PARENT >= 0)
-_PARENT = PARENT[_CHILD]
 #: Joints that change under a left/right swap (the others are on the spine).
 SIDED = np.flatnonzero(np.arange(N_KINECT_JOINTS) != MIRROR)
 
@@ -77,57 +75,40 @@ class PersonTrack:
     seen_s: float = -np.inf
 
     def update(
-        self,
-        joints: np.ndarray,
-        seen: np.ndarray,
-        tracked: np.ndarray,
-        t: float,
-        alpha: float,
-        beta: float,
+        self, joints: np.ndarray, state: np.ndarray, t: float, alpha: float, beta: float
     ) -> None:
-        """Take the fused ``joints`` at ``t``: α-β joints and velocities, bone lengths.
-
-        ``seen`` (25,) marks the joints fused now, ``tracked`` those fused from a Tracked
-        joint (the bone lengths learn only from those).
-        """
-        dt = t - self.last_seen
-        both = seen & np.isfinite(dt) & (dt > 0)
-        if both.any():
-            d = dt[both, None]
-            pred = self.joints[both] + self.velocity[both] * d
-            r = joints[both] - pred
-            self.joints[both] = pred + alpha * r
-            self.velocity[both] += beta * r / d
-        first = seen & ~np.isfinite(dt)
-        self.joints[first], self.velocity[first] = joints[first], 0.0
-        self.last_seen[seen] = t
+        """Take the fused ``joints`` (25, 3) (NaN where none) and ``state`` at ``t``: one
+        α-β step of the joints and velocities, and the bone lengths learnt from Tracked
+        joints (:func:`~qpavoid.fusion_kernels.update_track`)."""
+        update_track(
+            self.joints,
+            self.velocity,
+            self.last_seen,
+            self.bone,
+            PARENT,
+            joints,
+            state,
+            t,
+            alpha,
+            beta,
+        )
         self.seen_s = t
-        ok = tracked[_CHILD] & tracked[_PARENT]
-        step = joints[_CHILD] - joints[_PARENT]
-        length = np.sqrt((step * step).sum(axis=1))
-        old = self.bone[_CHILD]
-        self.bone[_CHILD] = np.where(ok, np.where(old > 0, 0.9 * old + 0.1 * length, length), old)
 
     def centre(self) -> np.ndarray:
         """Torso centre, m (NaN if no joint is known)."""
-        return torso_centre(self.joints, np.isfinite(self.joints).all(axis=1))
+        return torso_centre(self.joints)
 
     def predicted(self, t: float, horizon_s: float) -> np.ndarray:
         """(25, 3) joints moved along their velocity to time ``t`` (at most ``horizon_s``)."""
-        dt = np.clip(t - self.last_seen, 0.0, horizon_s)
-        dt[~np.isfinite(dt)] = 0.0
+        dt = np.maximum(
+            np.minimum(t - self.last_seen, horizon_s), 0.0
+        )  # never seen: NaN joints stay NaN
         return self.joints + self.velocity * dt[:, None]
 
 
-def torso_centre(joints: np.ndarray, usable: np.ndarray) -> np.ndarray:
-    """Mean of the usable torso joints (of all usable joints if none), m; NaN if none."""
-    centre = joints[TORSO].sum(axis=0) * (1.0 / len(TORSO))
-    if not np.isnan(centre[0]) and usable[TORSO].all():  # the usual case, fast
-        return np.asarray(centre)
-    for pick in (TORSO[usable[TORSO]], np.flatnonzero(usable)):
-        if pick.size:
-            return np.asarray(joints[pick].mean(axis=0))
-    return np.full(3, np.nan)
+def torso_centre(joints: np.ndarray) -> np.ndarray:
+    """Mean of the finite torso joints (of all finite joints if none), m; NaN if none."""
+    return subset_mean(joints, TORSO)
 
 
 def mirror_cost(
@@ -167,31 +148,24 @@ def reference_rank(joints: np.ndarray, state: np.ndarray) -> tuple[bool, int]:
 MIRROR_CHECK_M = 0.1
 
 
-class _Body(Protocol):
-    @property
-    def joints(self) -> np.ndarray: ...
+def mirror_suspects(bodies: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """(S,) True for the bodies (S, 25, 3) whose sided joints lie on average farther than
+    :data:`MIRROR_CHECK_M` from ``reference`` (25, 3): only those may be swapped.
 
-    @property
-    def state(self) -> np.ndarray: ...
+    Joints missing in a body or in the reference do not count; a body with nothing to
+    compare is not a suspect.
+    """
+    return np.asarray(mean_gaps(bodies, reference, SIDED) > MIRROR_CHECK_M)  # NaN: no check
 
 
 def unmirrored(
-    body: _Body, reference: np.ndarray, margin_m: float
+    joints: np.ndarray, state: np.ndarray, reference: np.ndarray, margin_m: float
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """``body``'s joints and states relabelled left/right if that fits ``reference``
-    better by ``margin_m`` (:func:`mirror_cost`), else None. Sided joints within
-    :data:`MIRROR_CHECK_M` of the reference on average are not checked."""
-    step = body.joints[SIDED] - reference[SIDED]
-    gap = np.sqrt((step * step).sum(axis=1))
-    mean = gap.sum() / len(gap)
-    if np.isnan(mean):  # some joints missing: the mean of the others (np.nanmean is slow)
-        known = gap[~np.isnan(gap)]
-        mean = known.mean() if known.size else np.nan
-    if not mean > MIRROR_CHECK_M:  # NaN (nothing to compare): no check
-        return None
-    as_is, swapped = mirror_cost(body.joints, ~np.isnan(body.joints[:, 0]), reference)
+    """``joints`` and ``state`` relabelled left/right if that fits ``reference`` better
+    by ``margin_m`` (:func:`mirror_cost`), else None."""
+    as_is, swapped = mirror_cost(joints, ~np.isnan(joints[:, 0]), reference)
     if swapped + margin_m < as_is:
-        return body.joints[MIRROR], body.state[MIRROR]
+        return joints[MIRROR], state[MIRROR]
     return None
 
 
@@ -246,8 +220,8 @@ def associate(
 
 
 def _dist(a: np.ndarray, b: np.ndarray) -> float:
-    d = float(np.linalg.norm(a - b))
-    return d if np.isfinite(d) else float("inf")
+    d = math.dist(a, b)
+    return d if math.isfinite(d) else float("inf")
 
 
 def believed(

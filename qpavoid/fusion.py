@@ -31,12 +31,14 @@ from .association import (
     PersonTrack,
     associate,
     believed,
+    mirror_suspects,
     reference_rank,
     torso_centre,
     unmirrored,
 )
 from .calibration import Calibration
 from .frames import N_KINECT_JOINTS, HumanFrame, TrackingState
+from .fusion_kernels import disagreement, merge, warm_up
 from .people import NOBODY
 from .sensor_recording import BodyFrame
 
@@ -137,12 +139,14 @@ class FusedFrame(NamedTuple):
 
 
 HISTORY = 4  #: frames kept per (sensor, body)
+#: Tracking states as plain ints (comparing an array with an IntEnum member is 6× slower).
+NOT_TRACKED, INFERRED, TRACKED = (int(s) for s in TrackingState)
 
 
 class _Frame(NamedTuple):
     t: float  # capture time, controller clock, s
     joints: np.ndarray  # (25, 3) base frame, NaN where not usable
-    state: np.ndarray
+    state: np.ndarray  # (25,) NotTracked where not usable
     centre: np.ndarray  # torso centre, m
 
 
@@ -174,6 +178,12 @@ class Fuser:
         self._latest: dict[str, dict[int, list[_Frame]]] = {s: {} for s in calibration.names}
         self._assigned: dict[str, dict[int, int]] = {s: {} for s in calibration.names}
         self._next_id = 0
+        warm_up()
+        # averaging weight and confidence by tracking state (NotTracked, Inferred, Tracked)
+        self._weight = np.array([0.0, self.cfg.weight_inferred, self.cfg.weight_tracked])
+        self._confidence = np.array(
+            [0.0, self.cfg.confidence_inferred, self.cfg.confidence_tracked]
+        )
 
     def add(self, frame: BodyFrame) -> bool:
         """Take one body frame; False if it is not newer than that body's last (dropped).
@@ -191,9 +201,11 @@ class Fuser:
             return False
         state = np.asarray(frame.state, dtype=np.int8)
         joints = cal.to_base(frame.joints)
-        usable = ~np.isnan(joints[:, 0]) & (state != TrackingState.NotTracked)  # NaN spreads
-        joints = np.where(usable[:, None], joints, np.nan)
-        history.append(_Frame(t, joints, state, torso_centre(joints, usable)))
+        usable = ~np.isnan(joints[:, 0]) & (state != NOT_TRACKED)  # NaN spreads
+        if not usable.all():
+            joints = np.where(usable[:, None], joints, np.nan)
+            state = np.where(usable, state, NOT_TRACKED).astype(np.int8)
+        history.append(_Frame(t, joints, state, torso_centre(joints)))
         del history[:-HISTORY]
         return True
 
@@ -241,80 +253,68 @@ class Fuser:
         recent = t - track.seen_s <= 0.5
         if not recent:  # a new person: the first contribution is the others' reference
             contributions.sort(key=lambda c: reference_rank(c.joints, c.state))
-        prediction = track.predicted(t, 0.1) if recent else None
-        reference = prediction if prediction is not None else contributions[0].joints
-        mirrored = []
-        for i, c in enumerate(contributions):
-            fixed = unmirrored(c, reference, cfg.mirror_margin_m) if recent or i else None
-            if fixed is not None:
-                contributions[i] = c._replace(joints=fixed[0], state=fixed[1])
-                mirrored.append(c.sensor)
-                self.counters["mirrored_corrected"] += 1
         P = np.array([c.joints for c in contributions])  # (S, 25, 3), NaN not usable
+        S = np.array([c.state for c in contributions])  # (S, 25), NotTracked not usable
+        prediction = track.predicted(t, 0.1) if recent else None
+        reference = prediction if prediction is not None else P[0]
+        mirrored = []
+        for i in np.flatnonzero(mirror_suspects(P, reference)):
+            fixed = unmirrored(P[i], S[i], reference, cfg.mirror_margin_m)
+            if fixed is not None:
+                P[i], S[i] = fixed
+                mirrored.append(contributions[i].sensor)
+                self.counters["mirrored_corrected"] += 1
+        age = np.array([c.age for c in contributions])
         if cfg.max_extrapolation_s > 0.0:
-            step = np.minimum([c.age for c in contributions], cfg.max_extrapolation_s)
-            P = P + track.velocity[None] * step[:, None, None]
-        usable = ~np.isnan(P[:, :, 0])
-        tracked = (np.array([c.state for c in contributions]) == TrackingState.Tracked) & usable
-        fresh = [min(max(1.0 - 0.5 * c.age / cfg.max_age_s, 0.0), 1.0) for c in contributions]
-        scale = np.array(
-            [
-                f * self.calibration[c.sensor].weight
-                for f, c in zip(fresh, contributions, strict=True)
-            ]
-        )[:, None]
+            P = P + track.velocity[None] * np.minimum(age, cfg.max_extrapolation_s)[:, None, None]
+        fresh = np.minimum(np.maximum(1.0 - 0.5 * age / cfg.max_age_s, 0.0), 1.0)
         W = (
-            usable * cfg.weight_inferred + tracked * (cfg.weight_tracked - cfg.weight_inferred)
-        ) * scale
-        conf = (
-            usable * cfg.confidence_inferred
-            + tracked * (cfg.confidence_tracked - cfg.confidence_inferred)
-        ) * np.array(fresh)[:, None]
-        outliers = []
-        if len(contributions) > 1:
-            if len(contributions) == 2:
-                gap = np.sqrt(((P[0] - P[1]) ** 2).sum(axis=1))  # NaN where one does not see
-            else:
-                gap = np.sqrt(((P[:, None] - P[None, :]) ** 2).sum(axis=3))  # (S, S, 25)
-                gap = np.where(np.isnan(gap), -1.0, gap).max(axis=(0, 1))
-            for j in np.flatnonzero(gap > cfg.outlier_threshold_m):
-                keep = believed(
-                    int(j),
-                    P[:, j],
-                    tracked[:, j],
-                    usable[:, j],
-                    prediction,
-                    track.bone,
-                    cfg.outlier_threshold_m,
-                )
-                W[~keep, j], conf[~keep, j] = 0.0, 0.0
-                names = [c.sensor for c in contributions]
-                chosen = names[int(np.flatnonzero(keep)[0])]
-                dropped = tuple(
-                    n for n, k, u in zip(names, keep, usable[:, j], strict=True) if u and not k
-                )
-                outliers.append(OutlierChoice(int(j), chosen, dropped))
-                self.counters["outliers_resolved"] += 1
-        total = W.sum(axis=0)
-        seen = total > 0
-        with np.errstate(invalid="ignore", divide="ignore"):  # 0 / 0 where no sensor sees
-            joints = np.einsum("sj,sjx->jx", W, np.where(usable[:, :, None], P, 0.0))
-            joints /= total[:, None]
-        joints[~seen] = np.nan
-        state = np.where(seen, np.where((tracked & (W > 0)).any(axis=0), 2, 1), 0).astype(
-            np.int8
-        )  # Tracked, Inferred, NotTracked
-        state[[o.joint for o in outliers if seen[o.joint]]] = TrackingState.Inferred  # disputed
-        track.update(
-            joints, seen, state == TrackingState.Tracked, t, cfg.velocity_alpha, cfg.velocity_beta
+            self._weight[S]
+            * (fresh * [self.calibration[c.sensor].weight for c in contributions])[:, None]
         )
+        conf = self._confidence[S] * fresh[:, None]
+        outliers = self._settle(contributions, P, S, W, conf, prediction, track)
+        joints, state = merge(
+            P, S, W, np.isin(np.arange(N_KINECT_JOINTS), [o.joint for o in outliers])
+        )
+        track.update(joints, state, t, cfg.velocity_alpha, cfg.velocity_beta)
+        seen = state != NOT_TRACKED
+        got = {c.sensor for c in contributions}
         return FusedPerson(
             track.id,
             HumanFrame(
                 np.where(seen[:, None], track.joints, np.nan) if cfg.smooth else joints, state
             ),
             np.minimum(conf.sum(axis=0), 1.0),
-            tuple(n for n in self.calibration.names if any(c.sensor == n for c in contributions)),
+            tuple(n for n in self.calibration.names if n in got),
             tuple(outliers),
             tuple(mirrored),
         )
+
+    def _settle(
+        self,
+        contributions: list[_Contribution],
+        P: np.ndarray,
+        S: np.ndarray,
+        W: np.ndarray,
+        conf: np.ndarray,
+        prediction: np.ndarray | None,
+        track: PersonTrack,
+    ) -> list[OutlierChoice]:
+        """Joints on which the sensors disagree: whom to believe (the others' ``W`` and
+        ``conf`` zeroed in place)."""
+        gap = disagreement(P)  # -1 where fewer than two sensors see the joint
+        threshold = self.cfg.outlier_threshold_m
+        outliers = []
+        for j in np.flatnonzero(gap > threshold):
+            usable = S[:, j] != NOT_TRACKED
+            keep = believed(
+                int(j), P[:, j], S[:, j] == TRACKED, usable, prediction, track.bone, threshold
+            )
+            W[~keep, j], conf[~keep, j] = 0.0, 0.0
+            names = [c.sensor for c in contributions]
+            chosen = names[int(np.flatnonzero(keep)[0])]
+            dropped = tuple(n for n, k, u in zip(names, keep, usable, strict=True) if u and not k)
+            outliers.append(OutlierChoice(int(j), chosen, dropped))
+            self.counters["outliers_resolved"] += 1
+        return outliers

@@ -1,18 +1,16 @@
 """Live skeletons over UDP: a listener for the controller, and a replayer that feeds it.
 
-:class:`Listener` receives datagrams (:mod:`qpavoid.wire`) on a UDP socket in a thread of
-its own that does nothing but receive: they wait in a bounded queue where, under a
-flood, the newest win (the oldest are dropped and counted as ``overflow``). The control
-loop takes what arrived since its last tick, at most ``queue_size`` datagrams, and checks
-them: invalid ones are dropped and counted by reason (never a crash, never a stall). The
-listener is a thread: a flood still competes with the loop for Python's interpreter lock
-(measured in docs/sensors.md).
+:class:`Listener` receives datagrams (:mod:`qpavoid.wire`) on a UDP socket in a process of
+its own (:mod:`qpavoid.receiver`), which checks each (invalid ones dropped and counted by
+reason: never a crash, never a stall) and keeps each body's newest frame in shared memory.
+A flood therefore neither holds the interpreter lock of the control loop nor grows its
+work: each tick takes at most one frame per (sensor, body), the newest (measured in
+docs/sensors.md).
 
-:class:`LiveSource` is what the control loop asks each tick: it drains the listener,
-moves each frame's time stamp onto the run clock, fuses (:class:`~qpavoid.fusion.Fuser`;
-out-of-order and duplicate frames are dropped there) and returns everybody with the
-capture time of the newest frame used, so the controller judges the age of what it sees:
-no fresh frame for the stale limit, and it stops.
+:class:`LiveSource` is what the control loop asks each tick: it takes those frames,
+moves each frame's time stamp onto the run clock, fuses (:class:`~qpavoid.fusion.Fuser`)
+and returns everybody with the capture time of the newest frame used, so the controller
+judges the age of what it sees: no fresh frame for the stale limit, and it stops.
 
 :func:`replay` streams per-sensor recordings to a listener in real time, as live sensors
 would: the whole path runs on one machine over loopback.
@@ -20,11 +18,10 @@ would: the whole path runs on one machine over loopback.
 
 from __future__ import annotations
 
+import multiprocessing
 import socket
-import sys
-import threading
 import time
-from collections import Counter, deque
+from collections import Counter
 from collections.abc import Callable, Sequence
 from itertools import pairwise
 
@@ -32,13 +29,11 @@ from .calibration import Calibration
 from .errors import InputError
 from .fusion import Fuser, FusionConfig
 from .people import People
+from .receiver import SlotTable, serve
 from .sensor_recording import BodyFrame, SensorRecording
-from .wire import WireError, Workspace, decode, encode
+from .wire import Workspace, encode
 
 __all__ = ["Listener", "LiveSource", "parse_address", "replay"]
-
-#: How often threads take turns while a listener runs, s (Python's default: 0.005).
-SWITCH_INTERVAL_S = 0.0005
 
 
 def parse_address(text: str, name: str = "--listen") -> tuple[str, int]:
@@ -58,6 +53,9 @@ def parse_address(text: str, name: str = "--listen") -> tuple[str, int]:
 class Listener:
     """UDP datagrams in, checked :class:`BodyFrame` s out (module docstring).
 
+    The receiving runs in a process of its own (:mod:`qpavoid.receiver`), started here
+    and stopped by :meth:`close` (or the ``with`` block's end).
+
     Parameters
     ----------
     address
@@ -66,10 +64,14 @@ class Listener:
         The sensors; a datagram from another is dropped (``unknown_sensor``).
     workspace
         Where a joint may be in the base frame; a datagram with a joint outside is dropped.
-    queue_size
-        Most datagrams waiting for the control loop; beyond, the oldest are dropped
-        (64: two sensors × six bodies × several frames; the loop checks at most this
-        many a tick, about 1 ms).
+    start_timeout_s
+        Longest wait for the receiver process to start and bind, s (it imports numpy and
+        scipy: about 0.5 s; 30 leaves room on a loaded machine).
+
+    Raises
+    ------
+    InputError
+        If the address cannot be bound (in use, not local) or the receiver does not start.
     """
 
     def __init__(
@@ -77,84 +79,58 @@ class Listener:
         address: tuple[str, int],
         calibration: Calibration,
         workspace: Workspace | None = None,
-        queue_size: int = 64,
+        start_timeout_s: float = 30.0,
     ):
         self.calibration = calibration
         self.workspace = workspace or Workspace()
-        self.counters: Counter[str] = Counter()
-        self._queue: deque[bytes] = deque(maxlen=queue_size)
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
-        self._sock = socket.socket(family, socket.SOCK_DGRAM)
-        try:
-            self._sock.bind(address)
-        except OSError as exc:
-            self._sock.close()
+        context = multiprocessing.get_context("spawn")  # no fork of a threaded process
+        self._table = SlotTable.create(context, calibration.names)
+        self._stop = context.Event()
+        status, child_status = context.Pipe(duplex=False)
+        self._process = context.Process(
+            target=serve,
+            args=(address, calibration, self.workspace, self._table, child_status, self._stop),
+            name="qpavoid-udp",
+            daemon=True,
+        )
+        self._process.start()
+        child_status.close()
+        if status.poll(start_timeout_s):
+            outcome, value = status.recv()
+        else:
+            outcome, value = "error", f"the receiver did not start in {start_timeout_s} s"
+        status.close()
+        if outcome != "ok":
+            self.close()
             raise InputError(
-                f"cannot listen on {address[0]}:{address[1]}: {exc.strerror or exc}",
+                f"cannot listen on {address[0]}:{address[1]}: {value}",
                 name="--listen",
                 value=address,
-            ) from None
-        self._sock.settimeout(0.05)
-        self.address: tuple[str, int] = self._sock.getsockname()[:2]
-        self._thread = threading.Thread(target=self._receive, name="qpavoid-udp", daemon=True)
-        self._switch: float | None = None
+            )
+        self.address: tuple[str, int] = (str(value[0]), int(value[1]))
+
+    @property
+    def counters(self) -> Counter[str]:
+        """Datagrams received and dropped, by reason (zeros left out)."""
+        return Counter({k: v for k, v in self._table.counters().items() if v})
 
     def __enter__(self) -> Listener:
-        # While listening, threads take turns every 0.5 ms instead of Python's 5 ms, so a
-        # flood keeps the control loop waiting for the interpreter lock 0.5 ms at most
-        # (measured under a garbage flood: docs/sensors.md). Restored on close.
-        self._switch = sys.getswitchinterval()
-        sys.setswitchinterval(SWITCH_INTERVAL_S)
-        self._thread.start()
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
 
     def close(self) -> None:
-        """Stop the thread and close the socket."""
-        if self._switch is not None:
-            sys.setswitchinterval(self._switch)
-            self._switch = None
+        """Stop the receiver process."""
         self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=1.0)
-        self._sock.close()
-
-    def _receive(self) -> None:
-        """Receive only: raw datagrams into the bounded queue (newest win). The checks run
-        in :meth:`drain`, on the control loop's side, on at most ``queue_size`` datagrams
-        a tick: a flood costs this thread a ``recv`` and an ``append`` per datagram."""
-        while not self._stop.is_set():
-            try:
-                data = self._sock.recv(65536)
-            except TimeoutError:
-                continue
-            except OSError:  # closed under us
-                return
-            with self._lock:
-                self.counters["received"] += 1
-                if len(self._queue) == self._queue.maxlen:
-                    self.counters["dropped_overflow"] += 1
-                self._queue.append(data)
+        self._process.join(timeout=2.0)
+        if self._process.is_alive():
+            self._process.kill()
+            self._process.join()
 
     def drain(self) -> list[BodyFrame]:
-        """The valid frames among the datagrams that arrived since the last call, oldest
-        first; the others dropped and counted by reason."""
-        with self._lock:
-            raw = list(self._queue)
-            self._queue.clear()
-        frames = []
-        for data in raw:
-            try:
-                frames.append(decode(data, self.calibration, self.workspace))
-            except WireError as exc:
-                self.counters[f"dropped_{exc.reason}"] += 1
-            except Exception:  # a datagram must never end the loop: dropped, counted
-                self.counters["dropped_unreadable"] += 1
-        return frames
+        """Each body's newest valid frame received since the last call, oldest first."""
+        return self._table.take()
 
 
 class LiveSource:

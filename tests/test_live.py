@@ -93,22 +93,32 @@ def test_addresses():
             parse_address(bad)
 
 
-def test_a_flood_keeps_the_newest_frames_and_the_queue_bounded():
-    with Listener(("127.0.0.1", 0), CAL, queue_size=16) as listener:
+def test_a_flood_keeps_each_bodys_newest_frame_and_counts_the_rest():
+    with Listener(("127.0.0.1", 0), CAL) as listener:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
             for k in range(400):
-                sock.sendto(encode(frame(t=float(k))), listener.address)
-                if k % 50 == 0 or k == 395:
+                sock.sendto(encode(frame(t=float(k))._replace(body=k % 2)), listener.address)
+                if k % 50 == 0:
                     sock.sendto(b"junk", listener.address)
-        deadline = time.time() + 5.0
-        while listener.counters["received"] < 409 and time.time() < deadline:
-            time.sleep(0.01)
+            sock.sendto(encode(frame(t=3.0)), listener.address)  # far older than its body's last
+        deadline, last = time.time() + 5.0, -1
+        while last < listener.counters["received"] < 409 and time.time() < deadline:
+            last = listener.counters["received"]  # until all came, or no more comes
+            time.sleep(0.2)
         frames = listener.drain()
-    received = listener.counters["received"]
+        again = listener.drain()
+    counts = listener.counters
+    received = counts["received"]
     assert 16 < received <= 409  # the kernel may shed some too; we count what came
-    assert listener.counters["dropped_overflow"] == received - 16  # only the newest 16 stay
-    assert listener.counters["dropped_bad_json"] == 1  # the junk among them, checked
-    assert len(frames) == 15 and frames[-1].t == 399.0  # the newest win, in order
+    assert [f.body for f in frames] == [0, 1] and [f.t % 2 for f in frames] == [0.0, 1.0]
+    assert frames[0].t < frames[1].t  # one frame per body, in order
+    assert again == []  # each frame is taken once
+    assert counts["dropped_bad_json"] >= 1  # the junk, checked on the receiver's side
+    valid = received - counts["dropped_bad_json"] - counts["out_of_order_or_duplicate"]
+    assert counts["superseded"] == valid - 2  # every valid frame but the two taken
+    if received == 409:  # nothing shed by the kernel: exactly the newest of each body
+        assert [f.t for f in frames] == [398.0, 399.0]
+        assert counts["dropped_bad_json"] == 8 and counts["out_of_order_or_duplicate"] == 1
 
 
 def test_a_busy_port_is_a_clear_error():
@@ -139,6 +149,7 @@ def test_loopback_replay_with_faults_never_moves_on_stale_or_invalid_data(robot)
         if k == 17:
             msg = json.loads(datagram)
             msg["t"] -= 0.5  # half a second late: dropped as old
+            msg["body"] = 5  # (as body 5, with no newer frame: as late, not out of order)
             return [json.dumps(msg).encode()]
         if k == 21:
             msg = json.loads(datagram)

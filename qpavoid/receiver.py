@@ -1,0 +1,164 @@
+"""The receiving side of a live listener, in a process of its own: datagrams in, the newest
+frame of each body out, in shared memory.
+
+A flood of datagrams must not delay the control loop. In a thread, receiving and
+checking them competes with the loop for Python's interpreter lock (measured in
+docs/sensors.md: 73 overruns in 6 s under a flood of valid datagrams). So :func:`serve`
+runs in a child process (``multiprocessing``, spawn), at a lower priority than the loop
+(``nice`` +10), and does all the work per datagram: receive, check (:func:`~qpavoid.wire.decode`,
+drops counted by reason), and keep each body's newest frame in a :class:`SlotTable`, one
+fixed slot per (sensor, body). A frame not newer than its body's last is dropped
+(``out_of_order_or_duplicate``); a frame replaced before the loop took it is counted
+``superseded``. The loop's side (:meth:`SlotTable.take`) costs the same whatever arrives:
+one lock, one copy of at most sensors × 6 slots.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+from collections.abc import Sequence
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from multiprocessing.context import SpawnContext
+from typing import Any
+
+import numpy as np
+
+from .calibration import Calibration
+from .frames import N_KINECT_JOINTS
+from .sensor_recording import MAX_BODIES, BodyFrame
+from .wire import REASONS, WireError, Workspace, decode
+
+__all__ = ["COUNTERS", "SlotTable", "serve"]
+
+#: What the receiver counts, in this order in shared memory.
+COUNTERS = (
+    "received",
+    "superseded",
+    "out_of_order_or_duplicate",
+    *(f"dropped_{reason}" for reason in REASONS),
+    "dropped_unreadable",
+)
+_J = N_KINECT_JOINTS
+#: A slot: sequence number written, sequence number taken, t, joints (25 × 3), states (25).
+SLOT = 3 + 4 * _J
+#: Priority the receiver drops to, so that the control loop gets the CPU first.
+NICE = 10
+
+
+@dataclass
+class SlotTable:
+    """Each (sensor, body)'s newest frame, in memory shared by the receiver and the loop.
+
+    Parameters
+    ----------
+    context
+        The multiprocessing context that makes the shared arrays and the lock.
+    sensors
+        The sensors' names, in slot order.
+    """
+
+    sensors: tuple[str, ...]
+    values: Any  # multiprocessing Array of doubles, len(sensors) × MAX_BODIES × SLOT
+    counts: Any  # multiprocessing Array of int64, len(COUNTERS)
+    lock: Any
+
+    @classmethod
+    def create(cls, context: SpawnContext, sensors: Sequence[str]) -> SlotTable:
+        """Zeroed slots and counters for ``sensors``."""
+        n = len(sensors) * MAX_BODIES * SLOT
+        values = context.Array("d", n, lock=False)
+        counts = context.Array("q", len(COUNTERS), lock=False)
+        return cls(tuple(sensors), values, counts, context.Lock())
+
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        rows = np.frombuffer(self.values, dtype=np.float64).reshape(-1, SLOT)
+        return rows, np.frombuffer(self.counts, dtype=np.int64)
+
+    def counters(self) -> dict[str, int]:
+        """Every counter, by name."""
+        counts = self._arrays()[1]
+        with self.lock:
+            values = counts.tolist()
+        return dict(zip(COUNTERS, values, strict=True))
+
+    def take(self) -> list[BodyFrame]:
+        """The frames written since the last call, oldest first (the loop's side)."""
+        rows, _ = self._arrays()
+        with self.lock:
+            new = np.flatnonzero(rows[:, 0] > rows[:, 1])
+            picked = rows[new].copy()
+            rows[new, 1] = rows[new, 0]
+        frames = [
+            BodyFrame(
+                self.sensors[slot // MAX_BODIES],
+                int(slot % MAX_BODIES),
+                float(row[2]),
+                row[3 : 3 + 3 * _J].reshape(_J, 3),
+                row[3 + 3 * _J :].astype(np.int8),
+            )
+            for slot, row in zip(new, picked, strict=True)
+        ]
+        return sorted(frames, key=lambda f: f.t)
+
+
+def serve(
+    address: tuple[str, int],
+    calibration: Calibration,
+    workspace: Workspace,
+    table: SlotTable,
+    status: Connection,
+    stop: Any,
+) -> None:
+    """The receiver process: bind ``address``, tell ``status`` ``("ok", address)`` or
+    ``("error", why)``, then receive until ``stop`` (an Event) is set."""
+    with contextlib.suppress(OSError):  # not allowed here: it runs at the loop's priority
+        os.nice(NICE)
+    family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
+    with socket.socket(family, socket.SOCK_DGRAM) as sock:
+        try:
+            sock.bind(address)
+        except OSError as exc:
+            status.send(("error", exc.strerror or str(exc)))
+            return
+        status.send(("ok", sock.getsockname()[:2]))
+        sock.settimeout(0.05)
+        _receive(sock, calibration, workspace, table, stop)
+
+
+def _receive(
+    sock: socket.socket, calibration: Calibration, workspace: Workspace, table: SlotTable, stop: Any
+) -> None:
+    rows, counts = table._arrays()
+    index = {name: i for i, name in enumerate(table.sensors)}
+    code = {name: i for i, name in enumerate(COUNTERS)}
+    newest = np.full(len(rows), -np.inf)
+    while not stop.is_set():
+        try:
+            data = sock.recv(65536)
+        except TimeoutError:
+            continue
+        except OSError:  # closed under us
+            return
+        try:
+            frame = decode(data, calibration, workspace)
+            slot = index[frame.sensor] * MAX_BODIES + int(frame.body)
+            reason = "out_of_order_or_duplicate" if frame.t <= newest[slot] else None
+        except WireError as exc:
+            reason = f"dropped_{exc.reason}"
+        except Exception:  # a datagram must never end the receiver: dropped, counted
+            reason = "dropped_unreadable"
+        with table.lock:
+            counts[0] += 1
+            if reason is not None:
+                counts[code[reason]] += 1
+                continue
+            row = rows[slot]
+            counts[1] += row[0] > row[1]  # the last one was never taken
+            row[0] += 1.0
+            row[2] = frame.t
+            row[3 : 3 + 3 * _J] = np.ravel(frame.joints)
+            row[3 + 3 * _J :] = frame.state
+        newest[slot] = frame.t
