@@ -54,9 +54,6 @@ def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.nd
     (a degenerate segment is its end point).
     """
     ab, ap = b - a, p - a
-    s = np.clip(
-        np.einsum("...k,...k->...", ap, ab) / np.maximum(np.einsum("...k,...k->...", ab, ab), TINY),
-        0.0,
-        1.0,
-    )
-    return np.linalg.norm(ap - s[..., None] * ab, axis=-1)
+    s = (ap * ab).sum(axis=-1) / np.maximum((ab * ab).sum(axis=-1), TINY)
+    d = ap - np.minimum(np.maximum(s, 0.0), 1.0)[..., None] * ab
+    return np.sqrt((d * d).sum(axis=-1))

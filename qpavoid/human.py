@@ -303,8 +303,8 @@ class KinectHuman:
         if len(self._reach):
             k, j = self._reach.T
             stick_out = point_segment_distance(clean[j], segments[k, 0], segments[k, 1])
-            stick_out = np.nan_to_num(stick_out - self.capsule_radii[k], nan=0.0)
-            np.maximum.at(reach, k, np.maximum(stick_out, 0.0))
+            # fmax: NaN (a joint or a segment not known) sticks out by 0
+            np.maximum.at(reach, k, np.fmax(stick_out - self.capsule_radii[k], 0.0))
         return HumanGeometry(
             points, point_valid, segments, np.asarray(ok.any(axis=1)), margin, reach
         )
