@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .frames import N_KINECT_JOINTS, HumanFrame, JointType, TrackingState
-from .geometry import point_segment_distance
+from .perception_kernels import capsules, warm_up
 
 __all__ = [
     "N_KINECT_JOINTS",
@@ -203,12 +203,15 @@ class KinectHuman:
     _chains: np.ndarray = field(init=False, repr=False)
     _members: np.ndarray = field(init=False, repr=False)
     _reach: np.ndarray = field(init=False, repr=False)
+    _radii: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         members = np.zeros((len(self.parts), N_KINECT_JOINTS), dtype=bool)
         for k, p in enumerate(self.parts):
             members[k, [int(j) for j in (*p.chain, *p.mid, *p.reach)]] = True
         object.__setattr__(self, "_members", members)
+        object.__setattr__(self, "_radii", np.array([p.capsule_radius_m for p in self.parts]))
+        warm_up()
         reach = [(k, int(j)) for k, p in enumerate(self.parts) for j in p.reach]
         object.__setattr__(self, "_reach", np.array(reach, dtype=int).reshape(-1, 2))
         used = {int(j) for p in self.parts for j in (*p.chain, *p.mid)}
@@ -280,31 +283,20 @@ class KinectHuman:
         ``part_margin`` is the largest of its joints'.
         """
         frame = HumanFrame.check(joints, state)
-        usable = frame.usable
-        clean = np.where(usable[:, None], frame.joints, np.nan)
-        mids = 0.5 * (clean[self._mid_ids[:, 0]] + clean[self._mid_ids[:, 1]])
-        points = np.concatenate([clean[self.joint_ids], mids])
-        point_valid = ~np.isnan(points[:, 0])
-        # Capsule of each part: first and last usable joint of its chain (padded by
-        # repeating the last joint, which changes neither).
-        ok = usable[self._chains]  # (K, L)
-        first = ok.argmax(axis=1)
-        last = ok.shape[1] - 1 - ok[:, ::-1].argmax(axis=1)
-        rows = np.arange(len(self.parts))
-        segments = np.stack(
-            [clean[self._chains[rows, first]], clean[self._chains[rows, last]]], axis=1
+        # each part's capsule: the first and last usable joints of its chain; the points;
+        # how far the fingers stick out (perception_kernels.capsules)
+        points, point_valid, segments, segment_valid, reach = capsules(
+            np.ascontiguousarray(frame.joints, dtype=np.float64),
+            np.ascontiguousarray(frame.state, dtype=np.int8),
+            self.joint_ids,
+            self._mid_ids,
+            self._chains,
+            self._reach,
+            self._radii,
         )
         margin = (
             None
             if joint_radius is None
             else np.where(self._members, joint_radius[None, :], 0.0).max(axis=1)
         )
-        reach = np.zeros(len(self.parts))
-        if len(self._reach):
-            k, j = self._reach.T
-            stick_out = point_segment_distance(clean[j], segments[k, 0], segments[k, 1])
-            # fmax: NaN (a joint or a segment not known) sticks out by 0
-            np.maximum.at(reach, k, np.fmax(stick_out - self.capsule_radii[k], 0.0))
-        return HumanGeometry(
-            points, point_valid, segments, np.asarray(ok.any(axis=1)), margin, reach
-        )
+        return HumanGeometry(points, point_valid, segments, segment_valid, margin, reach)

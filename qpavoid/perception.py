@@ -36,6 +36,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .frames import N_KINECT_JOINTS, HumanFrame, JointType, TrackingState
+from .perception_kernels import track, warm_up
 
 J = JointType
 
@@ -161,6 +162,7 @@ class Tracker:
         self.bone = MAX_BONE_M.copy()  # longest bone to the parent: seen, or the bound
         self._last: HumanFrame | None = None
         self._perceived: Perceived | None = None
+        warm_up()
 
     def update(self, frame: HumanFrame, capture_time_s: float) -> Perceived:
         """Take a new frame captured at ``capture_time_s`` (s) and return what to trust."""
@@ -177,59 +179,28 @@ class Tracker:
                 and frame.state.tobytes() == last.state.tobytes()
             )
             identical = self._perceived.identical + 1 if same else 0
-        seen = frame.usable
-        tracked = seen & (frame.state == TRACKED)
-        z = frame.joints
-        # α-β filter on joints seen now and before; a joint seen for the first time starts
-        # at rest where it is.
-        dt = capture_time_s - self.last_seen
-        both = seen & np.isfinite(dt)
-        if both.any():
-            d = dt[both, None]
-            predicted = self.position[both] + self.velocity[both] * d
-            residual = z[both] - predicted
-            self.position[both] = predicted + cfg.velocity_alpha * residual
-            self.velocity[both] = self.velocity[both] + cfg.velocity_beta * residual / d
-        fresh = seen & ~both
-        self.position[fresh], self.velocity[fresh] = z[fresh], 0.0
-        self.velocity[~seen] = 0.0
-        self.last_seen[seen] = capture_time_s
-        self.last_tracked[tracked] = capture_time_s
-        parent_seen = PARENT >= 0
-        pair = seen & parent_seen & seen[np.maximum(PARENT, 0)]
-        step = z[pair] - z[PARENT[pair]]
-        self.bone[pair] = np.maximum(self.bone[pair], np.sqrt((step * step).sum(axis=1)))
-
-        joints = np.where(seen[:, None], z, self.position)
-        radius = np.zeros(N_KINECT_JOINTS)
-        inferred = seen & ~tracked
-        radius[inferred] = cfg.inferred_uncertainty_m + cfg.max_human_speed_mps * np.maximum(
-            capture_time_s - self.last_tracked[inferred], 0.0
+        # the α-β filter, the bones, each joint's uncertainty and the lost joints placed
+        # within reach of their nearest tracked ancestor (perception_kernels.track)
+        joints, state, radius, velocity = track(
+            self.position,
+            self.velocity,
+            self.last_seen,
+            self.last_tracked,
+            self.bone,
+            PARENT,
+            np.ascontiguousarray(frame.joints, dtype=np.float64),
+            np.ascontiguousarray(frame.state, dtype=np.int8),
+            float(capture_time_s),
+            float(cfg.velocity_alpha),
+            float(cfg.velocity_beta),
+            float(cfg.inferred_uncertainty_m),
+            float(cfg.max_human_speed_mps),
         )
-        lost = ~seen & np.isfinite(self.last_seen)
-        radius[lost] = cfg.max_human_speed_mps * (capture_time_s - self.last_seen[lost])
-        never = ~seen & ~np.isfinite(self.last_seen)
-        radius[never] = np.inf
-        # Any joint not tracked now lies within the reach of its nearest tracked ancestor
-        # (the bones between, each at its longest: seen, or the anthropometric bound, so
-        # a foreshortened frame before a loss cannot shrink it): there it is placed when
-        # that is the tighter bound. This also covers joints never seen at all.
-        for j in np.flatnonzero(~tracked & (PARENT >= 0)):
-            reach, a = self.bone[j], PARENT[j]
-            while a >= 0 and not tracked[a]:
-                reach, a = reach + self.bone[a], PARENT[a]
-            if a >= 0 and reach < radius[j]:
-                joints[j], radius[j] = z[a], reach
-        known = np.isfinite(joints.sum(axis=1))
-        placed = ~seen & known
-        radius[~known] = 0.0  # never seen, nothing tracked above it
-        state = frame.state.copy()
-        state[placed] = TrackingState.Inferred
         self._last = frame
         self._perceived = Perceived(
             HumanFrame(joints, state),
             radius,
-            np.where(seen[:, None], self.velocity, 0.0),
+            velocity,
             identical,
             float(capture_time_s),
         )

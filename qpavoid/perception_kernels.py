@@ -1,0 +1,234 @@
+"""Perception's per-joint arithmetic, compiled (numba): the tracker's update and the body's
+capsules, one pass over the 25 joints each.
+
+:mod:`qpavoid.perception` and :mod:`qpavoid.human` say *what* is computed (and hold the
+state); these kernels compute it, instead of some sixty numpy calls on (25, 3) arrays
+whose call overhead outweighed their arithmetic (docs/performance.md measures it). The
+compiled code is cached on disk (``cache=True``) and :func:`warm_up` compiles or loads
+it before the first frame.
+
+Arrays: ``joints`` (25, 3) float64, m; ``state`` (25,) int8 (0 NotTracked, 1 Inferred,
+2 Tracked); ``parent`` (25,) int64, -1 at the root.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+from numba import njit
+
+__all__ = ["capsules", "track", "warm_up"]
+
+TINY = 1e-12  #: a segment shorter than this is its end point, m (as geometry.TINY)
+
+
+@njit(cache=True)
+def track(
+    position: np.ndarray,
+    velocity: np.ndarray,
+    last_seen: np.ndarray,
+    last_tracked: np.ndarray,
+    bone: np.ndarray,
+    parent: np.ndarray,
+    z: np.ndarray,
+    state: np.ndarray,
+    t: float,
+    alpha: float,
+    beta: float,
+    inferred_uncertainty: float,
+    max_speed: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One frame ``z``, ``state`` captured at ``t`` into a tracker's memory, in place.
+
+    The memory (``position``, ``velocity`` (25, 3); ``last_seen``, ``last_tracked``,
+    ``bone`` (25,)) follows :meth:`qpavoid.perception.Tracker.update`:
+
+    * a joint seen (finite, not NotTracked) now and before takes an α-β step,
+      ``p̂ = p + v Δt``, ``r = z − p̂``, ``p = p̂ + α r``, ``v = v + β r / Δt``; seen
+      for the first time, it starts at rest at ``z``; not seen, its velocity is 0;
+    * a bone seen at both ends keeps its longest length;
+    * the uncertainty of a joint: 0 tracked; ``inferred_uncertainty + max_speed ×``
+      (time since last tracked) inferred; ``max_speed ×`` (time since last seen) lost;
+      infinite if never seen;
+    * a joint not tracked lies within the summed bones of its nearest tracked ancestor:
+      placed there when that bound is tighter.
+
+    Returns
+    -------
+    joints, state, radius, velocity
+        The frame to trust (lost joints filled in, flagged Inferred; NaN where nothing
+        is known, radius 0 there), each joint's uncertainty (m) and velocity (m/s, 0
+        where not seen now).
+    """
+    n = z.shape[0]
+    seen = np.empty(n, dtype=np.bool_)
+    tracked = np.empty(n, dtype=np.bool_)
+    for j in range(n):
+        seen[j] = state[j] != 0 and not np.isnan(z[j, 0] + z[j, 1] + z[j, 2])
+        tracked[j] = seen[j] and state[j] == 2
+        if seen[j]:
+            dt = t - last_seen[j]
+            if np.isfinite(dt):
+                for k in range(3):
+                    pred = position[j, k] + velocity[j, k] * dt
+                    r = z[j, k] - pred
+                    position[j, k] = pred + alpha * r
+                    velocity[j, k] = velocity[j, k] + beta * r / dt
+            else:
+                for k in range(3):
+                    position[j, k], velocity[j, k] = z[j, k], 0.0
+            last_seen[j] = t
+            if tracked[j]:
+                last_tracked[j] = t
+        else:
+            for k in range(3):
+                velocity[j, k] = 0.0
+    for j in range(n):
+        a = parent[j]
+        if a >= 0 and seen[j] and seen[a]:
+            dx, dy, dz = z[j, 0] - z[a, 0], z[j, 1] - z[a, 1], z[j, 2] - z[a, 2]
+            bone[j] = max(bone[j], np.sqrt(dx * dx + dy * dy + dz * dz))
+    joints = np.empty((n, 3))
+    radius = np.zeros(n)
+    for j in range(n):
+        if seen[j]:
+            joints[j] = z[j]
+            if not tracked[j]:
+                radius[j] = inferred_uncertainty + max_speed * max(t - last_tracked[j], 0.0)
+        else:
+            joints[j] = position[j]
+            lost = t - last_seen[j]
+            radius[j] = max_speed * lost if np.isfinite(last_seen[j]) else np.inf
+    for j in range(n):
+        if tracked[j] or parent[j] < 0:
+            continue
+        reach, a = bone[j], parent[j]
+        while a >= 0 and not tracked[a]:
+            reach, a = reach + bone[a], parent[a]
+        if a >= 0 and reach < radius[j]:
+            joints[j], radius[j] = z[a], reach
+    out_state = state.copy()
+    out_velocity = np.zeros((n, 3))
+    for j in range(n):
+        known = not np.isnan(joints[j, 0] + joints[j, 1] + joints[j, 2])
+        if not known:
+            radius[j] = 0.0
+        elif not seen[j]:
+            out_state[j] = 1
+        if seen[j]:
+            out_velocity[j] = velocity[j]
+    return joints, out_state, radius, out_velocity
+
+
+@njit(cache=True)
+def capsules(
+    joints: np.ndarray,
+    state: np.ndarray,
+    joint_ids: np.ndarray,
+    mid_ids: np.ndarray,
+    chains: np.ndarray,
+    reach_pairs: np.ndarray,
+    capsule_radii: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The body model's points and capsules at one frame (:meth:`KinectHuman.geometry`).
+
+    Parameters
+    ----------
+    joints, state
+        The frame (module docstring); a joint NaN or NotTracked is not usable.
+    joint_ids, mid_ids
+        Joints that are model points, and the (M, 2) joint pairs whose mid-points are.
+    chains
+        (K, L) each part's joints from one end to the other (padded with its last).
+    reach_pairs
+        (R, 2) (part, joint): joints the part's capsule must reach (fingers).
+    capsule_radii
+        (K,) each part's capsule radius, m.
+
+    Returns
+    -------
+    points, point_valid, segments, segment_valid, reach
+        (P, 3) points (NaN not usable), (K, 2, 3) each capsule's axis between the first
+        and last usable joints of its chain, whether it has one, and (K,) how far each
+        ``reach_pairs`` joint sticks out of its capsule, m (0 if nowhere or not known).
+    """
+    n = joints.shape[0]
+    clean = np.full((n, 3), np.nan)
+    usable = np.zeros(n, dtype=np.bool_)
+    for j in range(n):
+        if state[j] != 0 and not np.isnan(joints[j, 0] + joints[j, 1] + joints[j, 2]):
+            usable[j] = True
+            clean[j] = joints[j]
+    n_points = len(joint_ids) + len(mid_ids)
+    points = np.empty((n_points, 3))
+    for i in range(len(joint_ids)):
+        points[i] = clean[joint_ids[i]]
+    for i in range(len(mid_ids)):
+        points[len(joint_ids) + i] = 0.5 * (clean[mid_ids[i, 0]] + clean[mid_ids[i, 1]])
+    point_valid = np.empty(n_points, dtype=np.bool_)
+    for i in range(n_points):
+        point_valid[i] = not np.isnan(points[i, 0])
+    K, L = chains.shape
+    segments = np.full((K, 2, 3), np.nan)
+    segment_valid = np.zeros(K, dtype=np.bool_)
+    for k in range(K):
+        first, last = -1, -1
+        for i in range(L):
+            if usable[chains[k, i]]:
+                if first < 0:
+                    first = i
+                last = i
+        if first < 0:
+            first = last = 0
+        else:
+            segment_valid[k] = True
+        segments[k, 0] = clean[chains[k, first]]
+        segments[k, 1] = clean[chains[k, last]]
+    reach = np.zeros(K)
+    for r in range(reach_pairs.shape[0]):
+        k, j = reach_pairs[r, 0], reach_pairs[r, 1]
+        a, b, p = segments[k, 0], segments[k, 1], clean[j]
+        ab, ap = b - a, p - a
+        s = (ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / max(
+            ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2], TINY
+        )
+        s = min(max(s, 0.0), 1.0)
+        d = ap - s * ab
+        out = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) - capsule_radii[k]
+        if out > reach[k]:  # NaN compares False: sticks out by 0
+            reach[k] = out
+    return points, point_valid, segments, segment_valid, reach
+
+
+@functools.cache
+def warm_up() -> None:
+    """Compile (or load from the disk cache) every kernel, once per process."""
+    z = np.zeros((25, 3))
+    state = np.full(25, 2, dtype=np.int8)
+    parent = np.full(25, -1, dtype=np.int64)
+    track(
+        z.copy(),
+        z.copy(),
+        np.zeros(25),
+        np.zeros(25),
+        np.zeros(25),
+        parent,
+        z,
+        state,
+        1.0,
+        0.3,
+        0.05,
+        0.05,
+        1.6,
+    )
+    ids = np.arange(3, dtype=np.int64)
+    capsules(
+        z,
+        state,
+        ids,
+        np.zeros((1, 2), dtype=np.int64),
+        np.zeros((1, 2), dtype=np.int64),
+        np.zeros((1, 2), dtype=np.int64),
+        np.ones(1),
+    )

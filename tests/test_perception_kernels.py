@@ -1,0 +1,103 @@
+"""The compiled tracker and capsules against their former numpy code, over random frames."""
+
+import numpy as np
+import pytest
+
+from qpavoid.frames import HumanFrame
+from qpavoid.human import KinectHuman
+from qpavoid.perception import MAX_BONE_M, PARENT, PerceptionConfig, Tracker
+
+
+def numpy_track(mem, z, state, t, cfg):
+    """The tracker's update as plain numpy (the code the kernel replaced, commit 6f201b9)."""
+    pos, vel, last_seen, last_tracked, bone = mem
+    seen = np.isfinite(z).all(axis=1) & (state != 0)
+    tracked = seen & (state == 2)
+    dt = t - last_seen
+    both = seen & np.isfinite(dt)
+    d = dt[both, None]
+    pred = pos[both] + vel[both] * d
+    r = z[both] - pred
+    pos[both] = pred + cfg.velocity_alpha * r
+    vel[both] = vel[both] + cfg.velocity_beta * r / d
+    fresh = seen & ~both
+    pos[fresh], vel[fresh] = z[fresh], 0.0
+    vel[~seen] = 0.0
+    last_seen[seen] = t
+    last_tracked[tracked] = t
+    pair = seen & (PARENT >= 0) & seen[np.maximum(PARENT, 0)]
+    bone[pair] = np.maximum(bone[pair], np.linalg.norm(z[pair] - z[PARENT[pair]], axis=1))
+    joints = np.where(seen[:, None], z, pos)
+    radius = np.zeros(25)
+    inferred = seen & ~tracked
+    radius[inferred] = cfg.inferred_uncertainty_m + cfg.max_human_speed_mps * np.maximum(
+        t - last_tracked[inferred], 0.0
+    )
+    lost = ~seen & np.isfinite(last_seen)
+    radius[lost] = cfg.max_human_speed_mps * (t - last_seen[lost])
+    radius[~seen & ~np.isfinite(last_seen)] = np.inf
+    for j in np.flatnonzero(~tracked & (PARENT >= 0)):
+        reach, a = bone[j], PARENT[j]
+        while a >= 0 and not tracked[a]:
+            reach, a = reach + bone[a], PARENT[a]
+        if a >= 0 and reach < radius[j]:
+            joints[j], radius[j] = z[a], reach
+    known = np.isfinite(joints).all(axis=1)
+    out_state = state.copy()
+    out_state[~seen & known] = 1
+    radius[~known] = 0.0
+    return joints, out_state, radius, np.where(seen[:, None], vel, 0.0)
+
+
+def random_frames(rng, n):
+    base = rng.normal(0.0, 0.3, (25, 3)) + np.array([0.6, -0.6, 0.3])
+    for _ in range(n):
+        z = base + rng.normal(0.0, 0.02, (25, 3))
+        state = rng.choice(np.array([0, 1, 2], dtype=np.int8), 25, p=[0.15, 0.15, 0.7])
+        z[rng.uniform(size=25) < 0.1] = np.nan
+        yield z, state
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_tracker_is_its_numpy_code(seed):
+    rng = np.random.default_rng(seed)
+    cfg = PerceptionConfig()
+    tracker = Tracker(cfg)
+    mem = [
+        np.full((25, 3), np.nan),
+        np.zeros((25, 3)),
+        np.full(25, -np.inf),
+        np.full(25, -np.inf),
+        MAX_BONE_M.copy(),
+    ]
+    for k, (z, state) in enumerate(random_frames(rng, 60)):
+        t = k / 30 + (0.5 if k > 40 else 0.0)  # and a gap
+        p = tracker.update(HumanFrame(z, state), t)
+        want = numpy_track(mem, z, state, t, cfg)
+        np.testing.assert_allclose(p.frame.joints, want[0], atol=1e-12)
+        np.testing.assert_array_equal(p.frame.state, want[1])
+        np.testing.assert_allclose(p.joint_radius, want[2], atol=1e-12)
+        np.testing.assert_allclose(p.joint_velocity, want[3], atol=1e-9)
+    np.testing.assert_allclose(tracker.bone, mem[4], atol=1e-12)
+
+
+def test_capsules_are_first_and_last_usable_joints_and_fingers_stick_out():
+    rng = np.random.default_rng(7)
+    human = KinectHuman()
+    for z, state in random_frames(rng, 50):
+        geo = human.geometry(z, state)
+        usable = np.isfinite(z).all(axis=1) & (state != 0)
+        for k, part in enumerate(human.parts):
+            chain = [int(j) for j in part.chain if usable[int(j)]]
+            assert geo.segment_valid[k] == bool(chain)
+            if chain:
+                np.testing.assert_array_equal(geo.segments[k], z[[chain[0], chain[-1]]])
+                a, b = geo.segments[k]
+                out = 0.0
+                for j in (int(j) for j in part.reach if usable[int(j)]):
+                    s = np.clip(np.dot(z[j] - a, b - a) / max(np.dot(b - a, b - a), 1e-12), 0, 1)
+                    gap = np.linalg.norm(z[j] - (a + s * (b - a))) - part.capsule_radius_m
+                    out = max(out, gap)
+                assert geo.reach_margin[k] == pytest.approx(out, abs=1e-12)
+        for i, j in enumerate(human.joint_ids):
+            assert geo.point_valid[i] == usable[j]
