@@ -75,11 +75,18 @@ class PersonTrack:
     seen_s: float = -np.inf
 
     def update(
-        self, joints: np.ndarray, state: np.ndarray, t: float, alpha: float, beta: float
+        self,
+        joints: np.ndarray,
+        state: np.ndarray,
+        t: float,
+        alpha: float,
+        beta: float,
+        max_gap_s: float,
     ) -> None:
         """Take the fused ``joints`` (25, 3) (NaN where none) and ``state`` at ``t``: one
-        α-β step of the joints and velocities, and the bone lengths learnt from Tracked
-        joints (:func:`~qpavoid.fusion_kernels.update_track`)."""
+        α-β step of the joints and velocities (a joint unseen for over ``max_gap_s``
+        restarts where it is, at rest), and the bone lengths learnt from Tracked joints
+        (:func:`~qpavoid.fusion_kernels.update_track`)."""
         update_track(
             self.joints,
             self.velocity,
@@ -88,9 +95,10 @@ class PersonTrack:
             PARENT,
             joints,
             state,
-            t,
-            alpha,
-            beta,
+            float(t),
+            float(alpha),
+            float(beta),
+            float(max_gap_s),
         )
         self.seen_s = t
 

@@ -92,7 +92,7 @@ class Calibration:
             return self.sensors[name]
         except KeyError:
             raise CalibrationError(
-                f"{self._where()}has no sensor {name!r} (sensors: "
+                f"{self._where()}has no sensor {str(name)!r} (sensors: "
                 f"{', '.join(sorted(self.sensors)) or 'none'})",
                 path=self.path,
                 sensor=name,

@@ -277,7 +277,7 @@ class Fuser:
         joints, state = merge(
             P, S, W, np.isin(np.arange(N_KINECT_JOINTS), [o.joint for o in outliers])
         )
-        track.update(joints, state, t, cfg.velocity_alpha, cfg.velocity_beta)
+        track.update(joints, state, t, cfg.velocity_alpha, cfg.velocity_beta, cfg.max_age_s)
         seen = state != NOT_TRACKED
         got = {c.sensor for c in contributions}
         return FusedPerson(

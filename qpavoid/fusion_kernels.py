@@ -133,15 +133,19 @@ def update_track(
     t: float,
     alpha: float,
     beta: float,
+    max_gap_s: float,
 ) -> None:
     """One α-β step of a person's filtered joints, in place, and their bone lengths.
 
-    A joint fused now (finite in ``joints``) and seen before at ``last_seen < t``:
+    A joint fused now (finite in ``joints``) and seen before at ``last_seen < t``, at most
+    ``max_gap_s`` before:
 
     .. math:: \\hat p = p + v\\,\\Delta t,\\quad r = z - \\hat p,\\quad
               p \\leftarrow \\hat p + \\alpha r,\\quad v \\leftarrow v + \\beta r / \\Delta t
 
-    A joint fused for the first time takes ``z`` with zero velocity. A bone whose two ends
+    A joint fused for the first time, or after a longer gap (its velocity then is no
+    guide: the person may have stopped, turned, or be another), takes ``z`` with zero
+    velocity. A bone whose two ends
     are Tracked (``state`` 2) moves its length 10 % towards the measured one (its first
     measure taken as is).
     """
@@ -149,7 +153,7 @@ def update_track(
         if np.isnan(joints[j, 0]):
             continue
         dt = t - last_seen[j]
-        if np.isinf(dt):
+        if dt > max_gap_s:  # never seen (inf), or not for too long
             for k in range(3):
                 positions[j, k], velocity[j, k] = joints[j, k], 0.0
         elif dt > 0.0:
@@ -190,4 +194,5 @@ def warm_up() -> None:
         1.0,
         0.3,
         0.05,
+        0.1,
     )

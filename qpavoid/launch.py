@@ -19,11 +19,15 @@ def _interrupted_while_loading(signum: int, frame: FrameType | None) -> None:
     raise SystemExit(130)
 
 
-# Process-wide, but only for the entry point's own loading: restored right below.
-_previous = signal.signal(signal.SIGINT, _interrupted_while_loading)
+# Process-wide, but only for the entry point's own loading: restored right below. A
+# program started with Ctrl-C ignored (a background job of a script, nohup) keeps it so.
+_previous = signal.getsignal(signal.SIGINT)
+if _previous is not signal.SIG_IGN:
+    signal.signal(signal.SIGINT, _interrupted_while_loading)
 from .cli import main as _main  # noqa: E402  (after the handler, on purpose)
 
-signal.signal(signal.SIGINT, _previous)
+if _previous is not signal.SIG_IGN:
+    signal.signal(signal.SIGINT, _previous)
 
 
 def main() -> int:

@@ -19,6 +19,8 @@ would: the whole path runs on one machine over loopback.
 from __future__ import annotations
 
 import multiprocessing
+import os
+import signal
 import socket
 import time
 from collections import Counter
@@ -53,8 +55,9 @@ def parse_address(text: str, name: str = "--listen") -> tuple[str, int]:
 class Listener:
     """UDP datagrams in, checked :class:`BodyFrame` s out (module docstring).
 
-    The receiving runs in a process of its own (:mod:`qpavoid.receiver`), started here
-    and stopped by :meth:`close` (or the ``with`` block's end).
+    The receiving runs in a process of its own (:mod:`qpavoid.receiver`, spawned: a
+    script that makes a listener needs the ``if __name__ == "__main__":`` guard), started
+    here and stopped by :meth:`close` (or the ``with`` block's end).
 
     Parameters
     ----------
@@ -64,6 +67,9 @@ class Listener:
         The sensors; a datagram from another is dropped (``unknown_sensor``).
     workspace
         Where a joint may be in the base frame; a datagram with a joint outside is dropped.
+    max_age_s
+        A frame captured more than this before or after now is dropped on arrival, s
+        (the fusion's own limit, :class:`~qpavoid.fusion.FusionConfig`).
     start_timeout_s
         Longest wait for the receiver process to start and bind, s (it imports numpy and
         scipy: about 0.5 s; 30 leaves room on a loaded machine).
@@ -79,6 +85,7 @@ class Listener:
         address: tuple[str, int],
         calibration: Calibration,
         workspace: Workspace | None = None,
+        max_age_s: float = FusionConfig.max_age_s,
         start_timeout_s: float = 30.0,
     ):
         self.calibration = calibration
@@ -89,17 +96,39 @@ class Listener:
         status, child_status = context.Pipe(duplex=False)
         self._process = context.Process(
             target=serve,
-            args=(address, calibration, self.workspace, self._table, child_status, self._stop),
+            args=(
+                address,
+                calibration,
+                self.workspace,
+                self._table,
+                child_status,
+                self._stop,
+                max_age_s,
+                os.getpid(),
+            ),
             name="qpavoid-udp",
             daemon=True,
         )
-        self._process.start()
+        # The receiver starts with Ctrl-C blocked (a terminal's Ctrl-C reaches the whole
+        # process group; it is ours to handle, and we stop the receiver).
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            self._process.start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         child_status.close()
-        if status.poll(start_timeout_s):
-            outcome, value = status.recv()
-        else:
-            outcome, value = "error", f"the receiver did not start in {start_timeout_s} s"
-        status.close()
+        try:
+            if status.poll(start_timeout_s):
+                outcome, value = status.recv()
+            else:
+                outcome, value = "error", f"the receiver did not start in {start_timeout_s} s"
+        except EOFError:
+            outcome, value = "error", "the receiver ended before it started"
+        except BaseException:  # Ctrl-C while it starts: not left behind
+            self.close()
+            raise
+        finally:
+            status.close()
         if outcome != "ok":
             self.close()
             raise InputError(

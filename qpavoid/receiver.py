@@ -5,19 +5,25 @@ A flood of datagrams must not delay the control loop. In a thread, receiving and
 checking them competes with the loop for Python's interpreter lock (measured in
 docs/sensors.md: 73 overruns in 6 s under a flood of valid datagrams). So :func:`serve`
 runs in a child process (``multiprocessing``, spawn), at a lower priority than the loop
-(``nice`` +10), and does all the work per datagram: receive, check (:func:`~qpavoid.wire.decode`,
-drops counted by reason), and keep each body's newest frame in a :class:`SlotTable`, one
-fixed slot per (sensor, body). A frame not newer than its body's last is dropped
-(``out_of_order_or_duplicate``); a frame replaced before the loop took it is counted
-``superseded``. The loop's side (:meth:`SlotTable.take`) costs the same whatever arrives:
-one lock, one copy of at most sensors × 6 slots.
+(``nice`` +10), and does all the work per datagram: receive, check
+(:func:`~qpavoid.wire.decode`, drops counted by reason), and keep each body's newest frame
+in a :class:`SlotTable`, one fixed slot per (sensor, body).
+
+A frame captured more than the fusion's ``max_age_s`` before or after now is dropped
+(``late``, ``from_the_future``: a clock ahead of ours must not poison the order), one
+not newer than its body's last too (``out_of_order_or_duplicate``); the others are
+``accepted``, and one replaced before the loop took it is counted ``superseded``:
+``received`` is ``accepted`` plus every drop. The loop's side (:meth:`SlotTable.take`)
+costs the same whatever arrives: one lock, one copy of at most sensors × 6 slots.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import socket
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -36,7 +42,10 @@ __all__ = ["COUNTERS", "SlotTable", "serve"]
 #: What the receiver counts, in this order in shared memory.
 COUNTERS = (
     "received",
+    "accepted",
     "superseded",
+    "late",
+    "from_the_future",
     "out_of_order_or_duplicate",
     *(f"dropped_{reason}" for reason in REASONS),
     "dropped_unreadable",
@@ -111,9 +120,19 @@ def serve(
     table: SlotTable,
     status: Connection,
     stop: Any,
+    max_age_s: float,
+    parent_pid: int,
 ) -> None:
     """The receiver process: bind ``address``, tell ``status`` ``("ok", address)`` or
-    ``("error", why)``, then receive until ``stop`` (an Event) is set."""
+    ``("error", why)``, then receive until ``stop`` (an Event) is set or the parent
+    process ``parent_pid`` is gone (killed: the port must not stay taken).
+
+    Ctrl-C is the parent's to handle (it stops this process): ignored here. A frame
+    captured more than ``max_age_s`` before now (``late``) or after now (``from_the_future``,
+    a clock ahead of ours) is dropped before it can count as its body's newest.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked by the parent
     with contextlib.suppress(OSError):  # not allowed here: it runs at the loop's priority
         os.nice(NICE)
     family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
@@ -125,17 +144,23 @@ def serve(
             return
         status.send(("ok", sock.getsockname()[:2]))
         sock.settimeout(0.05)
-        _receive(sock, calibration, workspace, table, stop)
+        _receive(sock, calibration, workspace, table, stop, max_age_s, parent_pid)
 
 
 def _receive(
-    sock: socket.socket, calibration: Calibration, workspace: Workspace, table: SlotTable, stop: Any
+    sock: socket.socket,
+    calibration: Calibration,
+    workspace: Workspace,
+    table: SlotTable,
+    stop: Any,
+    max_age_s: float,
+    parent_pid: int,
 ) -> None:
     rows, counts = table._arrays()
     index = {name: i for i, name in enumerate(table.sensors)}
     code = {name: i for i, name in enumerate(COUNTERS)}
     newest = np.full(len(rows), -np.inf)
-    while not stop.is_set():
+    while not stop.is_set() and os.getppid() == parent_pid:
         try:
             data = sock.recv(65536)
         except TimeoutError:
@@ -145,7 +170,16 @@ def _receive(
         try:
             frame = decode(data, calibration, workspace)
             slot = index[frame.sensor] * MAX_BODIES + int(frame.body)
-            reason = "out_of_order_or_duplicate" if frame.t <= newest[slot] else None
+            age = time.time() - (frame.t + calibration[frame.sensor].time_offset_s)
+            reason = (
+                "late"
+                if age > max_age_s
+                else "from_the_future"
+                if age < -max_age_s
+                else "out_of_order_or_duplicate"
+                if frame.t <= newest[slot]
+                else None
+            )
         except WireError as exc:
             reason = f"dropped_{exc.reason}"
         except Exception:  # a datagram must never end the receiver: dropped, counted
@@ -156,7 +190,8 @@ def _receive(
                 counts[code[reason]] += 1
                 continue
             row = rows[slot]
-            counts[1] += row[0] > row[1]  # the last one was never taken
+            counts[code["accepted"]] += 1
+            counts[code["superseded"]] += row[0] > row[1]  # the last one was never taken
             row[0] += 1.0
             row[2] = frame.t
             row[3 : 3 + 3 * _J] = np.ravel(frame.joints)

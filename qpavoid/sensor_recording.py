@@ -118,7 +118,8 @@ class SensorRecording:
         if np.any(wrong):
             bad = int(np.flatnonzero(wrong)[0])
             raise InputError(
-                f"body[{bad}] is {body[bad]!r}; a Kinect v2 body id is 0 to {MAX_BODIES - 1}",
+                f"body[{bad}] is {body[bad].item()!r}; a Kinect v2 body id is 0 to "
+                f"{MAX_BODIES - 1}",
                 name="body",
                 value=body,
             )

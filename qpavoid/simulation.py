@@ -30,8 +30,6 @@ correct controller keeps at 0).
 from __future__ import annotations
 
 import math
-import signal
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -45,6 +43,7 @@ from .controller import Controller
 from .distances import distance_method
 from .errors import InputError
 from .frames import N_KINECT_JOINTS, HumanFrame, HumanMotion
+from .interruption import Interruption
 from .metrics import end_of_run, run_metrics, truth_metrics
 from .people import People, closest_of
 from .sensor import Sensor, SensorConfig
@@ -147,7 +146,9 @@ def simulate(
         ``dq_command`` (T, nv) the controller's command (``dq`` is what the arm did),
         ``frame_age_s`` (T,) the age of the frame the controller was given (now minus its
         capture time), ``true_distance`` (T, 3) exact capsule distance per set to where the
-        person really is (NaN without ``measure_truth``).
+        person really is (NaN without ``measure_truth``), ``robot_point`` and
+        ``human_point`` (T, 3, 3) the witness points of each set's closest pair (NaN if no
+        part is seen), ``stop_reason`` (T,) str why the robot stops ("" while it moves).
     """
     cfg = config or SimConfig()
     robot, path = controller.robot, controller.path
@@ -194,12 +195,15 @@ def simulate(
         "tick_us": np.empty(n_max),
         "frame_age_s": np.empty(n_max),
         "true_distance": np.full((n_max, 3), np.nan),
+        "robot_point": np.empty((n_max, 3, 3)),
+        "human_point": np.empty((n_max, 3, 3)),
     }
+    reasons: list[str] = []
     stop_events = []
     vel_violations = pos_violations = 0
     tau, was_stopped, last_progress = 0.0, False, -1.0
     reached, overruns, n = False, 0, 0
-    interrupt = _Interrupt(realtime)
+    interrupt = Interruption(realtime)
     wall0 = time.perf_counter()
     try:
         for k in range(n_max):
@@ -246,6 +250,11 @@ def simulate(
             log["v_rep_L2"][k], log["v_rep_EE"][k] = cmd.v_rep_L2, cmd.v_rep_EE
             log["ee_pos"][k], log["ee_ref"][k] = cmd.ee_pos, cmd.ee_ref
             log["tau"][k], log["tick_us"][k], log["frame_age_s"][k] = tau, tick_us, t - captured_s
+            closest = np.argmin(cmd.table.distance, axis=1)  # each set's closest pair
+            sets = np.arange(len(closest))
+            log["robot_point"][k] = cmd.table.robot_point[sets, closest]
+            log["human_point"][k] = cmd.table.human_point[sets, closest]
+            reasons.append(cmd.reason if cmd.stopped else "")
             n = k + 1
 
             if tau >= path.duration_s and not cmd.stopped:
@@ -261,6 +270,7 @@ def simulate(
     finally:
         interrupt.restore()
     log = {key: v[:n] for key, v in log.items()}
+    log["stop_reason"] = np.array(reasons[:n], dtype=str)
     avoidance = controller.config.avoidance
     ending = end_of_run(reached, cmd, robot, avoidance, log, goal)
     if interrupt.requested:
@@ -284,25 +294,6 @@ def simulate(
         )
         | ending,
     )
-
-
-class _Interrupt:
-    """Ctrl-C during a real-time run: noted, so that the loop ends at the next tick and the
-    run is written as usual (the handler is ours only in the main thread, then restored)."""
-
-    def __init__(self, active: bool):
-        self.requested = False
-        self._previous = None
-        if active and threading.current_thread() is threading.main_thread():
-            self._previous = signal.signal(signal.SIGINT, self._note)
-
-    def _note(self, signum: int, frame: object) -> None:
-        self.requested = True
-
-    def restore(self) -> None:
-        if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
-            self._previous = None
 
 
 def _rot_err(A: np.ndarray, B: np.ndarray) -> float:

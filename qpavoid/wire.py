@@ -113,7 +113,11 @@ def decode(data: bytes, calibration: Calibration, workspace: Workspace | None = 
         raise WireError(f"not JSON: {exc}", reason="bad_json") from None
     if not isinstance(msg, dict):
         raise WireError("not a JSON object", reason="bad_json")
-    if msg.get("v") != VERSION or isinstance(msg.get("v"), bool):
+    if (
+        msg.get("v") != VERSION
+        or not isinstance(msg.get("v"), int)
+        or isinstance(msg.get("v"), bool)
+    ):
         raise WireError(f"version {msg.get('v')!r}, expected {VERSION}", reason="bad_version")
     sensor, body, t, rows = (msg.get(k) for k in ("sensor", "body", "t", "joints"))
     if not isinstance(sensor, str) or not sensor:

@@ -104,6 +104,22 @@ def test_old_frames_are_not_used_and_a_lost_person_is_reported_missing_then_drop
     assert fuser.fuse(1.2).people == ()
 
 
+def test_a_person_seen_again_after_a_gap_is_not_extrapolated_across_it():
+    """Moving at 1 m/s, unseen for 0.5 s, seen again standing: the fused skeleton is
+    where the sensor sees them (the filter restarts), not where the old speed leads."""
+    cal = calibration("a")
+    rest = Operator().rest()
+    fuser = Fuser(cal)  # smoothed: the filtered joints are reported
+    for k in range(30):
+        t = k / 30
+        fuser.add(body(cal, "a", t, rest + np.array([t, 0.0, 0.0])))
+        fuser.fuse(t)
+    seen = rest + np.array([1.2, 0.0, 0.0])  # where they stopped, 0.5 s later
+    fuser.add(body(cal, "a", 29 / 30 + 0.5, seen))
+    person = fuser.fuse(29 / 30 + 0.5).people[0]
+    np.testing.assert_allclose(person.frame.joints, seen, atol=1e-9)
+
+
 def test_a_joint_no_sensor_sees_stays_missing_and_one_sensor_halves_confidence():
     cal = calibration("a", "b")
     rest = Operator().rest()

@@ -57,12 +57,16 @@ def test_update_track_filters_and_learns_bones_by_hand():
     last_seen, bone = np.full(25, -np.inf), np.zeros(25)
     z = np.arange(75.0).reshape(25, 3) * 0.01
     state = np.full(25, 2, dtype=np.int8)
-    update_track(positions, velocity, last_seen, bone, PARENT, z, state, 1.0, 0.3, 0.05)
+    update_track(positions, velocity, last_seen, bone, PARENT, z, state, 1.0, 0.3, 0.05, 0.6)
     np.testing.assert_array_equal(positions, z)  # first sight: taken as is, at rest
     assert not velocity.any() and (last_seen == 1.0).all()
     child = np.flatnonzero(PARENT >= 0)
     np.testing.assert_allclose(bone[child], np.linalg.norm(z[child] - z[PARENT[child]], axis=1))
     z2 = z + 0.1
-    update_track(positions, velocity, last_seen, bone, PARENT, z2, state, 1.5, 0.3, 0.05)
+    update_track(positions, velocity, last_seen, bone, PARENT, z2, state, 1.5, 0.3, 0.05, 0.6)
     np.testing.assert_allclose(positions, z + 0.3 * 0.1)  # α r, r = 0.1
     np.testing.assert_allclose(velocity, np.full((25, 3), 0.05 * 0.1 / 0.5))  # β r / Δt
+    z3 = z + 1.0  # after a gap over max_gap_s: no extrapolation across it
+    update_track(positions, velocity, last_seen, bone, PARENT, z3, state, 2.5, 0.3, 0.05, 0.6)
+    np.testing.assert_array_equal(positions, z3)
+    assert not velocity.any()

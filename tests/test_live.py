@@ -94,13 +94,17 @@ def test_addresses():
 
 
 def test_a_flood_keeps_each_bodys_newest_frame_and_counts_the_rest():
+    def stamp(k: int) -> float:  # frame k's capture time: 0.1 ms apart, now
+        return start + 1e-4 * k
+
     with Listener(("127.0.0.1", 0), CAL) as listener:
+        start = time.time()
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
             for k in range(400):
-                sock.sendto(encode(frame(t=float(k))._replace(body=k % 2)), listener.address)
+                sock.sendto(encode(frame(t=stamp(k))._replace(body=k % 2)), listener.address)
                 if k % 50 == 0:
                     sock.sendto(b"junk", listener.address)
-            sock.sendto(encode(frame(t=3.0)), listener.address)  # far older than its body's last
+            sock.sendto(encode(frame(t=stamp(3))), listener.address)  # older than body 1's last
         deadline, last = time.time() + 5.0, -1
         while last < listener.counters["received"] < 409 and time.time() < deadline:
             last = listener.counters["received"]  # until all came, or no more comes
@@ -110,14 +114,18 @@ def test_a_flood_keeps_each_bodys_newest_frame_and_counts_the_rest():
     counts = listener.counters
     received = counts["received"]
     assert 16 < received <= 409  # the kernel may shed some too; we count what came
+    index = [round((f.t - start) / 1e-4) for f in frames]
     assert sorted(f.body for f in frames) == [0, 1]  # one frame per body ...
-    assert all(f.t % 2 == f.body for f in frames) and frames[0].t < frames[1].t  # ... in order
+    assert all(k % 2 == f.body for k, f in zip(index, frames, strict=True))
+    assert frames[0].t < frames[1].t  # ... in order
     assert all(g.t > f.t for g in again for f in frames if f.body == g.body)  # taken once
     assert counts["dropped_bad_json"] >= 1  # the junk, checked on the receiver's side
-    valid = received - counts["dropped_bad_json"] - counts["out_of_order_or_duplicate"]
-    assert counts["superseded"] == valid - 2  # every valid frame but the two taken
+    drops = sum(v for k, v in counts.items() if k.startswith("dropped_"))
+    drops += counts["out_of_order_or_duplicate"] + counts["late"] + counts["from_the_future"]
+    assert received == counts["accepted"] + drops  # every datagram accounted for
+    assert counts["superseded"] == counts["accepted"] - 2  # all but the two taken
     if received == 409:  # nothing shed by the kernel: exactly the newest of each body
-        assert [f.t for f in frames] == [398.0, 399.0]
+        assert index == [398, 399]
         assert counts["dropped_bad_json"] == 8 and counts["out_of_order_or_duplicate"] == 1
 
 
@@ -191,7 +199,28 @@ def test_loopback_replay_with_faults_never_moves_on_stale_or_invalid_data(robot)
     assert report["out_of_order_or_duplicate"] >= 4 and report["late"] >= 2, report
 
 
-def test_the_command_line_listens_and_ctrl_c_writes_the_run(tmp_path):
+def test_a_frame_from_the_future_cannot_hide_the_real_ones():
+    """An adversarial tester's case: a datagram stamped 10⁶ s ahead was dropped, but only
+    after it became its body's newest, so every real frame after it was dropped too."""
+    with Listener(("127.0.0.1", 0), CAL) as listener:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            sock.sendto(encode(frame(t=time.time() + 1e6)), listener.address)
+            sock.sendto(encode(frame(t=time.time() - 10.0)), listener.address)
+            time.sleep(0.2)
+            now = time.time()
+            sock.sendto(encode(frame(t=now)), listener.address)
+        deadline = time.time() + 5.0
+        while listener.counters["received"] < 3 and time.time() < deadline:
+            time.sleep(0.02)
+        frames = listener.drain()
+    counts = listener.counters
+    assert [f.t for f in frames] == [now]
+    assert counts["from_the_future"] == 1 and counts["late"] == 1
+    assert counts["received"] == counts["accepted"] + 2 == 3
+
+
+def listening(tmp_path: Path) -> tuple[subprocess.Popen, int, Path]:
+    """``qpavoid run --listen`` on a free port, started; its process, port and output."""
     calib = tmp_path / "calib.toml"
     T = CAL["a"].base_from_camera
     rows = ", ".join("[" + ", ".join(repr(float(v)) for v in row) + "]" for row in T)
@@ -203,13 +232,45 @@ def test_the_command_line_listens_and_ctrl_c_writes_the_run(tmp_path):
     cmd = [sys.executable, "-m", "qpavoid", "run", "--listen", f"127.0.0.1:{port}"]
     cmd += ["--sensors", str(calib), "--out", str(out), "--rate", "100", "--no-plots", "-q"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return proc, port, out
+
+
+def port_is_free(port: int, within_s: float) -> bool:
+    """True once ``port`` can be bound again, trying for ``within_s``."""
+    deadline = time.time() + within_s
+    while True:
+        try:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                s.bind(("127.0.0.1", port))
+            return True
+        except OSError:
+            if time.time() > deadline:
+                return False
+            time.sleep(0.1)
+
+
+@pytest.mark.slow
+def test_a_killed_run_leaves_no_receiver_holding_its_port(tmp_path):
+    proc, port, _ = listening(tmp_path)
+    time.sleep(3.0)
+    assert not port_is_free(port, 0.0)  # the receiver has it
+    proc.kill()
+    proc.communicate(timeout=30)
+    assert port_is_free(port, 3.0)  # the orphaned receiver saw its parent go, and left
+
+
+@pytest.mark.parametrize(
+    "signum", [signal.SIGINT, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)]
+)
+def test_the_command_line_listens_and_ctrl_c_or_sigterm_writes_the_run(tmp_path, signum):
+    proc, port, out = listening(tmp_path)
     time.sleep(2.5)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         for _k in range(15):
             sock.sendto(encode(frame(t=time.time())._replace(body=0)), ("127.0.0.1", port))
             sock.sendto(b"junk", ("127.0.0.1", port))
             time.sleep(1 / 30)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(signum)
     stdout, stderr = proc.communicate(timeout=30)
     assert proc.returncode == 0, stderr
     assert "Traceback" not in stderr
@@ -217,6 +278,7 @@ def test_the_command_line_listens_and_ctrl_c_writes_the_run(tmp_path):
     assert metrics["end_reason"] == "interrupted"
     assert metrics["input"]["dropped_bad_json"] == 15
     assert Path(out / "log.npz").exists() and "wrote metrics.json" in stdout
+    assert port_is_free(port, 3.0)
 
 
 def test_per_sensor_files_replay_from_the_command_line(tmp_path, robot):
