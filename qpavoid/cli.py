@@ -29,6 +29,7 @@ from .cli_args import HelpFormatter, Parser, count, package_version, positive_fl
 from .cli_bench import add_bench_command
 from .cli_campaign import add_campaign_command
 from .cli_sensors import add_sensor_commands
+from .cli_view import add_view_command
 from .compare import compare
 from .errors import QpavoidError
 from .io import check_output_dir
@@ -152,6 +153,7 @@ def build_parser() -> Parser:
     add_sensor_commands(sub)
     add_campaign_command(sub)
     add_bench_command(sub)
+    add_view_command(sub)
     return parser
 
 
@@ -178,6 +180,9 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         help="the goal counts as reached within this end-effector error, m",
     )
     p.add_argument("--no-plots", action="store_true", help="do not write the figures")
+    p.add_argument(
+        "--no-view", action="store_true", help="do not write the browser replay (replay.html)"
+    )
     p.add_argument(
         "--robot",
         default="iiwa14",
@@ -221,12 +226,16 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
         def advance(t: float) -> None:
             bar.update(t - bar.n)
 
-        m = run_one(spec, out, plots=not args.no_plots, progress=advance)
+        m = run_one(spec, out, plots=not args.no_plots, progress=advance, view=not args.no_view)
     lines = [describe(m)]
-    if m.get("plots_skipped"):
-        lines.append(f"  figures skipped: {m['plots_skipped']}")
-    figures = f" and {len(m['plots'])} figures" if m["plots"] else ""
-    lines.append(f"wrote metrics.json, log.npz{figures} to {out}/")
+    for what in ("plots", "view"):
+        if m.get(f"{what}_skipped"):
+            lines.append(
+                f"  {'figures' if what == 'plots' else 'replay'} skipped: {m[f'{what}_skipped']}"
+            )
+    written = ["metrics.json", "log.npz"] + [f"{len(m['plots'])} figures"] * bool(m["plots"])
+    written += ["replay.html (open it in a browser)"] * bool(m.get("view"))
+    lines.append(f"wrote {', '.join(written[:-1])} and {written[-1]} to {out}/")
     return "\n".join(lines)
 
 
@@ -243,8 +252,9 @@ def _compare(args: argparse.Namespace) -> str:
         args.robot,
         workers=args.workers,
         progress=not args.quiet,
+        view=not args.no_view,
     )
-    return f"{table}\nwrote compare.json, compare.md and the plots to {args.out}/"
+    return f"{table}\nwrote compare.json, compare.md, the plots and replays to {args.out}/"
 
 
 def main(argv: Sequence[str] | None = None) -> int:

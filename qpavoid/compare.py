@@ -17,12 +17,14 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from . import plots as plotting
+from . import view_html
 from .errors import InputError
 from .io import check_output_dir, staged_output
 from .jobs import map_jobs
@@ -30,12 +32,14 @@ from .recording import load_recording
 from .robot import load_robot
 from .run_spec import CONTROLLERS, DISTANCES
 from .runs import RunSpec, simulate_one
+from .view_data import replay_data
 
 Series = dict[str, np.ndarray]
 
 
-def run_case(spec: RunSpec) -> tuple[RunSpec, dict, Series]:
-    """Simulate one case; return its metrics and the time series the plots need."""
+def run_case(spec: RunSpec, view: bool = False) -> tuple[RunSpec, dict, Series, dict | None]:
+    """Simulate one case; return its metrics, the time series the plots need and (with
+    ``view``, for a named input) its replay's data."""
     run = simulate_one(spec)
     log = run.sim.log
     series = {
@@ -43,7 +47,9 @@ def run_case(spec: RunSpec) -> tuple[RunSpec, dict, Series]:
         "min_distance": log["distance"].min(axis=1)[::10],
         "path_error": np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)[::10],
     }
-    return spec, run.metrics, series
+    named = not spec.label.startswith("random:")
+    data = replay_data(log, run.metrics, run.robot) if view and named else None
+    return spec, run.metrics, series, data
 
 
 def _row(label: str, ctrl: str, dist: str, m: dict[str, Any]) -> str:
@@ -148,20 +154,33 @@ def compare(
     robot: str = "iiwa14",
     workers: int | None = None,
     progress: bool = False,
+    view: bool = True,
 ) -> str:
     """Run the comparison, write its files into ``out``; return the markdown table.
+
+    With ``view`` (and meshcat installed), each named input's four runs also get a browser
+    replay, ``replay_<input>_<controller>_<distance>.html``.
 
     Every case is checked before the first run starts (:func:`compare_specs`); the files
     appear in ``out`` only when all of them are written.
     """
     check_output_dir(out)
     specs = compare_specs(scenarios, human_files, n_random, seed, max_time_s, rate_hz, robot)
-    done = map_jobs(run_case, specs, workers=workers, progress=progress, desc="compare", unit="run")
+    view = view and view_html.available()
+    case = partial(run_case, view=view)
+    done = map_jobs(case, specs, workers=workers, progress=progress, desc="compare", unit="run")
     metrics: dict = {}
     series: dict = {}
-    for spec, m, s in done:
+    replays: dict = {}
+    for spec, m, s, data in done:
         metrics.setdefault(spec.label, {}).setdefault(spec.controller, {})[spec.distance] = m
         series[(spec.label, spec.controller, spec.distance)] = s
+        if data is not None:
+            name = f"replay_{spec.label}_{spec.controller}_{spec.distance}.html"
+            replays[name.replace(":", "-").replace("/", "-")] = (
+                data,
+                view_html.replay_title(m, spec.label),
+            )
     labels = list(dict.fromkeys(spec.label for spec in specs))
     randoms = [label for label in labels if label.startswith("random:")]
     named = [label for label in labels if label not in randoms]
@@ -187,6 +206,8 @@ def compare(
             f"methods ({rate_hz:g} Hz control, {max_time_s:g} s cap). Limit violations: ticks "
             "over a joint velocity / position limit.\n\n" + table + "\n"
         )
+        for name, (data, title) in replays.items():
+            view_html.write_html(stage / name, view_html.replay_html(data, title))
         if plots and plotting.available():
             for label in named:
                 plotting.write_comparison(

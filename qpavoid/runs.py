@@ -16,7 +16,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import motions
+from . import motions, view_html
 from . import plots as plotting
 from .analytic import AnalyticConfig, AnalyticController
 from .braking import BrakingConfig
@@ -33,6 +33,7 @@ from .run_spec import (
 )
 from .sensor import SensorConfig
 from .simulation import HumanMotion, SimConfig, SimResult, simulate
+from .view_data import replay_data
 
 #: Redundancy mode (docs/qp.md): weight of the elbow-clearance cost, and a regularisation
 #: large enough to give the end effector's null-space direction curvature (with 1e-7
@@ -150,13 +151,15 @@ def simulate_one(
         bench=spec.bench,
         latency_s=spec.latency_s if spec.bench == "real" and not live else 0.0,
         redundant=bool(spec.redundant),
+        robot=spec.robot,
         solver=getattr(getattr(controller, "backend", None), "name", None),
     )
     return RunResult(spec, sim, robot, controller, metrics)
 
 
-def write_outputs(run: RunResult, out: str | Path, plots: bool = True) -> dict:
-    """Write ``metrics.json``, ``log.npz`` and (with ``plots``) the figures of ``run``.
+def write_outputs(run: RunResult, out: str | Path, plots: bool = True, view: bool = True) -> dict:
+    """Write ``metrics.json``, ``log.npz``, (with ``plots``) the figures and (with
+    ``view``) the browser replay ``replay.html`` of ``run``.
 
     The files are written into a staging folder first and moved into ``out`` only when
     all of them are written, so a failure leaves no half-written ``out``.
@@ -164,14 +167,21 @@ def write_outputs(run: RunResult, out: str | Path, plots: bool = True) -> dict:
     Returns
     -------
     dict
-        The metrics written, with ``plots`` (figure file names) and, when figures were not
-        drawn, ``plots_skipped`` (why).
+        The metrics written, with ``plots`` (figure file names), ``view`` (the replay's file
+        name, or None) and, when figures or the replay were not made, ``plots_skipped``
+        and ``view_skipped`` (why).
     """
-    extra: dict = {"plots": []}
+    extra: dict = {"plots": [], "view": None}
     if not plots:
         extra["plots_skipped"] = "disabled by --no-plots"
     elif not plotting.available():
         extra["plots_skipped"] = "matplotlib is not installed (pip install 'qpavoid[plot]')"
+    if not view:
+        extra["view_skipped"] = "disabled by --no-view"
+    elif not view_html.available():
+        extra["view_skipped"] = "meshcat is not installed (pip install 'qpavoid[view]')"
+    else:
+        extra["view"] = "replay.html"
     with staged_output(out) as stage:
         if plots and plotting.available():
             figures = plotting.write_figures(
@@ -185,6 +195,10 @@ def write_outputs(run: RunResult, out: str | Path, plots: bool = True) -> dict:
             )
             extra["plots"] = [p.name for p in figures]
         write_run(stage, run.sim, {**run.metrics, **extra})
+        if extra["view"]:
+            data = replay_data(run.sim.log, run.metrics, run.robot)
+            title = view_html.replay_title(run.metrics, Path(out).name)
+            view_html.write_html(stage / "replay.html", view_html.replay_html(data, title))
     return {**run.metrics, **extra}
 
 
@@ -193,6 +207,7 @@ def run_one(
     out: str | Path,
     plots: bool = True,
     progress: Callable[[float], None] | None = None,
+    view: bool = True,
 ) -> dict:
     """Simulate ``spec`` and write its files into ``out``; return its metrics."""
-    return write_outputs(simulate_one(spec, progress=progress), out, plots)
+    return write_outputs(simulate_one(spec, progress=progress), out, plots, view)

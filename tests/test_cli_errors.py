@@ -138,7 +138,8 @@ def test_default_out_and_last_line(workdir):
     r = qpavoid_cli("run", "free", "--max-time", "0.5", "--rate", "100", "--no-plots", cwd=workdir)
     assert r.returncode == 0, r.stderr
     assert (workdir / "runs" / "free" / "metrics.json").is_file()
-    assert r.stdout.strip().splitlines()[-1] == "wrote metrics.json, log.npz to runs/free/"
+    last = "wrote metrics.json, log.npz and replay.html (open it in a browser) to runs/free/"
+    assert r.stdout.strip().splitlines()[-1] == last
     assert r.stderr == ""  # no progress bar when not on a terminal
     shutil.rmtree(workdir / "runs")
 

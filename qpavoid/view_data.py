@@ -1,0 +1,153 @@
+"""What a replay shows of a run: its geometry frame by frame and its numbers tick by tick.
+
+:func:`replay_data` turns a run's ``log.npz`` and ``metrics.json`` into the arrays the
+browser replay (:mod:`qpavoid.view_html`) draws and prints:
+
+* **scene frames**, at most ``fps`` a second of run time: the arm's links (Pinocchio's
+  joint placements), the robot's safety shapes of the run's distance method (the three
+  set capsules, or the nine control-point spheres), the person's (eight part capsules, or
+  21 spheres), each robot set's closest pair (``robot_point``, ``human_point`` of the log)
+  and the end effector;
+* **ticks**, every one: time, f (eq. 2), the distance per set and its state (free,
+  repulsion active, within the stop distance), the stop reason while stopped, the frame
+  age and, where measured, the true clearance (docs/safety.md);
+* the planned path and the end-effector trace, once.
+
+Everything is plain numbers (float32, m and s) so that the HTML stays small: a 30 s run
+at 500 Hz is about 2 MB with the viewer.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .human import KinectHuman
+from .laws import AvoidanceConfig, distance_at_factor
+from .robot import Robot
+
+__all__ = ["PAIR_STATES", "pair_states", "replay_data"]
+
+#: A robot set's closest pair is in one of these states (the colours of its line).
+PAIR_STATES = ("free", "repulsion active", "within the stop distance")
+#: Repulsion counts as active where the logistic of eqs. (2) and (4) exceeds this share of
+#: its maximum (1 %: where it starts to move the robot visibly).
+ACTIVE_SHARE = 0.01
+
+
+def pair_states(distance: np.ndarray, cfg: AvoidanceConfig) -> np.ndarray:
+    """(T, 3) state of each set's closest pair (index into :data:`PAIR_STATES`).
+
+    Within the stop distance: L1 at or below the distance where f reaches ``f_stop``
+    (eq. 2 inverted), L2 and EE at or below 0.05 m (the paper's rules). Repulsion active:
+    where eq. (2) (L1) or eq. (4) (L2, EE) is above :data:`ACTIVE_SHARE` of its maximum.
+    """
+    stop = np.array([cfg.d_stop_L1_m(), cfg.d_stop_L2_m, cfg.d_stop_EE_m])
+    active = np.array(
+        [
+            distance_at_factor(ACTIVE_SHARE, cfg.rho_L1_m, cfg.alpha_L1),
+            distance_at_factor(ACTIVE_SHARE, cfg.rho_rep_m, cfg.alpha_rep),
+            distance_at_factor(ACTIVE_SHARE, cfg.rho_rep_m, cfg.alpha_rep),
+        ]
+    )
+    d = np.asarray(distance, dtype=float)
+    return np.where(d <= stop, 2, np.where(d < active, 1, 0)).astype(np.int8)
+
+
+def _links(robot: Robot, q: np.ndarray) -> np.ndarray:
+    """(J + 2, 3) the base, every joint's origin and the end effector, m (Pinocchio)."""
+    model, data = robot.model, robot.data
+    pin.forwardKinematics(model, data, q)
+    pin.updateFramePlacement(model, data, robot.ee_frame)
+    joints = [data.oMi[i].translation for i in range(1, model.njoints)]
+    return np.array([np.zeros(3), *joints, data.oMf[robot.ee_frame].translation])
+
+
+def replay_data(
+    log: dict[str, np.ndarray],
+    metrics: dict[str, Any],
+    robot: Robot,
+    cfg: AvoidanceConfig | None = None,
+    fps: float = 30.0,
+) -> dict[str, Any]:
+    """The replay of one run (module docstring): a dict of numbers, lists and arrays.
+
+    Parameters
+    ----------
+    log, metrics
+        The run's ``log.npz`` arrays and ``metrics.json``.
+    robot
+        The run's robot.
+    cfg
+        The avoidance constants the run used (the states of the closest pairs).
+    fps
+        Most scene frames per second of run time.
+    """
+    cfg = cfg or AvoidanceConfig()
+    t = np.asarray(log["t"], dtype=float)
+    n = len(t)
+    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+    stride = max(1, round(1.0 / (fps * dt)))
+    frames = np.arange(0, n, stride)
+    method = str(metrics.get("distance_method", "capsules"))
+    human = KinectHuman()
+    links, robot_shapes, human_shapes = [], [], []
+    for k in frames:
+        kin = robot.kinematics(log["q"][k], jacobians=False)
+        links.append(_links(robot, log["q"][k]))
+        geo = human.geometry(log["joints"][k], log["state"][k])
+        if method == "spheres":
+            robot_shapes.append(kin.points)
+            human_shapes.append(np.where(geo.point_valid[:, None], geo.points, np.nan))
+        else:
+            robot_shapes.append(kin.segments)
+            segments = np.where(geo.segment_valid[:, None, None], geo.segments, np.nan)
+            human_shapes.append(segments)
+    if method == "spheres":
+        robot_radii = robot.sphere_radii
+        part_of_point = np.argmax(human.point_part, axis=1)
+        human_radii = human.sphere_radii[part_of_point]
+    else:
+        robot_radii, human_radii = robot.capsule_radii, human.capsule_radii
+    stopped = np.asarray(log["stopped"], dtype=bool)
+    reason_text = log.get("stop_reason", np.full(n, ""))
+    reasons = sorted({str(r) for r in reason_text[stopped]})
+    code = {r: i for i, r in enumerate(reasons)}
+    true = np.asarray(log.get("true_distance", np.full((n, 3), np.nan)), dtype=float)
+    f32 = np.float32
+    return {
+        "method": method,
+        "controller": metrics.get("controller"),
+        "scenario": metrics.get("scenario"),
+        "safety": metrics.get("safety"),
+        "set_names": list(robot.set_names),
+        "part_names": list(human.part_names),
+        "pair_states": list(PAIR_STATES),
+        "robot_radii": robot_radii.astype(f32),
+        "human_radii": human_radii.astype(f32),
+        "frame_tick": frames.astype(np.int32),
+        "links": np.array(links, dtype=f32),
+        "robot": np.array(robot_shapes, dtype=f32),
+        "human": np.array(human_shapes, dtype=f32),
+        "pairs": np.stack([log["robot_point"][frames], log["human_point"][frames]], axis=2).astype(
+            f32
+        )
+        if "robot_point" in log
+        else np.full((len(frames), 3, 2, 3), np.nan, dtype=f32),
+        "t": t.astype(np.float64),
+        "f": np.asarray(log["f"], dtype=f32),
+        "distance": np.asarray(log["distance"], dtype=f32),
+        "state": pair_states(log["distance"], cfg),
+        "stopped": stopped.astype(np.int8),
+        "reasons": reasons,
+        "reason": np.array(
+            [code[str(r)] if s else -1 for r, s in zip(reason_text, stopped, strict=True)],
+            dtype=np.int32,
+        ),
+        "frame_age": np.asarray(log.get("frame_age_s", np.zeros(n)), dtype=f32),
+        "true_distance": true.astype(f32),
+        "path": np.asarray(log["ee_ref"], dtype=f32)[:: max(1, stride // 2)],
+        "trace": np.asarray(log["ee_pos"], dtype=f32)[:: max(1, stride // 2)],
+    }

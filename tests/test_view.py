@@ -1,0 +1,186 @@
+"""The browser replay: its numbers, its size, no network address, and a real browser."""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from qpavoid.cli import main
+from qpavoid.io import load_log
+from qpavoid.laws import AvoidanceConfig
+from qpavoid.runs import RunSpec, run_one
+from qpavoid.scenarios import nominal_configurations
+from qpavoid.task import ArcPath
+from qpavoid.view_data import pair_states, replay_data
+from qpavoid.view_html import replay_html, write_replay
+
+pytest.importorskip("meshcat", reason="the replay needs the extra 'view' (meshcat)")
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+#: Headless Chromium as this machine runs it: no sandbox (root), software WebGL, and no
+#: background connections (the network is closed).
+CHROMIUM_ARGS = [
+    "--headless=new",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+
+
+@pytest.fixture(scope="module")
+def test2_run(tmp_path_factory):
+    """The paper's Test 2 at 100 Hz, written with its replay."""
+    out = tmp_path_factory.mktemp("test2")
+    run_one(RunSpec(scenario="test2", rate_hz=100.0), out, plots=False)
+    return out
+
+
+def test_pair_states_follow_the_paper_thresholds_by_hand():
+    cfg = AvoidanceConfig()
+    # L1 stops where f = 0.8: d = ρ/2 (1 + ln(1/0.8 − 1)/α) = 0.05 (1 − 0.154) = 0.0423 m;
+    # L2/EE stop at 0.05 m; repulsion is active below d(1 %) = ρ/2 (1 + ln 99 / 9)
+    # = 0.0755 m for L1 (ρ = 0.1) and 0.151 m for L2, EE (ρ = 0.2)
+    d = np.array(
+        [
+            [0.0420, 0.0499, 0.0500],  # all within the stop distance
+            [0.0430, 0.0510, 0.1500],  # L1 just out: active; L2, EE active
+            [0.0760, 0.1520, 0.3000],  # free
+        ]
+    )
+    assert pair_states(d, cfg).tolist() == [[2, 2, 2], [1, 1, 1], [0, 0, 0]]
+
+
+def test_replay_data_is_the_log_tick_by_tick(test2_run, robot):
+    log = load_log(test2_run)
+    metrics = json.loads((test2_run / "metrics.json").read_text())
+    data = replay_data(log, metrics, robot)
+    n = len(log["t"])
+    np.testing.assert_array_equal(data["t"], log["t"])
+    np.testing.assert_allclose(data["distance"], log["distance"], rtol=1e-6)
+    stopped = log["stopped"]
+    assert stopped.any() and (data["stopped"] == stopped).all()
+    shown = [data["reasons"][i] if i >= 0 else "" for i in data["reason"]]
+    assert shown == list(log["stop_reason"]) and all(shown[k] for k in np.flatnonzero(stopped))
+    # scene frames every 1/30 s at most, the first at tick 0, each a tick of the log
+    ticks = data["frame_tick"]
+    assert ticks[0] == 0 and np.all(np.diff(log["t"][ticks]) <= 1 / 30 + 1e-9)
+    assert data["links"].shape == (len(ticks), robot.model.njoints + 1, 3)
+    assert data["robot"].shape == (len(ticks), 3, 2, 3)  # capsules: the three sets
+    assert len(data["reason"]) == n
+    # the links end at the end effector the log recorded
+    np.testing.assert_allclose(data["links"][:, -1], log["ee_pos"][ticks], atol=1e-5)
+
+
+def test_a_30_s_run_fits_in_5_mb_and_names_no_network_address(robot):
+    """A 30 s run at 500 Hz, every tick stopped with its own reason (the worst case)."""
+    n = 15000
+    t = np.arange(n) / 500.0
+    q = nominal_configurations(robot, ArcPath(), np.linspace(0.0, ArcPath().duration_s, n))
+    rng = np.random.default_rng(0)
+    joints = np.broadcast_to(np.array([0.5, 0.8, 0.2]), (n, 25, 3)) + rng.normal(0, 0.2, (n, 25, 3))
+    log = {
+        "t": t,
+        "q": q,
+        "joints": joints,
+        "state": np.full((n, 25), 2, dtype=np.int8),
+        "stopped": np.ones(n, dtype=bool),
+        "stop_reason": np.array([f"f = {0.8 + k * 1e-5:.5f} > 0.8 (L1)" for k in range(n)]),
+        "f": rng.uniform(0, 1, n),
+        "distance": rng.uniform(0, 0.5, (n, 3)),
+        "robot_point": rng.normal(0, 0.5, (n, 3, 3)),
+        "human_point": rng.normal(0, 0.5, (n, 3, 3)),
+        "ee_pos": rng.normal(0, 0.5, (n, 3)),
+        "ee_ref": rng.normal(0, 0.5, (n, 3)),
+        "frame_age_s": rng.uniform(0, 0.1, n),
+        "true_distance": rng.uniform(0, 0.5, (n, 3)),
+    }
+    html = replay_html(replay_data(log, {"distance_method": "capsules"}, robot), "size")
+    assert len(html.encode()) < 5e6
+    assert "://" not in html and "<script src" not in html and "@import" not in html
+
+
+def test_qpavoid_view_writes_the_replay_and_refuses_a_folder_without_a_run(
+    test2_run, tmp_path, capsys
+):
+    assert (test2_run / "replay.html").is_file()  # run writes it ...
+    out = tmp_path / "again.html"
+    assert main(["view", str(test2_run), "--out", str(out)]) == 0  # ... and view does too
+    assert out.read_bytes() == (test2_run / "replay.html").read_bytes()
+    assert main(["view", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "not a run folder" in err and err.count("\n") == 1
+    assert write_replay(test2_run, tmp_path / "x.html").stat().st_size > 1e5
+
+
+@pytest.fixture(scope="module")
+def browser():
+    sync_api = pytest.importorskip(
+        "playwright.sync_api", reason="no playwright: pip install 'qpavoid[dev]'"
+    )
+    if CHROMIUM is None:
+        pytest.skip("no Chromium on this machine (Debian: apt-get install chromium)")
+    with sync_api.sync_playwright() as p:
+        chromium = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield chromium
+        chromium.close()
+
+
+def changed_pixels(page, name: str) -> int:
+    """Pixels of the canvas that change when object ``name`` is hidden (it is drawn)."""
+    shown = screenshot(page)
+    page.evaluate(f"window.qpavoidReplay.visible({name!r}, false)")
+    page.wait_for_timeout(200)
+    hidden = screenshot(page)
+    page.evaluate(f"window.qpavoidReplay.visible({name!r}, true)")
+    return int((np.abs(shown - hidden).max(axis=2) > 30).sum())
+
+
+def screenshot(page) -> np.ndarray:
+    """The page as an (H, W, 3) int array."""
+    image = Image.open(io.BytesIO(page.screenshot())).convert("RGB")
+    return np.asarray(image).astype(int)
+
+
+def test_the_replay_renders_in_a_browser_and_shows_the_stop_of_test2(browser, test2_run):
+    log = load_log(test2_run)
+    page = browser.new_page(viewport={"width": 1000, "height": 700})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    requests: list[str] = []
+    page.on("request", lambda r: requests.append(r.url))
+    page.goto(Path(test2_run / "replay.html").resolve().as_uri())
+    page.wait_for_function("window.qpavoidReplay !== undefined", timeout=30000)
+    page.wait_for_timeout(300)
+    assert errors == []
+    assert set(page.evaluate("window.qpavoidReplay.objects()")) >= {"robot", "human", "pairs"}
+    # the canvas is not blank, and the robot and the person are drawn on it
+    assert screenshot(page).std() > 20
+    assert changed_pixels(page, "robot") > 2000, "no robot drawn"
+    assert changed_pixels(page, "human") > 2000, "no person drawn"
+    # the slider to the first stop of Test 2
+    k = int(np.flatnonzero(log["stopped"])[0])
+    t_stop = float(log["t"][k])
+    page.eval_on_selector(
+        "#time",
+        "(el, t) => { el.value = t; el.dispatchEvent(new Event('input')); }",
+        t_stop,
+    )
+    assert page.evaluate("window.qpavoidReplay.tick()") == k
+    assert page.inner_text("#t") == f"{t_stop:.3f}"
+    assert page.inner_text("#reason") == f"stopped: {log['stop_reason'][k]}"
+    for s in range(3):
+        assert page.inner_text(f"#d{s}") == f"{log['distance'][k, s]:.3f} m"
+    assert all(u.startswith("file:") or u.startswith("data:") for u in requests), requests
+    page.close()
