@@ -19,6 +19,7 @@ never a traceback (``QPAVOID_DEBUG=1`` shows one for an internal error).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 from collections.abc import Sequence
@@ -37,7 +38,7 @@ from .jobs import progress_bar
 from .metrics import describe
 from .motions import check_inputs
 from .run_spec import BENCHES, CONTROLLERS, DISTANCES, LIMIT_MODES
-from .runs import RunSpec, run_one
+from .runs import RunSpec, live_view, run_one
 from .scenarios import SCENARIOS
 from .sensor import KINECT_V2_LATENCY_S
 from .tick import SAFETY_MODES
@@ -111,6 +112,14 @@ def build_parser() -> Parser:
         help="QP only: free A3 (7 joints) and keep the elbow away from the person",
     )
     run.add_argument("--out", metavar="DIR", help="output folder (default: runs/NAME)")
+    run.add_argument(
+        "--view",
+        nargs="?",
+        const="127.0.0.1:0",
+        metavar="HOST:PORT",
+        help="follow the run in a browser as it happens: serve a live view on localhost "
+        "(any free port unless given) and print its address",
+    )
     _add_common(run)
     run.set_defaults(parser=run)
 
@@ -221,12 +230,20 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
         load_calibration(args.sensors)  # a bad file fails before the run
     else:
         check_inputs(files, args.sensors)
-    with progress_bar(spec.max_time_s, spec.label, "s", not args.quiet) as bar:
+    with contextlib.ExitStack() as stack:
+        watch = None
+        if args.view is not None:
+            live = stack.enter_context(live_view(spec, args.view))
+            print(f"live view: {live.url} (open it in a browser)", flush=True)
+            watch = live.update
+        bar = stack.enter_context(progress_bar(spec.max_time_s, spec.label, "s", not args.quiet))
 
         def advance(t: float) -> None:
             bar.update(t - bar.n)
 
-        m = run_one(spec, out, plots=not args.no_plots, progress=advance, view=not args.no_view)
+        m = run_one(
+            spec, out, plots=not args.no_plots, progress=advance, view=not args.no_view, watch=watch
+        )
     lines = [describe(m)]
     for what in ("plots", "view"):
         if m.get(f"{what}_skipped"):

@@ -38,13 +38,15 @@ from .wire import Workspace, encode
 __all__ = ["Listener", "LiveSource", "parse_address", "replay"]
 
 
-def parse_address(text: str, name: str = "--listen") -> tuple[str, int]:
-    """``HOST:PORT`` as ``(host, port)``; :class:`InputError` if it is not one."""
+def parse_address(text: str, name: str = "--listen", any_port: bool = False) -> tuple[str, int]:
+    """``HOST:PORT`` as ``(host, port)``; :class:`InputError` if it is not one (``any_port``:
+    port 0, any free one, is allowed too)."""
     host, sep, port = str(text).rpartition(":")
     ascii_port = port.isascii() and port.isdigit()  # "５００６" is a digit to Python
-    if not sep or not host or not ascii_port or not 1 <= int(port) <= 65535:
+    low = 0 if any_port else 1
+    if not sep or not host or not ascii_port or not low <= int(port) <= 65535:
         raise InputError(
-            f"{name} must be HOST:PORT with a port from 1 to 65535 (e.g. 127.0.0.1:5005), "
+            f"{name} must be HOST:PORT with a port from {low} to 65535 (e.g. 127.0.0.1:5005), "
             f"got {text!r}",
             name=name,
             value=text,

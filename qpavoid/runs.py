@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from . import motions, view_html
 from . import plots as plotting
@@ -24,6 +25,7 @@ from .calibration import load_calibration
 from .controller import Controller, ControllerConfig
 from .io import staged_output, write_run
 from .live import Listener, LiveSource, parse_address
+from .live_view import LiveView
 from .perception import PerceptionConfig
 from .qp import QPConfig, QPController
 from .robot import Robot, load_robot
@@ -97,6 +99,20 @@ def live_source(spec: RunSpec) -> Iterator[LiveSource | None]:
         yield LiveSource(listener)
 
 
+def spec_robot(spec: RunSpec) -> Robot:
+    """The robot ``spec`` names (A3 free with ``redundant``)."""
+    return load_robot(spec.robot, locked=() if spec.redundant else None)
+
+
+@contextmanager
+def live_view(spec: RunSpec, address: str) -> Iterator[LiveView]:
+    """A browser view of ``spec``'s run, served at ``address`` (HOST:PORT) while it lasts."""
+    title = f"qpavoid live: {spec.label}, {spec.controller} controller, {spec.distance}"
+    where = parse_address(address, "--view", any_port=True)
+    with LiveView(where, spec_robot(spec), spec.distance, title) as v:
+        yield v
+
+
 def load_motion(spec: RunSpec, robot: Robot) -> HumanMotion:
     """The human motion ``spec`` names (:func:`qpavoid.motions.load_motion`)."""
     files = spec.sensor_files or ((spec.human_file,) if spec.human_file else ())
@@ -107,6 +123,7 @@ def simulate_one(
     spec: RunSpec,
     motion: HumanMotion | None = None,
     progress: Callable[[float], None] | None = None,
+    watch: Callable[[dict[str, Any]], None] | None = None,
 ) -> RunResult:
     """Build the robot, controller and motion of ``spec`` and simulate them.
 
@@ -118,8 +135,11 @@ def simulate_one(
         The human motion if already loaded (else :func:`load_motion`).
     progress
         Called with the simulated time, s, at every human frame.
+    watch
+        Called with ticks as they are logged (:func:`~qpavoid.simulation.simulate`), e.g.
+        :meth:`LiveView.update <qpavoid.live_view.LiveView.update>`.
     """
-    robot = load_robot(spec.robot, locked=() if spec.redundant else None)
+    robot = spec_robot(spec)
     controller = build_controller(spec, robot)
     live = spec.listen is not None
     if motion is None and not live:
@@ -141,6 +161,7 @@ def simulate_one(
             progress=progress,
             source=source,
             realtime=live,
+            watch=watch,
         )
         metrics = dict(sim.metrics)
         if source is not None:
@@ -208,6 +229,8 @@ def run_one(
     plots: bool = True,
     progress: Callable[[float], None] | None = None,
     view: bool = True,
+    watch: Callable[[dict[str, Any]], None] | None = None,
 ) -> dict:
-    """Simulate ``spec`` and write its files into ``out``; return its metrics."""
-    return write_outputs(simulate_one(spec, progress=progress), out, plots, view)
+    """Simulate ``spec`` and write its files into ``out``; return its metrics (``watch``:
+    :func:`simulate_one`)."""
+    return write_outputs(simulate_one(spec, progress=progress, watch=watch), out, plots, view)

@@ -33,7 +33,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -109,6 +109,7 @@ def simulate(
     progress: Callable[[float], None] | None = None,
     source: FrameSource | None = None,
     realtime: bool = False,
+    watch: Callable[[dict[str, Any]], None] | None = None,
 ) -> SimResult:
     """Run the controller in closed loop against ``motion`` along ``controller.path``.
 
@@ -129,6 +130,9 @@ def simulate(
         Where the controller's frames come from instead of a sensor filming ``motion``
         (a live source, :class:`~qpavoid.live.LiveSource`, or fused sensors); ``motion``,
         if given, is then only the truth the run is judged against.
+    watch
+        Called with the tick just logged (its row of every log key, copied, and its
+        ``stop_reason``), at most 30 times a second of run time (a live view).
     realtime
         Tick on the wall clock (a live run): a tick that comes late is stamped with the
         wall time, so frame ages stay true when the loop falls behind; Ctrl-C ends the
@@ -201,7 +205,7 @@ def simulate(
     reasons: list[str] = []
     stop_events = []
     vel_violations = pos_violations = 0
-    tau, was_stopped, last_progress = 0.0, False, -1.0
+    tau, was_stopped, last_progress, last_watch = 0.0, False, -1.0, -1.0
     reached, overruns, n = False, 0, 0
     interrupt = Interruption(realtime)
     wall0 = time.perf_counter()
@@ -255,6 +259,9 @@ def simulate(
             log["robot_point"][k] = cmd.table.robot_point[sets, closest]
             log["human_point"][k] = cmd.table.human_point[sets, closest]
             reasons.append(cmd.reason if cmd.stopped else "")
+            if watch is not None and t - last_watch >= 1.0 / 30.0:
+                watch({key: v[k].copy() for key, v in log.items()} | {"stop_reason": reasons[k]})
+                last_watch = t
             n = k + 1
 
             if tau >= path.duration_s and not cmd.stopped:

@@ -33,6 +33,7 @@ from .view_page import PAGE
 
 __all__ = [
     "available",
+    "encode",
     "replay_html",
     "replay_title",
     "scene_commands",
@@ -145,6 +146,8 @@ def scene_commands(data: dict[str, Any]) -> list[str]:
     for name in ("path", "trace"):
         points = np.asarray(data[name], dtype=np.float32)
         points = points[np.isfinite(points).all(axis=1)].T
+        if points.shape[1] < 2:  # a live view's start: no path yet
+            continue
         line = g.Line(g.PointsGeometry(points), g.LineBasicMaterial(color=COLOURS[name]))
         objects.append((name, line, None))
     out = []
@@ -159,7 +162,7 @@ def scene_commands(data: dict[str, Any]) -> list[str]:
     return out
 
 
-def _encode(value: Any) -> Any:
+def encode(value: Any) -> Any:
     """JSON for the page: arrays as ``{"dtype", "shape", "b64"}`` (NaN kept)."""
     if isinstance(value, np.ndarray):
         kind = {"f": "float32", "i": "int32", "u": "int32", "b": "int32"}[value.dtype.kind]
@@ -172,27 +175,29 @@ def _encode(value: Any) -> Any:
             "b64": base64.b64encode(array.tobytes()).decode(),
         }
     if isinstance(value, dict):
-        return {k: _encode(v) for k, v in value.items()}
+        return {k: encode(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_encode(v) for v in value]
+        return [encode(v) for v in value]
     return value
 
 
-def replay_html(data: dict[str, Any], title: str) -> str:
-    """The replay page of ``data`` (:func:`~qpavoid.view_data.replay_data`).
+def replay_html(data: dict[str, Any], title: str, live: bool = False) -> str:
+    """The replay page of ``data`` (:func:`~qpavoid.view_data.replay_data`); ``live``: the
+    page of :class:`~qpavoid.live_view.LiveView`, which asks its server for each tick.
 
     Raises
     ------
     InputError
         If the page would refer to a network address (never expected: a safeguard).
     """
-    payload = json.dumps(_encode(data), separators=(",", ":"), allow_nan=False)
+    payload = json.dumps(encode(data), separators=(",", ":"), allow_nan=False)
     html = (
         PAGE.replace("{{TITLE}}", json.dumps(title)[1:-1].replace("<", "&lt;"))
         .replace("{{VIEWER}}", viewer_script())
         .replace("{{SCENE}}", json.dumps(scene_commands(data)))
         .replace("{{DATA}}", payload)
         .replace("{{COLOURS}}", json.dumps(COLOURS))
+        .replace("{{LIVE}}", json.dumps(live))
     )
     at = html.find(_ADDRESS)
     if at >= 0:

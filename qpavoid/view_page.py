@@ -6,7 +6,9 @@ The script keeps one tick index. The slider (``#time``, seconds) and play/pause
 (``#t``, ``#f``, ``#d0``-``#d2`` and ``#s0``-``#s2`` per robot set, ``#reason``,
 ``#safety``) and places every object from the scene frame at or before it. Shapes are
 unit cylinders (axis y) and spheres, scaled and placed by one matrix each; a shape that
-is not seen is scaled to nothing. ``window.qpavoidReplay`` exposes ``seek(t)``,
+is not seen is scaled to nothing. In live mode (``LIVE``) the controls are hidden and the
+script shows the newest tick its server gives (``state``) ten times a second.
+``window.qpavoidReplay`` exposes ``seek(t)``,
 ``tick()``, ``visible(name, on)`` and ``objects()`` for tests.
 """
 
@@ -64,6 +66,7 @@ PAGE = r"""<!DOCTYPE html>
 const SCENE = {{SCENE}};
 const RAW = {{DATA}};
 const COLOURS = {{COLOURS}};
+const LIVE = {{LIVE}};
 
 function decode(value) {
   if (value && typeof value === "object" && "b64" in value) {
@@ -124,8 +127,8 @@ function capsule(path, a, b, r) {
   place(path + "/b", sphere(b, r));
 }
 
-const nTicks = D.t.length;
-const nFrames = D.frame_tick.length;
+let nTicks = D.t.length;
+let nFrames = D.frame_tick.length;
 const spheres = D.method === "spheres";
 let tick = 0, playing = false, lastWall = null;
 
@@ -238,6 +241,17 @@ function frame(wall) {
 }
 show(0);
 requestAnimationFrame(frame);
+if (LIVE) {  // a run as it happens: the newest tick from the server, ten times a second
+  document.getElementById("controls").style.display = "none";
+  const poll = () => fetch("state", { cache: "no-store" })
+    .then((r) => r.json())
+    .then((raw) => {
+      if (raw) { Object.assign(D, decode(raw)); nTicks = 1; nFrames = 1; show(0); }
+    })
+    .catch(() => { document.getElementById("reason").textContent = "the run has ended"; })
+    .finally(() => setTimeout(poll, 100));
+  poll();
+}
 
 window.qpavoidReplay = {
   seek: (t) => { slider.value = t; show(tickAt(t)); return tick; },

@@ -2,21 +2,32 @@
 
 from __future__ import annotations
 
+import base64
 import io
 import json
+import re
 import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
 from pathlib import Path
+from urllib.request import urlopen
 
 import numpy as np
 import pytest
 from PIL import Image
 
+from qpavoid.calibration import Calibration, SensorCalibration
 from qpavoid.cli import main
 from qpavoid.io import load_log
 from qpavoid.laws import AvoidanceConfig
+from qpavoid.live_view import LiveView
 from qpavoid.runs import RunSpec, run_one
 from qpavoid.scenarios import nominal_configurations
 from qpavoid.task import ArcPath
+from qpavoid.two_sensors import look_at
 from qpavoid.view_data import pair_states, replay_data
 from qpavoid.view_html import replay_html, write_replay
 
@@ -41,9 +52,9 @@ CHROMIUM_ARGS = [
 
 @pytest.fixture(scope="module")
 def test2_run(tmp_path_factory):
-    """The paper's Test 2 at 100 Hz, written with its replay."""
+    """The paper's Test 2 at 100 Hz, its first 5 s (the first stop is at 3.1 s), with its replay."""
     out = tmp_path_factory.mktemp("test2")
-    run_one(RunSpec(scenario="test2", rate_hz=100.0), out, plots=False)
+    run_one(RunSpec(scenario="test2", rate_hz=100.0, max_time_s=5.0), out, plots=False)
     return out
 
 
@@ -184,3 +195,47 @@ def test_the_replay_renders_in_a_browser_and_shows_the_stop_of_test2(browser, te
         assert page.inner_text(f"#d{s}") == f"{log['distance'][k, s]:.3f} m"
     assert all(u.startswith("file:") or u.startswith("data:") for u in requests), requests
     page.close()
+
+
+def test_the_live_view_serves_the_page_and_the_newest_tick(test2_run, robot):
+    log = load_log(test2_run)
+    k = int(np.flatnonzero(log["stopped"])[0])
+    row = {key: v[k] for key, v in log.items()}
+    with LiveView(("127.0.0.1", 0), robot, "capsules", "live") as view:
+        page = urlopen(view.url, timeout=10).read().decode()
+        assert "const LIVE = true" in page and "://" not in page
+        assert urlopen(view.url + "state", timeout=10).read() == b"null"  # nothing yet
+        view.update(row)
+        state = json.loads(urlopen(view.url + "state", timeout=10).read())
+    shown = replay_data({key: np.asarray(v)[None] for key, v in row.items()}, {}, robot)
+    assert state["reasons"] == [str(log["stop_reason"][k])]
+    t = np.frombuffer(base64.b64decode(state["t"]["b64"]), dtype=np.float64)
+    assert t.tolist() == [log["t"][k]] == shown["t"].tolist()
+
+
+@pytest.mark.slow
+def test_qpavoid_run_view_follows_a_live_run_in_a_browser(browser, tmp_path):
+    calib = tmp_path / "calib.toml"
+    pose = look_at(np.array([1.0, 2.5, 1.3]), np.zeros(3))
+    calib.write_text(Calibration({"a": SensorCalibration("a", pose)}).to_toml())
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    cmd = [sys.executable, "-m", "qpavoid", "run", "--listen", f"127.0.0.1:{port}", "--sensors"]
+    cmd += [str(calib), "--view", "--out", str(tmp_path / "live"), "--rate", "100", "-q"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        url = re.search(r"live view: (\S+)", line).group(1)
+        page = browser.new_page()
+        page.goto(url)
+        page.wait_for_function("document.getElementById('t').textContent !== '0.000'")
+        first = float(page.inner_text("#t"))
+        time.sleep(0.6)
+        assert float(page.inner_text("#t")) > first  # it follows the run
+        assert "stale" in page.inner_text("#reason")  # no sensor: stopped, and says why
+        page.close()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=30)
+    assert proc.returncode == 0
