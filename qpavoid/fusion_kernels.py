@@ -17,6 +17,8 @@ import functools
 import numpy as np
 from numba import njit
 
+from .compiling import ctrl_c_deferred
+
 __all__ = ["disagreement", "mean_gaps", "merge", "subset_mean", "update_track", "warm_up"]
 
 
@@ -177,22 +179,23 @@ def update_track(
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) every kernel, once per process."""
-    P = np.zeros((2, 25, 3))
-    states = np.full((2, 25), 2, dtype=np.int8)
-    mean_gaps(P, P[0], np.arange(4))
-    subset_mean(P[0], np.arange(4))
-    disagreement(P)
-    joints, state = merge(P, states, np.ones((2, 25)), np.zeros(25, dtype=np.bool_))
-    update_track(
-        np.zeros((25, 3)),
-        np.zeros((25, 3)),
-        np.full(25, -np.inf),
-        np.zeros(25),
-        np.full(25, -1),
-        joints,
-        state,
-        1.0,
-        0.3,
-        0.05,
-        0.1,
-    )
+    with ctrl_c_deferred():  # a Ctrl-C while the kernels compile comes right after
+        P = np.zeros((2, 25, 3))
+        states = np.full((2, 25), 2, dtype=np.int8)
+        mean_gaps(P, P[0], np.arange(4))
+        subset_mean(P[0], np.arange(4))
+        disagreement(P)
+        joints, state = merge(P, states, np.ones((2, 25)), np.zeros(25, dtype=np.bool_))
+        update_track(
+            np.zeros((25, 3)),
+            np.zeros((25, 3)),
+            np.full(25, -np.inf),
+            np.zeros(25),
+            np.full(25, -1),
+            joints,
+            state,
+            1.0,
+            0.3,
+            0.05,
+            0.1,
+        )

@@ -18,6 +18,8 @@ import functools
 import numpy as np
 from numba import njit
 
+from .compiling import ctrl_c_deferred
+
 __all__ = ["capsules", "track", "warm_up"]
 
 TINY = 1e-12  #: a segment shorter than this is its end point, m (as geometry.TINY)
@@ -204,31 +206,32 @@ def capsules(
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) every kernel, once per process."""
-    z = np.zeros((25, 3))
-    state = np.full(25, 2, dtype=np.int8)
-    parent = np.full(25, -1, dtype=np.int64)
-    track(
-        z.copy(),
-        z.copy(),
-        np.zeros(25),
-        np.zeros(25),
-        np.zeros(25),
-        parent,
-        z,
-        state,
-        1.0,
-        0.3,
-        0.05,
-        0.05,
-        1.6,
-    )
-    ids = np.arange(3, dtype=np.int64)
-    capsules(
-        z,
-        state,
-        ids,
-        np.zeros((1, 2), dtype=np.int64),
-        np.zeros((1, 2), dtype=np.int64),
-        np.zeros((1, 2), dtype=np.int64),
-        np.ones(1),
-    )
+    with ctrl_c_deferred():  # a Ctrl-C while the kernels compile comes right after
+        z = np.zeros((25, 3))
+        state = np.full(25, 2, dtype=np.int8)
+        parent = np.full(25, -1, dtype=np.int64)
+        track(
+            z.copy(),
+            z.copy(),
+            np.zeros(25),
+            np.zeros(25),
+            np.zeros(25),
+            parent,
+            z,
+            state,
+            1.0,
+            0.3,
+            0.05,
+            0.05,
+            1.6,
+        )
+        ids = np.arange(3, dtype=np.int64)
+        capsules(
+            z,
+            state,
+            ids,
+            np.zeros((1, 2), dtype=np.int64),
+            np.zeros((1, 2), dtype=np.int64),
+            np.zeros((1, 2), dtype=np.int64),
+            np.ones(1),
+        )

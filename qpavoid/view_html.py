@@ -235,7 +235,8 @@ def write_replay(run_dir: str | Path, out: str | Path | None = None) -> Path:
             value=str(folder),
         ) from None
     log = load_log(folder)
-    robot = load_robot(str(metrics.get("robot", "iiwa14")))
+    locked = () if metrics.get("redundant") else None  # A3 free in a redundant run
+    robot = load_robot(str(metrics.get("robot", "iiwa14")), locked=locked)
     data = replay_data(log, metrics, robot)
     title = replay_title(metrics, folder.name)
     return write_html(out or folder / "replay.html", replay_html(data, title))

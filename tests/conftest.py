@@ -6,8 +6,18 @@ import numpy as np
 import pytest
 
 import qpavoid
+from qpavoid import fusion_kernels, perception_kernels
 from qpavoid.perception import PerceptionConfig
 from qpavoid.sensor import SensorConfig
+
+
+def pytest_configure(config):
+    """Compile the numba kernels once, in the first process, before the workers and the
+    command-line subprocesses need them (a fresh install compiles for about 5 s; every
+    process after that loads them from the disk cache)."""
+    if not hasattr(config, "workerinput"):  # pytest-xdist's controller, or no xdist
+        fusion_kernels.warm_up()
+        perception_kernels.warm_up()
 
 
 @pytest.fixture(scope="session")

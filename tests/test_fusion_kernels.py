@@ -1,8 +1,12 @@
 """The fusion's compiled kernels against plain numpy over many random cases."""
 
+import os
+import signal
+
 import numpy as np
 import pytest
 
+from qpavoid.compiling import ctrl_c_deferred
 from qpavoid.fusion_kernels import disagreement, mean_gaps, merge, subset_mean, update_track
 from qpavoid.perception import PARENT
 
@@ -70,3 +74,12 @@ def test_update_track_filters_and_learns_bones_by_hand():
     update_track(positions, velocity, last_seen, bone, PARENT, z3, state, 2.5, 0.3, 0.05, 0.6)
     np.testing.assert_array_equal(positions, z3)
     assert not velocity.any()
+
+
+def test_a_ctrl_c_while_the_kernels_compile_comes_right_after():
+    """Numba drops a KeyboardInterrupt raised in its compiler's callbacks: held back."""
+    reached = False
+    with pytest.raises(KeyboardInterrupt), ctrl_c_deferred():
+        os.kill(os.getpid(), signal.SIGINT)
+        reached = True  # not interrupted inside
+    assert reached

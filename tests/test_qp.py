@@ -17,6 +17,7 @@ from qpavoid.human import JointType
 from qpavoid.qp import Bounds, PersistentOSQP, QPConfig, QPController, QPProblem, QPSolversBackend
 from qpavoid.qp.elbow_task import ElbowClearanceTask
 from qpavoid.qp.velocity_limits import VelocityLimit
+from qpavoid.run_spec import CONTROLLERS, DISTANCES
 from qpavoid.runs import RunSpec, simulate_one
 from qpavoid.scenarios import make_scenario
 from qpavoid.simulation import SimConfig, simulate
@@ -272,6 +273,8 @@ def test_cli_qp_solver_redundant_and_compare(tmp_path, capsys):
         == 0
     )
     assert np.load(out / "log.npz")["q"].shape[1] == 7
+    assert main(["view", str(out), "--out", str(tmp_path / "red.html")]) == 0  # 7 joints
+    assert (tmp_path / "red.html").read_bytes() == (out / "replay.html").read_bytes()
     assert main(["run", "free", "--redundant", "--out", str(out)]) == 2
     assert "needs --controller qp" in capsys.readouterr().err
     cmp = tmp_path / "cmp"
@@ -295,6 +298,8 @@ def test_cli_qp_solver_redundant_and_compare(tmp_path, capsys):
     )
     data = json.loads((cmp / "compare.json").read_text())
     assert set(data) == {"free", "random:0"}
+    replays = sorted(p.name for p in cmp.glob("replay_*.html"))  # the named input's four
+    assert replays == sorted(f"replay_free_{c}_{d}.html" for c in CONTROLLERS for d in DISTANCES)
     for ctrl in ("analytic", "qp"):
         assert set(data["free"][ctrl]) == {"spheres", "capsules"}
         assert "min_distance_m" in data["free"][ctrl]["spheres"]
