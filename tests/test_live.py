@@ -235,6 +235,19 @@ def listening(tmp_path: Path) -> tuple[subprocess.Popen, int, Path]:
     return proc, port, out
 
 
+def wait_until_bound(port: int, within_s: float = 30.0) -> None:
+    """Wait until some socket is bound to UDP ``port`` (read from /proc: probing by binding
+    could steal the port from the receiver about to bind it)."""
+    deadline = time.time() + within_s
+    while time.time() < deadline:
+        for table in ("/proc/net/udp", "/proc/net/udp6"):
+            with open(table) as handle:
+                if any(f":{port:04X} " in line.split()[1] + " " for line in handle.readlines()[1:]):
+                    return
+        time.sleep(0.1)
+    raise AssertionError(f"nothing bound UDP port {port} in {within_s} s")
+
+
 def port_is_free(port: int, within_s: float) -> bool:
     """True once ``port`` can be bound again, trying for ``within_s``."""
     deadline = time.time() + within_s
@@ -252,7 +265,7 @@ def port_is_free(port: int, within_s: float) -> bool:
 @pytest.mark.slow
 def test_a_killed_run_leaves_no_receiver_holding_its_port(tmp_path):
     proc, port, _ = listening(tmp_path)
-    time.sleep(3.0)
+    wait_until_bound(port)
     assert not port_is_free(port, 0.0)  # the receiver has it
     proc.kill()
     proc.communicate(timeout=30)
@@ -264,7 +277,8 @@ def test_a_killed_run_leaves_no_receiver_holding_its_port(tmp_path):
 )
 def test_the_command_line_listens_and_ctrl_c_or_sigterm_writes_the_run(tmp_path, signum):
     proc, port, out = listening(tmp_path)
-    time.sleep(2.5)
+    wait_until_bound(port)  # its receiver has the port (a loaded CI is slow) ...
+    time.sleep(1.5)  # ... and the loop runs
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         for _k in range(15):
             sock.sendto(encode(frame(t=time.time())._replace(body=0)), ("127.0.0.1", port))
