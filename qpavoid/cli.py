@@ -271,7 +271,9 @@ def _compare(args: argparse.Namespace) -> str:
         progress=not args.quiet,
         view=not args.no_view,
     )
-    return f"{table}\nwrote compare.json, compare.md, the plots and replays to {args.out}/"
+    written = ["compare.json", "compare.md"] + ["the plots"] * (not args.no_plots)
+    written += ["the replays"] * (not args.no_view)
+    return f"{table}\nwrote {', '.join(written[:-1])} and {written[-1]} to {args.out}/"
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -37,12 +37,16 @@ def view_command(args: argparse.Namespace) -> str:
     run_dir = Path(args.run_dir)
     if not (run_dir / "log.npz").is_file():
         raise InputError(
-            f"{args.run_dir!r} is not a run folder (no log.npz in it)",
+            f"{args.run_dir!r} is not a run folder (no such folder, or no log.npz in it)",
             name="RUN_DIR",
             value=args.run_dir,
         )
-    target = Path(args.out) if args.out else None
-    if target is not None and (target.is_dir() or not target.parent.is_dir()):
-        raise InputError(f"--out {args.out!r}: not a writable file path", name="--out")
+    target = Path(args.out) if args.out is not None else None
+    if target is not None and (
+        target.suffix != ".html" or target.is_dir() or not target.parent.is_dir()
+    ):
+        raise InputError(
+            f"--out {args.out!r}: must be a .html file in an existing folder", name="--out"
+        )
     path = write_replay(run_dir, target)
     return f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): open it in a browser"

@@ -11,10 +11,12 @@ shared across threads).
 from __future__ import annotations
 
 import copy
+import ipaddress
 import json
+import socket
 import threading
 from functools import partial
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from http.server import BaseHTTPRequestHandler, HTTPServer
 from typing import Any
 
 import numpy as np
@@ -48,10 +50,15 @@ class LiveView:
         self.metrics = {"distance_method": method}
         self._latest: dict[str, Any] | None = None
         self._lock = threading.Lock()
+        _check_loopback(address)
         first = replay_data(_one_tick(self.robot), self.metrics, self.robot)
         self.page = replay_html(first, title, live=True).encode("utf-8")
+        self._state: tuple[int, bytes] = (0, b"null")  # (ticks handed so far, its JSON)
+        self._handed = 0
         try:
-            self.server = ThreadingHTTPServer(address, partial(_Handler, self))
+            # one request at a time: a browser polls ten times a second; a crowd of
+            # clients waits in line instead of competing with the control loop
+            self.server = _QuietServer(address, partial(_Handler, self))
         except OSError as exc:
             raise InputError(
                 f"cannot serve the live view on {address[0]}:{address[1]}: {exc.strerror or exc}",
@@ -71,16 +78,20 @@ class LiveView:
         ``watch``) as the one to show."""
         with self._lock:
             self._latest = row
+            self._handed += 1
 
     def state(self) -> bytes:
-        """The newest tick as the page's JSON (``null`` before the first)."""
+        """The newest tick as the page's JSON (``null`` before the first), made once per
+        tick however many times it is asked for."""
         with self._lock:
-            row = self._latest
+            row, handed = self._latest, self._handed
         if row is None:
             return b"null"
-        log = {key: np.asarray(value)[None] for key, value in row.items()}
-        data = replay_data(log, self.metrics, self.robot)
-        return json.dumps(encode(data), separators=(",", ":")).encode("utf-8")
+        if self._state[0] != handed:
+            log = {key: np.asarray(value)[None] for key, value in row.items()}
+            data = replay_data(log, self.metrics, self.robot)
+            self._state = (handed, json.dumps(encode(data), separators=(",", ":")).encode())
+        return self._state[1]
 
     def close(self) -> None:
         """Stop serving."""
@@ -113,8 +124,34 @@ def _one_tick(robot: Robot) -> dict[str, np.ndarray]:
     }
 
 
+def _check_loopback(address: tuple[str, int]) -> None:
+    """The live view serves this machine only (no authentication): a loopback host."""
+    host = address[0]
+    try:
+        resolved = socket.getaddrinfo(host, None)[0][4][0]
+        loopback = ipaddress.ip_address(resolved).is_loopback
+    except (OSError, ValueError):
+        loopback = False
+    if not loopback:
+        raise InputError(
+            f"--view serves this machine only: give a loopback host (127.0.0.1, localhost, "
+            f"::1), got {host!r}",
+            name="--view",
+            value=address,
+        )
+
+
+class _QuietServer(HTTPServer):
+    """A client that goes away mid-answer is its own business: no traceback."""
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        pass
+
+
 class _Handler(BaseHTTPRequestHandler):
     """``/``: the page; ``/state``: the newest tick; anything else: 404."""
+
+    timeout = 2.0  # a client that connects and says nothing does not hold the server
 
     def __init__(self, view: LiveView, *args: Any):
         self.view = view

@@ -278,6 +278,8 @@ def simulate(
         interrupt.restore()
     log = {key: v[:n] for key, v in log.items()}
     log["stop_reason"] = np.array(reasons[:n], dtype=str)
+    if watch is not None and n:  # the last tick too, whenever it came
+        watch({key: v[n - 1].copy() for key, v in log.items()})
     avoidance = controller.config.avoidance
     ending = end_of_run(reached, cmd, robot, avoidance, log, goal)
     if interrupt.requested:

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from .errors import InputError
 from .human import KinectHuman
 from .laws import AvoidanceConfig, distance_at_factor
 from .robot import Robot
@@ -32,6 +33,9 @@ __all__ = ["PAIR_STATES", "pair_states", "replay_data"]
 
 #: A robot set's closest pair is in one of these states (the colours of its line).
 PAIR_STATES = ("free", "repulsion active", "within the stop distance")
+#: Most ticks a replay keeps (every tick up to this; beyond, evenly spaced ones): 40 s at
+#: 500 Hz, about 3 MB of numbers. A run at 10 kHz would otherwise need 27 MB for 30 s.
+MAX_TICKS = 20_000
 #: Repulsion counts as active where the logistic of eqs. (2) and (4) exceeds this share of
 #: its maximum (1 %: where it starts to move the robot visibly).
 ACTIVE_SHARE = 0.01
@@ -54,6 +58,64 @@ def pair_states(distance: np.ndarray, cfg: AvoidanceConfig) -> np.ndarray:
     )
     d = np.asarray(distance, dtype=float)
     return np.where(d <= stop, 2, np.where(d < active, 1, 0)).astype(np.int8)
+
+
+#: The log arrays a replay needs, with the shape of one tick's row (None: any).
+_ROWS: dict[str, tuple[int | None, ...]] = {
+    "q": (None,),
+    "joints": (25, 3),
+    "state": (25,),
+    "stopped": (),
+    "f": (),
+    "distance": (3,),
+    "ee_pos": (3,),
+    "ee_ref": (3,),
+}
+#: Optional arrays (older logs lack them), with their row shapes.
+_OPTIONAL: dict[str, tuple[int | None, ...]] = {
+    "stop_reason": (),
+    "robot_point": (3, 3),
+    "human_point": (3, 3),
+    "frame_age_s": (),
+    "true_distance": (3,),
+}
+
+
+def checked_log(log: dict[str, np.ndarray], robot: Robot) -> dict[str, np.ndarray]:
+    """The arrays of ``log`` a replay uses, checked: ``t`` finite and increasing, every
+    other array one row per tick of the right shape and kind.
+
+    Raises
+    ------
+    InputError
+        Naming the first array at fault.
+    """
+
+    def refuse(name: str, why: str) -> InputError:
+        return InputError(f"log.npz: {name} {why}", name=name, value=why)
+
+    t = np.asarray(log.get("t", np.zeros(0)))
+    if t.ndim != 1 or len(t) == 0 or t.dtype.kind not in "fiu":
+        raise refuse("t", "must be a non-empty 1-D array of times, s")
+    if not np.isfinite(t).all() or np.any(np.diff(t) <= 0):
+        raise refuse("t", "must be finite and strictly increasing")
+    out = {"t": t.astype(float)}
+    for name, row in (_ROWS | _OPTIONAL).items():
+        if name not in log:
+            if name in _ROWS:
+                raise refuse(name, "is missing")
+            continue
+        value = np.asarray(log[name])
+        if name == "q":
+            row = (robot.nq,)
+        text = name == "stop_reason"
+        if value.shape != (len(t), *row) or (value.dtype.kind == "U") != text:
+            shape = (len(t), *row)
+            raise refuse(name, f"must be {'text' if text else 'numbers'} of shape {shape}")
+        if not text and value.dtype.kind not in "fiub":
+            raise refuse(name, "must be numbers")
+        out[name] = value
+    return out
 
 
 def _links(robot: Robot, q: np.ndarray) -> np.ndarray:
@@ -86,7 +148,11 @@ def replay_data(
         Most scene frames per second of run time.
     """
     cfg = cfg or AvoidanceConfig()
-    t = np.asarray(log["t"], dtype=float)
+    log = checked_log(log, robot)
+    n_all = len(log["t"])
+    keep = np.arange(0, n_all, -(-n_all // MAX_TICKS))  # every tick, up to MAX_TICKS
+    log = {key: value[keep] for key, value in log.items()}
+    t = log["t"]
     n = len(t)
     dt = float(np.median(np.diff(t))) if n > 1 else 1.0
     stride = max(1, round(1.0 / (fps * dt)))
@@ -112,11 +178,15 @@ def replay_data(
     else:
         robot_radii, human_radii = robot.capsule_radii, human.capsule_radii
     stopped = np.asarray(log["stopped"], dtype=bool)
-    reason_text = log.get("stop_reason", np.full(n, ""))
+    reason_text = log.get("stop_reason", np.full(n, "(reason not logged)"))
     reasons = sorted({str(r) for r in reason_text[stopped]})
     code = {r: i for i, r in enumerate(reasons)}
     true = np.asarray(log.get("true_distance", np.full((n, 3), np.nan)), dtype=float)
     f32 = np.float32
+    if "robot_point" in log and "human_point" in log:  # older logs have no closest pairs
+        pairs = np.stack([log["robot_point"][frames], log["human_point"][frames]], axis=2)
+    else:
+        pairs = np.full((len(frames), 3, 2, 3), np.nan)
     return {
         "method": method,
         "controller": metrics.get("controller"),
@@ -131,11 +201,7 @@ def replay_data(
         "links": np.array(links, dtype=f32),
         "robot": np.array(robot_shapes, dtype=f32),
         "human": np.array(human_shapes, dtype=f32),
-        "pairs": np.stack([log["robot_point"][frames], log["human_point"][frames]], axis=2).astype(
-            f32
-        )
-        if "robot_point" in log
-        else np.full((len(frames), 3, 2, 3), np.nan, dtype=f32),
+        "pairs": pairs.astype(f32),
         "t": t.astype(np.float64),
         "f": np.asarray(log["f"], dtype=f32),
         "distance": np.asarray(log["distance"], dtype=f32),

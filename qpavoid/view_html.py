@@ -234,6 +234,12 @@ def write_replay(run_dir: str | Path, out: str | Path | None = None) -> Path:
             name="RUN_DIR",
             value=str(folder),
         ) from None
+    if not isinstance(metrics, dict):
+        raise InputError(
+            f"{str(folder)!r}: metrics.json must hold an object, not {type(metrics).__name__}",
+            name="RUN_DIR",
+            value=str(folder),
+        )
     log = load_log(folder)
     locked = () if metrics.get("redundant") else None  # A3 free in a redundant run
     robot = load_robot(str(metrics.get("robot", "iiwa14")), locked=locked)

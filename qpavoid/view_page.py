@@ -130,7 +130,7 @@ function capsule(path, a, b, r) {
 let nTicks = D.t.length;
 let nFrames = D.frame_tick.length;
 const spheres = D.method === "spheres";
-let tick = 0, playing = false, lastWall = null;
+let tick = 0, playing = false, lastWall = null, playT = 0;  // playT: playback time, s
 
 function showFrame(j) {
   const nl = D.links.shape[1];
@@ -216,19 +216,23 @@ const slider = document.getElementById("time");
 slider.min = D.t[0];
 slider.max = D.t[nTicks - 1];
 slider.step = nTicks > 1 ? (D.t[nTicks - 1] - D.t[0]) / (nTicks - 1) : 1;
-slider.addEventListener("input", () => { show(tickAt(parseFloat(slider.value))); });
+slider.addEventListener("input", () => {
+  playT = parseFloat(slider.value);
+  show(tickAt(playT));
+});
 document.getElementById("play").addEventListener("click", () => {
   playing = !playing;
   document.getElementById("play").textContent = playing ? "Pause" : "Play";
   if (playing && tick >= nTicks - 1) show(0);
+  playT = D.t[tick];
   lastWall = null;
 });
 function frame(wall) {
   if (playing) {
     if (lastWall !== null) {
       const speed = parseFloat(document.getElementById("speed").value);
-      const t = D.t[tick] + (wall - lastWall) / 1000 * speed;
-      show(tickAt(t));
+      playT += (wall - lastWall) / 1000 * speed;  // kept apart from the tick: no drift
+      show(tickAt(playT));
       slider.value = D.t[tick];
       if (tick >= nTicks - 1) {
         playing = false;
@@ -254,7 +258,7 @@ if (LIVE) {  // a run as it happens: the newest tick from the server, ten times 
 }
 
 window.qpavoidReplay = {
-  seek: (t) => { slider.value = t; show(tickAt(t)); return tick; },
+  seek: (t) => { slider.value = t; playT = t; show(tickAt(t)); return tick; },
   tick: () => tick,
   visible: (name, on) => viewer.handle_command(
     { type: "set_property", path: "/qpavoid/" + name, property: "visible", value: on }),

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from qpavoid import view_data
 from qpavoid.calibration import Calibration, SensorCalibration
 from qpavoid.cli import main
 from qpavoid.io import load_log
@@ -239,3 +240,59 @@ def test_qpavoid_run_view_follows_a_live_run_in_a_browser(browser, tmp_path):
         proc.send_signal(signal.SIGINT)
         proc.communicate(timeout=30)
     assert proc.returncode == 0
+
+
+def test_view_refuses_to_overwrite_the_run_and_bad_logs_in_one_line(test2_run, tmp_path, capsys):
+    """An adversarial tester's cases: `--out RUN/log.npz` replaced the log with the page;
+    malformed logs gave an internal error or a broken page."""
+    log_bytes = (test2_run / "log.npz").read_bytes()
+    for out in ("log.npz", "metrics.json"):
+        assert main(["view", str(test2_run), "--out", str(test2_run / out)]) == 2
+    assert (test2_run / "log.npz").read_bytes() == log_bytes
+    assert capsys.readouterr().err.count("must be a .html file") == 2
+    log = dict(load_log(test2_run))
+    metrics = (test2_run / "metrics.json").read_text()
+    bad = {
+        "t reversed": {"t": log["t"][::-1]},
+        "t with a NaN": {"t": np.where(np.arange(len(log["t"])) == 3, np.nan, log["t"])},
+        "f short": {"f": log["f"][:-10]},
+        "distance (N, 2)": {"distance": log["distance"][:, :2]},
+        "reasons as numbers": {"stop_reason": np.arange(len(log["t"]))},
+    }
+    for name, change in bad.items():
+        folder = tmp_path / name.replace(" ", "_")
+        folder.mkdir()
+        np.savez(folder / "log.npz", **(log | change))
+        (folder / "metrics.json").write_text(metrics)
+        assert main(["view", str(folder)]) == 2, name
+        err = capsys.readouterr().err
+        assert err.startswith("qpavoid: error: log.npz: ") and err.count("\n") == 1, err
+    (folder / "metrics.json").write_text("[]")
+    assert main(["view", str(folder)]) == 2
+    assert "must hold an object" in capsys.readouterr().err
+    old = {k: v for k, v in log.items() if k != "human_point"}  # an older log: still opens
+    np.savez(folder / "log.npz", **old)
+    (folder / "metrics.json").write_text(metrics)
+    assert main(["view", str(folder)]) == 0
+
+
+def test_a_fast_run_keeps_at_most_max_ticks_each_one_of_the_log(test2_run, robot, monkeypatch):
+    monkeypatch.setattr(view_data, "MAX_TICKS", 100)
+    log = load_log(test2_run)
+    data = replay_data(log, {}, robot)
+    assert 50 <= len(data["t"]) <= 100
+    rows = np.searchsorted(log["t"], data["t"])
+    np.testing.assert_array_equal(log["t"][rows], data["t"])  # real ticks, not averages
+    np.testing.assert_allclose(data["distance"], log["distance"][rows], rtol=1e-6)
+
+
+def test_the_live_view_serves_this_machine_only_and_makes_each_tick_once(test2_run, robot):
+    with pytest.raises(Exception, match="loopback"):
+        LiveView(("0.0.0.0", 0), robot, "capsules", "live")
+    log = load_log(test2_run)
+    with LiveView(("127.0.0.1", 0), robot, "capsules", "live") as view:
+        view.update({key: v[5] for key, v in log.items()})
+        first = view.state()
+        assert view.state() is first  # asked again: not made again
+        view.update({key: v[6] for key, v in log.items()})
+        assert view.state() != first
