@@ -12,7 +12,8 @@ side as the right one. :func:`mirror_cost` compares a body with a reference skel
 labelled and with left and right swapped (``frames.MIRROR``); the fusion relabels the
 body when the swapped labelling fits better by a margin.
 
-Where sensors disagree on a joint, :func:`believed` chooses whom to believe.
+Where sensors disagree on a joint, :func:`~qpavoid.fusion_kernels.believed` chooses whom
+to believe.
 """
 
 from __future__ import annotations
@@ -230,32 +231,3 @@ def associate(
 def _dist(a: np.ndarray, b: np.ndarray) -> float:
     d = math.dist(a, b)
     return d if math.isfinite(d) else float("inf")
-
-
-def believed(
-    j: int,
-    p: np.ndarray,
-    tracked: np.ndarray,
-    usable: np.ndarray,
-    prediction: np.ndarray | None,
-    bone: np.ndarray,
-    threshold_m: float,
-) -> np.ndarray:
-    """Which sensors' positions ``p`` (S, 3) of joint ``j`` to keep when they disagree: (S,) bool.
-
-    The best candidate is Tracked rather than Inferred, then the closest to the person's
-    predicted joint (``prediction`` (25, 3), None for a new person) plus the error of the
-    bone to the predicted parent against its known length (``bone`` (25,), m); every
-    candidate within ``threshold_m`` of it is kept.
-    """
-    err = np.zeros(len(p))
-    if prediction is not None and np.isfinite(prediction[j]).all():
-        err += np.linalg.norm(p - prediction[j], axis=1)
-    parent = PARENT[j]
-    if parent >= 0 and bone[j] > 0 and prediction is not None:
-        anchor = prediction[parent]
-        if np.isfinite(anchor).all():
-            err += np.abs(np.linalg.norm(p - anchor, axis=1) - bone[j])
-    score = np.where(usable, np.where(tracked, 0.0, 1e3) + np.nan_to_num(err, nan=1e2), np.inf)
-    best = int(np.argmin(score))
-    return usable & (np.linalg.norm(p - p[best], axis=1) <= threshold_m)

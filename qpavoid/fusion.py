@@ -30,7 +30,6 @@ import numpy as np
 from .association import (
     PersonTrack,
     associate,
-    believed,
     mirror_suspects,
     reference_rank,
     torso_centre,
@@ -38,8 +37,9 @@ from .association import (
 )
 from .calibration import Calibration
 from .frames import N_KINECT_JOINTS, HumanFrame, TrackingState
-from .fusion_kernels import disagreement, merge, warm_up
+from .fusion_kernels import believed, disagreement, merge, warm_up
 from .people import NOBODY
+from .perception import PARENT
 from .sensor_recording import BodyFrame
 
 __all__ = ["FusedFrame", "FusedPerson", "Fuser", "FusionConfig", "OutlierChoice"]
@@ -141,6 +141,7 @@ class FusedFrame(NamedTuple):
 HISTORY = 4  #: frames kept per (sensor, body)
 #: Tracking states as plain ints (comparing an array with an IntEnum member is 6× slower).
 NOT_TRACKED, INFERRED, TRACKED = (int(s) for s in TrackingState)
+_UNKNOWN = np.full((N_KINECT_JOINTS, 3), np.nan)  #: a new person's prediction: nothing
 
 
 class _Frame(NamedTuple):
@@ -278,8 +279,7 @@ class Fuser:
             P, S, W, np.isin(np.arange(N_KINECT_JOINTS), [o.joint for o in outliers])
         )
         track.update(joints, state, t, cfg.velocity_alpha, cfg.velocity_beta, cfg.max_age_s)
-        seen = state != NOT_TRACKED
-        got = {c.sensor for c in contributions}
+        seen, got = state != NOT_TRACKED, {c.sensor for c in contributions}
         return FusedPerson(
             track.id,
             HumanFrame(
@@ -303,18 +303,18 @@ class Fuser:
     ) -> list[OutlierChoice]:
         """Joints on which the sensors disagree: whom to believe (the others' ``W`` and
         ``conf`` zeroed in place)."""
-        gap = disagreement(P)  # -1 where fewer than two sensors see the joint
         threshold = self.cfg.outlier_threshold_m
-        outliers = []
-        for j in np.flatnonzero(gap > threshold):
-            usable = S[:, j] != NOT_TRACKED
-            keep = believed(
-                int(j), P[:, j], S[:, j] == TRACKED, usable, prediction, track.bone, threshold
-            )
-            W[~keep, j], conf[~keep, j] = 0.0, 0.0
-            names = [c.sensor for c in contributions]
-            chosen = names[int(np.flatnonzero(keep)[0])]
-            dropped = tuple(n for n, k, u in zip(names, keep, usable, strict=True) if u and not k)
-            outliers.append(OutlierChoice(int(j), chosen, dropped))
-            self.counters["outliers_resolved"] += 1
+        disputed = np.flatnonzero(disagreement(P) > threshold)  # -1: fewer than two see it
+        if not disputed.size:
+            return []
+        expected = prediction if prediction is not None else _UNKNOWN
+        keep = believed(P, S, disputed, expected, track.bone, PARENT, threshold)
+        W[:, disputed] *= keep
+        conf[:, disputed] *= keep
+        names = np.array([c.sensor for c in contributions])
+        dropped = (S[:, disputed] != NOT_TRACKED) & ~keep  # seen, not believed
+        chosen = names[np.argmax(keep, axis=0)].tolist()
+        by_joint = zip(disputed.tolist(), chosen, dropped.T, strict=True)
+        outliers = [OutlierChoice(j, c, tuple(names[d].tolist())) for j, c, d in by_joint]
+        self.counters["outliers_resolved"] += len(outliers)
         return outliers

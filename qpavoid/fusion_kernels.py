@@ -19,7 +19,15 @@ from numba import njit
 
 from .compiling import ctrl_c_deferred
 
-__all__ = ["disagreement", "mean_gaps", "merge", "subset_mean", "update_track", "warm_up"]
+__all__ = [
+    "believed",
+    "disagreement",
+    "mean_gaps",
+    "merge",
+    "subset_mean",
+    "update_track",
+    "warm_up",
+]
 
 
 @njit(cache=True)
@@ -75,6 +83,53 @@ def disagreement(P: np.ndarray) -> np.ndarray:
                 if d > out[j]:  # NaN compares False
                     out[j] = d
     return out
+
+
+@njit(cache=True)
+def believed(
+    P: np.ndarray,
+    states: np.ndarray,
+    joints: np.ndarray,
+    prediction: np.ndarray,
+    bone: np.ndarray,
+    parent: np.ndarray,
+    threshold_m: float,
+) -> np.ndarray:
+    """Whom to believe on each joint where the sensors disagree: (S, len(joints)) bool.
+
+    For joint ``j`` the best sensor is one that tracks it rather than infers it, then the
+    one closest to the person's predicted joint (``prediction`` (25, 3); all NaN for a new
+    person) plus the error of the bone to the predicted parent against its known length
+    (``bone`` (25,), m; 0 unknown); every sensor within ``threshold_m`` of the best is
+    kept. A sensor that does not see the joint is never kept.
+    """
+    S = P.shape[0]
+    keep = np.zeros((S, len(joints)), dtype=np.bool_)
+    for n in range(len(joints)):
+        j = joints[n]
+        a = parent[j]
+        best, best_score = -1, np.inf
+        for s in range(S):
+            if states[s, j] == 0:
+                continue
+            err = 0.0
+            if not np.isnan(prediction[j, 0] + prediction[j, 1] + prediction[j, 2]):
+                err += np.sqrt(((P[s, j] - prediction[j]) ** 2).sum())
+            if a >= 0 and bone[j] > 0.0:
+                anchor = prediction[a]
+                if not np.isnan(anchor[0] + anchor[1] + anchor[2]):
+                    err += abs(np.sqrt(((P[s, j] - anchor) ** 2).sum()) - bone[j])
+            if np.isnan(err):
+                err = 100.0
+            score = (0.0 if states[s, j] == 2 else 1e3) + err
+            if score < best_score:
+                best, best_score = s, score
+        if best < 0:
+            continue
+        for s in range(S):
+            if states[s, j] != 0:
+                keep[s, n] = np.sqrt(((P[s, j] - P[best, j]) ** 2).sum()) <= threshold_m
+    return keep
 
 
 @njit(cache=True)
@@ -185,6 +240,7 @@ def warm_up() -> None:
         mean_gaps(P, P[0], np.arange(4))
         subset_mean(P[0], np.arange(4))
         disagreement(P)
+        believed(P, states, np.arange(3), P[0], np.zeros(25), np.full(25, -1), 0.2)
         joints, state = merge(P, states, np.ones((2, 25)), np.zeros(25, dtype=np.bool_))
         update_track(
             np.zeros((25, 3)),
