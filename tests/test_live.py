@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
+from urllib.request import urlopen
 
 import numpy as np
 import pytest
@@ -219,7 +221,7 @@ def test_a_frame_from_the_future_cannot_hide_the_real_ones():
     assert counts["received"] == counts["accepted"] + 2 == 3
 
 
-def listening(tmp_path: Path) -> tuple[subprocess.Popen, int, Path]:
+def listening(tmp_path: Path, *extra: str) -> tuple[subprocess.Popen, int, Path]:
     """``qpavoid run --listen`` on a free port, started; its process, port and output."""
     calib = tmp_path / "calib.toml"
     T = CAL["a"].base_from_camera
@@ -231,8 +233,19 @@ def listening(tmp_path: Path) -> tuple[subprocess.Popen, int, Path]:
     out = tmp_path / "live"
     cmd = [sys.executable, "-m", "qpavoid", "run", "--listen", f"127.0.0.1:{port}"]
     cmd += ["--sensors", str(calib), "--out", str(out), "--rate", "100", "--no-plots", "-q"]
+    cmd += list(extra)
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     return proc, port, out
+
+
+def wait_until_ticking(proc: subprocess.Popen, within_s: float = 60.0) -> None:
+    """Wait until a run started with ``--view`` has logged its first tick (its live view
+    then has a state to show)."""
+    url = re.search(r"live view: (\S+)", proc.stdout.readline()).group(1)
+    deadline = time.time() + within_s
+    while urlopen(url + "state", timeout=10).read() == b"null":
+        assert time.time() < deadline, "the run did not start ticking"
+        time.sleep(0.1)
 
 
 def wait_until_bound(port: int, within_s: float = 30.0) -> None:
@@ -276,9 +289,8 @@ def test_a_killed_run_leaves_no_receiver_holding_its_port(tmp_path):
     "signum", [signal.SIGINT, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)]
 )
 def test_the_command_line_listens_and_ctrl_c_or_sigterm_writes_the_run(tmp_path, signum):
-    proc, port, out = listening(tmp_path)
-    wait_until_bound(port)  # its receiver has the port (a loaded CI is slow) ...
-    time.sleep(1.5)  # ... and the loop runs
+    proc, port, out = listening(tmp_path, "--view")
+    wait_until_ticking(proc)  # a loaded CI may take seconds to start
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         for _k in range(15):
             sock.sendto(encode(frame(t=time.time())._replace(body=0)), ("127.0.0.1", port))
