@@ -8,9 +8,10 @@ centres (an optimal assignment per sensor, scipy's ``linear_sum_assignment``, wi
 ids do not jump. A body that fits no track starts a new one.
 
 A Kinect v2 assumes the person faces it: for a person facing away it labels the left
-side as the right one. :func:`mirror_cost` compares a body with a reference skeleton as
-labelled and with left and right swapped (``frames.MIRROR``); the fusion relabels the
-body when the swapped labelling fits better by a margin.
+side as the right one. :func:`reference_rank` picks, for a new person, the body the
+others are compared with; :func:`~qpavoid.fusion_person.mirror_costs` compares a body with
+that reference (or the person's prediction) as labelled and with left and right swapped,
+and the fusion relabels the body when the swap fits better by a margin.
 
 Where sensors disagree on a joint, :func:`~qpavoid.fusion_kernels.believed` chooses whom
 to believe.
@@ -19,13 +20,14 @@ to believe.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .frames import MIRROR, N_KINECT_JOINTS, JointType, TrackingState
-from .fusion_kernels import mean_gaps, subset_mean, update_track
+from .frames import N_KINECT_JOINTS, JointType, TrackingState
+from .fusion_kernels import subset_mean, update_track
 from .perception import PARENT
 
 J = JointType
@@ -43,8 +45,6 @@ TORSO = np.array(
         J.HipRight,
     ]
 )
-#: Joints that change under a left/right swap (the others are on the spine).
-SIDED = np.flatnonzero(np.arange(N_KINECT_JOINTS) != MIRROR)
 
 
 @dataclass
@@ -107,35 +107,10 @@ class PersonTrack:
         """Torso centre, m (NaN if no joint is known)."""
         return torso_centre(self.joints)
 
-    def predicted(self, t: float, horizon_s: float) -> np.ndarray:
-        """(25, 3) joints moved along their velocity to time ``t`` (at most ``horizon_s``)."""
-        dt = np.maximum(
-            np.minimum(t - self.last_seen, horizon_s), 0.0
-        )  # never seen: NaN joints stay NaN
-        return self.joints + self.velocity * dt[:, None]
-
 
 def torso_centre(joints: np.ndarray) -> np.ndarray:
     """Mean of the finite torso joints (of all finite joints if none), m; NaN if none."""
     return subset_mean(joints, TORSO)
-
-
-def mirror_cost(
-    joints: np.ndarray, usable: np.ndarray, reference: np.ndarray
-) -> tuple[float, float]:
-    """Median distance of the sided joints to ``reference``, as labelled and mirrored, m.
-
-    Only joints usable in ``joints`` (and their mirror) and finite in ``reference`` count;
-    (inf, inf) when none does.
-    """
-    ref_ok = np.isfinite(reference).all(axis=1)
-    keep = SIDED[usable[SIDED] & ref_ok[SIDED]]
-    keep_m = SIDED[usable[MIRROR[SIDED]] & ref_ok[SIDED]]
-    if keep.size == 0 or keep_m.size == 0:
-        return float("inf"), float("inf")
-    as_is = np.median(np.linalg.norm(joints[keep] - reference[keep], axis=1))
-    mirrored = np.median(np.linalg.norm(joints[MIRROR[keep_m]] - reference[keep_m], axis=1))
-    return float(as_is), float(mirrored)
 
 
 def reference_rank(joints: np.ndarray, state: np.ndarray) -> tuple[bool, int]:
@@ -152,35 +127,9 @@ def reference_rank(joints: np.ndarray, state: np.ndarray) -> tuple[bool, int]:
     return (not faces_robot, -int((state == TrackingState.Tracked).sum()))
 
 
-#: A body whose sided joints are on average this close to the person's prediction is not
-#: checked for a left/right swap (a swap moves them by a shoulder's width), m.
-MIRROR_CHECK_M = 0.1
-
-
-def mirror_suspects(bodies: np.ndarray, reference: np.ndarray) -> np.ndarray:
-    """(S,) True for the bodies (S, 25, 3) whose sided joints lie on average farther than
-    :data:`MIRROR_CHECK_M` from ``reference`` (25, 3): only those may be swapped.
-
-    Joints missing in a body or in the reference do not count; a body with nothing to
-    compare is not a suspect.
-    """
-    return np.asarray(mean_gaps(bodies, reference, SIDED) > MIRROR_CHECK_M)  # NaN: no check
-
-
-def unmirrored(
-    joints: np.ndarray, state: np.ndarray, reference: np.ndarray, margin_m: float
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """``joints`` and ``state`` relabelled left/right if that fits ``reference`` better
-    by ``margin_m`` (:func:`mirror_cost`), else None."""
-    as_is, swapped = mirror_cost(joints, ~np.isnan(joints[:, 0]), reference)
-    if swapped + margin_m < as_is:
-        return joints[MIRROR], state[MIRROR]
-    return None
-
-
 def associate(
-    centres: dict[int, np.ndarray],
-    track_centres: dict[int, np.ndarray],
+    centres: Mapping[int, Sequence[float]],
+    track_centres: Mapping[int, Sequence[float]],
     previous: dict[int, int],
     gate_m: float,
 ) -> dict[int, int | None]:
@@ -228,6 +177,6 @@ def associate(
     return out
 
 
-def _dist(a: np.ndarray, b: np.ndarray) -> float:
+def _dist(a: Sequence[float], b: Sequence[float]) -> float:
     d = math.dist(a, b)
     return d if math.isfinite(d) else float("inf")

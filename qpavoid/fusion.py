@@ -21,25 +21,19 @@ A person no sensor sees any more is reported with every joint missing for
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
-from .association import (
-    PersonTrack,
-    associate,
-    mirror_suspects,
-    reference_rank,
-    torso_centre,
-    unmirrored,
-)
+from .association import PersonTrack, associate, reference_rank, torso_centre
 from .calibration import Calibration
 from .frames import N_KINECT_JOINTS, HumanFrame, TrackingState
-from .fusion_kernels import believed, disagreement, merge, warm_up
+from .fusion_kernels import ingest
+from .fusion_person import fuse_person, warm_up
 from .people import NOBODY
-from .perception import PARENT
 from .sensor_recording import BodyFrame
 
 __all__ = ["FusedFrame", "FusedPerson", "Fuser", "FusionConfig", "OutlierChoice"]
@@ -141,14 +135,13 @@ class FusedFrame(NamedTuple):
 HISTORY = 4  #: frames kept per (sensor, body)
 #: Tracking states as plain ints (comparing an array with an IntEnum member is 6× slower).
 NOT_TRACKED, INFERRED, TRACKED = (int(s) for s in TrackingState)
-_UNKNOWN = np.full((N_KINECT_JOINTS, 3), np.nan)  #: a new person's prediction: nothing
 
 
 class _Frame(NamedTuple):
     t: float  # capture time, controller clock, s
     joints: np.ndarray  # (25, 3) base frame, NaN where not usable
     state: np.ndarray  # (25,) NotTracked where not usable
-    centre: np.ndarray  # torso centre, m
+    centre: tuple[float, float, float]  # torso centre, m (NaN: no joint usable)
 
 
 class _Contribution(NamedTuple):
@@ -179,6 +172,7 @@ class Fuser:
         self._latest: dict[str, dict[int, list[_Frame]]] = {s: {} for s in calibration.names}
         self._assigned: dict[str, dict[int, int]] = {s: {} for s in calibration.names}
         self._next_id = 0
+        self._sensor_weight = {n: calibration[n].weight for n in calibration.names}
         warm_up()
         # averaging weight and confidence by tracking state (NotTracked, Inferred, Tracked)
         self._weight = np.array([0.0, self.cfg.weight_inferred, self.cfg.weight_tracked])
@@ -200,13 +194,14 @@ class Fuser:
         if history and t <= history[-1].t:
             self.counters["out_of_order_or_duplicate"] += 1
             return False
-        state = np.asarray(frame.state, dtype=np.int8)
-        joints = cal.to_base(frame.joints)
-        usable = ~np.isnan(joints[:, 0]) & (state != NOT_TRACKED)  # NaN spreads
-        if not usable.all():
-            joints = np.where(usable[:, None], joints, np.nan)
-            state = np.where(usable, state, NOT_TRACKED).astype(np.int8)
-        history.append(_Frame(t, joints, state, torso_centre(joints)))
+        T = cal.base_from_camera
+        joints, state = ingest(
+            np.asarray(frame.joints, dtype=np.float64),
+            np.asarray(frame.state, dtype=np.int8),
+            T[:3, :3],
+            T[:3, 3],
+        )
+        history.append(_Frame(t, joints, state, tuple(torso_centre(joints).tolist())))
         del history[:-HISTORY]
         return True
 
@@ -214,13 +209,15 @@ class Fuser:
         """Every known person at time ``t`` (s, controller clock), from frames captured by ``t``."""
         cfg = self.cfg
         per_track: dict[int, list[_Contribution]] = {}
-        track_centres = {tr.id: tr.centre() for tr in self.tracks}
+        track_centres = {tr.id: tuple(tr.centre().tolist()) for tr in self.tracks}
         for sensor in self.calibration.names:
             bodies = {}
             for body, history in self._latest[sensor].items():
-                c = next((c for c in reversed(history) if c.t <= t), None)
-                if c is not None and t - cfg.max_age_s <= c.t and not np.isnan(c.centre[0]):
-                    bodies[body] = c
+                for c in reversed(history):  # the newest frame captured by t, if fresh
+                    if c.t <= t:
+                        if t - cfg.max_age_s <= c.t and not math.isnan(c.centre[0]):
+                            bodies[body] = c
+                        break
             centres = {body: c.centre for body, c in bodies.items()}
             mapping = associate(
                 centres, track_centres, self._assigned[sensor], cfg.association_gate_m
@@ -256,65 +253,53 @@ class Fuser:
             contributions.sort(key=lambda c: reference_rank(c.joints, c.state))
         P = np.array([c.joints for c in contributions])  # (S, 25, 3), NaN not usable
         S = np.array([c.state for c in contributions])  # (S, 25), NotTracked not usable
-        prediction = track.predicted(t, 0.1) if recent else None
-        reference = prediction if prediction is not None else P[0]
-        mirrored = []
-        for i in np.flatnonzero(mirror_suspects(P, reference)):
-            fixed = unmirrored(P[i], S[i], reference, cfg.mirror_margin_m)
-            if fixed is not None:
-                P[i], S[i] = fixed
-                mirrored.append(contributions[i].sensor)
-                self.counters["mirrored_corrected"] += 1
-        age = np.array([c.age for c in contributions])
-        if cfg.max_extrapolation_s > 0.0:
-            P = P + track.velocity[None] * np.minimum(age, cfg.max_extrapolation_s)[:, None, None]
-        fresh = np.minimum(np.maximum(1.0 - 0.5 * age / cfg.max_age_s, 0.0), 1.0)
-        W = (
-            self._weight[S]
-            * (fresh * [self.calibration[c.sensor].weight for c in contributions])[:, None]
+        names = [c.sensor for c in contributions]
+        joints, state, confidence, mirrored, disputed, keep = fuse_person(
+            P,
+            S,
+            np.array([c.age for c in contributions]),
+            np.array([self._sensor_weight[n] for n in names]),
+            recent,
+            track.joints,
+            track.velocity,
+            track.last_seen,
+            track.bone,
+            float(t),
+            self._weight,
+            self._confidence,
+            cfg.max_age_s,
+            cfg.max_extrapolation_s,
+            cfg.outlier_threshold_m,
+            cfg.mirror_margin_m,
+            cfg.velocity_alpha,
+            cfg.velocity_beta,
+            cfg.smooth,
         )
-        conf = self._confidence[S] * fresh[:, None]
-        outliers = self._settle(contributions, P, S, W, conf, prediction, track)
-        joints, state = merge(
-            P, S, W, np.isin(np.arange(N_KINECT_JOINTS), [o.joint for o in outliers])
-        )
-        track.update(joints, state, t, cfg.velocity_alpha, cfg.velocity_beta, cfg.max_age_s)
-        seen, got = state != NOT_TRACKED, {c.sensor for c in contributions}
+        track.seen_s = t
+        outliers = self._outliers(names, S, disputed, keep) if disputed.size else ()
+        flipped: tuple[str, ...] = ()
+        if mirrored.any():
+            flipped = tuple(n for n, m in zip(names, mirrored, strict=True) if m)
+            self.counters["mirrored_corrected"] += len(flipped)
         return FusedPerson(
             track.id,
-            HumanFrame(
-                np.where(seen[:, None], track.joints, np.nan) if cfg.smooth else joints, state
-            ),
-            np.minimum(conf.sum(axis=0), 1.0),
-            tuple(n for n in self.calibration.names if n in got),
-            tuple(outliers),
-            tuple(mirrored),
+            HumanFrame(joints, state),
+            confidence,
+            tuple(n for n in self.calibration.names if n in names),
+            outliers,
+            flipped,
         )
 
-    def _settle(
-        self,
-        contributions: list[_Contribution],
-        P: np.ndarray,
-        S: np.ndarray,
-        W: np.ndarray,
-        conf: np.ndarray,
-        prediction: np.ndarray | None,
-        track: PersonTrack,
-    ) -> list[OutlierChoice]:
-        """Joints on which the sensors disagree: whom to believe (the others' ``W`` and
-        ``conf`` zeroed in place)."""
-        threshold = self.cfg.outlier_threshold_m
-        disputed = np.flatnonzero(disagreement(P) > threshold)  # -1: fewer than two see it
-        if not disputed.size:
-            return []
-        expected = prediction if prediction is not None else _UNKNOWN
-        keep = believed(P, S, disputed, expected, track.bone, PARENT, threshold)
-        W[:, disputed] *= keep
-        conf[:, disputed] *= keep
-        names = np.array([c.sensor for c in contributions])
+    def _outliers(
+        self, names: list[str], S: np.ndarray, disputed: np.ndarray, keep: np.ndarray
+    ) -> tuple[OutlierChoice, ...]:
+        """The record of whom :func:`~qpavoid.fusion_person.fuse_person` believed on each
+        ``disputed`` joint (``keep``: (S, len(disputed)))."""
         dropped = (S[:, disputed] != NOT_TRACKED) & ~keep  # seen, not believed
-        chosen = names[np.argmax(keep, axis=0)].tolist()
-        by_joint = zip(disputed.tolist(), chosen, dropped.T, strict=True)
-        outliers = [OutlierChoice(j, c, tuple(names[d].tolist())) for j, c, d in by_joint]
-        self.counters["outliers_resolved"] += len(outliers)
-        return outliers
+        chosen = np.argmax(keep, axis=0).tolist()
+        by_joint = zip(disputed.tolist(), chosen, dropped.T.tolist(), strict=True)
+        self.counters["outliers_resolved"] += len(disputed)
+        return tuple(
+            OutlierChoice(j, names[c], tuple(n for n, d in zip(names, ds, strict=True) if d))
+            for j, c, ds in by_joint
+        )

@@ -22,6 +22,7 @@ from .compiling import ctrl_c_deferred
 __all__ = [
     "believed",
     "disagreement",
+    "ingest",
     "mean_gaps",
     "merge",
     "subset_mean",
@@ -49,6 +50,30 @@ def mean_gaps(P: np.ndarray, reference: np.ndarray, joints: np.ndarray) -> np.nd
                 n += 1
         out[s] = total / n if n else np.nan
     return out
+
+
+@njit(cache=True)
+def ingest(
+    joints: np.ndarray, state: np.ndarray, rotation: np.ndarray, translation: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """A sensor's joints (25, 3) and states (25,) in the base frame, m: ``R p + t``, NaN and
+    NotTracked (0) wherever a joint is NaN or NotTracked, in a new (25, 3) array and a new
+    (25,) int8 array."""
+    out = np.empty(joints.shape)
+    usable = np.empty(state.shape, dtype=np.int8)
+    for j in range(joints.shape[0]):
+        for k in range(3):
+            out[j, k] = (
+                rotation[k, 0] * joints[j, 0]
+                + rotation[k, 1] * joints[j, 1]
+                + rotation[k, 2] * joints[j, 2]
+                + translation[k]
+            )
+        usable[j] = state[j]
+        if state[j] == 0 or np.isnan(out[j, 0] + out[j, 1] + out[j, 2]):
+            out[j, 0] = out[j, 1] = out[j, 2] = np.nan
+            usable[j] = 0
+    return out, usable
 
 
 @njit(cache=True)
@@ -239,6 +264,7 @@ def warm_up() -> None:
         states = np.full((2, 25), 2, dtype=np.int8)
         mean_gaps(P, P[0], np.arange(4))
         subset_mean(P[0], np.arange(4))
+        ingest(P[0], states[0], np.eye(3), np.zeros(3))
         disagreement(P)
         believed(P, states, np.arange(3), P[0], np.zeros(25), np.full(25, -1), 0.2)
         joints, state = merge(P, states, np.ones((2, 25)), np.zeros(25, dtype=np.bool_))

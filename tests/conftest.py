@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import qpavoid
-from qpavoid import fusion_kernels, perception_kernels
+from qpavoid import fusion_person, perception_kernels
 from qpavoid.perception import PerceptionConfig
 from qpavoid.sensor import SensorConfig
 
@@ -16,7 +16,7 @@ def pytest_configure(config):
     command-line subprocesses need them (a fresh install compiles for about 5 s; every
     process after that loads them from the disk cache)."""
     if not hasattr(config, "workerinput"):  # pytest-xdist's controller, or no xdist
-        fusion_kernels.warm_up()
+        fusion_person.warm_up()  # and the fusion's per-joint kernels
         perception_kernels.warm_up()
 
 
