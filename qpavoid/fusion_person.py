@@ -132,18 +132,29 @@ def fuse_person(
         if gaps[s] > MIRROR_CHECK_M:  # NaN: nothing to compare, no check
             as_is, swapped = mirror_costs(P[s], reference)
             if swapped + mirror_margin_m < as_is:
-                P[s] = P[s][MIRROR]
-                states[s] = states[s][MIRROR]
+                body, body_states = P[s].copy(), states[s].copy()
+                for j in range(J):
+                    P[s, j] = body[MIRROR[j]]
+                    states[s, j] = body_states[MIRROR[j]]
                 mirrored[s] = True
     W, conf = np.empty((S, J)), np.empty((S, J))
     for s in range(S):
-        if max_extrapolation_s > 0.0:
-            P[s] += velocity * min(age[s], max_extrapolation_s)
+        shift = min(age[s], max_extrapolation_s)
         fresh = min(max(1.0 - 0.5 * age[s] / max_age_s, 0.0), 1.0)
         for j in range(J):
+            if shift > 0.0:
+                for k in range(3):
+                    P[s, j, k] += velocity[j, k] * shift
             W[s, j] = state_weight[states[s, j]] * (fresh * sensor_weight[s])
             conf[s, j] = state_confidence[states[s, j]] * fresh
-    disputed = np.flatnonzero(disagreement(P) > outlier_threshold_m)  # -1: fewer than two
+    gap = disagreement(P)  # -1: fewer than two sensors see the joint
+    disputed = np.empty(J, dtype=np.int64)
+    n_disputed = 0
+    for j in range(J):
+        if gap[j] > outlier_threshold_m:
+            disputed[n_disputed] = j
+            n_disputed += 1
+    disputed = disputed[:n_disputed]
     keep = believed(P, states, disputed, expected, bone, PARENT, outlier_threshold_m)
     is_disputed = np.zeros(J, dtype=np.bool_)
     for n in range(len(disputed)):
@@ -156,9 +167,13 @@ def fuse_person(
     update_track(
         positions, velocity, last_seen, bone, PARENT, joints, state, t, alpha, beta, max_age_s
     )
-    confidence = np.minimum(conf.sum(axis=0), 1.0)
-    if smooth:
-        for j in range(J):
+    confidence = np.empty(J)
+    for j in range(J):
+        total = 0.0
+        for s in range(S):
+            total += conf[s, j]
+        confidence[j] = min(total, 1.0)
+        if smooth:
             for k in range(3):
                 joints[j, k] = positions[j, k] if state[j] != 0 else np.nan
     return joints, state, confidence, mirrored, disputed, keep
