@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .capsules import CapsuleDistance, axis_rotations
+from .distance_kernels import sphere_table, warm_up
 from .distance_table import FALLBACK_DIRECTION, DistanceTable
 from .errors import InputError
 from .human import HumanGeometry, KinectHuman
@@ -61,7 +62,7 @@ class SphereDistance:
         n_sets, n_parts = len(robot.sets), len(human.parts)
         self.set_names, self.part_names = robot.set_names, human.part_names
         # For every (set, part) the flat indices p * M + m of its (robot point, human point)
-        # pairs, padded with an index that points at +inf: one gather, one argmin per tick.
+        # pairs, padded with P * M (no pair): one pass of distance_kernels.sphere_table.
         n_human = human.n_points
         pad = len(robot.point_set) * n_human
         pairs = [
@@ -80,46 +81,28 @@ class SphereDistance:
         for i in range(n_sets):
             for j in range(n_parts):
                 self._pairs[i * n_parts + j, : len(pairs[i][j])] = pairs[i][j]
-        self._rows = np.arange(n_sets * n_parts)
-        self._pairs_pad = pad
-        # Flat pair index -> robot point, human point (-1 for the padding index).
-        self._p_of = np.append(np.arange(pad) // n_human, -1)
-        self._m_of = np.append(np.arange(pad) % n_human, -1)
         self._no_s = np.full((n_sets, n_parts), np.nan)
         self._no_s.setflags(write=False)
-        self._n_human = n_human
         r_robot = np.array([s.sphere_radius_m for s in robot.sets])
         self._r_robot_flat = np.repeat(r_robot, n_parts)
         self._r_human_flat = np.tile(human.sphere_radii, n_sets)
         self._radii = self._r_robot_flat + self._r_human_flat
         self._shape = (n_sets, n_parts)
+        warm_up()
 
     def __call__(self, kin: Kinematics, geo: HumanGeometry) -> DistanceTable:
         """Distance table between the robot at ``kin`` and the human ``geo``."""
         P, H = kin.points, geo.filled_points
-        diff = P[:, None, :] - H[None, :, :]  # (P, M, 3)
-        buf = np.empty(self._pairs_pad + 1)
-        buf[-1] = np.inf
-        np.add(
-            np.sqrt(np.einsum("pmk,pmk->pm", diff, diff)),
-            geo.point_penalty,
-            out=buf[:-1].reshape(len(P), -1),
-        )
-        best = self._pairs[self._rows, buf[self._pairs].argmin(axis=1)]  # flat pair
-        d_star = buf[best]
         part_margin = geo.part_margin
         assert part_margin is not None  # filled in by HumanGeometry
-        margin = np.tile(part_margin, len(self._r_robot_flat) // len(part_margin))
-        vector = diff.reshape(-1, 3)[np.minimum(best, self._pairs_pad - 1)]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            vector /= d_star[:, None]  # inf -> 0
-        if d_star.min() < 1e-12:
-            vector[d_star < 1e-12] = FALLBACK_DIRECTION
-        p_idx, m_idx = self._p_of[best], self._m_of[best]  # -1: unseen
+        d, vector, p_idx, m_idx = sphere_table(
+            P, H, geo.point_penalty, self._pairs, self._radii, part_margin, FALLBACK_DIRECTION
+        )
         shape = self._shape
+        margin = np.tile(part_margin, shape[0])
         return DistanceTable(  # eq. (1)
             self.method,
-            (d_star - self._radii - margin).reshape(shape),
+            d.reshape(shape),
             vector.reshape(*shape, 3),
             p_idx.reshape(shape),
             self._no_s,

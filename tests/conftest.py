@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import qpavoid
-from qpavoid import fusion_person, perception_kernels
+from qpavoid import distance_kernels, fusion_person, perception_kernels
 from qpavoid.perception import PerceptionConfig
 from qpavoid.sensor import SensorConfig
 
@@ -18,6 +18,7 @@ def pytest_configure(config):
     if not hasattr(config, "workerinput"):  # pytest-xdist's controller, or no xdist
         fusion_person.warm_up()  # and the fusion's per-joint kernels
         perception_kernels.warm_up()
+        distance_kernels.warm_up()
 
 
 @pytest.fixture(scope="session")
