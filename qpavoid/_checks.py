@@ -42,6 +42,13 @@ def as_array(
         With ``name`` set as above and ``value`` the value given (the converted array for
         a wrong shape or a non-finite entry).
     """
+    if (  # the control loop's case, checked in one pass: a float array of the right shape
+        type(value) is np.ndarray
+        and value.dtype == np.float64
+        and value.shape == shape
+        and (not finite or math.isfinite(value.sum()))  # finite sum: every entry finite
+    ):
+        return value
     kind = np.asarray(value).dtype.kind if not isinstance(value, np.ndarray) else value.dtype.kind
     if kind not in "iuf":  # no bools, complex numbers, strings or objects taken as numbers
         raise InputError(

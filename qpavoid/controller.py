@@ -15,6 +15,7 @@ joint angle or path time) raise :class:`~qpavoid.errors.InputError` before any o
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -219,8 +220,10 @@ class Controller:
         control period, becomes a stop too.
         """
         reason = tick.reason or reason
+        if dq is not None:
+            dq = np.asarray(dq, dtype=float)
         if not reason and dq is not None:
-            if not np.all(np.isfinite(dq)):
+            if not math.isfinite(dq.sum()):  # a finite sum: every entry finite
                 reason = "non-finite joint velocity computed"
             else:
                 q_next = tick.q + dq * self.config.control_period_s
@@ -232,11 +235,12 @@ class Controller:
                         f"(q = {tick.q[k]:.4f} rad)"
                     )
         stopped = bool(reason) or dq is None
+        applied = np.zeros(self.robot.nv) if stopped or dq is None else dq
         if self.config.safety == "ssm":
-            self.stop_budget.record(np.zeros(self.robot.nv) if stopped else np.asarray(dq))
+            self.stop_budget.record(applied)
         zero3 = np.zeros(3)
         return Command(
-            dq=np.zeros(self.robot.nv) if stopped else np.asarray(dq, dtype=float),
+            dq=applied,
             stopped=stopped,
             reason=reason if stopped else "",
             time_scale=0.0 if stopped else float(time_scale),

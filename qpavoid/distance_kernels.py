@@ -27,7 +27,7 @@ TINY_DISTANCE_M = 1e-12
 def sphere_table(
     robot_points: np.ndarray,
     human_points: np.ndarray,
-    penalty: np.ndarray,
+    human_valid: np.ndarray,
     pairs: np.ndarray,
     radii: np.ndarray,
     part_margin: np.ndarray,
@@ -38,21 +38,21 @@ def sphere_table(
     Row ``r`` lists flat pair indices ``p M + m`` (robot point ``p``, human point ``m``,
     ``M`` human points), padded with ``P M`` (no pair). Its distance is
 
-    .. math:: d_r = \\min_{(p, m)} (\\lVert x_p - h_m \\rVert + \\pi_m) - \\rho_r - \\mu_r
+    .. math:: d_r = \\min_{(p, m)} \\lVert x_p - h_m \\rVert - \\rho_r - \\mu_r
 
-    with the penalty :math:`\\pi_m` (``inf`` for a point not seen), the summed sphere
+    over the pairs whose human point is usable (``human_valid``), with the summed sphere
     radii :math:`\\rho_r` (``radii``) and the part's margin :math:`\\mu_r`
-    (``part_margin[r % n_parts]``); the first minimum wins, as ``numpy.argmin``.
+    (``part_margin[r % n_parts]``); the first minimum wins.
 
     Returns
     -------
     distance
-        (R,) m; ``inf`` where no pair is seen.
+        (R,) m; ``inf`` where no pair is usable.
     direction
         (R, 3) unit vector from the human point to the robot point (0 where the distance
         is infinite, ``fallback`` where the points coincide).
     robot_point, human_point
-        (R,) indices of the closest pair (-1 for a padded row's pad).
+        (R,) indices of the closest pair (-1 where the distance is infinite).
     """
     n_rows, width = pairs.shape
     M = human_points.shape[0]
@@ -66,18 +66,15 @@ def sphere_table(
         best, best_value = pad, np.inf
         for k in range(width):
             flat = pairs[r, k]
-            if flat == pad:
-                value = np.inf
-            else:
-                p, m = flat // M, flat % M
-                dx = robot_points[p, 0] - human_points[m, 0]
-                dy = robot_points[p, 1] - human_points[m, 1]
-                dz = robot_points[p, 2] - human_points[m, 2]
-                value = np.sqrt(dx * dx + dy * dy + dz * dz) + penalty[m]
-            if k == 0 or value < best_value or (np.isnan(value) and not np.isnan(best_value)):
+            if flat == pad or not human_valid[flat % M]:
+                continue
+            p, m = flat // M, flat % M
+            dx = robot_points[p, 0] - human_points[m, 0]
+            dy = robot_points[p, 1] - human_points[m, 1]
+            dz = robot_points[p, 2] - human_points[m, 2]
+            value = np.sqrt(dx * dx + dy * dy + dz * dz)
+            if value < best_value:
                 best, best_value = flat, value
-                if np.isnan(value):
-                    break  # numpy's argmin stops at the first NaN
         distance[r] = best_value - radii[r] - part_margin[r % n_parts]
         if best == pad:
             continue
@@ -98,7 +95,7 @@ def warm_up() -> None:
         sphere_table(
             np.zeros((2, 3)),
             np.ones((3, 3)),
-            np.zeros(3),
+            np.ones(3, dtype=np.bool_),
             np.zeros((2, 2), dtype=np.int64),
             np.zeros(2),
             np.zeros(2),

@@ -92,11 +92,11 @@ class SphereDistance:
 
     def __call__(self, kin: Kinematics, geo: HumanGeometry) -> DistanceTable:
         """Distance table between the robot at ``kin`` and the human ``geo``."""
-        P, H = kin.points, geo.filled_points
+        P, H = kin.points, geo.points
         part_margin = geo.part_margin
         assert part_margin is not None  # filled in by HumanGeometry
         d, vector, p_idx, m_idx = sphere_table(
-            P, H, geo.point_penalty, self._pairs, self._radii, part_margin, FALLBACK_DIRECTION
+            P, H, geo.point_valid, self._pairs, self._radii, part_margin, FALLBACK_DIRECTION
         )
         shape = self._shape
         margin = np.tile(part_margin, shape[0])

@@ -20,6 +20,7 @@ by however far they stick out of it.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -163,20 +164,24 @@ class HumanGeometry:
     segment_valid: np.ndarray
     part_margin: np.ndarray | None = None
     reach_margin: np.ndarray | None = None
-    filled_points: np.ndarray = field(init=False, repr=False)
-    point_penalty: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         zeros = np.zeros(len(self.segments))
         for name in ("part_margin", "reach_margin"):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, zeros)
-        # For vectorised distances: unusable points at the origin, with +inf added to any
-        # distance to them (so they never win a minimum and never make a NaN).
-        object.__setattr__(
-            self, "filled_points", np.where(self.point_valid[:, None], self.points, 0.0)
-        )
-        object.__setattr__(self, "point_penalty", np.where(self.point_valid, 0.0, np.inf))
+
+    # For vectorised distances: unusable points at the origin, with +inf added to any
+    # distance to them (so they never win a minimum and never make a NaN).
+    @cached_property
+    def filled_points(self) -> np.ndarray:
+        """``points`` with unusable rows set to 0, m."""
+        return np.where(self.point_valid[:, None], self.points, 0.0)
+
+    @cached_property
+    def point_penalty(self) -> np.ndarray:
+        """(M,) 0 for a usable point, +inf for the others."""
+        return np.where(self.point_valid, 0.0, np.inf)
 
 
 @dataclass(frozen=True)

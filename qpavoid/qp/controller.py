@@ -40,7 +40,7 @@ class QPController(Controller):
                     u_EEᵀ J_EE q̇ + s_EE ≥ u_EEᵀ (v_PL + K e) + |v_EE|  EERepulsionTask
                     s_L2, s_EE ≥ 0
                     −nᵀ J_p q̇ ≤ ξ (d − d_s) / (d_i − d_s) [− v_h,n] VelocityDamper, every pair
-                   [−nᵀ J_p q̇ ≤ v_max(d)                         SeparationLimit, ssm]
+                   [−nᵀ J_p q̇ ≤ v_max(d)                         SeparationLimit, ssm only]
                     |q̇| ≤ q̇_max, A1 and A2 scaled by (1 − f)     VelocityLimit, eq. (3)
                     γ (q_min − q)/dt ≤ q̇ ≤ γ (q_max − q)/dt      PositionLimit
 
@@ -71,6 +71,7 @@ class QPController(Controller):
         self.qp = qp or QPConfig()
         w, cfg = self.qp, self.config
         self.variables = x = Variables(robot.nv)
+        ssm = cfg.safety == "ssm"
         d_stop = np.zeros(len(robot.sets))
         d_stop[[self.i_L1, self.i_L2, self.i_EE]] = stop_distances(cfg.avoidance)
         self.ee_task = EndEffectorTask(x, w.weight_position, w.weight_orientation)
@@ -98,13 +99,19 @@ class QPController(Controller):
             VelocityDamper(
                 x, d_stop, w.damper_influence_m, w.damper_gain_mps, len(self.human.parts)
             ),
-            SeparationLimit(x, len(robot.sets) * len(self.human.parts)),
+            # with the paper's rules every separation row is inactive: not in the problem
+            *([SeparationLimit(x, len(robot.sets) * len(self.human.parts))] if ssm else []),
             VelocityLimit(x),
             PositionLimit(x, robot.q_min, robot.q_max, w.position_limit_gain),
         ]
         self.assembler = Assembler(x.n, pieces)
         self.backend = make_backend(w, x.n, self.assembler.m)
-        self._hard: np.ndarray | None = None
+        # the rows of the hard pieces: the dampers', then the separation's (a slice: a view)
+        rows = self.assembler.rows
+        damper = rows[VelocityDamper.name]
+        separation = rows.get(SeparationLimit.name, slice(damper.stop, damper.stop))
+        assert damper.stop == separation.start  # adjacent in the pieces' order
+        self._hard = slice(damper.start, separation.stop)
 
     def problem(self, tick: Tick) -> QPProblem:
         """The QP of a tick (for inspection and cross-checks)."""
@@ -123,15 +130,11 @@ class QPController(Controller):
         # Hard rows, checked against the problem we meant to solve: a solution that breaks
         # a bound or a damper by more than the solver's tolerance is never applied; within
         # it, the bounds (joint limits) are then met exactly.
-        lb, ub = prob.lb[dq], prob.ub[dq]
-        if self._hard is None:  # the rows of the hard pieces (fixed by the assembler)
-            rows = [prob.rows[name] for name in (VelocityDamper.name, SeparationLimit.name)]
-            self._hard = np.concatenate([np.arange(r.start, r.stop) for r in rows])
-        hard = self._hard
+        lb, ub, dq_x = prob.lb[dq], prob.ub[dq], x[dq]
         excess = max(
-            float(np.max(lb - x[dq])),
-            float(np.max(x[dq] - ub)),
-            float(np.max(prob.G[hard] @ x - prob.h[hard], initial=-np.inf)),
+            float(np.max(lb - dq_x)),
+            float(np.max(dq_x - ub)),
+            float(np.max(prob.G[self._hard] @ x - prob.h[self._hard], initial=-np.inf)),
         )
         if excess > FEASIBILITY_TOL:
             return self.command(
@@ -142,5 +145,5 @@ class QPController(Controller):
                 info=info,
             )
         return self.command(
-            tick, np.clip(x[dq], lb, ub), 1.0, tick.v_rep_L2, tick.v_rep_EE, info=info
+            tick, np.clip(dq_x, lb, ub), 1.0, tick.v_rep_L2, tick.v_rep_EE, info=info
         )
