@@ -133,7 +133,11 @@ class Controller:
             v_people = np.zeros((len(percs), len(self.human.parts), 3))
         table, who = closest_of([self.distances(kin, g) for g in geos])
         dmin = table.min_per_set()
-        nearest = int(who.flat[np.argmin(table.distance)]) if np.isfinite(dmin).any() else 0
+        nearest = (
+            int(who.flat[np.argmin(table.distance)])
+            if len(geos) > 1 and np.isfinite(dmin).any()
+            else 0
+        )
         perceived, geo = percs[nearest], geos[nearest]
         frame = self.closest_frame = people.frames[nearest] if people.ids else NOBODY
         cfg = self.config.avoidance

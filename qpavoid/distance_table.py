@@ -69,7 +69,8 @@ class DistanceTable:
         if len(self._witness) == 2:  # capsules, or computed already (several people)
             return self._witness
         # spheres: the centres moved by their radii along the direction.
-        P, H, r_robot, r_human = self._witness
+        P, H, r_robot, r_human, part_margin = self._witness
+        r_human = r_human + np.tile(part_margin, len(r_human) // len(part_margin))
         shape = self.distance.shape
         v = self.vector.reshape(-1, 3)
         p_idx, m_idx = self.robot_index.ravel(), self.human_index.ravel()

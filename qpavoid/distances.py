@@ -99,7 +99,6 @@ class SphereDistance:
             P, H, geo.point_valid, self._pairs, self._radii, part_margin, FALLBACK_DIRECTION
         )
         shape = self._shape
-        margin = np.tile(part_margin, shape[0])
         return DistanceTable(  # eq. (1)
             self.method,
             d.reshape(shape),
@@ -109,7 +108,7 @@ class SphereDistance:
             m_idx.reshape(shape),
             self.set_names,
             self.part_names,
-            (P, H, self._r_robot_flat, self._r_human_flat + margin),
+            (P, H, self._r_robot_flat, self._r_human_flat, part_margin),
         )
 
 

@@ -145,5 +145,10 @@ class QPController(Controller):
                 info=info,
             )
         return self.command(
-            tick, np.clip(dq_x, lb, ub), 1.0, tick.v_rep_L2, tick.v_rep_EE, info=info
+            tick,
+            np.minimum(np.maximum(dq_x, lb), ub),  # np.clip: the same, 5 µs slower
+            1.0,
+            tick.v_rep_L2,
+            tick.v_rep_EE,
+            info=info,
         )
