@@ -14,7 +14,15 @@ from qpavoid.analytic import AnalyticController
 from qpavoid.cli import main
 from qpavoid.controller import ControllerConfig
 from qpavoid.human import JointType
-from qpavoid.qp import Bounds, PersistentOSQP, QPConfig, QPController, QPProblem, QPSolversBackend
+from qpavoid.qp import (
+    Bounds,
+    PersistentDAQP,
+    PersistentOSQP,
+    QPConfig,
+    QPController,
+    QPProblem,
+    QPSolversBackend,
+)
 from qpavoid.qp.elbow_task import ElbowClearanceTask
 from qpavoid.qp.velocity_limits import VelocityLimit
 from qpavoid.run_spec import CONTROLLERS, DISTANCES
@@ -31,11 +39,12 @@ SOLVER_TOL = 1e-5
 @pytest.mark.parametrize(
     "rate_hz", [100.0, pytest.param(500.0, marks=pytest.mark.slow)], ids=["100Hz", "500Hz"]
 )
-def test_nobody_near_qp_equals_analytic_at_every_tick(robot, rate_hz):
+@pytest.mark.parametrize("solver", ["osqp", "daqp"])  # both persistent backends
+def test_nobody_near_qp_equals_analytic_at_every_tick(robot, rate_hz, solver):
     """In `free` both controllers solve eq. (8): same command within 1e-4 rad/s."""
     cfg = paper_config(control_period_s=1.0 / rate_hz)
     result = simulate(
-        QPController(robot, config=cfg),
+        QPController(robot, config=cfg, qp=QPConfig(solver=solver)),
         make_scenario("free", robot),
         ideal_sim(control_rate_hz=rate_hz),
     )
@@ -118,6 +127,7 @@ def recorded_problems(robot):
 def test_solve_paths_agree(recorded_problems):
     n, m = recorded_problems[0].H.shape[0], len(recorded_problems[0].h)
     persistent = PersistentOSQP(n, m, QPConfig())
+    persistent_daqp = PersistentDAQP(n, m)
     through_osqp = QPSolversBackend("osqp", QPConfig())
     daqp = QPSolversBackend("daqp", QPConfig())
     others = [
@@ -130,7 +140,7 @@ def test_solve_paths_agree(recorded_problems):
         keep = np.isfinite(prob.h)
         if np.any(prob.G[keep] @ ref.x > prob.h[keep] - 1e-9):
             active += 1
-        for backend in (persistent, through_osqp, *others):
+        for backend in (persistent, persistent_daqp, through_osqp, *others):
             sol = backend.solve(prob)
             assert sol.found, (backend.name, sol.status)
             np.testing.assert_allclose(sol.x[:-2], ref.x[:-2], atol=SOLVER_TOL)
@@ -193,6 +203,19 @@ def test_backends_report_infeasibility():
     )  # 0 <= -1: infeasible
     assert not PersistentOSQP(2, 1, QPConfig()).solve(prob).found
     assert not QPSolversBackend("daqp", QPConfig()).solve(prob).found
+    daqp = PersistentDAQP(2, 1)
+    assert not daqp.solve(prob).found
+    # min ½|x|² − x₁ − x₂ with x₁ + x₂ ≤ 1: x = (½, ½), by hand
+    feasible = QPProblem(np.eye(2), -np.ones(2), np.ones((1, 2)), np.ones(1), prob.lb, prob.ub)
+    np.testing.assert_allclose(daqp.solve(feasible).x, [0.5, 0.5], atol=1e-9)
+    nan = QPProblem(
+        np.full((2, 2), np.nan), -np.ones(2), np.ones((1, 2)), np.ones(1), prob.lb, prob.ub
+    )
+    assert not daqp.solve(nan).found  # never a NaN command
+    assert daqp.solve(feasible).found  # and the workspace recovers
+    concave = QPProblem(-np.eye(2), -np.ones(2), np.ones((1, 2)), np.ones(1), prob.lb, prob.ub)
+    assert not daqp.solve(concave).found  # rejected: never the last problem's answer
+    assert not daqp.solve(prob).found
     with pytest.raises(qpavoid.SolverError, match="not installed"):
         QPSolversBackend("nosuchsolver", QPConfig())
 

@@ -8,7 +8,7 @@ named variables of :mod:`.variables`: :mod:`.ee_task` (eq. 8), :mod:`.repulsion`
 :mod:`.backends` solves, :mod:`.controller` composes.
 """
 
-from .backends import PersistentOSQP, QPSolversBackend, make_backend
+from .backends import PersistentDAQP, PersistentOSQP, QPSolversBackend, make_backend
 from .config import QPConfig
 from .controller import QPController
 from .pieces import Bounds, Constraint, Objective, QPPiece
@@ -20,6 +20,7 @@ __all__ = [
     "Bounds",
     "Constraint",
     "Objective",
+    "PersistentDAQP",
     "PersistentOSQP",
     "QPConfig",
     "QPController",

@@ -1,10 +1,12 @@
-"""Solving the QP: a persistent OSQP problem, or any solver through qpsolvers.
+"""Solving the QP: a persistent OSQP or daqp problem, or any solver through qpsolvers.
 
-Both backends give the same answer to the documented tolerance (docs/qp.md):
+The backends give the same answer to the documented tolerance (docs/qp.md):
 
-* :class:`PersistentOSQP` sets one ``osqp.OSQP`` problem up once with a fixed sparsity
-  pattern (dense blocks: every G row exists every tick, inactive rows have h = +inf) and
-  only ``update()``s its numbers each tick, warm started;
+* :class:`PersistentOSQP` (the default) sets one ``osqp.OSQP`` problem up once with a
+  fixed sparsity pattern (dense blocks: every G row exists every tick, inactive rows have
+  h = +inf) and only ``update()``s its numbers each tick, warm started;
+* :class:`PersistentDAQP` keeps one ``daqp.Model`` workspace the same way (the dual
+  active-set solver restarts from the last tick's active set);
 * :class:`QPSolversBackend` builds a new problem each tick through qpsolvers, with any
   installed solver, for portability and cross-checking.
 
@@ -130,13 +132,9 @@ class PersistentOSQP:
         lower, upper = np.maximum(self._l, -inf), np.minimum(self._u, inf)
         # OSQP rejects l > u (or a non-convex P) in an update by keeping the *previous*
         # data, after which solve() reports "solved" for that old problem: never let it.
-        if np.any(lower > upper):
-            k = int(np.argmax(lower > upper))
-            return QPSolution(
-                None,
-                False,
-                f"infeasible bounds: l > u in row {k} ({lower[k]:.4g} > {upper[k]:.4g})",
-            )
+        failed = _infeasible_bounds(lower, upper)
+        if failed is not None:
+            return failed
         Px, Ax = prob.H.ravel()[self._p_idx], self._M.ravel()[self._a_idx]
         if self._native is not None:
             s = self._native
@@ -167,6 +165,76 @@ class PersistentOSQP:
     def update_settings(self, **settings: Any) -> None:
         """Change OSQP settings (e.g. ``max_iter``) of the live problem."""
         self._solver.update_settings(**settings)
+
+
+def _infeasible_bounds(lower: np.ndarray, upper: np.ndarray) -> QPSolution | None:
+    """A failed solution naming the first row with ``lower > upper``, or None."""
+    bad = lower > upper
+    if not bad.any():
+        return None
+    k = int(np.argmax(bad))
+    return QPSolution(
+        None, False, f"infeasible bounds: l > u in row {k} ({lower[k]:.4g} > {upper[k]:.4g})"
+    )
+
+
+class PersistentDAQP:
+    """One ``daqp.Model`` for the controller's lifetime, updated each tick.
+
+    daqp's form is ``min ½xᵀHx + fᵀx, blower ≤ [x; A x] ≤ bupper`` (its first ``n``
+    bounds are simple bounds): here ``A = G``, ``bupper = [ub; h]``,
+    ``blower = [lb; −inf]``. Each tick is ``update(H, f, A, bupper, blower)`` and
+    ``solve()``, which starts from the last tick's active set. Needs daqp ≥ 0.11 (its
+    ``Model``; ``pip install "qpavoid[solvers]"``).
+
+    Parameters
+    ----------
+    n, m
+        Number of variables and of G rows.
+    """
+
+    name = "daqp-persistent"
+    #: daqp's exit flags that mean an optimal solution (1; 2 is soft-optimal: we have no
+    #: soft constraints, so it is not accepted).
+    SOLVED = (1,)
+
+    def __init__(self, n: int, m: int):
+        try:
+            import daqp  # the solvers extra; optional
+        except ImportError:
+            daqp = None
+        if daqp is None or not hasattr(daqp, "Model"):
+            raise SolverError(
+                'the persistent daqp backend needs daqp >= 0.11: pip install "qpavoid[solvers]"',
+                solver="daqp",
+                status="not installed",
+            )
+        self.n, self.m = n, m
+        self._upper = np.full(n + m, np.inf)
+        self._lower = np.full(n + m, -np.inf)
+        self._model = daqp.Model()
+        # placeholders: only the sizes matter, every tick replaces all the numbers
+        self._model.setup(np.eye(n), np.zeros(n), np.zeros((m, n)), self._upper, self._lower)
+
+    def solve(self, prob: QPProblem) -> QPSolution:
+        n = self.n
+        self._lower[:n], self._upper[:n], self._upper[n:] = prob.lb, prob.ub, prob.h
+        failed = _infeasible_bounds(self._lower, self._upper)
+        if failed is not None:
+            return failed
+        # daqp rejects an infeasible or non-convex update (a negative flag) by keeping the
+        # *previous* data, after which solve() reports success for that old problem (as
+        # OSQP does): never let it. NaN data passes the update and gives a NaN x.
+        rejected = self._model.update(
+            H=prob.H, f=prob.c, A=prob.G, bupper=self._upper, blower=self._lower
+        )
+        if rejected:
+            return QPSolution(None, False, f"daqp rejected the update (exit flag {rejected})")
+        x, _, flag, info = self._model.solve()
+        iterations = int(info.get("iterations", -1)) if isinstance(info, dict) else -1
+        found = flag in self.SOLVED and bool(np.isfinite(x).all())
+        status = "solved" if found else f"daqp exit flag {flag}"
+        return QPSolution(np.array(x) if found else None, found, status, iterations)
 
 
 class QPSolversBackend:
@@ -202,9 +270,20 @@ class QPSolversBackend:
         return QPSolution(sol.x if found else None, found, "solved" if found else "not solved")
 
 
-def make_backend(cfg: QPConfig, n: int, m: int) -> PersistentOSQP | QPSolversBackend:
-    """The backend named by ``cfg.backend``."""
+def make_backend(
+    cfg: QPConfig, n: int, m: int
+) -> PersistentOSQP | PersistentDAQP | QPSolversBackend:
+    """The backend named by ``cfg.backend`` (and, for ``"persistent"``, ``cfg.solver``:
+    ``osqp`` or ``daqp``)."""
     if cfg.backend == "persistent":
+        if cfg.solver == "daqp":
+            return PersistentDAQP(n, m)
+        if cfg.solver != "osqp":
+            raise SolverError(
+                f"no persistent backend for {cfg.solver!r} (osqp or daqp); use backend='qpsolvers'",
+                solver=cfg.solver,
+                status="unknown backend",
+            )
         return PersistentOSQP(n, m, cfg)
     if cfg.backend == "qpsolvers":
         return QPSolversBackend(cfg.solver, cfg)
