@@ -9,10 +9,11 @@ stable (docs/performance.md):
 * ``stages``: ``kinematics``, ``human_geometry``, ``sphere_table``, ``capsule_table``,
   ``perception`` (tracker update: lost joints, velocities), ``fusion`` (two sensors, one
   person: add + fuse), ``analytic_law`` (eqs. 4-9 after the prelude), ``prelude``,
-  ``qp_assembly``, ``qp_solve/persistent_osqp`` and ``qp_solve/<solver>`` for each
-  qpsolvers solver installed;
-* ``ticks``: ``<controller>/<distance>/<safety>`` for both controllers, both methods,
-  both safety modes;
+  ``qp_assembly``, ``qp_solve/persistent_osqp``, ``qp_solve/persistent_daqp`` (when
+  daqp ≥ 0.11 is installed) and ``qp_solve/<solver>`` for each qpsolvers solver installed;
+* ``ticks``: ``<controller>/<distance>/<safety>`` for both controllers (``analytic``,
+  ``qp``; and ``qp_daqp``, the QP controller on the persistent daqp backend, when
+  installed), both methods, both safety modes;
 * ``scaling``: ``robot_points/<n>`` (sphere table, n robot spheres) and ``people/<n>``
   (QP tick, capsules, SSM, n people, a new camera frame every other tick);
 * ``paper_budget_us``: the paper's 33 ms frame, 21 ms for distances and avoidance,
@@ -71,6 +72,15 @@ def _timed(fn: Callable[[Any], object], items: Sequence[Any], repeat: int) -> di
     return {"median_us": float(np.median(out)), "p99_us": float(np.percentile(out, 99))}
 
 
+def _has_persistent_daqp() -> bool:
+    """daqp installed with its ``Model`` (the persistent backend's workspace)."""
+    try:
+        import daqp  # the solvers extra; optional
+    except ImportError:
+        return False
+    return hasattr(daqp, "Model")
+
+
 def _controller(kind: str, distance: str, safety: str, **qp: Any) -> Callable[..., Controller]:
     config = ControllerConfig(distance=distance, safety=safety, control_period_s=0.01)
     if kind == "analytic":
@@ -124,15 +134,24 @@ def run_bench(quick: bool = False) -> dict[str, Any]:
     stages["qp_assembly"] = _timed(qp.problem, ticks, repeat)
     problems = [qp.problem(t) for t in ticks]
     stages["qp_solve/persistent_osqp"] = _timed(qp.backend.solve, problems, repeat)
+    kinds = ["analytic", "qp"]
+    if _has_persistent_daqp():
+        fast = QPController(robot, config=qp.config, qp=QPConfig(solver="daqp"))
+        stages["qp_solve/persistent_daqp"] = _timed(fast.backend.solve, problems, repeat)
+        kinds.append("qp_daqp")
     for name in sorted(qpsolvers.available_solvers):
         other = QPController(robot, qp=QPConfig(backend="qpsolvers", solver=name))
         stages[f"qp_solve/{name}"] = _timed(other.backend.solve, problems, repeat)
     result["stages"] = stages
     result["ticks"] = {}
-    for kind in ("analytic", "qp"):
+    for kind in kinds:
         for distance in ("spheres", "capsules"):
             for safety in ("paper", "ssm"):
-                ctrl = _controller(kind, distance, safety)(robot)
+                ctrl = (  # qp_daqp: the QP controller on the persistent daqp backend
+                    _controller("qp", distance, safety, solver="daqp")
+                    if kind == "qp_daqp"
+                    else _controller(kind, distance, safety)
+                )(robot)
                 result["ticks"][f"{kind}/{distance}/{safety}"] = _timed(
                     partial(_step, ctrl), states, repeat
                 )

@@ -31,9 +31,11 @@ def test_bench_writes_every_documented_key(tmp_path):
         "analytic_law",
         "qp_assembly",
         "qp_solve/persistent_osqp",
+        "qp_solve/persistent_daqp",
     ):
         assert data["stages"][key]["median_us"] > 0, key
-    assert len(data["ticks"]) == 8 and "qp/capsules/ssm" in data["ticks"]
+    assert len(data["ticks"]) == 12 and "qp/capsules/ssm" in data["ticks"]
+    assert "qp_daqp/spheres/paper" in data["ticks"]
     for key in ("robot_points/9", "robot_points/1000", "people/1", "people/6"):
         assert data["scaling"][key]["p99_us"] >= data["scaling"][key]["median_us"] > 0
     assert data["paper_budget_us"]["distances"] == 9000
