@@ -9,27 +9,31 @@ from __future__ import annotations
 
 import coal
 import numpy as np
+import pinocchio as pin
 
 from .distance_table import FALLBACK_DIRECTION, DistanceTable
-from .geometry import unit
+from .geometry import TINY, unit
 from .human import HumanGeometry, KinectHuman
 from .robot import Kinematics, Robot
 
+#: A capsule's axis in its own frame (coal's convention): +z.
+EZ = np.array([0.0, 0.0, 1.0])
+#: The rotation of a capsule too short to have an axis (a sphere).
+NO_ROTATION = pin.Quaternion.Identity()
+
+
+def axis_rotation(u: np.ndarray) -> pin.Quaternion:
+    """The smallest rotation taking +z onto the direction ``u`` (3,) (Pinocchio's
+    ``Quaternion.FromTwoVectors``; a half turn about an axis normal to z for u = −z); the
+    identity if ``‖u‖ < TINY``."""
+    if float(u @ u) < TINY * TINY:
+        return NO_ROTATION
+    return pin.Quaternion.FromTwoVectors(EZ, u)
+
 
 def axis_rotations(u: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) rotations taking +z onto the unit vectors ``u`` (N, 3) (Rodrigues).
-
-    ``R = I + [w]x + [w]x² / (1 + z)`` with ``w = ez × u``; for ``u`` = −z, a half turn
-    about x.
-    """
-    x, y, z = u.T
-    k = 1.0 / np.maximum(1.0 + z, 1e-12)
-    xy = -x * y * k
-    R = np.stack([1 - x * x * k, xy, x, xy, 1 - y * y * k, y, -x, -y, z], axis=1).reshape(-1, 3, 3)
-    flip = z < -1 + 1e-9
-    if flip.any():
-        R[flip] = np.diag([1.0, -1.0, -1.0])
-    return R
+    """(N, 3, 3) rotations taking +z onto the unit vectors ``u`` (N, 3) (:func:`axis_rotation`)."""
+    return np.array([axis_rotation(v).matrix() for v in u]).reshape(-1, 3, 3)
 
 
 class CapsuleDistance:
@@ -64,13 +68,11 @@ class CapsuleDistance:
         """Move capsules ``first``, ``first + 1``, ... (robot ones, then human ones) onto
         their segments."""
         axis = segments[:, 1] - segments[:, 0]
-        length = np.sqrt(np.einsum("nk,nk->n", axis, axis))
-        R = axis_rotations(unit(axis, FALLBACK_DIRECTION, norm=length))
+        half = (0.5 * np.sqrt(np.einsum("nk,nk->n", axis, axis))).tolist()
         centre = 0.5 * (segments[:, 0] + segments[:, 1])
-        half = (0.5 * length).tolist()
         for k in np.flatnonzero(valid).tolist():
             self._shapes[first + k].halfLength = half[k]
-            self._tfs[first + k].setRotation(R[k])
+            self._tfs[first + k].setQuatRotation(axis_rotation(axis[k]))
             self._tfs[first + k].setTranslation(centre[k])
 
     def __call__(self, kin: Kinematics, geo: HumanGeometry) -> DistanceTable:
@@ -86,45 +88,43 @@ class CapsuleDistance:
             self._placed = geo
         req, res = self._request, self._result
         parts = np.flatnonzero(geo.segment_valid).tolist()
-        dist, rp, hp, normal, where = [], [], [], [], []
+        n = n_sets * n_parts
+        distance = np.full(n, np.inf)
+        robot_point, human_point = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+        contact = []
         for i in range(n_sets):
             tf_r, functors = self._tfs[i], self._functors[i]
             for j in parts:
+                k = i * n_parts + j
                 res.clear()
-                d = functors[j](self._tfs[n_sets + j], tf_r, req, res)
-                dist.append(d)
-                hp.append(res.getNearestPoint1())
-                rp.append(res.getNearestPoint2())
-                # Only under contact is the witness difference no direction: keep coal's normal.
-                normal.append(res.normal if d <= 1e-9 else None)
-                where.append(i * n_parts + j)
-        distance = np.full(n_sets * n_parts, np.inf)
-        robot_point = np.full((n_sets * n_parts, 3), np.nan)
-        human_point = np.full((n_sets * n_parts, 3), np.nan)
-        vector = np.zeros((n_sets * n_parts, 3))
-        if where:
-            d = np.array(dist)
-            r_pts, h_pts = np.array(rp), np.array(hp)
-            distance[where], robot_point[where], human_point[where] = d, r_pts, h_pts
-            v = (r_pts - h_pts) / np.where(d > 1e-9, d, 1.0)[:, None]
-            for n, nrm in enumerate(normal):
-                if nrm is not None:  # coal's normal points from the human to the robot
-                    nn = np.linalg.norm(nrm)
-                    v[n] = nrm / nn if nn > 0.5 else unit(h_pts[n] - r_pts[n], FALLBACK_DIRECTION)
-            vector[where] = v
+                distance[k] = d = functors[j](self._tfs[n_sets + j], tf_r, req, res)
+                human_point[k], robot_point[k] = res.getNearestPoint1(), res.getNearestPoint2()
+                if d <= 1e-9:  # under contact the witnesses give no direction: coal's normal
+                    contact.append((k, res.normal.copy()))
+        seen = np.isfinite(distance)
+        vector = np.zeros((n, 3))
+        vector[seen] = (robot_point[seen] - human_point[seen]) / np.where(
+            distance[seen] > 1e-9, distance[seen], 1.0
+        )[:, None]
+        for k, nrm in contact:  # coal's normal points from the human to the robot
+            nn = np.linalg.norm(nrm)
+            vector[k] = (
+                nrm / nn if nn > 0.5 else unit(human_point[k] - robot_point[k], FALLBACK_DIRECTION)
+            )
         # Parameter along the robot capsule's axis of the robot witness point (for its Jacobian).
-        a = np.repeat(seg[:, 0], n_parts, axis=0)
-        ab = np.repeat(seg[:, 1] - seg[:, 0], n_parts, axis=0)
-        s = np.einsum(
-            "nk,nk->n", np.where(np.isnan(robot_point), 0.0, robot_point) - a, ab
-        ) / np.maximum(np.einsum("nk,nk->n", ab, ab), 1e-18)
+        a, ab = seg[:, 0], seg[:, 1] - seg[:, 0]  # (S, 3)
+        from_a = np.where(seen[:, None], robot_point, 0.0).reshape(n_sets, n_parts, 3) - a[:, None]
+        s = (
+            np.einsum("skx,sx->sk", from_a, ab)
+            / np.maximum(np.einsum("sx,sx->s", ab, ab), 1e-18)[:, None]
+        )
         shape = self._shape
         return DistanceTable(
             self.method,
             distance.reshape(shape),
             vector.reshape(*shape, 3),
             self._minus_one,
-            np.clip(s, 0.0, 1.0).reshape(shape),
+            np.minimum(np.maximum(s, 0.0), 1.0),
             self._minus_one,
             self.set_names,
             self.part_names,

@@ -12,7 +12,7 @@ import pytest
 from conftest import random_q
 
 import qpavoid
-from qpavoid.distances import CapsuleDistance, SphereDistance
+from qpavoid.distances import CapsuleDistance, SphereDistance, axis_rotations
 from qpavoid.human import HumanGeometry, JointType, TrackingState
 from qpavoid.posture import random_posture
 from qpavoid.robot import Kinematics
@@ -281,3 +281,18 @@ def test_bad_human_input(robot, human):
         qpavoid.capsule_distances(robot, q, human, j)
     with pytest.raises(qpavoid.InputError, match="unknown distance method 'boxes'"):
         qpavoid.distance_method("boxes", robot, human)
+
+
+def test_axis_rotations_take_z_onto_each_axis():
+    """Random directions, the antiparallel one and a zero-length axis (a sphere)."""
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(50, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    u = np.vstack([u, [0.0, 0.0, -1.0], [0.0, 0.0, 1.0]])
+    R = axis_rotations(u)
+    np.testing.assert_allclose(R @ np.array([0.0, 0.0, 1.0]), u, atol=1e-12)
+    np.testing.assert_allclose(
+        R @ R.transpose(0, 2, 1), np.broadcast_to(np.eye(3), R.shape), atol=1e-12
+    )
+    np.testing.assert_allclose(np.linalg.det(R), 1.0)
+    np.testing.assert_array_equal(axis_rotations(np.zeros((1, 3)))[0], np.eye(3))
