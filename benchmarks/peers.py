@@ -13,7 +13,8 @@ flange from its reference (mm) and how far its path clock is behind at the end (
 qpavoid's waits while it stops; the peers always chase the reference of the moment).
 
 * **qpavoid**: ``QPController.step`` (persistent OSQP), spheres and capsules, the paper's
-  rules, one person (the whole skeleton, as every tick sees it).
+  rules, one person (the whole skeleton, as every tick sees it); and spheres on the
+  persistent daqp backend (``QPConfig(solver="daqp")``).
 * **pink**: ``solve_ik`` with a ``FrameTask`` (the flange), a ``PostureTask`` (1e-3),
   configuration and velocity limits and **one** ``BodySphericalBarrier`` between the
   flange and a frame placed at the hand each tick (d_min 0.15 m), on our reduced
@@ -43,7 +44,7 @@ import qpavoid
 from qpavoid.frames import JointType
 from qpavoid.geometry import point_segment_distance
 from qpavoid.perception import PerceptionConfig
-from qpavoid.qp import QPController
+from qpavoid.qp import QPConfig, QPController
 from qpavoid.robot import load_robot
 from qpavoid.scenarios import make_scenario
 from qpavoid.task import ArcPath, inverse_kinematics
@@ -159,6 +160,10 @@ def main() -> None:
         "qpavoid QP, capsules (persistent OSQP)": (
             "qp",
             QPController(robot, config=ideal(distance="capsules")),
+        ),
+        "qpavoid QP, spheres (persistent daqp)": (
+            "qp",
+            QPController(robot, config=ideal(distance="spheres"), qp=QPConfig(solver="daqp")),
         ),
     }
     for solver in ("osqp", "daqp"):

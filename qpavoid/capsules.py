@@ -18,6 +18,9 @@ from .robot import Kinematics, Robot
 
 #: A capsule's axis in its own frame (coal's convention): +z.
 EZ = np.array([0.0, 0.0, 1.0])
+#: A person is skipped for a pair only if their lower bound exceeds the best distance by
+#: more than this (far above coal's and floating-point error), m.
+BOUND_SLACK_M = 1e-6
 #: The rotation of a capsule too short to have an axis (a sphere).
 NO_ROTATION = pin.Quaternion.Identity()
 
@@ -36,73 +39,145 @@ def axis_rotations(u: np.ndarray) -> np.ndarray:
     return np.array([axis_rotation(v).matrix() for v in u]).reshape(-1, 3, 3)
 
 
+class _Capsules:
+    """Coal capsules (shapes and transforms) built once, then only moved and widened."""
+
+    def __init__(self, radii: np.ndarray):
+        self.radii = np.asarray(radii, dtype=float)
+        self.shapes = [coal.Capsule(r, 0.0) for r in self.radii]
+        self.tfs = [coal.Transform3s() for _ in self.shapes]
+        self.centre = np.zeros((len(self.shapes), 3))
+        self.reach = np.zeros(len(self.shapes))  #: half length + radius: a bounding sphere
+        self.placed: HumanGeometry | None = None  # for a person's: the geometry shown
+
+    def place(self, segments: np.ndarray, valid: np.ndarray, widen: np.ndarray | None) -> None:
+        """Move the valid capsules onto their ``segments`` (N, 2, 3), radii + ``widen``."""
+        axis = segments[:, 1] - segments[:, 0]
+        half = 0.5 * np.sqrt(np.einsum("nk,nk->n", axis, axis))
+        self.centre = 0.5 * (segments[:, 0] + segments[:, 1])
+        radii = self.radii if widen is None else self.radii + widen
+        self.reach = half + radii
+        half_list, radii_list = half.tolist(), radii.tolist()
+        for k in np.flatnonzero(valid).tolist():
+            self.shapes[k].halfLength = half_list[k]
+            if widen is not None:
+                self.shapes[k].radius = radii_list[k]
+            self.tfs[k].setQuatRotation(axis_rotation(axis[k]))
+            self.tfs[k].setTranslation(self.centre[k])
+
+
 class CapsuleDistance:
     """Exact capsule-capsule distances from coal; build once, call every tick.
 
-    The coal shapes, transforms and distance functors are created once; each call only
-    moves them (and widens the human ones by their margins). coal's signed distance gives
-    the witness points and the normal (from the human capsule to the robot capsule), also
-    under penetration.
+    The coal shapes, transforms and distance functors are created once (the robot's, and
+    each person's as people appear); each call only moves them (a person's once per camera
+    frame, widened by the margins). coal's signed distance gives the witness points and
+    the normal (from the human capsule to the robot capsule), also under penetration.
+
+    With several people (:meth:`closest`), each robot set × body part pair needs only the
+    closest person's distance: people are tried in order of a lower bound (the distance
+    between the two capsules' bounding spheres) and coal is not called for a person whose
+    bound exceeds the best distance found: the result is exact.
     """
 
     method = "capsules"
 
     def __init__(self, robot: Robot, human: KinectHuman):
         self.set_names, self.part_names = robot.set_names, human.part_names
-        robot_shapes = [coal.Capsule(r, 0.0) for r in robot.capsule_radii]
-        human_shapes = [coal.Capsule(r, 0.0) for r in human.capsule_radii]
-        self._shapes = robot_shapes + human_shapes
+        self._robot = _Capsules(robot.capsule_radii)
+        self._robot_valid = np.ones(len(self._robot.shapes), dtype=bool)
         self._human_radii = human.capsule_radii
-        self._tfs = [coal.Transform3s() for _ in self._shapes]
-        self._functors = [[coal.ComputeDistance(h, r) for h in human_shapes] for r in robot_shapes]
-        self._shape = (len(robot_shapes), len(human_shapes))
-        self._robot_valid = np.ones(len(robot_shapes), dtype=bool)
+        self._people: list[tuple[_Capsules, list[list[coal.ComputeDistance]]]] = []
+        self._shape = (len(self._robot.shapes), len(human.capsule_radii))
         self._minus_one = np.full(self._shape, -1)
         self._minus_one.setflags(write=False)
         self._request = coal.DistanceRequest()
         self._request.enable_signed_distance = True
         self._result = coal.DistanceResult()
-        self._placed: HumanGeometry | None = None  # the geometry the human capsules show
 
-    def _place(self, segments: np.ndarray, valid: np.ndarray, first: int = 0) -> None:
-        """Move capsules ``first``, ``first + 1``, ... (robot ones, then human ones) onto
-        their segments."""
-        axis = segments[:, 1] - segments[:, 0]
-        half = (0.5 * np.sqrt(np.einsum("nk,nk->n", axis, axis))).tolist()
-        centre = 0.5 * (segments[:, 0] + segments[:, 1])
-        for k in np.flatnonzero(valid).tolist():
-            self._shapes[first + k].halfLength = half[k]
-            self._tfs[first + k].setQuatRotation(axis_rotation(axis[k]))
-            self._tfs[first + k].setTranslation(centre[k])
+    def _person(self, k: int, geo: HumanGeometry) -> tuple[_Capsules, list]:
+        """The ``k``-th person's capsules, showing ``geo`` (moved only when it changes)."""
+        while len(self._people) <= k:
+            caps = _Capsules(self._human_radii)
+            functors = [
+                [coal.ComputeDistance(h, r) for h in caps.shapes] for r in self._robot.shapes
+            ]
+            self._people.append((caps, functors))
+        caps, functors = self._people[k]
+        if geo is not caps.placed:
+            assert geo.part_margin is not None and geo.reach_margin is not None  # filled in
+            caps.place(
+                np.nan_to_num(geo.segments), geo.segment_valid, geo.part_margin + geo.reach_margin
+            )
+            caps.placed = geo
+        return caps, functors
 
     def __call__(self, kin: Kinematics, geo: HumanGeometry) -> DistanceTable:
         """Distance table between the robot capsules at ``kin`` and the human ``geo``."""
+        return self.closest(kin, [geo])[0]
+
+    def closest(
+        self, kin: Kinematics, geos: list[HumanGeometry]
+    ) -> tuple[DistanceTable, np.ndarray]:
+        """Per robot set and body part, the closest of the people ``geos``: the table and
+        ``who`` (S, K), the index of the person each entry comes from (as
+        :func:`~qpavoid.people.closest_of` of the people's own tables)."""
         seg = kin.segments
         n_sets, n_parts = self._shape
-        self._place(seg, self._robot_valid)
-        if geo is not self._placed:  # the person's capsules move once per camera frame
-            self._place(np.nan_to_num(geo.segments), geo.segment_valid, n_sets)
-            radii = (self._human_radii + geo.part_margin + geo.reach_margin).tolist()
-            for j, r in enumerate(radii):
-                self._shapes[n_sets + j].radius = r
-            self._placed = geo
+        robot = self._robot
+        robot.place(seg, self._robot_valid, None)
+        people = [self._person(k, g) for k, g in enumerate(geos)]
+        # lower bounds (S, K, P): bounding spheres' distance; +inf for a part not seen
+        gap = np.stack([caps.centre for caps, _ in people], axis=2)  # (K, 3, P)
+        bound = np.sqrt(((robot.centre[:, None, :, None] - gap[None]) ** 2).sum(axis=2))
+        bound -= robot.reach[:, None, None] + np.stack([c.reach for c, _ in people], axis=1)[None]
+        seen = np.stack([g.segment_valid for g in geos], axis=1)  # (K, P)
+        bound = np.where(seen[None], bound, np.inf)
+        order = np.argsort(bound, axis=2, kind="stable").tolist()
+        bound_list = bound.tolist()
         req, res = self._request, self._result
-        parts = np.flatnonzero(geo.segment_valid).tolist()
         n = n_sets * n_parts
         distance = np.full(n, np.inf)
         robot_point, human_point = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+        who = np.zeros(n, dtype=np.intp)
         contact = []
         for i in range(n_sets):
-            tf_r, functors = self._tfs[i], self._functors[i]
-            for j in parts:
-                k = i * n_parts + j
-                res.clear()
-                distance[k] = d = functors[j](self._tfs[n_sets + j], tf_r, req, res)
-                human_point[k], robot_point[k] = res.getNearestPoint1(), res.getNearestPoint2()
-                if d <= 1e-9:  # under contact the witnesses give no direction: coal's normal
-                    contact.append((k, res.normal.copy()))
+            tf_r = robot.tfs[i]
+            for j in range(n_parts):
+                k, best, normal = i * n_parts + j, np.inf, None
+                for p in order[i][j]:
+                    lower = bound_list[i][j][p]
+                    if lower == np.inf or lower > best + BOUND_SLACK_M:
+                        break  # sorted: nobody after can be closer
+                    caps, functors = people[p]
+                    res.clear()
+                    d = functors[i][j](caps.tfs[j], tf_r, req, res)
+                    if d < best or (d == best and p < who[k]):  # ties: the first person
+                        best, who[k] = d, p
+                        distance[k] = d
+                        human_point[k], robot_point[k] = (
+                            res.getNearestPoint1(),
+                            res.getNearestPoint2(),
+                        )
+                        normal = res.normal.copy() if d <= 1e-9 else None
+                if normal is not None:  # under contact the witnesses give no direction
+                    contact.append((k, normal))
+        return self._table(seg, distance, robot_point, human_point, contact), who.reshape(
+            self._shape
+        )
+
+    def _table(
+        self,
+        seg: np.ndarray,
+        distance: np.ndarray,
+        robot_point: np.ndarray,
+        human_point: np.ndarray,
+        contact: list[tuple[int, np.ndarray]],
+    ) -> DistanceTable:
+        """The table from coal's distances and witness points (and normals under contact)."""
+        n_sets, n_parts = shape = self._shape
         seen = np.isfinite(distance)
-        vector = np.zeros((n, 3))
+        vector = np.zeros((n_sets * n_parts, 3))
         vector[seen] = (robot_point[seen] - human_point[seen]) / np.where(
             distance[seen] > 1e-9, distance[seen], 1.0
         )[:, None]
@@ -118,7 +193,6 @@ class CapsuleDistance:
             np.einsum("skx,sx->sk", from_a, ab)
             / np.maximum(np.einsum("sx,sx->s", ab, ab), 1e-18)[:, None]
         )
-        shape = self._shape
         return DistanceTable(
             self.method,
             distance.reshape(shape),

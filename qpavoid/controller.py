@@ -34,7 +34,7 @@ from .laws import (
     scaled_velocity_limits,
     stop_reason,
 )
-from .people import NOBODY, People, Perceiver, as_people, closest_of
+from .people import NOBODY, People, Perceiver, as_people
 from .perception import Perceived
 from .robot import Robot, joint_columns
 from .ssm import (
@@ -131,7 +131,7 @@ class Controller:
             percs = [Perceived.untracked(f) for f in people.frames or (NOBODY,)]
             geos = self.geometry(people)
             v_people = np.zeros((len(percs), len(self.human.parts), 3))
-        table, who = closest_of([self.distances(kin, g) for g in geos])
+        table, who = self.distances.closest(kin, geos)
         dmin = table.min_per_set()
         nearest = (
             int(who.flat[np.argmin(table.distance)])

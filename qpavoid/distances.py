@@ -30,6 +30,7 @@ from .distance_kernels import sphere_table, warm_up
 from .distance_table import FALLBACK_DIRECTION, DistanceTable
 from .errors import InputError
 from .human import HumanGeometry, KinectHuman
+from .people import closest_of
 from .robot import Kinematics, Robot
 
 __all__ = [
@@ -110,6 +111,13 @@ class SphereDistance:
             self.part_names,
             (P, H, self._r_robot_flat, self._r_human_flat, part_margin),
         )
+
+    def closest(
+        self, kin: Kinematics, geos: list[HumanGeometry]
+    ) -> tuple[DistanceTable, np.ndarray]:
+        """Per robot set and body part, the closest of the people ``geos``: the table and
+        ``who`` (S, K), the index of each entry's person (:func:`~qpavoid.people.closest_of`)."""
+        return closest_of([self(kin, g) for g in geos])
 
 
 METHODS: dict[str, type[SphereDistance] | type[CapsuleDistance]] = {

@@ -45,7 +45,7 @@ from .errors import InputError
 from .frames import N_KINECT_JOINTS, HumanFrame, HumanMotion
 from .interruption import Interruption
 from .metrics import end_of_run, run_metrics, truth_metrics
-from .people import People, closest_of
+from .people import People
 from .sensor import Sensor, SensorConfig
 from .task import inverse_kinematics
 from .truth import TrueClearance
@@ -233,7 +233,7 @@ def simulate(
             cmd = controller.step(q, human, None, tau, t - captured_s, captured_s)
             tick_us = (time.perf_counter_ns() - t0) / 1e3
             kin = robot.kinematics(q, jacobians=False)
-            other_table = closest_of([other(kin, g) for g in controller.geometry(human)])[0]
+            other_table = other.closest(kin, controller.geometry(human))[0]
             if truth is not None:
                 log["true_distance"][k] = truth(kin, t)
 

@@ -296,3 +296,28 @@ def test_axis_rotations_take_z_onto_each_axis():
     )
     np.testing.assert_allclose(np.linalg.det(R), 1.0)
     np.testing.assert_array_equal(axis_rotations(np.zeros((1, 3)))[0], np.eye(3))
+
+
+@pytest.mark.parametrize("method", [CapsuleDistance, SphereDistance])
+def test_closest_of_several_people_is_each_pair_s_closest_person(robot, human, method):
+    """``closest`` (capsules: people tried in order of a bounding-sphere bound, coal skipped
+    for the rest) equals the minimum over every person's own table, entry by entry."""
+    rng = np.random.default_rng(7)
+    table_of, many = method(robot, human), method(robot, human)
+    for _ in range(40):
+        kin = robot.kinematics(random_q(rng, robot), jacobians=False)
+        geos = [
+            human.geometry(random_posture(rng, kin.points, spread_m=float(rng.uniform(0.1, 1.5))))
+            for _ in range(int(rng.integers(1, 7)))
+        ]
+        own = [table_of(kin, g) for g in geos]
+        table, who = many.closest(kin, geos)
+        D = np.stack([t.distance for t in own])
+        np.testing.assert_allclose(table.distance, D.min(axis=0), atol=1e-9)
+        picked = np.take_along_axis(D, who[None], axis=0)[0]
+        np.testing.assert_allclose(picked, table.distance, atol=1e-9)  # who is a closest one
+        for i, j in zip(*np.nonzero(np.isfinite(table.distance)), strict=True):
+            np.testing.assert_allclose(table.vector[i, j], own[who[i, j]].vector[i, j], atol=1e-6)
+            np.testing.assert_allclose(
+                table.robot_point[i, j], own[who[i, j]].robot_point[i, j], atol=1e-6
+            )
