@@ -13,8 +13,9 @@ flange from its reference (mm) and how far its path clock is behind at the end (
 qpavoid's waits while it stops; the peers always chase the reference of the moment).
 
 * **qpavoid**: ``QPController.step`` (persistent OSQP), spheres and capsules, the paper's
-  rules, one person (the whole skeleton, as every tick sees it); and spheres on the
-  persistent daqp backend (``QPConfig(solver="daqp")``).
+  rules, one person (the whole skeleton, as every tick sees it); spheres on the
+  persistent daqp backend (``QPConfig(solver="daqp")``); and six people (the same person
+  and five others standing 0.8 m apart along the table, every skeleton new every tick).
 * **pink**: ``solve_ik`` with a ``FrameTask`` (the flange), a ``PostureTask`` (1e-3),
   configuration and velocity limits and **one** ``BodySphericalBarrier`` between the
   flange and a frame placed at the hand each tick (d_min 0.15 m), on our reduced
@@ -43,6 +44,7 @@ import pinocchio as pin
 import qpavoid
 from qpavoid.frames import JointType
 from qpavoid.geometry import point_segment_distance
+from qpavoid.people import People
 from qpavoid.perception import PerceptionConfig
 from qpavoid.qp import QPConfig, QPController
 from qpavoid.robot import load_robot
@@ -63,6 +65,8 @@ def ideal(**kw):
 
 
 HAND_RADIUS_M = 0.05
+#: Where the five other people of the six-people variants stand, relative to the first, m.
+OTHERS = [np.array([0.7 * i, 0.4 * i, 0.0]) for i in range(1, 6)]
 URDF = Path(str(files("qpavoid.robots"))) / "iiwa14" / "iiwa14.urdf"
 
 
@@ -165,6 +169,14 @@ def main() -> None:
             "qp",
             QPController(robot, config=ideal(distance="spheres"), qp=QPConfig(solver="daqp")),
         ),
+        "qpavoid QP, spheres, 6 people (persistent OSQP)": (
+            "qp6",
+            QPController(robot, config=ideal(distance="spheres")),
+        ),
+        "qpavoid QP, capsules, 6 people (persistent OSQP)": (
+            "qp6",
+            QPController(robot, config=ideal(distance="capsules")),
+        ),
     }
     for solver in ("osqp", "daqp"):
         variants[f"pink + 1 barrier, {solver}"] = ("pink", Pink(robot, solver))
@@ -182,13 +194,15 @@ def main() -> None:
     for k in range(int(args.seconds * RATE_HZ)):
         t = k * dt
         frame = qpavoid.HumanFrame.check(*motion.frame_at(t))
+        others = [qpavoid.HumanFrame.check(frame.joints + d, frame.state) for d in OTHERS]
+        crowd = People(tuple(range(6)), (frame, *others))  # and five others at the table
         hand = frame.joints[JointType.HandRight]
         target = pin.SE3(path.reference(t)[0])
         for name, (kind, ctrl) in variants.items():
             q, tau = state[name], clock[name]
             t0 = time.perf_counter_ns()
-            if kind == "qp":  # qpavoid's path clock waits while it stops (its semantics)
-                cmd = ctrl.step(q, frame, None, tau)
+            if kind in ("qp", "qp6"):  # qpavoid's path clock waits while it stops
+                cmd = ctrl.step(q, frame if kind == "qp" else crowd, None, tau)
                 v, clock[name] = cmd.dq, tau + cmd.time_scale * dt
             else:  # the peers chase the reference of the moment
                 v, clock[name] = ctrl.step(q, hand, target), t + dt

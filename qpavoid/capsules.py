@@ -127,12 +127,14 @@ class CapsuleDistance:
         robot = self._robot
         robot.place(seg, self._robot_valid, None)
         people = [self._person(k, g) for k, g in enumerate(geos)]
-        # lower bounds (S, K, P): bounding spheres' distance; +inf for a part not seen
-        gap = np.stack([caps.centre for caps, _ in people], axis=2)  # (K, 3, P)
-        bound = np.sqrt(((robot.centre[:, None, :, None] - gap[None]) ** 2).sum(axis=2))
-        bound -= robot.reach[:, None, None] + np.stack([c.reach for c, _ in people], axis=1)[None]
         seen = np.stack([g.segment_valid for g in geos], axis=1)  # (K, P)
-        bound = np.where(seen[None], bound, np.inf)
+        if len(people) == 1:  # nobody to choose from: only parts not seen are skipped
+            bound = np.broadcast_to(np.where(seen, 0.0, np.inf), (n_sets, n_parts, 1))
+        else:  # lower bounds (S, K, P): the bounding spheres' distance
+            gap = np.stack([caps.centre for caps, _ in people], axis=2)  # (K, 3, P)
+            bound = np.sqrt(((robot.centre[:, None, :, None] - gap[None]) ** 2).sum(axis=2))
+            bound -= robot.reach[:, None, None] + np.stack([c.reach for c, _ in people], 1)[None]
+            bound = np.where(seen[None], bound, np.inf)
         order = np.argsort(bound, axis=2, kind="stable").tolist()
         bound_list = bound.tolist()
         req, res = self._request, self._result
