@@ -14,8 +14,9 @@ qpavoid's waits while it stops; the peers always chase the reference of the mome
 
 * **qpavoid**: ``QPController.step`` (persistent OSQP), spheres and capsules, the paper's
   rules, one person (the whole skeleton, as every tick sees it); spheres on the
-  persistent daqp backend (``QPConfig(solver="daqp")``); and six people (the same person
-  and five others standing 0.8 m apart along the table, every skeleton new every tick).
+  persistent daqp backend (``QPConfig(solver="daqp")``); and, in a second interleaved
+  phase of the same run, six people (the same person and five others standing 0.8 m
+  apart along the table, every skeleton new every tick).
 * **pink**: ``solve_ik`` with a ``FrameTask`` (the flange), a ``PostureTask`` (1e-3),
   configuration and velocity limits and **one** ``BodySphericalBarrier`` between the
   flange and a frame placed at the hand each tick (d_min 0.15 m), on our reduced
@@ -169,6 +170,11 @@ def main() -> None:
             "qp",
             QPController(robot, config=ideal(distance="spheres"), qp=QPConfig(solver="daqp")),
         ),
+    }
+    for solver in ("osqp", "daqp"):
+        variants[f"pink + 1 barrier, {solver}"] = ("pink", Pink(robot, solver))
+        variants[f"mink + CollisionAvoidanceLimit, {solver}"] = ("mink", Mink(solver))
+    crowds = {  # a second phase: their footprint would weigh on the head-to-head's caches
         "qpavoid QP, spheres, 6 people (persistent OSQP)": (
             "qp6",
             QPController(robot, config=ideal(distance="spheres")),
@@ -178,9 +184,15 @@ def main() -> None:
             QPController(robot, config=ideal(distance="capsules")),
         ),
     }
-    for solver in ("osqp", "daqp"):
-        variants[f"pink + 1 barrier, {solver}"] = ("pink", Pink(robot, solver))
-        variants[f"mink + CollisionAvoidanceLimit, {solver}"] = ("mink", Mink(solver))
+    rows = {}
+    for phase in (variants, crowds):
+        rows.update(_interleaved(phase, robot, path, motion, q0, args.seconds))
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+
+
+def _interleaved(variants: dict, robot, path, motion, q0, seconds: float) -> dict:
+    """Step ``variants`` tick by tick in one loop; print and return their rows."""
     state = {
         name: q0.copy() if kind != "mink" else np.insert(q0, 2, 0.0)
         for name, (kind, _) in variants.items()
@@ -191,7 +203,7 @@ def main() -> None:
     error: dict[str, list[float]] = {name: [] for name in variants}
     robot7 = load_robot("iiwa14", locked=())
     dt = 1.0 / RATE_HZ
-    for k in range(int(args.seconds * RATE_HZ)):
+    for k in range(int(seconds * RATE_HZ)):
         t = k * dt
         frame = qpavoid.HumanFrame.check(*motion.frame_at(t))
         others = [qpavoid.HumanFrame.check(frame.joints + d, frame.state) for d in OTHERS]
@@ -213,7 +225,7 @@ def main() -> None:
             ref = path.reference(clock[name])[0][:3, 3]
             error[name].append(float(np.linalg.norm(robot7.end_effector(q7)[:3, 3] - ref)))
     rows = {}
-    print(f"{int(args.seconds * RATE_HZ)} ticks at {RATE_HZ:.0f} Hz, variants interleaved\n")
+    print(f"\n{int(seconds * RATE_HZ)} ticks at {RATE_HZ:.0f} Hz, variants interleaved\n")
     print(
         f"{'variant':48s} {'median µs':>10s} {'p99 µs':>8s} {'clearance m':>12s} "
         f"{'path mm':>8s} {'behind s':>8s}"
@@ -225,7 +237,7 @@ def main() -> None:
             "p99_us": float(np.percentile(tt, 99)),
             "min_clearance_m": float(np.min(clear[name])),
             "max_path_error_mm": float(np.max(error[name]) * 1e3),
-            "path_time_behind_s": float(args.seconds - clock[name]),
+            "path_time_behind_s": float(seconds - clock[name]),
         }
         r = rows[name]
         print(
@@ -233,8 +245,7 @@ def main() -> None:
             f"{r['min_clearance_m']:12.3f} {r['max_path_error_mm']:8.1f} "
             f"{r['path_time_behind_s']:8.2f}"
         )
-    if args.json:
-        Path(args.json).write_text(json.dumps(rows, indent=1))
+    return rows
 
 
 def _clearance7(robot7, q7: np.ndarray, hand: np.ndarray) -> float:
