@@ -1,4 +1,5 @@
-"""Compiling the numba kernels without losing a Ctrl-C.
+"""Compiling the numba kernels without losing a Ctrl-C, and calling them only with the
+argument types they were compiled for.
 
 The first use of a kernel after an install compiles it (a few seconds; later processes
 load it from the disk cache in milliseconds). Numba's compiler calls back into Python
@@ -17,7 +18,9 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
 
-__all__ = ["ctrl_c_deferred"]
+import numpy as np
+
+__all__ = ["ctrl_c_deferred", "kernel_input"]
 
 
 @contextmanager
@@ -41,3 +44,21 @@ def ctrl_c_deferred() -> Iterator[None]:
             previous(signal.SIGINT, noted[0])
         elif noted and previous == signal.SIG_DFL:
             raise KeyboardInterrupt
+
+
+def kernel_input(array: object, dtype: type) -> np.ndarray:
+    """``array`` as the kernels were warmed up for it: C-contiguous, writeable, ``dtype``.
+
+    numba compiles a new specialisation for each layout, dtype *and* read-only flag it
+    meets; a read-only frame (a recording's arrays are) or a view would make the control
+    loop wait for the compiler at its first frame. Such an array is copied (25 joints: well
+    under a microsecond); the usual one is passed through.
+    """
+    if (
+        isinstance(array, np.ndarray)
+        and array.dtype == dtype
+        and array.flags.c_contiguous
+        and array.flags.writeable
+    ):
+        return array
+    return np.array(array, dtype=dtype, order="C")

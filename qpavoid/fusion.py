@@ -30,6 +30,7 @@ import numpy as np
 
 from .association import PersonTrack, associate, reference_rank, torso_centre
 from .calibration import Calibration
+from .compiling import kernel_input
 from .frames import N_KINECT_JOINTS, HumanFrame, TrackingState
 from .fusion_kernels import ingest
 from .fusion_person import fuse_person, warm_up
@@ -173,6 +174,15 @@ class Fuser:
         self._assigned: dict[str, dict[int, int]] = {s: {} for s in calibration.names}
         self._next_id = 0
         self._sensor_weight = {n: calibration[n].weight for n in calibration.names}
+        # each camera's rotation and translation as contiguous arrays: the types the
+        # compiled intake was warmed up for (a view would compile anew at the first frame)
+        self._pose = {
+            n: (
+                np.ascontiguousarray(calibration[n].base_from_camera[:3, :3]),
+                np.ascontiguousarray(calibration[n].base_from_camera[:3, 3]),
+            )
+            for n in calibration.names
+        }
         warm_up()
         # averaging weight and confidence by tracking state (NotTracked, Inferred, Tracked)
         self._weight = np.array([0.0, self.cfg.weight_inferred, self.cfg.weight_tracked])
@@ -194,12 +204,12 @@ class Fuser:
         if history and t <= history[-1].t:
             self.counters["out_of_order_or_duplicate"] += 1
             return False
-        T = cal.base_from_camera
+        rotation, translation = self._pose[frame.sensor]
         joints, state = ingest(
-            np.asarray(frame.joints, dtype=np.float64),
-            np.asarray(frame.state, dtype=np.int8),
-            T[:3, :3],
-            T[:3, 3],
+            kernel_input(frame.joints, np.float64),
+            kernel_input(frame.state, np.int8),
+            rotation,
+            translation,
         )
         history.append(_Frame(t, joints, state, tuple(torso_centre(joints).tolist())))
         del history[:-HISTORY]

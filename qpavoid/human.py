@@ -24,8 +24,9 @@ from functools import cached_property
 
 import numpy as np
 
+from .compiling import kernel_input
 from .frames import N_KINECT_JOINTS, HumanFrame, JointType, TrackingState
-from .perception_kernels import capsules, warm_up
+from .perception_kernels import capsules, largest_per_part, warm_up
 
 __all__ = [
     "N_KINECT_JOINTS",
@@ -291,8 +292,8 @@ class KinectHuman:
         # each part's capsule: the first and last usable joints of its chain; the points;
         # how far the fingers stick out (perception_kernels.capsules)
         points, point_valid, segments, segment_valid, reach = capsules(
-            np.ascontiguousarray(frame.joints, dtype=np.float64),
-            np.ascontiguousarray(frame.state, dtype=np.int8),
+            kernel_input(frame.joints, np.float64),
+            kernel_input(frame.state, np.int8),
             self.joint_ids,
             self._mid_ids,
             self._chains,
@@ -302,6 +303,6 @@ class KinectHuman:
         margin = (
             None
             if joint_radius is None
-            else np.where(self._members, joint_radius[None, :], 0.0).max(axis=1)
+            else largest_per_part(self._members, np.asarray(joint_radius, dtype=np.float64))
         )
         return HumanGeometry(points, point_valid, segments, segment_valid, margin, reach)

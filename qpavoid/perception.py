@@ -35,8 +35,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .compiling import kernel_input
 from .frames import N_KINECT_JOINTS, HumanFrame, JointType, TrackingState
-from .perception_kernels import track, warm_up
+from .perception_kernels import fastest_joint, track, warm_up
 
 J = JointType
 
@@ -188,8 +189,8 @@ class Tracker:
             self.last_tracked,
             self.bone,
             PARENT,
-            np.ascontiguousarray(frame.joints, dtype=np.float64),
-            np.ascontiguousarray(frame.state, dtype=np.int8),
+            kernel_input(frame.joints, np.float64),
+            kernel_input(frame.state, np.int8),
             float(capture_time_s),
             float(cfg.velocity_alpha),
             float(cfg.velocity_beta),
@@ -238,11 +239,9 @@ def part_velocities(
     person closest to each robot set and part, :func:`~qpavoid.people.closest_of`),
     (S, K, 3): the velocity of each pair's own person's part.
     """
-    out = []
-    for v in velocity:
-        speed = np.where(part_joints, (v * v).sum(axis=1)[None, :], -1.0)  # squared: same order
-        out.append(v[speed.argmax(axis=1)])
-    parts = np.array(out)  # (P, K, 3)
     if who is None:
-        return parts[0]
-    return parts[who, np.arange(who.shape[1])[None, :]]
+        return fastest_joint(part_joints, np.asarray(velocity[0], dtype=np.float64))
+    parts = np.array(
+        [fastest_joint(part_joints, np.asarray(v, dtype=np.float64)) for v in velocity]
+    )
+    return parts[who, np.arange(who.shape[1])[None, :]]  # (S, K, 3)

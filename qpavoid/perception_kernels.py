@@ -20,7 +20,7 @@ from numba import njit
 
 from .compiling import ctrl_c_deferred
 
-__all__ = ["capsules", "track", "warm_up"]
+__all__ = ["capsules", "fastest_joint", "largest_per_part", "track", "warm_up"]
 
 TINY = 1e-12  #: a segment shorter than this is its end point, m (as geometry.TINY)
 
@@ -203,6 +203,35 @@ def capsules(
     return points, point_valid, segments, segment_valid, reach
 
 
+@njit(cache=True)
+def largest_per_part(members: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(K,) the largest of each part's ``values`` (25,) ≥ 0 over its joints ``members``
+    (K, 25) bool; 0 for a part with none."""
+    out = np.zeros(members.shape[0])
+    for k in range(members.shape[0]):
+        for j in range(members.shape[1]):
+            if members[k, j] and values[j] > out[k]:
+                out[k] = values[j]
+    return out
+
+
+@njit(cache=True)
+def fastest_joint(members: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+    """(K, 3) each part's velocity: that of its fastest joint (the first of equals; joint 0
+    for a part with none), from the joints' ``velocity`` (25, 3), m/s."""
+    out = np.empty((members.shape[0], 3))
+    for k in range(members.shape[0]):
+        best, pick = -1.0, 0
+        for j in range(members.shape[1]):
+            if members[k, j]:
+                v = velocity[j]
+                speed = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+                if speed > best:
+                    best, pick = speed, j
+        out[k] = velocity[pick]
+    return out
+
+
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) every kernel, once per process."""
@@ -235,3 +264,6 @@ def warm_up() -> None:
             np.zeros((1, 2), dtype=np.int64),
             np.ones(1),
         )
+        members = np.ones((2, 25), dtype=np.bool_)
+        largest_per_part(members, np.zeros(25))
+        fastest_joint(members, z)

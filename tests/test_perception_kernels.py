@@ -6,6 +6,7 @@ import pytest
 from qpavoid.frames import HumanFrame
 from qpavoid.human import KinectHuman
 from qpavoid.perception import MAX_BONE_M, PARENT, PerceptionConfig, Tracker
+from qpavoid.perception_kernels import fastest_joint, largest_per_part
 
 
 def numpy_track(mem, z, state, t, cfg):
@@ -101,3 +102,19 @@ def test_capsules_are_first_and_last_usable_joints_and_fingers_stick_out():
                 assert geo.reach_margin[k] == pytest.approx(out, abs=1e-12)
         for i, j in enumerate(human.joint_ids):
             assert geo.point_valid[i] == usable[j]
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_part_maxima_are_their_numpy_code(seed):
+    """Largest radius and fastest joint per part against the numpy they replaced, on random
+    memberships (parts with no joint included) and speeds with ties."""
+    rng = np.random.default_rng(seed)
+    members = rng.uniform(size=(8, 25)) < 0.2
+    members[0] = False
+    radius = rng.uniform(0, 0.3, size=25) * (rng.uniform(size=25) < 0.5)
+    velocity = rng.choice([-1.0, 0.0, 1.0], size=(25, 3))  # many equal speeds
+    np.testing.assert_array_equal(
+        largest_per_part(members, radius), np.where(members, radius[None, :], 0.0).max(axis=1)
+    )
+    speed = np.where(members, (velocity * velocity).sum(axis=1)[None, :], -1.0)
+    np.testing.assert_array_equal(fastest_joint(members, velocity), velocity[speed.argmax(axis=1)])

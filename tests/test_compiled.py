@@ -1,0 +1,81 @@
+"""The control loop never waits for numba: every kernel it calls was compiled (or loaded)
+at construction, for the very argument types the loop passes."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+# A fresh process runs the loop's every compiled path (both distance methods, both
+# controllers, SSM, several people, two-sensor fusion with mirrors and outliers) and
+# reports how many specialisations each kernel holds: one more than warm_up made means
+# the loop compiled a new one mid-run (a second's stall next to a person).
+LOOP = """
+import json
+import numpy as np
+from qpavoid import distance_kernels, fusion_kernels, fusion_person, perception_kernels
+from qpavoid.calibration import Calibration
+from qpavoid.controller import ControllerConfig
+from qpavoid.frames import HumanFrame
+from qpavoid.fusion import Fuser
+from qpavoid.people import People
+from qpavoid.qp import QPController
+from qpavoid.robot import load_robot
+from qpavoid.runs import RunSpec, simulate_one
+from qpavoid.scenarios import make_scenario
+from qpavoid.two_sensors import TwoSensorConfig, two_sensor_data
+
+modules = (distance_kernels, fusion_kernels, fusion_person, perception_kernels)
+kernels = {
+    f"{m.__name__}.{n}": getattr(m, n)
+    for m in modules
+    for n in dir(m)
+    if hasattr(getattr(m, n), "signatures")
+}
+for controller in ("qp", "analytic"):
+    for distance in ("spheres", "capsules"):
+        simulate_one(RunSpec(scenario="test1", controller=controller, distance=distance,
+                             safety="ssm", max_time_s=3.0, rate_hz=100.0))
+robot = load_robot("iiwa14")
+motion = make_scenario("test1", robot)
+ctrl = QPController(robot, config=ControllerConfig(control_period_s=0.01, distance="capsules"))
+q = robot.neutral()
+def readonly(*arrays):  # as a recording's or a datagram's arrays are
+    for a in arrays:
+        a.setflags(write=False)
+    return arrays
+
+
+for k in range(30):
+    frame = HumanFrame.check(*motion.frame_at(4.0 + 0.03 * k))
+    other = HumanFrame(*readonly(frame.joints + [0.3, 0.2, 0.0], frame.state.copy()))
+    ctrl.step(q, People((0, 1), (frame, other)), None, 1.0)
+    ctrl.step(q, HumanFrame(*readonly(frame.joints[::-1][::-1], frame.state.astype(float))))
+data = two_sensor_data([motion], 4.0, TwoSensorConfig(seed=1))  # swaps, outliers
+fuser = Fuser(Calibration(dict(data.calibration.sensors)))
+rows = sorted((f.t + data.calibration[f.sensor].time_offset_s, f)
+              for rec in data.recordings.values() for f in rec.frames())
+for n, (t, f) in enumerate(rows):
+    if n % 2:  # read-only, and of other dtypes
+        joints, state = readonly(f.joints.astype(np.float32), f.state.astype(int))
+        f = f._replace(joints=joints, state=state)
+    fuser.add(f)
+    fuser.fuse(t)
+print(json.dumps({
+    "signatures": {name: len(k.signatures) for name, k in kernels.items()},
+    "counters": dict(fuser.counters),
+}))
+"""
+
+
+def test_the_loop_uses_only_the_kernels_warm_up_compiled():
+    r = subprocess.run([sys.executable, "-c", LOOP], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    counts = out["signatures"]
+    assert counts["qpavoid.fusion_person.fuse_person"] == 1  # the fusion ran
+    assert counts["qpavoid.distance_kernels.sphere_table"] == 1  # the sphere table ran
+    assert out["counters"].get("mirrored_corrected", 0) > 0  # mirrors were undone
+    assert out["counters"].get("outliers_resolved", 0) > 0  # and outliers settled
+    assert all(n <= 1 for n in counts.values()), counts
