@@ -14,7 +14,7 @@ qpavoid's waits while it stops; the peers always chase the reference of the mome
 
 * **qpavoid**: ``QPController.step`` (persistent OSQP), spheres and capsules, the paper's
   rules, one person (the whole skeleton, as every tick sees it); spheres on the
-  persistent daqp backend (``QPConfig(solver="daqp")``); and, in a second interleaved
+  daqp backend (``QPConfig(backend="daqp")``: daqp called directly); and, in a second interleaved
   phase of the same run, six people (the same person and five others standing 0.8 m
   apart along the table, every skeleton new every tick).
 * **pink**: ``solve_ik`` with a ``FrameTask`` (the flange), a ``PostureTask`` (1e-3),
@@ -166,9 +166,9 @@ def main() -> None:
             "qp",
             QPController(robot, config=ideal(distance="capsules")),
         ),
-        "qpavoid QP, spheres (persistent daqp)": (
+        "qpavoid QP, spheres (daqp)": (
             "qp",
-            QPController(robot, config=ideal(distance="spheres"), qp=QPConfig(solver="daqp")),
+            QPController(robot, config=ideal(distance="spheres"), qp=QPConfig(backend="daqp")),
         ),
     }
     for solver in ("osqp", "daqp"):

@@ -9,10 +9,10 @@ stable (docs/performance.md):
 * ``stages``: ``kinematics``, ``human_geometry``, ``sphere_table``, ``capsule_table``,
   ``perception`` (tracker update: lost joints, velocities), ``fusion`` (two sensors, one
   person: add + fuse), ``analytic_law`` (eqs. 4-9 after the prelude), ``prelude``,
-  ``qp_assembly``, ``qp_solve/persistent_osqp``, ``qp_solve/persistent_daqp`` (when
-  daqp ≥ 0.11 is installed) and ``qp_solve/<solver>`` for each qpsolvers solver installed;
+  ``qp_assembly``, ``qp_solve/persistent_osqp``, ``qp_solve/daqp_direct`` (the ``daqp``
+  backend, when daqp is installed) and ``qp_solve/<solver>`` for each qpsolvers solver;
 * ``ticks``: ``<controller>/<distance>/<safety>`` for both controllers (``analytic``,
-  ``qp``; and ``qp_daqp``, the QP controller on the persistent daqp backend, when
+  ``qp``; and ``qp_daqp``, the QP controller on the ``daqp`` backend, when
   installed), both methods, both safety modes;
 * ``scaling``: ``robot_points/<n>`` (sphere table, n robot spheres) and ``people/<n>``
   (QP tick, capsules, SSM, n people, a new camera frame every other tick);
@@ -72,13 +72,9 @@ def _timed(fn: Callable[[Any], object], items: Sequence[Any], repeat: int) -> di
     return {"median_us": float(np.median(out)), "p99_us": float(np.percentile(out, 99))}
 
 
-def _has_persistent_daqp() -> bool:
-    """daqp installed with its ``Model`` (the persistent backend's workspace)."""
-    try:
-        import daqp  # the solvers extra; optional
-    except ImportError:
-        return False
-    return hasattr(daqp, "Model")
+def _has_daqp() -> bool:
+    """daqp installed (the solvers extra)."""
+    return "daqp" in qpsolvers.available_solvers
 
 
 def _controller(kind: str, distance: str, safety: str, **qp: Any) -> Callable[..., Controller]:
@@ -135,9 +131,9 @@ def run_bench(quick: bool = False) -> dict[str, Any]:
     problems = [qp.problem(t) for t in ticks]
     stages["qp_solve/persistent_osqp"] = _timed(qp.backend.solve, problems, repeat)
     kinds = ["analytic", "qp"]
-    if _has_persistent_daqp():
-        fast = QPController(robot, config=qp.config, qp=QPConfig(solver="daqp"))
-        stages["qp_solve/persistent_daqp"] = _timed(fast.backend.solve, problems, repeat)
+    if _has_daqp():
+        fast = QPController(robot, config=qp.config, qp=QPConfig(backend="daqp"))
+        stages["qp_solve/daqp_direct"] = _timed(fast.backend.solve, problems, repeat)
         kinds.append("qp_daqp")
     for name in sorted(qpsolvers.available_solvers):
         other = QPController(robot, qp=QPConfig(backend="qpsolvers", solver=name))
@@ -147,8 +143,8 @@ def run_bench(quick: bool = False) -> dict[str, Any]:
     for kind in kinds:
         for distance in ("spheres", "capsules"):
             for safety in ("paper", "ssm"):
-                ctrl = (  # qp_daqp: the QP controller on the persistent daqp backend
-                    _controller("qp", distance, safety, solver="daqp")
+                ctrl = (  # qp_daqp: the QP controller on the daqp backend
+                    _controller("qp", distance, safety, backend="daqp")
                     if kind == "qp_daqp"
                     else _controller(kind, distance, safety)
                 )(robot)

@@ -31,7 +31,7 @@ def test_bench_writes_every_documented_key(tmp_path):
         "analytic_law",
         "qp_assembly",
         "qp_solve/persistent_osqp",
-        "qp_solve/persistent_daqp",
+        "qp_solve/daqp_direct",
     ):
         assert data["stages"][key]["median_us"] > 0, key
     assert len(data["ticks"]) == 12 and "qp/capsules/ssm" in data["ticks"]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from qpavoid.controller import ControllerConfig
 from qpavoid.human import JointType
 from qpavoid.qp import (
     Bounds,
-    PersistentDAQP,
+    DirectDAQP,
     PersistentOSQP,
     QPConfig,
     QPController,
@@ -39,12 +40,12 @@ SOLVER_TOL = 1e-5
 @pytest.mark.parametrize(
     "rate_hz", [100.0, pytest.param(500.0, marks=pytest.mark.slow)], ids=["100Hz", "500Hz"]
 )
-@pytest.mark.parametrize("solver", ["osqp", "daqp"])  # both persistent backends
-def test_nobody_near_qp_equals_analytic_at_every_tick(robot, rate_hz, solver):
+@pytest.mark.parametrize("backend", ["persistent", "daqp"])
+def test_nobody_near_qp_equals_analytic_at_every_tick(robot, rate_hz, backend):
     """In `free` both controllers solve eq. (8): same command within 1e-4 rad/s."""
     cfg = paper_config(control_period_s=1.0 / rate_hz)
     result = simulate(
-        QPController(robot, config=cfg, qp=QPConfig(solver=solver)),
+        QPController(robot, config=cfg, qp=QPConfig(backend=backend)),
         make_scenario("free", robot),
         ideal_sim(control_rate_hz=rate_hz),
     )
@@ -127,7 +128,7 @@ def recorded_problems(robot):
 def test_solve_paths_agree(recorded_problems):
     n, m = recorded_problems[0].H.shape[0], len(recorded_problems[0].h)
     persistent = PersistentOSQP(n, m, QPConfig())
-    persistent_daqp = PersistentDAQP(n, m)
+    direct_daqp = DirectDAQP(n, m)
     through_osqp = QPSolversBackend("osqp", QPConfig())
     daqp = QPSolversBackend("daqp", QPConfig())
     others = [
@@ -140,7 +141,7 @@ def test_solve_paths_agree(recorded_problems):
         keep = np.isfinite(prob.h)
         if np.any(prob.G[keep] @ ref.x > prob.h[keep] - 1e-9):
             active += 1
-        for backend in (persistent, persistent_daqp, through_osqp, *others):
+        for backend in (persistent, direct_daqp, through_osqp, *others):
             sol = backend.solve(prob)
             assert sol.found, (backend.name, sol.status)
             np.testing.assert_allclose(sol.x[:-2], ref.x[:-2], atol=SOLVER_TOL)
@@ -184,7 +185,11 @@ def test_infeasible_problem_stops_the_robot(robot, monkeypatch, backend):
             np.full(self.variables.n, 1.0), np.full(self.variables.n, -1.0)
         ),
     )
-    ctrl = QPController(robot, path, qp=QPConfig(backend=backend, solver="daqp"))
+    ctrl = QPController(
+        robot,
+        path,
+        qp=QPConfig(backend=backend, solver="daqp" if backend == "qpsolvers" else "osqp"),
+    )
     from qpavoid.posture import Operator
 
     cmd = ctrl.step(q, Operator().rest(), None, 1.0)
@@ -203,7 +208,7 @@ def test_backends_report_infeasibility():
     )  # 0 <= -1: infeasible
     assert not PersistentOSQP(2, 1, QPConfig()).solve(prob).found
     assert not QPSolversBackend("daqp", QPConfig()).solve(prob).found
-    daqp = PersistentDAQP(2, 1)
+    daqp = DirectDAQP(2, 1)
     assert not daqp.solve(prob).found
     # min ½|x|² − x₁ − x₂ with x₁ + x₂ ≤ 1: x = (½, ½), by hand
     feasible = QPProblem(np.eye(2), -np.ones(2), np.ones((1, 2)), np.ones(1), prob.lb, prob.ub)
@@ -214,7 +219,7 @@ def test_backends_report_infeasibility():
     assert not daqp.solve(nan).found  # never a NaN command
     assert daqp.solve(feasible).found  # and the workspace recovers
     concave = QPProblem(-np.eye(2), -np.ones(2), np.ones((1, 2)), np.ones(1), prob.lb, prob.ub)
-    assert not daqp.solve(concave).found  # rejected: never the last problem's answer
+    assert not daqp.solve(concave).found
     assert not daqp.solve(prob).found
     with pytest.raises(qpavoid.SolverError, match="not installed"):
         QPSolversBackend("nosuchsolver", QPConfig())
@@ -355,3 +360,56 @@ def test_rejected_update_is_never_solved_stale(robot):
         assert not sol.found and "infeasible bounds" in sol.status
         assert not b.solve(nonconvex).found
         assert b.solve(ok).found
+
+
+def _recorded_pair(k: int) -> QPProblem:
+    data = np.load(Path(__file__).parent / "data" / "daqp_warm_start_pairs.npz")
+    return QPProblem(*(data[f"{name}_{k}"] for name in ("H", "c", "G", "h", "lb", "ub")))
+
+
+@pytest.mark.parametrize("first, second", [(313, 314), (404, 405)])
+def test_daqp_answers_each_tick_as_if_it_were_the_first(first, second):
+    """Consecutive QPs of recorded ticks on which daqp 0.11's warm start (Model.update)
+    returned a wrong 'optimal' command (A1 at -1.48 rad/s instead of +1.48) or a NaN: the
+    daqp backend (cold each tick) answers the second as OSQP does."""
+    a, b = _recorded_pair(first), _recorded_pair(second)
+    n, m = a.G.shape[1], a.G.shape[0]
+    backend = DirectDAQP(n, m)
+    assert backend.solve(a).found
+    sol = backend.solve(b)
+    ref = PersistentOSQP(n, m, QPConfig()).solve(b)
+    assert sol.found and ref.found
+    np.testing.assert_allclose(sol.x[:-2], ref.x[:-2], atol=SOLVER_TOL)
+
+
+@pytest.mark.parametrize("field", ["H", "c", "G", "h", "lb", "ub"])
+def test_a_nan_in_the_problem_is_never_solved_and_leaves_no_trace(field):
+    """daqp takes a NaN row as no row and says 'solved'; one NaN in OSQP's warm start
+    spoiled every later solve: both backends refuse the problem, then solve the next."""
+    good = _recorded_pair(313)
+    n, m = good.G.shape[1], good.G.shape[0]
+    arrays = {k: getattr(good, k).copy() for k in ("H", "c", "G", "h", "lb", "ub")}
+    arrays[field].flat[0] = np.nan
+    bad = QPProblem(**arrays)
+    for backend in (PersistentOSQP(n, m, QPConfig()), DirectDAQP(n, m)):
+        assert backend.solve(good).found
+        sol = backend.solve(bad)
+        assert not sol.found
+        assert "NaN" in sol.status or "not finite" in sol.status
+        again = backend.solve(good)
+        assert again.found, backend.name
+
+
+def test_a_solution_the_hard_rows_cannot_judge_is_never_applied(robot, monkeypatch):
+    """A 'found' solution whose hard-row check is NaN (Python's max would skip the NaN)."""
+    path, q = _start(robot)
+    ctrl = QPController(robot, path)
+    from qpavoid.posture import Operator
+    from qpavoid.qp.problem import QPSolution
+
+    x = np.zeros(ctrl.variables.n)
+    x[-1] = np.nan  # a slack: the bounds on q̇ hold, the rows' check is NaN
+    monkeypatch.setattr(ctrl.backend, "solve", lambda prob: QPSolution(x, True, "solved"))
+    cmd = ctrl.step(q, Operator().rest(), None, 1.0)
+    assert cmd.stopped and "breaks a hard constraint by nan" in cmd.reason
+    np.testing.assert_array_equal(cmd.dq, 0.0)

@@ -8,7 +8,7 @@ named variables of :mod:`.variables`: :mod:`.ee_task` (eq. 8), :mod:`.repulsion`
 :mod:`.backends` solves, :mod:`.controller` composes.
 """
 
-from .backends import PersistentDAQP, PersistentOSQP, QPSolversBackend, make_backend
+from .backends import DirectDAQP, PersistentOSQP, QPSolversBackend, make_backend
 from .config import QPConfig
 from .controller import QPController
 from .pieces import Bounds, Constraint, Objective, QPPiece
@@ -19,8 +19,8 @@ __all__ = [
     "Assembler",
     "Bounds",
     "Constraint",
+    "DirectDAQP",
     "Objective",
-    "PersistentDAQP",
     "PersistentOSQP",
     "QPConfig",
     "QPController",

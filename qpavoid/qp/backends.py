@@ -1,12 +1,11 @@
-"""Solving the QP: a persistent OSQP or daqp problem, or any solver through qpsolvers.
+"""Solving the QP: a persistent OSQP problem, daqp directly, or any solver through qpsolvers.
 
 The backends give the same answer to the documented tolerance (docs/qp.md):
 
 * :class:`PersistentOSQP` (the default) sets one ``osqp.OSQP`` problem up once with a
   fixed sparsity pattern (dense blocks: every G row exists every tick, inactive rows have
   h = +inf) and only ``update()``s its numbers each tick, warm started;
-* :class:`PersistentDAQP` keeps one ``daqp.Model`` workspace the same way (the dual
-  active-set solver restarts from the last tick's active set);
+* :class:`DirectDAQP` calls daqp directly each tick (cold, no qpsolvers layer);
 * :class:`QPSolversBackend` builds a new problem each tick through qpsolvers, with any
   installed solver, for portability and cross-checking.
 
@@ -16,6 +15,7 @@ success; the controller then stops the robot.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -126,6 +126,9 @@ class PersistentOSQP:
         )
 
     def solve(self, prob: QPProblem) -> QPSolution:
+        failed = _not_finite(prob)
+        if failed is not None:
+            return failed
         n, inf = self.n, self._infinity
         self._M[n:] = prob.G
         self._l[:n], self._u[:n], self._u[n:] = prob.lb, prob.ub, prob.h
@@ -178,14 +181,17 @@ def _infeasible_bounds(lower: np.ndarray, upper: np.ndarray) -> QPSolution | Non
     )
 
 
-class PersistentDAQP:
-    """One ``daqp.Model`` for the controller's lifetime, updated each tick.
+class DirectDAQP:
+    """daqp called directly each tick, on buffers kept for the controller's lifetime.
 
     daqp's form is ``min ½xᵀHx + fᵀx, blower ≤ [x; A x] ≤ bupper`` (its first ``n``
     bounds are simple bounds): here ``A = G``, ``bupper = [ub; h]``,
-    ``blower = [lb; −inf]``. Each tick is ``update(H, f, A, bupper, blower)`` and
-    ``solve()``, which starts from the last tick's active set. Needs daqp ≥ 0.11 (its
-    ``Model``; ``pip install "qpavoid[solvers]"``).
+    ``blower = [lb; −inf]``. Each tick is one cold ``daqp.solve`` (about 4 µs on our
+    problems), without qpsolvers' conversions. Not warm started: daqp 0.11's
+    ``Model.update`` + ``solve`` was found (adversarial testing) to return a wrong answer
+    reported as optimal on about 1 % of recorded ticks, and a NaN one with exit flag 1
+    (tests/data/daqp_warm_start_pairs.npz); a cold solve of the same problems is right.
+    ``pip install "qpavoid[solvers]"``.
 
     Parameters
     ----------
@@ -193,7 +199,7 @@ class PersistentDAQP:
         Number of variables and of G rows.
     """
 
-    name = "daqp-persistent"
+    name = "daqp-direct"
     #: daqp's exit flags that mean an optimal solution (1; 2 is soft-optimal: we have no
     #: soft constraints, so it is not accepted).
     SOLVED = (1,)
@@ -202,39 +208,44 @@ class PersistentDAQP:
         try:
             import daqp  # the solvers extra; optional
         except ImportError:
-            daqp = None
-        if daqp is None or not hasattr(daqp, "Model"):
             raise SolverError(
-                'the persistent daqp backend needs daqp >= 0.11: pip install "qpavoid[solvers]"',
+                'the daqp backend needs daqp: pip install "qpavoid[solvers]"',
                 solver="daqp",
                 status="not installed",
-            )
+            ) from None
+        self._daqp = daqp
         self.n, self.m = n, m
         self._upper = np.full(n + m, np.inf)
         self._lower = np.full(n + m, -np.inf)
-        self._model = daqp.Model()
-        # placeholders: only the sizes matter, every tick replaces all the numbers
-        self._model.setup(np.eye(n), np.zeros(n), np.zeros((m, n)), self._upper, self._lower)
 
     def solve(self, prob: QPProblem) -> QPSolution:
+        failed = _not_finite(prob)
+        if failed is not None:
+            return failed
         n = self.n
         self._lower[:n], self._upper[:n], self._upper[n:] = prob.lb, prob.ub, prob.h
         failed = _infeasible_bounds(self._lower, self._upper)
         if failed is not None:
             return failed
-        # daqp rejects an infeasible or non-convex update (a negative flag) by keeping the
-        # *previous* data, after which solve() reports success for that old problem (as
-        # OSQP does): never let it. NaN data passes the update and gives a NaN x.
-        rejected = self._model.update(
-            H=prob.H, f=prob.c, A=prob.G, bupper=self._upper, blower=self._lower
-        )
-        if rejected:
-            return QPSolution(None, False, f"daqp rejected the update (exit flag {rejected})")
-        x, _, flag, info = self._model.solve()
+        x, _, flag, info = self._daqp.solve(prob.H, prob.c, prob.G, self._upper, self._lower)
         iterations = int(info.get("iterations", -1)) if isinstance(info, dict) else -1
-        found = flag in self.SOLVED and bool(np.isfinite(x).all())
-        status = "solved" if found else f"daqp exit flag {flag}"
-        return QPSolution(np.array(x) if found else None, found, status, iterations)
+        if flag not in self.SOLVED:
+            return QPSolution(None, False, f"daqp exit flag {flag}", iterations)
+        if not np.isfinite(x).all():
+            return QPSolution(None, False, f"daqp returned a non-finite x (exit flag {flag})")
+        return QPSolution(np.array(x), True, "solved", iterations)
+
+
+def _not_finite(prob: QPProblem) -> QPSolution | None:
+    """A failed solution if the problem holds a NaN (or an infinite cost or row
+    coefficient), else None. Solvers take such data silently: daqp ignores a NaN row and
+    reports success; one NaN left in OSQP's warm start spoils every later solve."""
+    if not math.isfinite(float(prob.H.sum()) + float(prob.c.sum()) + float(prob.G.sum())):
+        return QPSolution(None, False, "the QP's cost or rows are not finite")
+    for name, v in (("h", prob.h), ("lower bounds", prob.lb), ("upper bounds", prob.ub)):
+        if np.isnan(v).any():
+            return QPSolution(None, False, f"the QP's {name} hold a NaN")
+    return None
 
 
 class QPSolversBackend:
@@ -270,25 +281,23 @@ class QPSolversBackend:
         return QPSolution(sol.x if found else None, found, "solved" if found else "not solved")
 
 
-def make_backend(
-    cfg: QPConfig, n: int, m: int
-) -> PersistentOSQP | PersistentDAQP | QPSolversBackend:
-    """The backend named by ``cfg.backend`` (and, for ``"persistent"``, ``cfg.solver``:
-    ``osqp`` or ``daqp``)."""
+def make_backend(cfg: QPConfig, n: int, m: int) -> PersistentOSQP | DirectDAQP | QPSolversBackend:
+    """The backend named by ``cfg.backend``."""
     if cfg.backend == "persistent":
-        if cfg.solver == "daqp":
-            return PersistentDAQP(n, m)
         if cfg.solver != "osqp":
             raise SolverError(
-                f"no persistent backend for {cfg.solver!r} (osqp or daqp); use backend='qpsolvers'",
+                f"the persistent backend is OSQP's, not {cfg.solver!r}: use backend='daqp' "
+                "or backend='qpsolvers'",
                 solver=cfg.solver,
                 status="unknown backend",
             )
         return PersistentOSQP(n, m, cfg)
+    if cfg.backend == "daqp":
+        return DirectDAQP(n, m)
     if cfg.backend == "qpsolvers":
         return QPSolversBackend(cfg.solver, cfg)
     raise SolverError(
-        f"unknown QP backend {cfg.backend!r}; choose 'persistent' or 'qpsolvers'",
+        f"unknown QP backend {cfg.backend!r}; choose 'persistent', 'daqp' or 'qpsolvers'",
         solver=cfg.backend,
         status="unknown backend",
     )

@@ -34,13 +34,12 @@ class QPConfig:
         the closest person point at ``elbow_speed_mps`` times eq. (4)'s shape with
         ρ = ``elbow_influence_m``; 0 disables it.
     backend
-        ``"persistent"``: one solver workspace set up once and updated each tick (warm
-        started): ``osqp.OSQP`` (the default) or, with ``solver="daqp"``, a ``daqp.Model``
-        (docs/performance.md: 5 µs a solve against OSQP's 45); ``"qpsolvers"``: a new
+        ``"persistent"`` (the default): one ``osqp.OSQP`` problem set up once and updated
+        each tick (warm started); ``"daqp"``: daqp called directly each tick, cold
+        (docs/qp.md: 11 µs a solve against persistent OSQP's 53); ``"qpsolvers"``: a new
         problem each tick through qpsolvers.
     solver
-        ``osqp`` or ``daqp`` for the persistent backend; any solver qpsolvers has for the
-        qpsolvers backend (``osqp``, ``proxqp``, ``daqp``, ...).
+        Solver name for the qpsolvers backend (``osqp``, ``proxqp``, ``daqp``, ...).
     eps_abs, eps_rel, max_iter, polish
         OSQP settings (both backends). OSQP's default 1e-3 is far too loose for a problem
         this small; 1e-7 matches an active-set solver (daqp) to the tolerance of

@@ -131,12 +131,16 @@ class QPController(Controller):
         # a bound or a damper by more than the solver's tolerance is never applied; within
         # it, the bounds (joint limits) are then met exactly.
         lb, ub, dq_x = prob.lb[dq], prob.ub[dq], x[dq]
-        excess = max(
-            float(np.max(lb - dq_x)),
-            float(np.max(dq_x - ub)),
-            float(np.max(prob.G[self._hard] @ x - prob.h[self._hard], initial=-np.inf)),
+        excess = float(  # a NaN anywhere makes it NaN (Python's max would skip it)
+            np.max(
+                (
+                    np.max(lb - dq_x),
+                    np.max(dq_x - ub),
+                    np.max(prob.G[self._hard] @ x - prob.h[self._hard], initial=-np.inf),
+                )
+            )
         )
-        if excess > FEASIBILITY_TOL:
+        if not excess <= FEASIBILITY_TOL:  # NaN too
             return self.command(
                 tick,
                 None,
