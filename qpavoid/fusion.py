@@ -28,14 +28,14 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._checks import finite_number
 from .association import PersonTrack, associate, reference_rank, torso_centre
 from .calibration import Calibration
-from .compiling import kernel_input
 from .frames import N_KINECT_JOINTS, HumanFrame, TrackingState
 from .fusion_kernels import ingest
 from .fusion_person import fuse_person, warm_up
 from .people import NOBODY
-from .sensor_recording import BodyFrame
+from .sensor_recording import BodyFrame, checked_arrays
 
 __all__ = ["FusedFrame", "FusedPerson", "Fuser", "FusionConfig", "OutlierChoice"]
 
@@ -197,20 +197,20 @@ class Fuser:
         ------
         CalibrationError
             If the frame's sensor is not in the calibration.
+        InputError
+            If its time is not finite, its joints are not (25, 3) numbers (NaN: not
+            usable) or its states not (25,) values in {0, 1, 2} (recordings and datagrams
+            are checked so already; a frame made by hand is checked here).
         """
         cal = self.calibration[frame.sensor]
-        t = float(frame.t) + cal.time_offset_s
+        t = finite_number(frame.t, "t (capture time, s)") + cal.time_offset_s
+        joints_in, state_in = checked_arrays(frame)
         history = self._latest[frame.sensor].setdefault(int(frame.body), [])
         if history and t <= history[-1].t:
             self.counters["out_of_order_or_duplicate"] += 1
             return False
         rotation, translation = self._pose[frame.sensor]
-        joints, state = ingest(
-            kernel_input(frame.joints, np.float64),
-            kernel_input(frame.state, np.int8),
-            rotation,
-            translation,
-        )
+        joints, state = ingest(joints_in, state_in, rotation, translation)
         history.append(_Frame(t, joints, state, tuple(torso_centre(joints).tolist())))
         del history[:-HISTORY]
         return True

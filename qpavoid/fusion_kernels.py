@@ -57,8 +57,8 @@ def ingest(
     joints: np.ndarray, state: np.ndarray, rotation: np.ndarray, translation: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """A sensor's joints (25, 3) and states (25,) in the base frame, m: ``R p + t``, NaN and
-    NotTracked (0) wherever a joint is NaN or NotTracked, in a new (25, 3) array and a new
-    (25,) int8 array."""
+    NotTracked (0) wherever a joint is not finite or NotTracked, in a new (25, 3) array and
+    a new (25,) int8 array."""
     out = np.empty(joints.shape)
     usable = np.empty(state.shape, dtype=np.int8)
     for j in range(joints.shape[0]):
@@ -70,7 +70,9 @@ def ingest(
                 + translation[k]
             )
         usable[j] = state[j]
-        if state[j] == 0 or np.isnan(out[j, 0] + out[j, 1] + out[j, 2]):
+        if state[j] == 0 or not (
+            np.isfinite(out[j, 0]) and np.isfinite(out[j, 1]) and np.isfinite(out[j, 2])
+        ):
             out[j, 0] = out[j, 1] = out[j, 2] = np.nan
             usable[j] = 0
     return out, usable

@@ -28,6 +28,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._checks import as_array
+from .compiling import kernel_input
 from .errors import InputError
 from .frames import N_KINECT_JOINTS, check_joints, check_states
 from .recording_files import (
@@ -81,6 +82,34 @@ class BodyFrame(NamedTuple):
     t: float
     joints: np.ndarray
     state: np.ndarray
+
+
+def checked_arrays(frame: BodyFrame) -> tuple[np.ndarray, np.ndarray]:
+    """A frame's joints as (25, 3) float64 and states as (25,) int8, writeable and
+    contiguous (the compiled fusion's input types: :func:`~qpavoid.compiling.kernel_input`).
+
+    Raises
+    ------
+    InputError
+        For joints that are not (25, 3) numbers (NaN: not usable) or states that are not
+        (25,) values in {0, 1, 2}. Recordings and datagrams are checked so already; a
+        frame made by hand is checked here, in a few microseconds.
+    """
+    joints, state = frame.joints, frame.state
+    if not (
+        isinstance(joints, np.ndarray)
+        and joints.shape == (N_KINECT_JOINTS, 3)
+        and joints.dtype.kind == "f"
+    ):
+        joints = check_joints(joints)
+    if not (
+        isinstance(state, np.ndarray)
+        and state.dtype == np.int8
+        and state.shape == (N_KINECT_JOINTS,)
+        and ((state >= 0) & (state <= 2)).all()
+    ):
+        state = check_states(state)
+    return kernel_input(joints, np.float64), kernel_input(state, np.int8)
 
 
 @dataclass(frozen=True, eq=False)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from qpavoid.calibration import Calibration, SensorCalibration
-from qpavoid.errors import CalibrationError
+from qpavoid.errors import CalibrationError, InputError
 from qpavoid.frames import MIRROR, JointType, TrackingState
 from qpavoid.fusion import Fuser, FusionConfig
 from qpavoid.posture import Operator
@@ -214,6 +214,54 @@ def test_duplicates_out_of_order_and_unknown_sensors():
     assert fuser.counters["out_of_order_or_duplicate"] == 2
     with pytest.raises(CalibrationError, match="no sensor 'z'"):
         fuser.add(BodyFrame("z", 0, 0.2, rest, TRACKED))
+
+
+@pytest.mark.parametrize(
+    "field, value, match",
+    [
+        ("state", np.full(25, 5), "state"),  # read past the kernels' tables, once
+        ("state", np.full(25, 258, dtype=np.int64), "state"),  # int8 would make it 2
+        ("state", np.full(25, 1.9), "state"),
+        ("state", np.full((25, 1), 2, dtype=np.int8), "shape"),
+        ("joints", np.zeros((24, 3)), "shape"),
+        ("joints", np.zeros((1, 25, 3)), "shape"),
+        ("joints", None, "joints"),
+        ("t", float("inf"), "t "),
+        ("t", float("nan"), "t "),
+    ],
+)
+def test_a_frame_made_by_hand_is_checked(field, value, match):
+    """Recordings and datagrams are checked on reading; a BodyFrame made by hand is checked
+    by the fuser (adversarial tester: state 5 gave confidences like 4e-321)."""
+    cal = calibration("a")
+    frame = body(cal, "a", 0.1, Operator().rest())._replace(**{field: value})
+    with pytest.raises(InputError, match=match):
+        Fuser(cal, RAW).add(frame)
+
+
+def test_frames_of_other_types_fuse_as_float64_ones():
+    """float32, read-only and list joints, int64 states, an infinite joint (missing)."""
+    cal = calibration("a")
+    rest = Operator().rest()
+    ref = Fuser(cal, RAW)
+    ref.add(body(cal, "a", 0.1, rest))
+    want = ref.fuse(0.1).people[0]
+    frame = body(cal, "a", 0.1, rest)
+    joints = frame.joints.astype(np.float32)
+    joints.setflags(write=False)
+    for j in (joints, frame.joints.tolist()):
+        fuser = Fuser(cal, RAW)
+        fuser.add(frame._replace(joints=j, state=frame.state.astype(np.int64)))
+        got = fuser.fuse(0.1).people[0]
+        np.testing.assert_allclose(got.frame.joints, want.frame.joints, atol=1e-5)
+        np.testing.assert_array_equal(got.frame.state, want.frame.state)
+    far = frame.joints.copy()
+    far[JointType.HandRight] = np.inf
+    fuser = Fuser(cal, RAW)
+    fuser.add(frame._replace(joints=far))
+    got = fuser.fuse(0.1).people[0]
+    assert np.isnan(got.frame.joints[JointType.HandRight]).all()
+    assert got.frame.state[JointType.HandRight] == TrackingState.NotTracked
 
 
 def test_the_example_and_qpavoid_fuse_write_a_fused_recording(tmp_path):
