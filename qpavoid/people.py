@@ -144,7 +144,10 @@ class Crowd:
     motions
         Each person's motion by id: generated (run clock) or recordings (their own clock,
         shared: the run starts at the earliest first frame). A recording's person is
-        absent before its first frame and holds its last frame after its end.
+        absent before its first frame and holds its last frame after its end, unless no
+        joint of that frame is seen: then they have left (a fused recording's person,
+        dropped by the fusion after ``person_timeout_s`` unseen) and are absent after it,
+        as in a live run.
     """
 
     def __init__(self, motions: Mapping[int, HumanMotion]):
@@ -155,13 +158,18 @@ class Crowd:
         self.t0 = min(starts) if starts else 0.0
         ends = [float(m.t[-1]) for m in self.motions.values() if isinstance(m, Recording)]
         self.duration_s = max(ends) - self.t0 if ends else float("inf")
+        self._left = {  # people whose recording ends unseen: absent after its end
+            pid: float(m.t[-1])
+            for pid, m in self.motions.items()
+            if isinstance(m, Recording) and not m.frame_at(float(m.t[-1])).usable.any()
+        }
 
     def _frames(self, t: float, frame_of: object) -> People:
         assert callable(frame_of)
         ids, frames = [], []
         for pid, motion in self.motions.items():
             if isinstance(motion, Recording):
-                if self.t0 + t < motion.t[0]:
+                if self.t0 + t < motion.t[0] or self.t0 + t > self._left.get(pid, np.inf):
                     continue
                 frame = frame_of(motion, self.t0 + t)
             else:

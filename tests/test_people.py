@@ -12,6 +12,7 @@ from qpavoid.fusion import Fuser
 from qpavoid.people import Crowd, People
 from qpavoid.posture import Operator
 from qpavoid.qp import QPController
+from qpavoid.recording import Recording
 from qpavoid.runs import RunSpec, simulate_one
 from qpavoid.scenarios import make_scenario
 from qpavoid.simulation import SimConfig, simulate
@@ -192,3 +193,23 @@ def test_two_people_who_swap_places_keep_their_ids(robot):
         centre = track.centre()
         truth = motion.frame_at(3.4 - 0.06).joints[[0, 1, 20]].mean(axis=0)
         assert np.linalg.norm(centre[:2] - truth[:2]) < 0.15, (track.id, centre, truth)
+
+
+def test_a_person_whose_recording_ends_unseen_has_left():
+    """A fused recording's person dropped by the fusion ends with frames that see nothing:
+    absent after them (as live), not held unseen for ever (a lost person's growing
+    uncertainty stopped the robot for the rest of an offline run: adversarial tester)."""
+    rest = Operator().rest()
+    t = np.arange(0.0, 3.0, 0.1)
+    joints = np.repeat(rest[None], len(t), axis=0)
+    state = np.full((len(t), 25), 2, dtype=np.int8)
+    stays = Recording(t, joints, state)
+    joints_left, state_left = joints.copy(), state.copy()
+    joints_left[20:], state_left[20:] = np.nan, 0  # unseen from 2.0 s, the file ends at 2.9
+    aside = np.array([1.0, 0.0, 0.0])
+    leaves = Recording(t, joints_left + aside, state_left)
+    crowd = Crowd({0: stays, 1: leaves})
+    assert crowd.frame_at(2.5).ids == (0, 1)  # unseen but not yet dropped: still there
+    assert crowd.frame_at(5.0).ids == (0,)  # after the end: gone
+    held = Crowd({0: stays, 1: Recording(t, joints + aside, state)})
+    assert held.frame_at(5.0).ids == (0, 1)  # a person seen at the end is held
