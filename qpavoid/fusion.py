@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -32,60 +31,13 @@ from ._checks import finite_number
 from .association import PersonTrack, associate, reference_rank, torso_centre
 from .calibration import Calibration
 from .frames import N_KINECT_JOINTS, HumanFrame, TrackingState
+from .fusion_config import FusionConfig
 from .fusion_kernels import ingest
 from .fusion_person import fuse_person, warm_up
 from .people import NOBODY
 from .sensor_recording import BodyFrame, checked_arrays
 
 __all__ = ["FusedFrame", "FusedPerson", "Fuser", "FusionConfig", "OutlierChoice"]
-
-
-@dataclass(frozen=True)
-class FusionConfig:
-    """How sensors are merged (module docstring; docs/sensors.md measures the defaults).
-
-    Attributes
-    ----------
-    max_age_s
-        A sensor's frame older than this at the fusion time is not used, s (0.1: three
-        Kinect frames, the controller's own stale limit on the real bench).
-    max_extrapolation_s
-        Farthest a frame is moved along the person's velocity to the fusion time, s.
-    weight_tracked, weight_inferred
-        Averaging weights of a Tracked and an Inferred joint (the SDK: an Inferred
-        joint's "confidence ... is very low").
-    confidence_tracked, confidence_inferred
-        What one fresh sensor adds to a joint's confidence.
-    outlier_threshold_m
-        Two sensors farther apart than this on one joint disagree, m (0.2: about three
-        standard deviations of the difference of two 50 mm sensors).
-    mirror_margin_m
-        A body is relabelled left/right when that fits the person better by this much, m.
-    association_gate_m
-        Farthest a body's torso centre may be from a person's to be that person, m.
-    person_timeout_s
-        A person seen by no sensor for this long is dropped, s (sensors must cover every
-        approach to the robot).
-    velocity_alpha, velocity_beta
-        Gains of the α-β filter on each person's fused joints (measured: docs/sensors.md).
-    smooth
-        Report the filtered joints (True: 24 mm mean error, not 37, from 50 mm sensors)
-        or the sensors' weighted mean (False).
-    """
-
-    max_age_s: float = 0.1
-    max_extrapolation_s: float = 0.0
-    weight_tracked: float = 1.0
-    weight_inferred: float = 0.2
-    confidence_tracked: float = 0.5
-    confidence_inferred: float = 0.15
-    outlier_threshold_m: float = 0.2
-    mirror_margin_m: float = 0.05
-    association_gate_m: float = 0.6
-    person_timeout_s: float = 2.0
-    velocity_alpha: float = 0.3
-    velocity_beta: float = 0.05
-    smooth: bool = True
 
 
 class OutlierChoice(NamedTuple):
@@ -221,13 +173,17 @@ class Fuser:
         per_track: dict[int, list[_Contribution]] = {}
         track_centres = {tr.id: tuple(tr.centre().tolist()) for tr in self.tracks}
         for sensor in self.calibration.names:
-            bodies = {}
+            newest: dict[int, _Frame] = {}  # each body's newest frame captured by t
             for body, history in self._latest[sensor].items():
-                for c in reversed(history):  # the newest frame captured by t, if fresh
-                    if c.t <= t:
-                        if t - cfg.max_age_s <= c.t and not math.isnan(c.centre[0]):
-                            bodies[body] = c
-                        break
+                c = next((c for c in reversed(history) if c.t <= t), None)
+                if c is not None:
+                    newest[body] = c
+            bodies = {
+                body: c
+                for body, c in newest.items()
+                if t - cfg.max_age_s <= c.t and not math.isnan(c.centre[0])
+            }
+            self._renumbered(sensor, bodies)
             centres = {body: c.centre for body, c in bodies.items()}
             mapping = associate(
                 centres, track_centres, self._assigned[sensor], cfg.association_gate_m
@@ -253,6 +209,26 @@ class Fuser:
                 people.append(FusedPerson(track.id, NOBODY, np.zeros(N_KINECT_JOINTS), (), (), ()))
         ages = [c.age for cs in per_track.values() for c in cs]
         return FusedFrame(float(t), tuple(people), float(t - min(ages)) if ages else -np.inf)
+
+    def _renumbered(self, sensor: str, bodies: dict[int, _Frame]) -> None:
+        """Drop from ``sensor``'s ``bodies`` those it has renumbered: a camera frame
+        reports every body it tracks with its time stamp, so a body missing from the
+        sensor's newest frame is that person re-acquired under a new id (Kinect does so)
+        if a body of that frame lies within the association gate of it and neither is
+        known as someone else. Left in for its last ``max_age_s``, it would keep the
+        person and the new id would become a second one."""
+        if len(bodies) < 2:
+            return
+        now = max(c.t for c in bodies.values()) - self.cfg.same_frame_s
+        assigned, gate = self._assigned[sensor], self.cfg.association_gate_m
+        current = [(assigned.get(b), c.centre) for b, c in bodies.items() if c.t >= now]
+        for body in [b for b, c in bodies.items() if c.t < now]:
+            person, centre = assigned.get(body), bodies[body].centre
+            for other, c in current:
+                nobody_else = other in (None, person) or person is None
+                if nobody_else and math.dist(centre, c) <= gate:
+                    del bodies[body]
+                    break
 
     def _fuse_person(
         self, track: PersonTrack, contributions: list[_Contribution], t: float

@@ -350,3 +350,42 @@ def test_a_sensor_stuck_on_a_still_arm_cannot_hide_a_strike(robot, stuck):
     )
     assert np.nanmin(sim.log["true_distance"]) < 0.0  # the real hand reached the robot
     assert sim.metrics["ticks_moving_in_true_contact"] == 0
+
+
+@pytest.mark.parametrize("gap_s", [0.0, 1.0 / 30.0, 0.1])
+def test_a_body_renumbered_by_its_sensor_stays_one_person(gap_s):
+    """A Kinect that re-acquires a person gives them a new body id (adversarial tester: a
+    second person appeared, each 'person' seen by one sensor, the old one lingering)."""
+    cal = calibration("a", "b")
+    rng = np.random.default_rng(0)
+    rest = Operator().rest()
+    fuser = Fuser(cal)
+    switch = {"a": 1.5, "b": 1.0}
+    for i in range(90):
+        t = i / 30
+        for name in cal.names:
+            if switch[name] <= t < switch[name] + gap_s:
+                continue  # the sensor lost the person for a moment
+            body_id = 0 if t < switch[name] else 1
+            joints = rest + rng.normal(0.0, 0.02, rest.shape)
+            fuser.add(body(cal, name, t, joints, body_id=body_id))
+        people = fuser.fuse(t).people
+        assert [p.id for p in people] == [0], t
+        if not any(switch[n] <= t < switch[n] + gap_s + 0.1 for n in cal.names):
+            assert people[0].sensors == ("a", "b"), t
+
+
+def test_two_people_side_by_side_stay_two_when_one_leaves_a_sensor():
+    """The renumbering rule never merges someone else: a person who leaves a sensor's
+    view next to another (0.5 m apart) keeps their own id."""
+    cal = calibration("a")
+    rest = Operator().rest()
+    fuser = Fuser(cal, RAW)
+    beside = np.array([0.5, 0.0, 0.0])
+    for i in range(10):
+        t = i / 30
+        fuser.add(body(cal, "a", t, rest, body_id=0))
+        if i < 5:
+            fuser.add(body(cal, "a", t, rest + beside, body_id=1))
+        ids = [p.id for p in fuser.fuse(t).people]
+        assert ids == [0, 1], (t, ids)

@@ -1,0 +1,61 @@
+"""How sensors are merged: :class:`FusionConfig` (used by :class:`~qpavoid.fusion.Fuser`;
+docs/sensors.md measures the defaults)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["FusionConfig"]
+
+
+@dataclass(frozen=True)
+class FusionConfig:
+    """How sensors are merged (module docstring; docs/sensors.md measures the defaults).
+
+    Attributes
+    ----------
+    max_age_s
+        A sensor's frame older than this at the fusion time is not used, s (0.1: three
+        Kinect frames, the controller's own stale limit on the real bench).
+    max_extrapolation_s
+        Farthest a frame is moved along the person's velocity to the fusion time, s.
+    weight_tracked, weight_inferred
+        Averaging weights of a Tracked and an Inferred joint (the SDK: an Inferred
+        joint's "confidence ... is very low").
+    confidence_tracked, confidence_inferred
+        What one fresh sensor adds to a joint's confidence.
+    outlier_threshold_m
+        Two sensors farther apart than this on one joint disagree, m (0.2: about three
+        standard deviations of the difference of two 50 mm sensors).
+    mirror_margin_m
+        A body is relabelled left/right when that fits the person better by this much, m.
+    association_gate_m
+        Farthest a body's torso centre may be from a person's to be that person, m.
+    same_frame_s
+        Bodies of one camera frame share its time stamp: a body whose newest frame is older
+        than its sensor's newest by more than this has left that sensor's view, s (0.005:
+        far below a Kinect frame's 33 ms).
+    person_timeout_s
+        A person seen by no sensor for this long is dropped, s (sensors must cover every
+        approach to the robot).
+    velocity_alpha, velocity_beta
+        Gains of the α-β filter on each person's fused joints (measured: docs/sensors.md).
+    smooth
+        Report the filtered joints (True: 24 mm mean error, not 37, from 50 mm sensors)
+        or the sensors' weighted mean (False).
+    """
+
+    max_age_s: float = 0.1
+    max_extrapolation_s: float = 0.0
+    weight_tracked: float = 1.0
+    weight_inferred: float = 0.2
+    confidence_tracked: float = 0.5
+    confidence_inferred: float = 0.15
+    outlier_threshold_m: float = 0.2
+    mirror_margin_m: float = 0.05
+    association_gate_m: float = 0.6
+    same_frame_s: float = 0.005
+    person_timeout_s: float = 2.0
+    velocity_alpha: float = 0.3
+    velocity_beta: float = 0.05
+    smooth: bool = True
