@@ -74,6 +74,25 @@ class SensorCalibration:
     time_offset_s: float = 0.0
     weight: float = 1.0
 
+    def __post_init__(self) -> None:
+        """The same limits as a calibration file's (a weight of 0 made seen joints
+        missing with a positive confidence: adversarial tester)."""
+        T = np.asarray(self.base_from_camera, dtype=float)
+        if T.shape != (4, 4) or not np.isfinite(T).all():
+            raise CalibrationError(
+                f"sensor {self.name!r}: base_from_camera must be a finite 4x4 transform",
+                sensor=self.name,
+                name="base_from_camera",
+                value=self.base_from_camera,
+            )
+        object.__setattr__(self, "base_from_camera", T)
+        bad = _settings_error(self.time_offset_s, self.weight)
+        if bad is not None:
+            key, message, value = bad
+            raise CalibrationError(
+                f"sensor {self.name!r}: {message}", sensor=self.name, name=key, value=value
+            )
+
     def to_base(self, joints: np.ndarray) -> np.ndarray:
         """Joint positions (..., 3) in the camera frame → the robot base frame, m."""
         T = self.base_from_camera
@@ -168,22 +187,31 @@ def _sensor(name: str, table: object, where: str, path: str | None) -> SensorCal
         raise fail("base_from_camera is missing (a 4x4 rigid transform, m)", "base_from_camera")
     T = _rigid(table["base_from_camera"], fail)
     offset, weight = table.get("time_offset_s", 0.0), table.get("weight", 1.0)
+    bad = _settings_error(offset, weight)
+    if bad is not None:
+        raise fail(bad[1], bad[0], bad[2])
+    return SensorCalibration(name, T, float(offset), float(weight))
+
+
+def _settings_error(offset: object, weight: object) -> tuple[str, str, object] | None:
+    """(key, message, value) of the first setting out of its limits, or None."""
     for key, value, low, high, kind in (
         ("time_offset_s", offset, -MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S, "s"),
         ("weight", weight, MIN_WEIGHT, MAX_WEIGHT, "relative"),
     ):
         if (
-            not isinstance(value, (int, float))
+            not isinstance(value, (int, float, np.floating, np.integer))
             or isinstance(value, bool)
             or not math.isfinite(value)
             or not low <= value <= high
         ):
-            raise fail(
-                f"{key} must be a number from {low:g} to {high:g} ({kind}), got {value!r}",
+            shown = float(value) if isinstance(value, (np.floating, np.integer)) else value
+            return (
                 key,
+                f"{key} must be a number from {low:g} to {high:g} ({kind}), got {shown!r}",
                 value,
             )
-    return SensorCalibration(name, T, float(offset), float(weight))
+    return None
 
 
 def _rigid(value: object, fail: Callable[..., CalibrationError]) -> np.ndarray:
