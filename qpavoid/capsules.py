@@ -12,6 +12,7 @@ import numpy as np
 import pinocchio as pin
 
 from .distance_table import FALLBACK_DIRECTION, DistanceTable
+from .errors import InputError
 from .geometry import TINY, unit
 from .human import HumanGeometry, KinectHuman
 from .robot import Kinematics, Robot
@@ -121,7 +122,15 @@ class CapsuleDistance:
     ) -> tuple[DistanceTable, np.ndarray]:
         """Per robot set and body part, the closest of the people ``geos``: the table and
         ``who`` (S, K), the index of the person each entry comes from (as
-        :func:`~qpavoid.people.closest_of` of the people's own tables)."""
+        :func:`~qpavoid.people.closest_of` of the people's own tables).
+
+        Raises
+        ------
+        InputError
+            For no geometry at all (nobody is :data:`~qpavoid.people.NOBODY`'s).
+        """
+        if not geos:
+            raise InputError("closest: no person's geometry (nobody: NOBODY's)", name="geos")
         seg = kin.segments
         n_sets, n_parts = self._shape
         robot = self._robot

@@ -76,6 +76,12 @@ def fuse_command(args: argparse.Namespace) -> str:
     check_output_dir(out.parent if str(out.parent) else Path("."))
     if out.is_dir():
         raise InputError(f"--out {str(out)!r} is a folder, not a file", name="--out")
+    inputs = [Path(f).resolve() for f in args.files]
+    if out.resolve() in inputs:
+        raise InputError(f"--out {str(out)!r} is one of the recordings read", name="--out")
+    if len(set(inputs)) < len(inputs):
+        twice = next(str(f) for f in args.files if inputs.count(Path(f).resolve()) > 1)
+        raise InputError(f"{twice!r} is given twice", name="files", value=twice)
     calibration = load_calibration(args.sensors)
     recordings = [load_sensor_recording(f) for f in args.files]
     for rec in recordings:

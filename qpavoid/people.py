@@ -68,6 +68,8 @@ def closest_of(tables: Sequence[DistanceTable]) -> tuple[DistanceTable, np.ndarr
     Returns the combined table (witness points computed) and ``who`` (S, K): the index
     of the person each entry comes from.
     """
+    if not tables:
+        raise InputError("closest_of: no person's table (nobody: NOBODY's)", name="tables")
     if len(tables) == 1:
         return tables[0], np.zeros(tables[0].distance.shape, dtype=np.intp)
     D = np.stack([t.distance for t in tables])

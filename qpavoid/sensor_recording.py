@@ -159,7 +159,7 @@ class SensorRecording:
             if np.any(steps <= 0):
                 i = rows[int(np.flatnonzero(steps <= 0)[0]) + 1]
                 raise InputError(
-                    f"times of sensor {key[0]!r}, body {key[1]} must increase strictly: "
+                    f"times of sensor {str(key[0])!r}, body {key[1]} must increase strictly: "
                     f"row {i} (t={float(t[i])!r} s) is not after the one before",
                     name="t",
                     value=t,
@@ -247,7 +247,11 @@ def _load_npz(path: Path) -> SensorRecording:
     arrays = read_npz(path, None, SENSOR_NPZ_EXPECTED)
     missing = [k for k in ("t", "joints", "state", "sensor") if k not in arrays]
     if missing:
-        hint = " (a base-frame recording: drop --sensors)" if missing == ["sensor"] else ""
+        hint = (
+            " (a base-frame recording, not one sensor's: it needs no calibration)"
+            if missing == ["sensor"]
+            else ""
+        )
         raise InputError(
             f"NPZ file has no array {missing[0]!r}{hint}; {SENSOR_NPZ_EXPECTED}",
             name=missing[0],

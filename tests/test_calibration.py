@@ -156,7 +156,7 @@ def test_bad_per_sensor_recordings_are_one_line_errors(tmp_path):
     base = tmp_path / "base.npz"
     np.savez(base, t=[0.0], joints=rest[None], state=np.full((1, 25), 2))
     assert not is_sensor_recording(base)
-    with pytest.raises(RecordingError, match=r"no array 'sensor'.*drop --sensors"):
+    with pytest.raises(RecordingError, match=r"no array 'sensor'.*needs no calibration"):
         load_sensor_recording(base)
     with pytest.raises(Exception, match="must increase strictly"):
         SensorRecording(["a", "a"], [0.1, 0.1], [0, 0], np.stack([rest, rest]), np.full((2, 25), 2))

@@ -72,6 +72,8 @@ BAD_INPUTS = [
     (["fuse", "zz.npz", "--sensors", "calib.toml"], "no sensor 'zz'"),
     (["fuse", "a.npz", "--sensors", "calib.toml", "--out", "x.csv"], ".npz"),
     (["fuse", "text.npz", "--sensors", "calib.toml"], "text.npz"),
+    (["fuse", "a.npz", "--sensors", "calib.toml", "--out", "a.npz"], "recordings read"),
+    (["fuse", "a.npz", "./a.npz", "--sensors", "calib.toml"], "given twice"),
     (["run", "--human", "a.npz"], "--sensors"),
     (["run", "--human", "a.npz", "zz.npz"], "--sensors"),
     (["run", "--human", "a.npz", "zz.npz", "--sensors", "calib.toml"], "no sensor 'zz'"),

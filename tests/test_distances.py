@@ -321,3 +321,10 @@ def test_closest_of_several_people_is_each_pair_s_closest_person(robot, human, m
             np.testing.assert_allclose(
                 table.robot_point[i, j], own[who[i, j]].robot_point[i, j], atol=1e-6
             )
+
+
+@pytest.mark.parametrize("method", [CapsuleDistance, SphereDistance])
+def test_closest_of_nobody_is_a_clear_error(robot, human, method):
+    kin = robot.kinematics(robot.neutral(), jacobians=False)
+    with pytest.raises(qpavoid.InputError, match="no person"):
+        method(robot, human).closest(kin, [])
