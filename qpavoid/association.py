@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .frames import N_KINECT_JOINTS, JointType, TrackingState
+from .frames import MIRROR, N_KINECT_JOINTS, JointType, TrackingState
 from .fusion_kernels import subset_mean, update_track
 from .perception import PARENT
 
@@ -66,6 +66,8 @@ class PersonTrack:
         (0 until measured).
     seen_s
         Last time any sensor saw the person, s.
+    born_s
+        When the fusion first saw the person, s.
     """
 
     id: int
@@ -74,6 +76,12 @@ class PersonTrack:
     last_seen: np.ndarray = field(default_factory=lambda: np.full(N_KINECT_JOINTS, -np.inf))
     bone: np.ndarray = field(default_factory=lambda: np.zeros(N_KINECT_JOINTS))
     seen_s: float = -np.inf
+    born_s: float = -np.inf
+
+    def mirror(self) -> None:
+        """Swap the track's left and right (its joints, velocities, times and bones)."""
+        for a in (self.joints, self.velocity, self.last_seen, self.bone):
+            a[:] = a[MIRROR]
 
     def update(
         self,
@@ -121,10 +129,15 @@ def reference_rank(joints: np.ndarray, state: np.ndarray) -> tuple[bool, int]:
     (``(ShoulderLeft − ShoulderRight) × up``) points towards the robot's base comes
     first, then the one with more Tracked joints.
     """
+    return (not faces_robot(joints), -int((state == TrackingState.Tracked).sum()))
+
+
+def faces_robot(joints: np.ndarray) -> bool:
+    """Whether a skeleton's labelled front, ``(ShoulderLeft − ShoulderRight) × up``, points
+    towards the robot's base (False if a shoulder is missing)."""
     left, right = joints[J.ShoulderLeft], joints[J.ShoulderRight]
     front = np.cross(left - right, [0.0, 0.0, 1.0])
-    faces_robot = bool(np.dot(front, -joints[J.SpineShoulder]) > 0)  # NaN compares False
-    return (not faces_robot, -int((state == TrackingState.Tracked).sum()))
+    return bool(np.dot(front, -joints[J.SpineShoulder]) > 0)  # NaN compares False
 
 
 def associate(

@@ -28,12 +28,12 @@ from typing import NamedTuple
 import numpy as np
 
 from ._checks import finite_number
-from .association import PersonTrack, associate, reference_rank, torso_centre
+from .association import PersonTrack, associate, faces_robot, reference_rank, torso_centre
 from .calibration import Calibration
 from .frames import N_KINECT_JOINTS, HumanFrame, TrackingState
 from .fusion_config import FusionConfig
 from .fusion_kernels import ingest
-from .fusion_person import fuse_person, warm_up
+from .fusion_person import fuse_person, mirror_costs, warm_up
 from .people import NOBODY
 from .sensor_recording import BodyFrame, checked_arrays
 
@@ -192,7 +192,7 @@ class Fuser:
             for body, tid in mapping.items():
                 tc, joints, state, _ = bodies[body]
                 if tid is None:
-                    track = PersonTrack(self._next_id, joints.copy())
+                    track = PersonTrack(self._next_id, joints.copy(), born_s=t)
                     self._next_id += 1
                     self.tracks.append(track)
                     track_centres[track.id] = bodies[body].centre
@@ -235,11 +235,14 @@ class Fuser:
     ) -> FusedPerson:
         cfg = self.cfg
         recent = t - track.seen_s <= 0.5
-        if not recent:  # a new person: the first contribution is the others' reference
+        settling = t - track.born_s <= cfg.settle_s
+        if not recent or settling:  # a new person: the best body is the others' reference
             contributions.sort(key=lambda c: reference_rank(c.joints, c.state))
         P = np.array([c.joints for c in contributions])  # (S, 25, 3), NaN not usable
         S = np.array([c.state for c in contributions])  # (S, 25), NotTracked not usable
         names = [c.sensor for c in contributions]
+        if recent and settling and self._mirrored_track(track, P[0]):
+            track.mirror()  # its first frames came from a sensor behind the person
         joints, state, confidence, mirrored, disputed, keep = fuse_person(
             P,
             S,
@@ -275,6 +278,15 @@ class Fuser:
             outliers,
             flipped,
         )
+
+    def _mirrored_track(self, track: PersonTrack, reference: np.ndarray) -> bool:
+        """The track faces away from the robot while the reference body (25, 3) faces it,
+        and fits it better with left and right swapped: it started from a sensor behind
+        the person (operators face their robot)."""
+        if not faces_robot(reference) or faces_robot(track.joints):
+            return False
+        as_is, swapped = mirror_costs(track.joints, reference)
+        return bool(swapped + self.cfg.mirror_margin_m < as_is)
 
     def _outliers(
         self, names: list[str], S: np.ndarray, disputed: np.ndarray, keep: np.ndarray

@@ -29,6 +29,10 @@ class FusionConfig:
         standard deviations of the difference of two 50 mm sensors).
     mirror_margin_m
         A body is relabelled left/right when that fits the person better by this much, m.
+    settle_s
+        For this long after a person is first seen, the body facing the robot decides
+        their left and right (the track is swapped if it started from a sensor behind
+        them), s (0.2: six Kinect frames, both sensors' first ones).
     association_gate_m
         Farthest a body's torso centre may be from a person's to be that person, m.
     same_frame_s
@@ -53,6 +57,7 @@ class FusionConfig:
     confidence_inferred: float = 0.15
     outlier_threshold_m: float = 0.2
     mirror_margin_m: float = 0.05
+    settle_s: float = 0.2
     association_gate_m: float = 0.6
     same_frame_s: float = 0.005
     person_timeout_s: float = 2.0

@@ -389,3 +389,37 @@ def test_two_people_side_by_side_stay_two_when_one_leaves_a_sensor():
             fuser.add(body(cal, "a", t, rest + beside, body_id=1))
         ids = [p.id for p in fuser.fuse(t).people]
         assert ids == [0, 1], (t, ids)
+
+
+@pytest.mark.parametrize("behind_first", [True, False])
+def test_a_person_first_seen_from_behind_is_not_locked_mirrored(behind_first):
+    """A Kinect behind the operator swaps left and right; if its frame is fused first (13 ms
+    before the one in front), the new person must still settle the right way round
+    (adversarial tester: they stayed mirrored, hands 0.37 m off, the front sensor
+    'corrected' every frame)."""
+    rest = Operator().rest()  # faces the robot
+    chest = rest[JointType.SpineShoulder]
+    cal = Calibration(
+        {
+            "front": SensorCalibration("front", look_at(np.array([0.9, 0.0, 1.3]), chest)),
+            "behind": SensorCalibration("behind", look_at(np.array([0.15, 2.8, 1.3]), chest)),
+        }
+    )
+    order = ("behind", "front") if behind_first else ("front", "behind")
+    fuser = Fuser(cal)
+    rng = np.random.default_rng(0)
+    worst = 0.0
+    for i in range(60):
+        for k, name in enumerate(order):
+            t = i / 30 + 0.013 * k
+            truth = rest.copy()
+            truth[JointType.HandLeft] += [0.0, -0.2 * np.sin(t), 0.0]
+            seen = truth + rng.normal(0, 0.01, truth.shape)
+            seen = seen[MIRROR] if name == "behind" else seen  # labelled as if facing it
+            fuser.add(body(cal, name, t, seen))
+            person = fuser.fuse(t).people[0]
+            if i >= 10:
+                sided = [JointType.HandLeft, JointType.HandRight, JointType.ShoulderLeft]
+                worst = max(worst, np.linalg.norm(person.frame.joints - truth, axis=1)[sided].max())
+                assert person.mirrored == ("behind",)
+    assert worst < 0.05
