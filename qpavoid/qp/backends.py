@@ -240,10 +240,13 @@ def _not_finite(prob: QPProblem) -> QPSolution | None:
     """A failed solution if the problem holds a NaN (or an infinite cost or row
     coefficient), else None. Solvers take such data silently: daqp ignores a NaN row and
     reports success; one NaN left in OSQP's warm start spoils every later solve."""
+    # a sum is finite iff its terms are; h, lb and ub may hold +inf, -inf and +inf (free
+    # rows and variables), so their sums are NaN only for a NaN (or an lb of +inf or a ub
+    # of -inf: an infeasible bound, refused either way)
     if not math.isfinite(float(prob.H.sum()) + float(prob.c.sum()) + float(prob.G.sum())):
         return QPSolution(None, False, "the QP's cost or rows are not finite")
     for name, v in (("h", prob.h), ("lower bounds", prob.lb), ("upper bounds", prob.ub)):
-        if np.isnan(v).any():
+        if math.isnan(float(v.sum())):
             return QPSolution(None, False, f"the QP's {name} hold a NaN")
     return None
 
