@@ -157,32 +157,21 @@ def main() -> None:
     robot = load_robot("iiwa14")
     path, motion = ArcPath(), make_scenario("test1", robot)
     q0 = inverse_kinematics(robot, path.reference(0.0)[0])
+
+    def ours(kind: str, distance: str, **qp) -> tuple[str, QPController]:
+        return kind, QPController(robot, config=ideal(distance=distance), qp=QPConfig(**qp))
+
     variants = {
-        "qpavoid QP, spheres (persistent OSQP)": (
-            "qp",
-            QPController(robot, config=ideal(distance="spheres")),
-        ),
-        "qpavoid QP, capsules (persistent OSQP)": (
-            "qp",
-            QPController(robot, config=ideal(distance="capsules")),
-        ),
-        "qpavoid QP, spheres (daqp)": (
-            "qp",
-            QPController(robot, config=ideal(distance="spheres"), qp=QPConfig(backend="daqp")),
-        ),
+        "qpavoid QP, spheres (persistent OSQP)": ours("qp", "spheres"),
+        "qpavoid QP, capsules (persistent OSQP)": ours("qp", "capsules"),
+        "qpavoid QP, spheres (daqp)": ours("qp", "spheres", backend="daqp"),
     }
     for solver in ("osqp", "daqp"):
         variants[f"pink + 1 barrier, {solver}"] = ("pink", Pink(robot, solver))
         variants[f"mink + CollisionAvoidanceLimit, {solver}"] = ("mink", Mink(solver))
     crowds = {  # a second phase: their footprint would weigh on the head-to-head's caches
-        "qpavoid QP, spheres, 6 people (persistent OSQP)": (
-            "qp6",
-            QPController(robot, config=ideal(distance="spheres")),
-        ),
-        "qpavoid QP, capsules, 6 people (persistent OSQP)": (
-            "qp6",
-            QPController(robot, config=ideal(distance="capsules")),
-        ),
+        "qpavoid QP, spheres, 6 people (persistent OSQP)": ours("qp6", "spheres"),
+        "qpavoid QP, capsules, 6 people (persistent OSQP)": ours("qp6", "capsules"),
     }
     rows = {}
     for phase in (variants, crowds):

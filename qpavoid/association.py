@@ -27,8 +27,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from .frames import MIRROR, N_KINECT_JOINTS, JointType, TrackingState
-from .fusion_kernels import subset_mean, update_track
-from .perception import PARENT
+from .fusion_kernels import subset_mean
 
 J = JointType
 
@@ -49,7 +48,8 @@ TORSO = np.array(
 
 @dataclass
 class PersonTrack:
-    """One person across sensors and time (the fusion's memory of them).
+    """One person across sensors and time (the fusion's memory of them); each fusion
+    updates its arrays in place (:func:`~qpavoid.fusion_person.fuse_person`).
 
     Attributes
     ----------
@@ -82,34 +82,6 @@ class PersonTrack:
         """Swap the track's left and right (its joints, velocities, times and bones)."""
         for a in (self.joints, self.velocity, self.last_seen, self.bone):
             a[:] = a[MIRROR]
-
-    def update(
-        self,
-        joints: np.ndarray,
-        state: np.ndarray,
-        t: float,
-        alpha: float,
-        beta: float,
-        max_gap_s: float,
-    ) -> None:
-        """Take the fused ``joints`` (25, 3) (NaN where none) and ``state`` at ``t``: one
-        α-β step of the joints and velocities (a joint unseen for over ``max_gap_s``
-        restarts where it is, at rest), and the bone lengths learnt from Tracked joints
-        (:func:`~qpavoid.fusion_kernels.update_track`)."""
-        update_track(
-            self.joints,
-            self.velocity,
-            self.last_seen,
-            self.bone,
-            PARENT,
-            joints,
-            state,
-            float(t),
-            float(alpha),
-            float(beta),
-            float(max_gap_s),
-        )
-        self.seen_s = t
 
     def centre(self) -> np.ndarray:
         """Torso centre, m (NaN if no joint is known)."""
