@@ -16,7 +16,8 @@ every person it knows (:class:`FusedFrame`). docs/sensors.md details and measure
    disagreed is Inferred, whoever was believed, so the controller widens it.
 
 A person no sensor sees any more is reported with every joint missing for
-``person_timeout_s`` (the controller's tracker bounds them meanwhile), then dropped.
+``person_timeout_s`` (the controller's tracker bounds them meanwhile), then dropped, unless
+they were last seen within ``forget_beyond_m`` of the robot: those are kept until seen.
 """
 
 from __future__ import annotations
@@ -203,7 +204,7 @@ class Fuser:
             contributions = per_track.get(track.id)
             if contributions:
                 people.append(self._fuse_person(track, contributions, t))
-            elif t - track.seen_s > cfg.person_timeout_s:
+            elif t - track.seen_s > cfg.person_timeout_s and self._far(track):
                 self.tracks.remove(track)
             else:
                 people.append(FusedPerson(track.id, NOBODY, np.zeros(N_KINECT_JOINTS), (), (), ()))
@@ -278,6 +279,11 @@ class Fuser:
             outliers,
             flipped,
         )
+
+    def _far(self, track: PersonTrack) -> bool:
+        """Last seen farther than ``forget_beyond_m`` from the robot's base (or nowhere)."""
+        distance = float(np.linalg.norm(track.centre()))
+        return not distance <= self.cfg.forget_beyond_m  # NaN (never placed): far
 
     def _mirrored_track(self, track: PersonTrack, reference: np.ndarray) -> bool:
         """The track faces away from the robot while the reference body (25, 3) faces it,

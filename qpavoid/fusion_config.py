@@ -37,11 +37,17 @@ class FusionConfig:
         Farthest a body's torso centre may be from a person's to be that person, m.
     same_frame_s
         Bodies of one camera frame share its time stamp: a body whose newest frame is older
-        than its sensor's newest by more than this has left that sensor's view, s (0.005:
-        far below a Kinect frame's 33 ms).
+        than its sensor's newest by more than this is not in that frame, s (0.005: far
+        below a Kinect frame's 33 ms); with a body of that frame near it, it was renumbered.
     person_timeout_s
-        A person seen by no sensor for this long is dropped, s (sensors must cover every
-        approach to the robot).
+        A person seen by no sensor for this long is dropped, s, if they were last seen
+        farther than ``forget_beyond_m`` from the robot (sensors must cover every approach
+        to the robot, so a person unseen far from it has walked away).
+    forget_beyond_m
+        A person last seen within this distance of the robot's base is never dropped while
+        unseen (they may be hidden next to it, e.g. behind the operator): the robot stays
+        stopped by their growing uncertainty until a sensor sees them again, m (1.5: the
+        iiwa's 0.82 m reach plus an arm's length).
     velocity_alpha, velocity_beta
         Gains of the α-β filter on each person's fused joints (measured: docs/sensors.md).
     smooth
@@ -61,6 +67,7 @@ class FusionConfig:
     association_gate_m: float = 0.6
     same_frame_s: float = 0.005
     person_timeout_s: float = 2.0
+    forget_beyond_m: float = 1.5
     velocity_alpha: float = 0.3
     velocity_beta: float = 0.05
     smooth: bool = True

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from qpavoid.association import torso_centre
 from qpavoid.calibration import Calibration, SensorCalibration
 from qpavoid.errors import CalibrationError, InputError
 from qpavoid.frames import MIRROR, JointType, TrackingState
@@ -94,14 +95,32 @@ def test_a_frame_from_the_future_is_never_used():
 
 def test_old_frames_are_not_used_and_a_lost_person_is_reported_missing_then_dropped():
     cal = calibration("a")
-    rest = Operator().rest()
+    far = Operator().rest() + np.array([0.0, 1.0, 0.0])  # 2 m from the robot's base: walked away
     fuser = Fuser(cal, FusionConfig(max_age_s=0.1, person_timeout_s=1.0, smooth=False))
-    fuser.add(body(cal, "a", 0.0, rest))
+    fuser.add(body(cal, "a", 0.0, far))
     assert np.isfinite(fuser.fuse(0.05).people[0].frame.joints).all()
     gone = fuser.fuse(0.5).people[0]  # too old: every joint missing, never invented
     assert np.isnan(gone.frame.joints).all() and (gone.frame.state == 0).all()
     assert gone.confidence.max() == 0.0
     assert fuser.fuse(1.2).people == ()
+
+
+def test_a_person_lost_next_to_the_robot_is_kept_until_seen_again():
+    """Unseen within forget_beyond_m of the robot (1.1 m here: hidden behind the operator,
+    say), a person is never dropped: reported missing (the robot stays stopped), and the
+    same person again once a sensor sees them."""
+    cal = calibration("a")
+    near = Operator().rest()
+    assert np.linalg.norm(torso_centre(near)) < FusionConfig().forget_beyond_m
+    fuser = Fuser(cal, FusionConfig(max_age_s=0.1, person_timeout_s=1.0, smooth=False))
+    fuser.add(body(cal, "a", 0.0, near))
+    fuser.fuse(0.0)
+    for t in (0.5, 1.5, 10.0, 60.0):
+        (kept,) = fuser.fuse(t).people
+        assert kept.id == 0 and np.isnan(kept.frame.joints).all()
+    fuser.add(body(cal, "a", 60.1, near + np.array([0.1, 0.0, 0.0]), body_id=3))  # a new body id
+    (back,) = fuser.fuse(60.1).people
+    assert back.id == 0 and np.isfinite(back.frame.joints).all()
 
 
 def test_a_person_seen_again_after_a_gap_is_not_extrapolated_across_it():
