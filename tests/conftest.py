@@ -8,6 +8,7 @@ import pytest
 import qpavoid
 from qpavoid import distance_kernels, fusion_person, perception_kernels
 from qpavoid.perception import PerceptionConfig
+from qpavoid.qp import kernels as qp_kernels
 from qpavoid.sensor import SensorConfig
 
 
@@ -19,6 +20,7 @@ def pytest_configure(config):
         fusion_person.warm_up()  # and the fusion's per-joint kernels
         perception_kernels.warm_up()
         distance_kernels.warm_up()
+        qp_kernels.warm_up()
 
 
 @pytest.fixture(scope="session")

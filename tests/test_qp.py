@@ -16,7 +16,6 @@ from qpavoid.cli import main
 from qpavoid.controller import ControllerConfig
 from qpavoid.human import JointType
 from qpavoid.qp import (
-    Bounds,
     DirectDAQP,
     PersistentOSQP,
     QPConfig,
@@ -178,13 +177,11 @@ def test_iteration_limit_stops_the_robot(robot):
 @pytest.mark.parametrize("backend", ["persistent", "qpsolvers"])
 def test_infeasible_problem_stops_the_robot(robot, monkeypatch, backend):
     path, q = _start(robot)
-    monkeypatch.setattr(
-        VelocityLimit,
-        "compute_qp_bounds",
-        lambda self, tick, dt: Bounds(
-            np.full(self.variables.n, 1.0), np.full(self.variables.n, -1.0)
-        ),
-    )
+
+    def crossed(self, tick, dt, lb, ub):  # 1 <= x <= -1
+        lb[:], ub[:] = 1.0, -1.0
+
+    monkeypatch.setattr(VelocityLimit, "tighten_qp_bounds", crossed)
     ctrl = QPController(
         robot,
         path,

@@ -15,7 +15,6 @@ success; the controller then stops the robot.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -24,6 +23,7 @@ import qpsolvers
 import scipy.sparse as sp
 
 from ..errors import InputError, SolverError
+from .checks import infeasible_bounds, not_finite
 from .config import QPConfig
 from .problem import QPProblem, QPSolution
 
@@ -126,7 +126,7 @@ class PersistentOSQP:
         )
 
     def solve(self, prob: QPProblem) -> QPSolution:
-        failed = _not_finite(prob)
+        failed = not_finite(prob)
         if failed is not None:
             return failed
         n, inf = self.n, self._infinity
@@ -135,7 +135,7 @@ class PersistentOSQP:
         lower, upper = np.maximum(self._l, -inf), np.minimum(self._u, inf)
         # OSQP rejects l > u (or a non-convex P) in an update by keeping the *previous*
         # data, after which solve() reports "solved" for that old problem: never let it.
-        failed = _infeasible_bounds(lower, upper)
+        failed = infeasible_bounds(lower, upper)
         if failed is not None:
             return failed
         Px, Ax = prob.H.ravel()[self._p_idx], self._M.ravel()[self._a_idx]
@@ -168,17 +168,6 @@ class PersistentOSQP:
     def update_settings(self, **settings: Any) -> None:
         """Change OSQP settings (e.g. ``max_iter``) of the live problem."""
         self._solver.update_settings(**settings)
-
-
-def _infeasible_bounds(lower: np.ndarray, upper: np.ndarray) -> QPSolution | None:
-    """A failed solution naming the first row with ``lower > upper``, or None."""
-    bad = lower > upper
-    if not bad.any():
-        return None
-    k = int(np.argmax(bad))
-    return QPSolution(
-        None, False, f"infeasible bounds: l > u in row {k} ({lower[k]:.4g} > {upper[k]:.4g})"
-    )
 
 
 class DirectDAQP:
@@ -219,12 +208,12 @@ class DirectDAQP:
         self._lower = np.full(n + m, -np.inf)
 
     def solve(self, prob: QPProblem) -> QPSolution:
-        failed = _not_finite(prob)
+        failed = not_finite(prob)
         if failed is not None:
             return failed
         n = self.n
         self._lower[:n], self._upper[:n], self._upper[n:] = prob.lb, prob.ub, prob.h
-        failed = _infeasible_bounds(self._lower, self._upper)
+        failed = infeasible_bounds(self._lower, self._upper)
         if failed is not None:
             return failed
         x, _, flag, info = self._daqp.solve(prob.H, prob.c, prob.G, self._upper, self._lower)
@@ -234,21 +223,6 @@ class DirectDAQP:
         if not np.isfinite(x).all():
             return QPSolution(None, False, f"daqp returned a non-finite x (exit flag {flag})")
         return QPSolution(np.array(x), True, "solved", iterations)
-
-
-def _not_finite(prob: QPProblem) -> QPSolution | None:
-    """A failed solution if the problem holds a NaN (or an infinite cost or row
-    coefficient), else None. Solvers take such data silently: daqp ignores a NaN row and
-    reports success; one NaN left in OSQP's warm start spoils every later solve."""
-    # a sum is finite iff its terms are; h, lb and ub may hold +inf, -inf and +inf (free
-    # rows and variables), so their sums are NaN only for a NaN (or an lb of +inf or a ub
-    # of -inf: an infeasible bound, refused either way)
-    if not math.isfinite(float(prob.H.sum()) + float(prob.c.sum()) + float(prob.G.sum())):
-        return QPSolution(None, False, "the QP's cost or rows are not finite")
-    for name, v in (("h", prob.h), ("lower bounds", prob.lb), ("upper bounds", prob.ub)):
-        if math.isnan(float(v.sum())):
-            return QPSolution(None, False, f"the QP's {name} hold a NaN")
-    return None
 
 
 class QPSolversBackend:

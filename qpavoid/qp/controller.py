@@ -13,6 +13,7 @@ from .backends import make_backend
 from .config import QPConfig
 from .ee_task import EndEffectorTask
 from .elbow_task import ElbowClearanceTask
+from .kernels import hard_excess, warm_up
 from .pieces import QPPiece
 from .position_limits import PositionLimit
 from .problem import Assembler, QPProblem
@@ -104,6 +105,7 @@ class QPController(Controller):
             VelocityLimit(x),
             PositionLimit(x, robot.q_min, robot.q_max, w.position_limit_gain),
         ]
+        warm_up()  # the QP's compiled pieces, before the first tick
         self.assembler = Assembler(x.n, pieces)
         self.backend = make_backend(w, x.n, self.assembler.m)
         # the rows of the hard pieces: the dampers', then the separation's (a slice: a view)
@@ -118,7 +120,7 @@ class QPController(Controller):
         return self.assembler(tick, self.config.control_period_s)
 
     def act(self, tick: Tick) -> Command:
-        prob = self.problem(tick)
+        prob = self.assembler.fill(tick, self.config.control_period_s)
         sol = self.backend.solve(prob)
         info = {"solver": self.backend.name, "status": sol.status, "iterations": sol.iterations}
         if not sol.found or sol.x is None:
@@ -131,14 +133,15 @@ class QPController(Controller):
         # a bound or a damper by more than the solver's tolerance is never applied; within
         # it, the bounds (joint limits) are then met exactly.
         lb, ub, dq_x = prob.lb[dq], prob.ub[dq], x[dq]
-        excess = float(  # a NaN anywhere makes it NaN (Python's max would skip it)
-            np.max(
-                (
-                    np.max(lb - dq_x),
-                    np.max(dq_x - ub),
-                    np.max(prob.G[self._hard] @ x - prob.h[self._hard], initial=-np.inf),
-                )
-            )
+        excess = hard_excess(  # NaN if any is NaN
+            x,
+            self.variables.nv,
+            prob.lb,
+            prob.ub,
+            prob.G,
+            prob.h,
+            self._hard.start,
+            self._hard.stop,
         )
         if not excess <= FEASIBILITY_TOL:  # NaN too
             return self.command(

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..compiling import kernel_input
 from ..controller import Tick
-from .pieces import Objective, QPPiece
+from .kernels import ee_task_cost
+from .pieces import Objective, QPPiece, zero_objective
 from .variables import Variables
 
 
@@ -40,11 +42,19 @@ class EndEffectorTask(QPPiece):
 
     def compute_qp_objective(self, tick: Tick | None, dt: float) -> Objective:
         assert tick is not None
-        n, dq = self.variables.n, self.variables.dq
+        H, c = zero_objective(self.variables.n)
+        self.add_qp_objective(tick, dt, H, c)
+        return Objective(H, c)
+
+    def add_qp_objective(self, tick: Tick, dt: float, H: np.ndarray, c: np.ndarray) -> None:
+        """``H[q̇, q̇] += 2 JᵀW²J``, ``c[q̇] −= 2 JᵀW²v*`` (the joint velocities come first)."""
         J = tick.kin.ee_jacobian
         assert J is not None  # a tick's kinematics carry the Jacobians
-        JW = J.T * self.w2
-        H, c = np.zeros((n, n)), np.zeros(n)
-        H[dq, dq] = 2.0 * JW @ J
-        c[dq] = -2.0 * JW @ self.target(tick)
-        return Objective(H, c)
+        ee_task_cost(
+            kernel_input(J, np.float64),  # Pinocchio's are column-major
+            self.w2,
+            kernel_input(tick.task_twist, np.float64),
+            kernel_input(tick.v_rep_EE, np.float64),
+            H,
+            c,
+        )

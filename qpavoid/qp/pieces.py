@@ -8,9 +8,16 @@ full-width blocks over ``x = [q̇; slacks]`` (:class:`~qpavoid.qp.variables.Vari
   the structure stays fixed, so a persistent solver never changes its pattern);
 * :class:`Bounds` ``(lb, ub)``: ``lb ≤ x ≤ ub``.
 
-A piece may give any of the three (:class:`QPPiece` returns None for those it has not);
-the assembler visits each piece once per tick. Every method takes the tick's measurements
-and the control period, as mink's take ``(configuration, dt)``.
+A piece may give any of the three (:class:`QPPiece` returns None for those it has not).
+Every method takes the tick's measurements and the control period, as mink's take
+``(configuration, dt)``.
+
+Each tick the assembler asks for the same blocks in place, into its own arrays (no
+allocation): :meth:`QPPiece.add_qp_objective`, :meth:`QPPiece.write_qp_inequalities`,
+:meth:`QPPiece.tighten_qp_bounds`. By default they go through the ``compute_qp_*``
+methods; the pieces that change every tick do it the other way round: their arithmetic
+is written once, in place (often a compiled kernel of :mod:`.kernels`), and their
+``compute_qp_*`` apply it to fresh zeros.
 """
 
 from __future__ import annotations
@@ -76,6 +83,36 @@ class QPPiece:
     def compute_qp_bounds(self, tick: Tick | None, dt: float) -> Bounds | None:
         """The piece's bounds, or None."""
         return None
+
+    def add_qp_objective(self, tick: Tick, dt: float, H: np.ndarray, c: np.ndarray) -> None:
+        """Add the piece's cost to ``H`` (n, n) and ``c`` (n,), in place."""
+        obj = self.compute_qp_objective(tick, dt)
+        if obj is not None:
+            H += obj.H
+            c += obj.c
+
+    def write_qp_inequalities(self, tick: Tick, dt: float, G: np.ndarray, h: np.ndarray) -> None:
+        """Write the piece's rows into ``G`` (rows, n) and ``h`` (rows,), in place."""
+        con = self.compute_qp_inequalities(tick, dt)
+        assert con is not None, self.name
+        G[:], h[:] = con.G, con.h
+
+    def tighten_qp_bounds(self, tick: Tick, dt: float, lb: np.ndarray, ub: np.ndarray) -> None:
+        """Intersect ``lb ≤ x ≤ ub`` (n,) with the piece's bounds, in place."""
+        b = self.compute_qp_bounds(tick, dt)
+        if b is not None:
+            np.maximum(lb, b.lb, out=lb)
+            np.minimum(ub, b.ub, out=ub)
+
+
+def zero_objective(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(H, c)`` of no cost over n variables: a start that pieces add to."""
+    return np.zeros((n, n)), np.zeros(n)
+
+
+def no_rows(rows: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(G, h)`` of ``rows`` inactive rows over n variables: a start pieces write into."""
+    return np.zeros((rows, n)), np.full(rows, np.inf)
 
 
 def free_bounds(n: int) -> tuple[np.ndarray, np.ndarray]:

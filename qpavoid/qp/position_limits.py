@@ -33,8 +33,12 @@ class PositionLimit(QPPiece):
 
     def compute_qp_bounds(self, tick: Tick | None, dt: float) -> Bounds:
         assert tick is not None
-        k = self.gain / dt
         lb, ub = free_bounds(self.variables.n)
-        lb[self.variables.dq] = k * (self.q_min - tick.q)
-        ub[self.variables.dq] = k * (self.q_max - tick.q)
+        self.tighten_qp_bounds(tick, dt, lb, ub)
         return Bounds(lb, ub)
+
+    def tighten_qp_bounds(self, tick: Tick, dt: float, lb: np.ndarray, ub: np.ndarray) -> None:
+        k = self.gain / dt
+        lo, hi = lb[self.variables.dq], ub[self.variables.dq]
+        np.maximum(lo, k * (self.q_min - tick.q), out=lo)
+        np.minimum(hi, k * (self.q_max - tick.q), out=hi)

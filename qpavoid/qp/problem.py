@@ -9,7 +9,8 @@ rows and bounds, and the assembler makes the problem
 
 over ``x = [q̇; slacks]`` (:class:`~qpavoid.qp.variables.Variables`). The rows of each
 piece are found by its name (:attr:`QPProblem.rows`), never by position. Pieces whose cost
-or bounds are constant are summed once, at construction. The backends that solve it are
+or bounds are constant are summed once, at construction; each tick the others write into
+arrays allocated once (:meth:`Assembler.fill`). The backends that solve it are
 in :mod:`.backends`.
 """
 
@@ -108,24 +109,34 @@ class Assembler:
             p.name: slice(a, b) for p, a, b in zip(self._rows, offsets, offsets[1:], strict=False)
         }
         self.m = offsets[-1]
+        self._slices = [self.rows[p.name] for p in self._rows]
+        self._buffers = (
+            np.zeros((n, n)),
+            np.zeros(n),
+            np.zeros((self.m, n)),
+            np.zeros(self.m),
+            np.zeros(n),
+            np.zeros(n),
+        )
+        self._filled = QPProblem(*self._buffers, self.rows)
 
     def __call__(self, tick: Tick, dt: float) -> QPProblem:
-        """The problem of ``tick`` with control period ``dt`` (s)."""
-        H, c = self.H0.copy(), self.c0.copy()
+        """The problem of ``tick`` with control period ``dt`` (s), in arrays of its own."""
+        p = self.fill(tick, dt)
+        return QPProblem(
+            p.H.copy(), p.c.copy(), p.G.copy(), p.h.copy(), p.lb.copy(), p.ub.copy(), self.rows
+        )
+
+    def fill(self, tick: Tick, dt: float) -> QPProblem:
+        """The problem of ``tick``, written into the assembler's own arrays: no allocation,
+        but valid only until the next :meth:`fill` (the controller's loop; else use
+        :meth:`__call__`)."""
+        H, c, G, h, lb, ub = self._buffers
+        H[:], c[:], lb[:], ub[:] = self.H0, self.c0, self.lb0, self.ub0
         for p in self._objectives:
-            obj = p.compute_qp_objective(tick, dt)
-            if obj is not None:
-                H += obj.H
-                c += obj.c
-        G, h = np.empty((self.m, self.n)), np.empty(self.m)
-        for p in self._rows:
-            con = p.compute_qp_inequalities(tick, dt)
-            assert con is not None, p.name
-            G[self.rows[p.name]], h[self.rows[p.name]] = con.G, con.h
-        lb, ub = self.lb0.copy(), self.ub0.copy()
+            p.add_qp_objective(tick, dt, H, c)
+        for p, rows in zip(self._rows, self._slices, strict=True):
+            p.write_qp_inequalities(tick, dt, G[rows], h[rows])
         for p in self._bounds:
-            b = p.compute_qp_bounds(tick, dt)
-            if b is not None:
-                np.maximum(lb, b.lb, out=lb)
-                np.minimum(ub, b.ub, out=ub)
-        return QPProblem(H, c, G, h, lb, ub, self.rows)
+            p.tighten_qp_bounds(tick, dt, lb, ub)
+        return self._filled

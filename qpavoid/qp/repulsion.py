@@ -19,12 +19,13 @@ against other constraints. The row is always present (fixed structure); below
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
 
 from ..controller import Tick
-from .pieces import Bounds, Constraint, Objective, QPPiece, free_bounds, readonly
+from .pieces import Bounds, Constraint, Objective, QPPiece, free_bounds, no_rows, readonly
 from .variables import Variables
 
 #: Repulsive speeds below this are treated as none (m/s): 0.1 mm/s.
@@ -80,16 +81,24 @@ class RepulsionTask(QPPiece):
 
     def compute_qp_inequalities(self, tick: Tick, dt: float) -> Constraint:
         """One row: ``−uᵀ J_p q̇ − s ≤ −(uᵀ ṗ_nominal + |v|)``."""
-        G = np.zeros((1, self.variables.n))
-        G[0, self.slack] = -1.0
+        G, h = no_rows(1, self.variables.n)
+        self.write_qp_inequalities(tick, dt, G, h)
+        return Constraint(G, h)
+
+    def write_qp_inequalities(self, tick: Tick, dt: float, G: np.ndarray, h: np.ndarray) -> None:
+        row = G[0]
+        row[:] = 0.0
+        row[self.slack] = -1.0
         v = self.velocity(tick)
-        speed = float(np.sqrt(v @ v))
+        speed = math.sqrt(v @ v)
         if speed < MIN_SPEED_MPS:
-            return Constraint(G, np.array([np.inf]))
+            h[0] = np.inf
+            return
         u = v / speed
         Jp, nominal = self.motion(tick)
-        G[0, self.variables.dq] = -u @ Jp
-        return Constraint(G, np.array([-(u @ nominal + speed)]))
+        np.matmul(u, Jp, out=row[self.variables.dq])
+        np.negative(row[self.variables.dq], out=row[self.variables.dq])
+        h[0] = -(u @ nominal + speed)
 
 
 class L2RepulsionTask(RepulsionTask):

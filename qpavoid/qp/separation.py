@@ -16,9 +16,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..compiling import kernel_input
 from ..ssm import BOUND_INACTIVE_MPS
 from ..tick import Tick
-from .pieces import Constraint, QPPiece
+from .kernels import pair_inputs, separation_rows
+from .pieces import Constraint, QPPiece, no_rows
 from .variables import Variables
 
 
@@ -45,15 +47,15 @@ class SeparationLimit(QPPiece):
 
     def compute_qp_inequalities(self, tick: Tick, dt: float) -> Constraint:
         """(rows, n) G and (rows,) h, one row per set × part pair."""
-        table = tick.table
-        bound = tick.approach_limit.ravel()
-        G = np.zeros((self.rows, self.variables.n))
-        h = np.full(self.rows, np.inf)
-        active = np.flatnonzero(bound < self.inactive_above_mps)
-        if len(active):
-            sets, parts = np.divmod(active, table.distance.shape[1])
-            Jp = table.robot_jacobians(tick.kin, sets, parts)  # (A, 3, nv)
-            normal = table.vector.reshape(-1, 3)[active]
-            G[active, self.variables.dq] = -np.einsum("ak,akv->av", normal, Jp)
-            h[active] = bound[active]
+        G, h = no_rows(self.rows, self.variables.n)
+        self.write_qp_inequalities(tick, dt, G, h)
         return Constraint(G, h)
+
+    def write_qp_inequalities(self, tick: Tick, dt: float, G: np.ndarray, h: np.ndarray) -> None:
+        separation_rows(  # the joint velocities are the first columns
+            kernel_input(tick.approach_limit.reshape(-1), np.float64),
+            *pair_inputs(tick.table, tick.kin),
+            self.inactive_above_mps,
+            G,
+            h,
+        )

@@ -20,8 +20,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..compiling import kernel_input
 from ..controller import Tick
-from .pieces import Constraint, QPPiece
+from .kernels import damper_rows, pair_inputs
+from .pieces import Constraint, QPPiece, no_rows
 from .variables import Variables
 
 
@@ -59,19 +61,18 @@ class VelocityDamper(QPPiece):
 
     def compute_qp_inequalities(self, tick: Tick, dt: float) -> Constraint:
         """(rows, n) G and (rows,) h, one row per set × part pair."""
-        table, kin = tick.table, tick.kin
-        d = table.distance.ravel()
-        G = np.zeros((self.rows, self.variables.n))
-        h = np.full(self.rows, np.inf)
-        active = np.flatnonzero(d < self.influence_m)
-        if len(active):
-            sets, parts = np.divmod(active, table.distance.shape[1])
-            Jp = table.robot_jacobians(kin, sets, parts)  # (A, 3, nv)
-            normal = table.vector.reshape(-1, 3)[active]
-            G[active, self.variables.dq] = -np.einsum("ak,akv->av", normal, Jp)
-            ds = self.d_stop[active]
-            h[active] = (
-                self.gain * (d[active] - ds) / (self.influence_m - ds)
-                - tick.human_approach.ravel()[active]
-            )
+        G, h = no_rows(self.rows, self.variables.n)
+        self.write_qp_inequalities(tick, dt, G, h)
         return Constraint(G, h)
+
+    def write_qp_inequalities(self, tick: Tick, dt: float, G: np.ndarray, h: np.ndarray) -> None:
+        damper_rows(  # the joint velocities are the first columns
+            kernel_input(tick.table.distance.reshape(-1), np.float64),
+            *pair_inputs(tick.table, tick.kin),
+            self.d_stop,
+            self.influence_m,
+            self.gain,
+            kernel_input(tick.human_approach.reshape(-1), np.float64),
+            G,
+            h,
+        )

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..controller import Tick
 from .pieces import Bounds, QPPiece, free_bounds
 from .variables import Variables
@@ -22,5 +24,10 @@ class VelocityLimit(QPPiece):
     def compute_qp_bounds(self, tick: Tick | None, dt: float) -> Bounds:
         assert tick is not None
         lb, ub = free_bounds(self.variables.n)
-        lb[self.variables.dq], ub[self.variables.dq] = -tick.limits, tick.limits
+        self.tighten_qp_bounds(tick, dt, lb, ub)
         return Bounds(lb, ub)
+
+    def tighten_qp_bounds(self, tick: Tick, dt: float, lb: np.ndarray, ub: np.ndarray) -> None:
+        lo, hi = lb[self.variables.dq], ub[self.variables.dq]
+        np.maximum(lo, -tick.limits, out=lo)
+        np.minimum(hi, tick.limits, out=hi)

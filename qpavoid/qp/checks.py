@@ -1,0 +1,47 @@
+"""What a backend checks before it hands a problem to a solver.
+
+Solvers take bad data silently: daqp ignores a NaN row and reports success; one NaN left
+in OSQP's warm start spoils every later solve; OSQP keeps its *previous* data when an
+update has ``l > u`` and then reports "solved" for that old problem. Each check returns a
+failed :class:`~qpavoid.qp.problem.QPSolution` saying what is wrong, or None.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..compiling import kernel_input
+from .kernels import problem_defect
+from .problem import QPProblem, QPSolution
+
+__all__ = ["DEFECTS", "infeasible_bounds", "not_finite"]
+
+
+#: What :func:`~qpavoid.qp.kernels.problem_defect`'s codes mean.
+DEFECTS = {
+    1: "the QP's cost or rows are not finite",
+    2: "the QP's h hold a NaN",
+    3: "the QP's lower bounds hold a NaN",
+    4: "the QP's upper bounds hold a NaN",
+}
+
+
+def not_finite(prob: QPProblem) -> QPSolution | None:
+    """A failed solution if the problem holds a NaN (or an infinite cost or row
+    coefficient), else None. Solvers take such data silently: daqp ignores a NaN row and
+    reports success; one NaN left in OSQP's warm start spoils every later solve."""
+    defect = problem_defect(
+        *(kernel_input(a, np.float64) for a in (prob.H, prob.c, prob.G, prob.h, prob.lb, prob.ub))
+    )
+    return QPSolution(None, False, DEFECTS[defect]) if defect else None
+
+
+def infeasible_bounds(lower: np.ndarray, upper: np.ndarray) -> QPSolution | None:
+    """A failed solution naming the first row with ``lower > upper``, or None."""
+    bad = lower > upper
+    if not bad.any():
+        return None
+    k = int(np.argmax(bad))
+    return QPSolution(
+        None, False, f"infeasible bounds: l > u in row {k} ({lower[k]:.4g} > {upper[k]:.4g})"
+    )

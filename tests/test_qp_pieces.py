@@ -1,0 +1,175 @@
+"""The QP's pieces, row by row, against independent references: finite differences of the
+robot points, the rows' formulas by hand, numpy for the compiled cost, and the in-place
+assembly against the pieces' own ``compute_qp_*``."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from qpavoid.controller import ControllerConfig
+from qpavoid.qp import QPController
+from qpavoid.qp.kernels import hard_excess, problem_defect
+from qpavoid.qp.problem import Assembler
+from qpavoid.qp.separation import SeparationLimit
+from qpavoid.qp.velocity_damper import VelocityDamper
+from qpavoid.scenarios import make_scenario
+from qpavoid.simulation import SimConfig, simulate
+
+EPS = 1e-6  # central differences: error ~ EPS² · |q̈-terms|, far below the tolerance
+
+
+@pytest.fixture(scope="module", params=["spheres", "capsules"])
+def ticks(robot, request):
+    """The states of a test1 run under the paper's rules (close approaches: active damper
+    rows), measured again by a probe controller with SSM (active separation rows)."""
+    cfg = ControllerConfig(control_period_s=0.01, distance=request.param)
+    log = simulate(
+        QPController(robot, config=cfg),
+        make_scenario("test1", robot),
+        SimConfig(control_rate_hz=100),
+    ).log
+    probe = QPController(robot, config=replace(cfg, safety="ssm"))
+    out = [
+        probe.measure(log["q"][k], log["joints"][k], log["state"][k], log["tau"][k])
+        for k in range(0, len(log["t"]), 7)
+    ]
+    return probe, [t for t in out if not t.reason]
+
+
+def _material_point(robot, q, table, i, k):
+    """The robot point of pair (i, k) as a point fixed on the arm, at joint angles q."""
+    kin = robot.kinematics(q, jacobians=False)
+    p = table.robot_index[i, k]
+    if p >= 0:
+        return kin.points[p]
+    s = table.robot_s[i, k]
+    return (1.0 - s) * kin.segments[i, 0] + s * kin.segments[i, 1]
+
+
+def _approach_row(robot, tick, i, k):
+    """−nᵀ ∂p/∂q by central differences (p the pair's robot point)."""
+    J = np.empty((3, robot.nv))
+    for j in range(robot.nv):
+        e = np.zeros(robot.nq)
+        e[j] = EPS
+        J[:, j] = (
+            _material_point(robot, tick.q + e, tick.table, i, k)
+            - _material_point(robot, tick.q - e, tick.table, i, k)
+        ) / (2 * EPS)
+    return -tick.table.vector[i, k] @ J
+
+
+def test_damper_and_separation_rows_by_finite_differences(robot, ticks):
+    ctrl, recorded = ticks
+    pieces = {p.name: p for p in ctrl.assembler.pieces}
+    damper, separation = pieces[VelocityDamper.name], pieces[SeparationLimit.name]
+    nv, n_parts = robot.nv, len(ctrl.human.parts)
+    np.testing.assert_allclose(damper.d_stop[::n_parts], [0.0423, 0.05, 0.05], atol=1e-4)
+    checked = {"damper": 0, "separation": 0}
+    for tick in recorded:
+        d = tick.table.distance
+        for piece, active, bound in (
+            (
+                damper,
+                d < damper.influence_m,
+                damper.gain * (d.ravel() - damper.d_stop) / (damper.influence_m - damper.d_stop)
+                - tick.human_approach.ravel(),
+            ),
+            (
+                separation,
+                tick.approach_limit < separation.inactive_above_mps,
+                tick.approach_limit.ravel(),
+            ),
+        ):
+            con = piece.compute_qp_inequalities(tick, 0.01)
+            assert con.G.shape == (d.size, ctrl.variables.n)
+            np.testing.assert_array_equal(con.G[:, nv:], 0.0)  # no slack in a hard row
+            for r in range(d.size):
+                i, k = divmod(r, n_parts)
+                if not active[i, k]:
+                    assert con.h[r] == np.inf and not con.G[r].any()
+                    continue
+                assert con.h[r] == pytest.approx(bound[r], abs=1e-12)
+                np.testing.assert_allclose(
+                    con.G[r, :nv], _approach_row(robot, tick, i, k), atol=1e-7
+                )
+                checked["damper" if piece is damper else "separation"] += 1
+    assert checked["damper"] > 20 and checked["separation"] > 20, checked
+
+
+def test_compiled_end_effector_cost_equals_numpy(ticks):
+    ctrl, recorded = ticks
+    n, nv = ctrl.variables.n, ctrl.variables.nv
+    for tick in recorded[::3]:
+        obj = ctrl.ee_task.compute_qp_objective(tick, 0.01)
+        J, W2 = tick.kin.ee_jacobian, np.diag(ctrl.ee_task.w2)
+        np.testing.assert_allclose(obj.H[:nv, :nv], 2 * J.T @ W2 @ J, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(
+            obj.c[:nv], -2 * J.T @ W2 @ ctrl.ee_task.target(tick), rtol=1e-12, atol=1e-12
+        )
+        assert not obj.H[nv:].any() and not obj.H[:, nv:].any() and not obj.c[nv:].any()
+        assert obj.H.shape == (n, n)
+
+
+def test_in_place_assembly_equals_the_pieces_own_blocks(ticks):
+    """What the loop solves (Assembler.fill, in place) is the sum, stack and intersection
+    of each piece's compute_qp_* (allocated fresh), and problem() outlives the next tick."""
+    ctrl, recorded = ticks
+    asm: Assembler = ctrl.assembler
+    n, first = asm.n, ctrl.problem(recorded[0])
+    kept = {k: getattr(first, k).copy() for k in ("H", "c", "G", "h", "lb", "ub")}
+    for tick in recorded:
+        H, c = np.zeros((n, n)), np.zeros(n)
+        G, h = [], []
+        lb, ub = np.full(n, -np.inf), np.full(n, np.inf)
+        for p in asm.pieces:
+            if (obj := p.compute_qp_objective(tick, 0.01)) is not None:
+                H, c = H + obj.H, c + obj.c
+            if p.rows:
+                con = p.compute_qp_inequalities(tick, 0.01)
+                G.append(con.G)
+                h.append(con.h)
+            if (b := p.compute_qp_bounds(tick, 0.01)) is not None:
+                lb, ub = np.maximum(lb, b.lb), np.minimum(ub, b.ub)
+        prob = asm.fill(tick, 0.01)
+        for name, ref in zip(
+            ("H", "c", "G", "h", "lb", "ub"), (H, c, np.vstack(G), np.concatenate(h), lb, ub)
+        ):
+            np.testing.assert_allclose(getattr(prob, name), ref, rtol=1e-13, atol=1e-13)
+    for k, v in kept.items():  # the first problem() is untouched by every fill since
+        np.testing.assert_array_equal(getattr(first, k), v)
+
+
+def test_problem_defect_finds_every_nan_and_infinity():
+    rng = np.random.default_rng(5)
+    shapes = {"H": (4, 4), "c": (4,), "G": (3, 4), "h": (3,), "lb": (4,), "ub": (4,)}
+    codes = {"H": 1, "c": 1, "G": 1, "h": 2, "lb": 3, "ub": 4}
+    for _ in range(200):
+        arrays = {k: rng.normal(size=s) for k, s in shapes.items()}
+        arrays["h"][0], arrays["lb"][1], arrays["ub"][2] = np.inf, -np.inf, np.inf  # free
+        assert problem_defect(*arrays.values()) == 0
+        name = rng.choice(list(shapes))
+        arrays[name].flat[rng.integers(arrays[name].size)] = (
+            np.nan if name in ("h", "lb", "ub") else rng.choice([np.nan, np.inf, -np.inf])
+        )
+        assert problem_defect(*arrays.values()) == codes[name]
+
+
+def test_hard_excess_is_numpys_max_and_nan_aware():
+    rng = np.random.default_rng(6)
+    nv, n, m = 3, 5, 6
+    for _ in range(300):
+        x, lb, ub = rng.normal(size=n), rng.normal(size=n) - 1, rng.normal(size=n) + 1
+        G, h = rng.normal(size=(m, n)), rng.normal(size=m)
+        start, stop = sorted(rng.integers(0, m + 1, size=2))
+        ref = max(
+            np.max(lb[:nv] - x[:nv]),
+            np.max(x[:nv] - ub[:nv]),
+            np.max(G[start:stop] @ x - h[start:stop], initial=-np.inf),
+        )
+        assert hard_excess(x, nv, lb, ub, G, h, start, stop) == pytest.approx(ref, abs=1e-12)
+        x[rng.integers(n if stop > start else nv)] = np.nan  # a slack only counts via a row
+        assert np.isnan(hard_excess(x, nv, lb, ub, G, h, start, stop))
