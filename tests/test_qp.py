@@ -410,3 +410,19 @@ def test_a_solution_the_hard_rows_cannot_judge_is_never_applied(robot, monkeypat
     cmd = ctrl.step(q, Operator().rest(), None, 1.0)
     assert cmd.stopped and "breaks a hard constraint by nan" in cmd.reason
     np.testing.assert_array_equal(cmd.dq, 0.0)
+
+
+def test_warm_start_never_decays_into_subnormal_numbers(recorded_problems):
+    """The duals of inactive rows shrink with every warm-started solve until they are
+    subnormal, and OSQP's iterations then take twice as long: they are zeroed between
+    solves, so no solution of a long run holds one (without it, most did)."""
+    n, m = recorded_problems[0].H.shape[0], len(recorded_problems[0].h)
+    backend = PersistentOSQP(n, m, QPConfig())
+    tiny = np.finfo(float).tiny
+    subnormal = 0
+    for prob in recorded_problems * 3:
+        assert backend.solve(prob).found
+        sol = backend._native.solution
+        v = np.r_[np.array(sol.x), np.array(sol.y)]
+        subnormal += int(((v != 0) & (np.abs(v) < tiny)).any())
+    assert subnormal == 0

@@ -22,6 +22,7 @@ from ..robot import Kinematics
 __all__ = [
     "damper_rows",
     "ee_task_cost",
+    "flush_tiny",
     "hard_excess",
     "pair_inputs",
     "problem_defect",
@@ -175,6 +176,18 @@ def problem_defect(
 
 
 @njit(cache=True)
+def flush_tiny(v: np.ndarray, floor: float) -> bool:
+    """Set the entries of ``v`` smaller than ``floor`` in magnitude (but not 0) to 0, in
+    place; True if there was any."""
+    found = False
+    for k in range(v.shape[0]):
+        if v[k] != 0.0 and abs(v[k]) < floor:
+            v[k] = 0.0
+            found = True
+    return found
+
+
+@njit(cache=True)
 def hard_excess(
     x: np.ndarray,
     nv: int,
@@ -217,6 +230,7 @@ def warm_up() -> None:
         separation_rows(np.ones(2), *pair, 1.0, G, h)
         problem_defect(H, c, G, h, c, c)
         hard_excess(c, nv, c, c, G, h, 0, 2)
+        flush_tiny(c, 1e-20)
 
 
 def pair_inputs(
