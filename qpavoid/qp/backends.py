@@ -22,10 +22,11 @@ import osqp
 import qpsolvers
 import scipy.sparse as sp
 
+from ..compiling import kernel_input
 from ..errors import InputError, SolverError
-from .checks import infeasible_bounds, not_finite
+from .checks import crossed_bounds, infeasible_bounds, not_finite
 from .config import QPConfig
-from .kernels import flush_tiny
+from .kernels import flush_tiny, osqp_arrays
 from .problem import QPProblem, QPSolution
 
 #: QP solvers that come with an extra of ours, and its name (``pip install "qpavoid[solvers]"``).
@@ -95,23 +96,13 @@ class PersistentOSQP:
         rows_p = [r for j in range(n) for r in range(j + 1)]
         cols_p = [j for j in range(n) for _ in range(j + 1)]
         self._p_idx = np.array(rows_p) * n + np.array(cols_p)
-        a_rows = [[j, *range(n, n + m)] for j in range(n)]
-        self._a_idx = np.array([r * n + j for j in range(n) for r in a_rows[j]])
+        rows_a = [r for j in range(n) for r in (j, *range(n, n + m))]  # kernels.osqp_arrays
+        cols_a = [j for j in range(n) for _ in range(m + 1)]
         P = sp.csc_matrix((np.ones(len(rows_p)), (rows_p, cols_p)), shape=(n, n))
-        A = sp.csc_matrix(
-            (
-                np.ones(len(self._a_idx)),
-                (
-                    [r for j in range(n) for r in a_rows[j]],
-                    [j for j in range(n) for _ in a_rows[j]],
-                ),
-            ),
-            shape=(n + m, n),
-        )
-        self._M = np.zeros((n + m, n))
-        self._M[:n] = np.eye(n)
+        A = sp.csc_matrix((np.ones(len(rows_a)), (rows_a, cols_a)), shape=(n + m, n))
         self._l = np.full(n + m, -np.inf)
         self._u = np.full(n + m, np.inf)
+        self._Px, self._Ax = np.zeros(len(rows_p)), np.zeros(len(rows_a))
         self._solver = osqp.OSQP()
         # The numbers here are placeholders (P must be positive semidefinite for setup);
         # only the pattern matters: every tick replaces all of them.
@@ -136,16 +127,20 @@ class PersistentOSQP:
         failed = not_finite(prob)
         if failed is not None:
             return failed
-        n, inf = self.n, self._infinity
-        self._M[n:] = prob.G
-        self._l[:n], self._u[:n], self._u[n:] = prob.lb, prob.ub, prob.h
-        lower, upper = np.maximum(self._l, -inf), np.minimum(self._u, inf)
+        Px, Ax, lower, upper = self._Px, self._Ax, self._l, self._u
+        crossed = osqp_arrays(
+            *(kernel_input(a, np.float64) for a in (prob.H, prob.G, prob.h, prob.lb, prob.ub)),
+            self._p_idx,
+            self._infinity,
+            Px,
+            Ax,
+            lower,
+            upper,
+        )
         # OSQP rejects l > u (or a non-convex P) in an update by keeping the *previous*
         # data, after which solve() reports "solved" for that old problem: never let it.
-        failed = infeasible_bounds(lower, upper)
-        if failed is not None:
-            return failed
-        Px, Ax = prob.H.ravel()[self._p_idx], self._M.ravel()[self._a_idx]
+        if crossed >= 0:
+            return crossed_bounds(lower, upper, crossed)
         if self._native is not None:
             s = self._native
             flag = s.update_data_vec(q=prob.c, l=lower, u=upper) or s.update_data_mat(

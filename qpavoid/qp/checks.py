@@ -14,7 +14,7 @@ from ..compiling import kernel_input
 from .kernels import problem_defect
 from .problem import QPProblem, QPSolution
 
-__all__ = ["DEFECTS", "infeasible_bounds", "not_finite"]
+__all__ = ["DEFECTS", "crossed_bounds", "infeasible_bounds", "not_finite"]
 
 
 #: What :func:`~qpavoid.qp.kernels.problem_defect`'s codes mean.
@@ -39,9 +39,11 @@ def not_finite(prob: QPProblem) -> QPSolution | None:
 def infeasible_bounds(lower: np.ndarray, upper: np.ndarray) -> QPSolution | None:
     """A failed solution naming the first row with ``lower > upper``, or None."""
     bad = lower > upper
-    if not bad.any():
-        return None
-    k = int(np.argmax(bad))
+    return crossed_bounds(lower, upper, int(np.argmax(bad))) if bad.any() else None
+
+
+def crossed_bounds(lower: np.ndarray, upper: np.ndarray, k: int) -> QPSolution:
+    """The failed solution of bounds crossed in row ``k`` (``lower[k] > upper[k]``)."""
     return QPSolution(
         None, False, f"infeasible bounds: l > u in row {k} ({lower[k]:.4g} > {upper[k]:.4g})"
     )

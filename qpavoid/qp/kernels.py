@@ -24,6 +24,7 @@ __all__ = [
     "ee_task_cost",
     "flush_tiny",
     "hard_excess",
+    "osqp_arrays",
     "pair_inputs",
     "problem_defect",
     "separation_rows",
@@ -176,6 +177,44 @@ def problem_defect(
 
 
 @njit(cache=True)
+def osqp_arrays(
+    H: np.ndarray,
+    G: np.ndarray,
+    h: np.ndarray,
+    lb: np.ndarray,
+    ub: np.ndarray,
+    p_index: np.ndarray,
+    infinity: float,
+    Px: np.ndarray,
+    Ax: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+) -> int:
+    """OSQP's data of ``min ½xᵀHx + cᵀx, Gx ≤ h, lb ≤ x ≤ ub`` as ``l ≤ A x ≤ u`` with
+    ``A = [I; G]``, in place: ``Px`` the entries ``H.flat[p_index]`` (its upper
+    triangle in CSC order), ``Ax`` A's entries column by column (every entry of G is in
+    the pattern), ``lower = [lb; −∞]``, ``upper = [ub; h]``, infinities clipped to OSQP's
+    ``infinity``. Returns the first row with ``lower > upper``, or −1."""
+    n, m = G.shape[1], G.shape[0]
+    for k in range(p_index.shape[0]):
+        Px[k] = H.flat[p_index[k]]
+    for j in range(n):
+        Ax[j * (m + 1)] = 1.0
+        for r in range(m):
+            Ax[j * (m + 1) + 1 + r] = G[r, j]
+    for j in range(n):
+        lower[j] = max(lb[j], -infinity)
+        upper[j] = min(ub[j], infinity)
+    for r in range(m):
+        lower[n + r] = -infinity
+        upper[n + r] = min(h[r], infinity)
+    for k in range(n + m):
+        if lower[k] > upper[k]:
+            return k
+    return -1
+
+
+@njit(cache=True)
 def flush_tiny(v: np.ndarray, floor: float) -> bool:
     """Set the entries of ``v`` smaller than ``floor`` in magnitude (but not 0) to 0, in
     place; True if there was any."""
@@ -231,6 +270,10 @@ def warm_up() -> None:
         problem_defect(H, c, G, h, c, c)
         hard_excess(c, nv, c, c, G, h, 0, 2)
         flush_tiny(c, 1e-20)
+        lower, upper = np.zeros(n + 2), np.zeros(n + 2)
+        osqp_arrays(
+            H, G, h, c, c, np.zeros(3, dtype=np.int64), 1e30, c, np.zeros(3 * n), lower, upper
+        )
 
 
 def pair_inputs(
