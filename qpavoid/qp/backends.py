@@ -129,7 +129,11 @@ class PersistentOSQP:
             return failed
         Px, Ax, lower, upper = self._Px, self._Ax, self._l, self._u
         crossed = osqp_arrays(
-            *(kernel_input(a, np.float64) for a in (prob.H, prob.G, prob.h, prob.lb, prob.ub)),
+            kernel_input(prob.H, np.float64),
+            kernel_input(prob.G, np.float64),
+            kernel_input(prob.h, np.float64),
+            kernel_input(prob.lb, np.float64),
+            kernel_input(prob.ub, np.float64),
             self._p_idx,
             self._infinity,
             Px,
