@@ -11,6 +11,9 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from .compiling import kernel_input
+from .distance_kernels import capsule_axes, capsule_directions
+from .distance_kernels import warm_up as warm_up_kernels
 from .distance_table import FALLBACK_DIRECTION, DistanceTable
 from .errors import InputError
 from .geometry import TINY, unit
@@ -22,6 +25,9 @@ EZ = np.array([0.0, 0.0, 1.0])
 #: A person is skipped for a pair only if their lower bound exceeds the best distance by
 #: more than this (far above coal's and floating-point error), m.
 BOUND_SLACK_M = 1e-6
+#: The witness point of a pair not measured (a part not seen).
+NO_POINT = np.full(3, np.nan)
+NO_POINT.setflags(write=False)
 #: The rotation of a capsule too short to have an axis (a sphere).
 NO_ROTATION = pin.Quaternion.Identity()
 
@@ -52,10 +58,9 @@ class _Capsules:
         self.placed: HumanGeometry | None = None  # for a person's: the geometry shown
 
     def place(self, segments: np.ndarray, valid: np.ndarray, widen: np.ndarray | None) -> None:
-        """Move the valid capsules onto their ``segments`` (N, 2, 3), radii + ``widen``."""
-        axis = segments[:, 1] - segments[:, 0]
-        half = 0.5 * np.sqrt(np.einsum("nk,nk->n", axis, axis))
-        self.centre = 0.5 * (segments[:, 0] + segments[:, 1])
+        """Move the valid capsules onto their ``segments`` (N, 2, 3; others may be NaN),
+        radii + ``widen``."""
+        axis, half, self.centre = capsule_axes(kernel_input(segments, np.float64))
         radii = self.radii if widen is None else self.radii + widen
         self.reach = half + radii
         half_list, radii_list = half.tolist(), radii.tolist()
@@ -95,6 +100,7 @@ class CapsuleDistance:
         self._request = coal.DistanceRequest()
         self._request.enable_signed_distance = True
         self._result = coal.DistanceResult()
+        warm_up_kernels()
 
     def _person(self, k: int, geo: HumanGeometry) -> tuple[_Capsules, list]:
         """The ``k``-th person's capsules, showing ``geo`` (moved only when it changes)."""
@@ -107,9 +113,7 @@ class CapsuleDistance:
         caps, functors = self._people[k]
         if geo is not caps.placed:
             assert geo.part_margin is not None and geo.reach_margin is not None  # filled in
-            caps.place(
-                np.nan_to_num(geo.segments), geo.segment_valid, geo.part_margin + geo.reach_margin
-            )
+            caps.place(geo.segments, geo.segment_valid, geo.part_margin + geo.reach_margin)
             caps.placed = geo
         return caps, functors
 
@@ -136,21 +140,22 @@ class CapsuleDistance:
         robot = self._robot
         robot.place(seg, self._robot_valid, None)
         people = [self._person(k, g) for k, g in enumerate(geos)]
-        seen = np.stack([g.segment_valid for g in geos], axis=1)  # (K, P)
         if len(people) == 1:  # nobody to choose from: only parts not seen are skipped
-            bound = np.broadcast_to(np.where(seen, 0.0, np.inf), (n_sets, n_parts, 1))
+            row = [[0.0] if v else [np.inf] for v in geos[0].segment_valid.tolist()]
+            bound_list, order = [row] * n_sets, [[[0]] * n_parts] * n_sets
         else:  # lower bounds (S, K, P): the bounding spheres' distance
+            seen = np.stack([g.segment_valid for g in geos], axis=1)  # (K, P)
             gap = np.stack([caps.centre for caps, _ in people], axis=2)  # (K, 3, P)
             bound = np.sqrt(((robot.centre[:, None, :, None] - gap[None]) ** 2).sum(axis=2))
             bound -= robot.reach[:, None, None] + np.stack([c.reach for c, _ in people], 1)[None]
             bound = np.where(seen[None], bound, np.inf)
-        order = np.argsort(bound, axis=2, kind="stable").tolist()
-        bound_list = bound.tolist()
+            order = np.argsort(bound, axis=2, kind="stable").tolist()
+            bound_list = bound.tolist()
         req, res = self._request, self._result
         n = n_sets * n_parts
-        distance = np.full(n, np.inf)
-        robot_point, human_point = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
-        who = np.zeros(n, dtype=np.intp)
+        # Python lists while coal fills them (a numpy row per entry costs more than coal)
+        distance, who = [np.inf] * n, [0] * n
+        robot_point, human_point = [NO_POINT] * n, [NO_POINT] * n
         contact = []
         for i in range(n_sets):
             tf_r = robot.tfs[i]
@@ -164,18 +169,17 @@ class CapsuleDistance:
                     res.clear()
                     d = functors[i][j](caps.tfs[j], tf_r, req, res)
                     if d < best or (d == best and p < who[k]):  # ties: the first person
-                        best, who[k] = d, p
-                        distance[k] = d
-                        human_point[k], robot_point[k] = (
-                            res.getNearestPoint1(),
-                            res.getNearestPoint2(),
-                        )
+                        best = distance[k] = d
+                        who[k] = p
+                        human_point[k] = res.getNearestPoint1()  # copies
+                        robot_point[k] = res.getNearestPoint2()
                         normal = res.normal.copy() if d <= 1e-9 else None
                 if normal is not None:  # under contact the witnesses give no direction
                     contact.append((k, normal))
-        return self._table(seg, distance, robot_point, human_point, contact), who.reshape(
-            self._shape
+        table = self._table(
+            seg, np.array(distance), np.array(robot_point), np.array(human_point), contact
         )
+        return table, np.array(who, dtype=np.intp).reshape(self._shape)
 
     def _table(
         self,
@@ -186,30 +190,21 @@ class CapsuleDistance:
         contact: list[tuple[int, np.ndarray]],
     ) -> DistanceTable:
         """The table from coal's distances and witness points (and normals under contact)."""
-        n_sets, n_parts = shape = self._shape
-        seen = np.isfinite(distance)
-        vector = np.zeros((n_sets * n_parts, 3))
-        vector[seen] = (robot_point[seen] - human_point[seen]) / np.where(
-            distance[seen] > 1e-9, distance[seen], 1.0
-        )[:, None]
+        shape = self._shape
+        # the unit vectors human → robot, and the robot witness point's parameter along its
+        # set's axis (for its Jacobian), in one compiled pass
+        vector, s = capsule_directions(seg, distance, robot_point, human_point)
         for k, nrm in contact:  # coal's normal points from the human to the robot
             nn = np.linalg.norm(nrm)
             vector[k] = (
                 nrm / nn if nn > 0.5 else unit(human_point[k] - robot_point[k], FALLBACK_DIRECTION)
             )
-        # Parameter along the robot capsule's axis of the robot witness point (for its Jacobian).
-        a, ab = seg[:, 0], seg[:, 1] - seg[:, 0]  # (S, 3)
-        from_a = np.where(seen[:, None], robot_point, 0.0).reshape(n_sets, n_parts, 3) - a[:, None]
-        s = (
-            np.einsum("skx,sx->sk", from_a, ab)
-            / np.maximum(np.einsum("sx,sx->s", ab, ab), 1e-18)[:, None]
-        )
         return DistanceTable(
             self.method,
             distance.reshape(shape),
             vector.reshape(*shape, 3),
             self._minus_one,
-            np.minimum(np.maximum(s, 0.0), 1.0),
+            s.reshape(shape),
             self._minus_one,
             self.set_names,
             self.part_names,

@@ -16,7 +16,7 @@ from numba import njit
 
 from .compiling import ctrl_c_deferred
 
-__all__ = ["TINY_DISTANCE_M", "sphere_table", "warm_up"]
+__all__ = ["TINY_DISTANCE_M", "capsule_axes", "capsule_directions", "sphere_table", "warm_up"]
 
 #: Two points closer than this have no direction between them; the table's fallback is
 #: used instead, m.
@@ -88,6 +88,64 @@ def sphere_table(
     return distance, direction, robot_point, human_point
 
 
+@njit(cache=True)
+def capsule_axes(segments: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Axis ``b − a`` (N, 3), half length (N,) and centre (N, 3) of the segments
+    ``(a, b)`` (N, 2, 3), m (NaN in, NaN out)."""
+    n = segments.shape[0]
+    axis, half, centre = np.empty((n, 3)), np.empty(n), np.empty((n, 3))
+    for i in range(n):
+        length2 = 0.0
+        for k in range(3):
+            axis[i, k] = segments[i, 1, k] - segments[i, 0, k]
+            centre[i, k] = 0.5 * (segments[i, 0, k] + segments[i, 1, k])
+            length2 += axis[i, k] * axis[i, k]
+        half[i] = 0.5 * np.sqrt(length2)
+    return axis, half, centre
+
+
+@njit(cache=True)
+def capsule_directions(
+    segments: np.ndarray,
+    distance: np.ndarray,
+    robot_point: np.ndarray,
+    human_point: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The capsule table's directions and axis parameters from coal's witness points.
+
+    Row ``r`` is the pair of robot set ``r // K`` (``K = R / S``) with a body part. Its
+    direction is ``(robot_point − human_point) / d`` (the unit vector from the human to
+    the robot; unscaled where ``d ≤ 1e-9``, for the caller to replace, and 0 for a part
+    not seen, ``d = inf``); its parameter is that of the robot witness point's projection
+    on the set's axis ``a → b``, clipped to [0, 1] (0 for a part not seen).
+
+    Returns
+    -------
+    vector
+        (R, 3).
+    s
+        (R,).
+    """
+    n_rows, n_sets = distance.shape[0], segments.shape[0]
+    n_parts = n_rows // n_sets
+    vector = np.zeros((n_rows, 3))
+    s = np.zeros(n_rows)
+    for r in range(n_rows):
+        d = distance[r]
+        if not np.isfinite(d):
+            continue
+        i = r // n_parts
+        scale = d if d > 1e-9 else 1.0
+        along, length2 = 0.0, 0.0
+        for k in range(3):
+            vector[r, k] = (robot_point[r, k] - human_point[r, k]) / scale
+            ab = segments[i, 1, k] - segments[i, 0, k]
+            along += (robot_point[r, k] - segments[i, 0, k]) * ab
+            length2 += ab * ab
+        s[r] = min(max(along / max(length2, 1e-18), 0.0), 1.0)
+    return vector, s
+
+
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) the kernel, once per process."""
@@ -101,3 +159,5 @@ def warm_up() -> None:
             np.zeros(2),
             np.zeros(3),
         )
+        capsule_directions(np.zeros((1, 2, 3)), np.ones(2), np.zeros((2, 3)), np.ones((2, 3)))
+        capsule_axes(np.zeros((1, 2, 3)))

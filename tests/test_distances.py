@@ -149,6 +149,12 @@ def _check_capsules(robot, human, table, rseg, hseg, widen=None):
                     robot.capsule_radii[i], abs=1e-6
                 )
                 assert point_segment(hp, *hseg[j]) == pytest.approx(r_human[j], abs=1e-6)
+                # robot_s: where on the axis the robot witness point's Jacobian is taken
+                s = table.robot_s[i, j]
+                on_axis = (1 - s) * rseg[i][0] + s * rseg[i][1]
+                assert np.linalg.norm(rp - on_axis) == pytest.approx(
+                    robot.capsule_radii[i], abs=1e-6
+                )
                 np.testing.assert_allclose(rp - hp, ref * table.vector[i, j], atol=1e-6)
             assert np.linalg.norm(table.vector[i, j]) == pytest.approx(1.0)
 
