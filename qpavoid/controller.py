@@ -87,6 +87,11 @@ class Controller:
         self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, self.config.control_period_s))
         self.stop_budget = StopTimeBudget(self.ssm, robot.joint_names, self.config.control_period_s)
         self.accel = joint_speed_limits(replace(ssm, stop_time_s=1.0), robot.joint_names)  # a_j
+        # the paper's rules: no separation bound, no part's own speed (read-only, shared)
+        shape = (len(robot.sets), len(self.human.parts))
+        self._no_bound, self._no_approach = np.full(shape, np.inf), np.zeros(shape)
+        for a in (self._no_bound, self._no_approach):
+            a.setflags(write=False)
         self._clock_s = 0.0  # the controller's own clock: control periods since it started
         self.closest_frame: HumanFrame | None = None  # the closest person's, last tick
 
@@ -149,8 +154,7 @@ class Controller:
             approach_limit, human_approach = separation_bounds(table, v_parts, age, ssm)
             limits = np.minimum(limits, self.accel * ssm.stop_time_s)  # |q̇_j| ≤ a_j T_s
         else:
-            approach_limit = np.full(table.distance.shape, np.inf)
-            human_approach = np.zeros(table.distance.shape)
+            approach_limit, human_approach = self._no_bound, self._no_approach
         j = table.closest_part(self.i_L2)
         v_rep_L2 = repulsive_velocity(
             table.distance[self.i_L2, j], table.vector[self.i_L2, j], cfg
@@ -163,10 +167,9 @@ class Controller:
         frozen = self.config.perception.max_identical_frames
         if not age <= self.config.max_frame_age_s:  # NaN too
             reason = f"human frame is stale ({age:.3f} s old, max {self.config.max_frame_age_s} s)"
-        elif frozen is not None and min(p.identical for p in percs) > frozen:
-            n = min(p.identical for p in percs) + 1
-            reason = f"human frame is frozen ({n} identical skeletons in a row)"
-        elif self.config.require_human and not np.isfinite(table.distance).any():
+        elif frozen is not None and (repeats := min(p.identical for p in percs)) > frozen:
+            reason = f"human frame is frozen ({repeats + 1} identical skeletons in a row)"
+        elif self.config.require_human and not np.isfinite(dmin).any():
             reason = "no body part of the operator is tracked"
         else:
             reason = stop_reason(f, dmin[self.i_L2], dmin[self.i_EE], cfg) or ""
