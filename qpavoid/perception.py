@@ -217,7 +217,10 @@ class PeopleTracker:
 
     def person(self, pid: int) -> Tracker:
         """Person ``pid``'s tracker (made on first use)."""
-        return self.trackers.setdefault(pid, Tracker(self.cfg))
+        tracker = self.trackers.get(pid)
+        if tracker is None:  # (setdefault would build, and drop, one every frame)
+            tracker = self.trackers[pid] = Tracker(self.cfg)
+        return tracker
 
     def update(
         self, ids: tuple[int, ...], frames: tuple[HumanFrame, ...], capture_time_s: float
