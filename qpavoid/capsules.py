@@ -193,7 +193,9 @@ class CapsuleDistance:
         shape = self._shape
         # the unit vectors human → robot, and the robot witness point's parameter along its
         # set's axis (for its Jacobian), in one compiled pass
-        vector, s = capsule_directions(seg, distance, robot_point, human_point)
+        vector, s = capsule_directions(
+            kernel_input(seg, np.float64), distance, robot_point, human_point
+        )
         for k, nrm in contact:  # coal's normal points from the human to the robot
             nn = np.linalg.norm(nrm)
             vector[k] = (

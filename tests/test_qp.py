@@ -379,20 +379,24 @@ def test_daqp_answers_each_tick_as_if_it_were_the_first(first, second):
     np.testing.assert_allclose(sol.x[:-2], ref.x[:-2], atol=SOLVER_TOL)
 
 
-@pytest.mark.parametrize("field", ["H", "c", "G", "h", "lb", "ub"])
-def test_a_nan_in_the_problem_is_never_solved_and_leaves_no_trace(field):
+@pytest.mark.parametrize(
+    "field, value",
+    [(f, np.nan) for f in ("H", "c", "G", "h", "lb", "ub")]
+    + [("h", -np.inf), ("lb", np.inf), ("ub", -np.inf), ("G", np.inf)],
+)
+def test_a_nan_in_the_problem_is_never_solved_and_leaves_no_trace(field, value):
     """daqp takes a NaN row as no row and says 'solved'; one NaN in OSQP's warm start
     spoiled every later solve: both backends refuse the problem, then solve the next."""
     good = _recorded_pair(313)
     n, m = good.G.shape[1], good.G.shape[0]
     arrays = {k: getattr(good, k).copy() for k in ("H", "c", "G", "h", "lb", "ub")}
-    arrays[field].flat[0] = np.nan
+    arrays[field].flat[0] = value
     bad = QPProblem(**arrays)
     for backend in (PersistentOSQP(n, m, QPConfig()), DirectDAQP(n, m)):
         assert backend.solve(good).found
         sol = backend.solve(bad)
         assert not sol.found
-        assert "NaN" in sol.status or "not finite" in sol.status
+        assert "NaN" in sol.status or "not finite" in sol.status, sol.status
         again = backend.solve(good)
         assert again.found, backend.name
 

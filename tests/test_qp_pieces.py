@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from qpavoid.controller import ControllerConfig
-from qpavoid.qp import QPController
+from qpavoid.errors import InputError
+from qpavoid.qp import QPConfig, QPController, QPProblem
 from qpavoid.qp.kernels import hard_excess, problem_defect
 from qpavoid.qp.problem import Assembler
 from qpavoid.qp.separation import SeparationLimit
@@ -173,3 +174,37 @@ def test_hard_excess_is_numpys_max_and_nan_aware():
         assert hard_excess(x, nv, lb, ub, G, h, start, stop) == pytest.approx(ref, abs=1e-12)
         x[rng.integers(n if stop > start else nv)] = np.nan  # a slack only counts via a row
         assert np.isnan(hard_excess(x, nv, lb, ub, G, h, start, stop))
+
+
+def test_problem_never_touches_the_problem_being_solved(ticks):
+    """``problem()`` (inspection, any thread) builds in arrays of its own: the arrays the
+    loop's ``fill`` handed to the solver keep their tick's numbers."""
+    ctrl, recorded = ticks
+    filled = ctrl.assembler.fill(recorded[0], 0.01)
+    before = {k: getattr(filled, k).copy() for k in ("H", "c", "G", "h", "lb", "ub")}
+    other = ctrl.problem(recorded[-1])
+    assert not np.array_equal(other.c, before["c"])  # a different tick indeed
+    for k, v in before.items():
+        np.testing.assert_array_equal(getattr(filled, k), v)
+
+
+def test_rows_of_the_wrong_size_are_refused_not_written(ticks):
+    """The compiled kernels write unchecked: a table or a problem of another size is a
+    ValueError (as numpy's broadcasting gave), never a write past an array's end."""
+    ctrl, recorded = ticks
+    damper = next(p for p in ctrl.assembler.pieces if p.name == VelocityDamper.name)
+    n = ctrl.variables.n
+    with pytest.raises(ValueError, match="pairs"):
+        damper.write_qp_inequalities(recorded[0], 0.01, np.zeros((3, n)), np.zeros(3))
+    prob = ctrl.problem(recorded[0])
+    small = QPProblem(prob.H, prob.c, prob.G[:5], prob.h[:5], prob.lb, prob.ub)
+    with pytest.raises(ValueError, match="shapes"):
+        ctrl.backend.solve(small)
+
+
+def test_a_damper_that_would_divide_by_zero_is_refused(robot):
+    with pytest.raises(InputError, match="damper_influence_m"):
+        QPController(robot, qp=QPConfig(damper_influence_m=0.05))  # = L2's stop distance
+    ctrl = QPController(robot, qp=QPConfig(damper_gain_mps=1, weight_position=2))  # ints
+    damper = next(p for p in ctrl.assembler.pieces if p.name == VelocityDamper.name)
+    assert isinstance(damper.gain, float) and ctrl.ee_task.w2.dtype == np.float64

@@ -24,7 +24,7 @@ import scipy.sparse as sp
 
 from ..compiling import kernel_input
 from ..errors import InputError, SolverError
-from .checks import crossed_bounds, infeasible_bounds, not_finite
+from .checks import check_shapes, crossed_bounds, infeasible_bounds, not_finite
 from .config import QPConfig
 from .kernels import flush_tiny, osqp_arrays
 from .problem import QPProblem, QPSolution
@@ -124,6 +124,7 @@ class PersistentOSQP:
         )
 
     def solve(self, prob: QPProblem) -> QPSolution:
+        check_shapes(prob, self.n, self.m)
         failed = not_finite(prob)
         if failed is not None:
             return failed
@@ -226,6 +227,7 @@ class DirectDAQP:
         self._lower = np.full(n + m, -np.inf)
 
     def solve(self, prob: QPProblem) -> QPSolution:
+        check_shapes(prob, self.n, self.m)
         failed = not_finite(prob)
         if failed is not None:
             return failed

@@ -14,16 +14,24 @@ from ..compiling import kernel_input
 from .kernels import problem_defect
 from .problem import QPProblem, QPSolution
 
-__all__ = ["DEFECTS", "crossed_bounds", "infeasible_bounds", "not_finite"]
+__all__ = ["DEFECTS", "check_shapes", "crossed_bounds", "infeasible_bounds", "not_finite"]
 
 
 #: What :func:`~qpavoid.qp.kernels.problem_defect`'s codes mean.
 DEFECTS = {
     1: "the QP's cost or rows are not finite",
-    2: "the QP's h hold a NaN",
-    3: "the QP's lower bounds hold a NaN",
-    4: "the QP's upper bounds hold a NaN",
+    2: "the QP's h hold a NaN or −inf",
+    3: "the QP's lower bounds hold a NaN or +inf",
+    4: "the QP's upper bounds hold a NaN or −inf",
 }
+
+
+def check_shapes(prob: QPProblem, n: int, m: int) -> None:
+    """Raise ``ValueError`` unless ``prob`` has ``n`` variables and ``m`` rows, as the
+    backend was built for (its compiled copy into the solver's arrays writes unchecked)."""
+    shapes = [a.shape for a in (prob.H, prob.c, prob.G, prob.h, prob.lb, prob.ub)]
+    if shapes != [(n, n), (n,), (m, n), (m,), (n,), (n,)]:
+        raise ValueError(f"a QP of shapes {shapes} for a backend of n = {n}, m = {m}")
 
 
 def not_finite(prob: QPProblem) -> QPSolution | None:

@@ -31,7 +31,7 @@ class EndEffectorTask(QPPiece):
 
     def __init__(self, variables: Variables, weight_position: float, weight_orientation: float):
         self.variables = variables
-        self.w2 = np.r_[[weight_position**2] * 3, [weight_orientation**2] * 3]
+        self.w2 = np.array([weight_position**2] * 3 + [weight_orientation**2] * 3, dtype=float)
 
     @staticmethod
     def target(tick: Tick) -> np.ndarray:

@@ -20,6 +20,7 @@ from ..distance_table import DistanceTable
 from ..robot import Kinematics
 
 __all__ = [
+    "check_rows",
     "damper_rows",
     "ee_task_cost",
     "flush_tiny",
@@ -158,8 +159,9 @@ def problem_defect(
     H: np.ndarray, c: np.ndarray, G: np.ndarray, h: np.ndarray, lb: np.ndarray, ub: np.ndarray
 ) -> int:
     """0 if a QP's data are usable, else what is wrong with them: 1 a cost or row
-    coefficient that is not finite, 2 a NaN in h, 3 in the lower bounds, 4 in the upper
-    bounds (h, lb and ub may hold infinities: free rows and variables)."""
+    coefficient that is not finite, 2 a NaN or −inf in h, 3 a NaN or +inf in the lower
+    bounds, 4 a NaN or −inf in the upper bounds (h and ub may hold +inf, lb −inf: free
+    rows and variables)."""
     for x in H.ravel():
         if not np.isfinite(x):
             return 1
@@ -169,9 +171,9 @@ def problem_defect(
     for x in G.ravel():
         if not np.isfinite(x):
             return 1
-    for code, v in ((2, h), (3, lb), (4, ub)):
+    for code, v, sign in ((2, h, -1.0), (3, lb, 1.0), (4, ub, -1.0)):
         for x in v:
-            if np.isnan(x):
+            if np.isnan(x) or x == sign * np.inf:
                 return code
     return 0
 
@@ -274,6 +276,14 @@ def warm_up() -> None:
         osqp_arrays(
             H, G, h, c, c, np.zeros(3, dtype=np.int64), 1e30, c, np.zeros(3 * n), lower, upper
         )
+
+
+def check_rows(name: str, rows: int, pairs: int, G: np.ndarray, h: np.ndarray) -> None:
+    """Raise ``ValueError`` unless ``G`` and ``h`` hold one row per pair, as many as the
+    piece ``name``'s ``rows`` (the kernels do not check their bounds: a mismatch would
+    write past the arrays' ends, where numpy raised)."""
+    if not (pairs == rows == G.shape[0] == h.shape[0]):
+        raise ValueError(f"{name}: {pairs} set × part pairs for {rows} rows (G {G.shape})")
 
 
 def pair_inputs(

@@ -110,28 +110,28 @@ class Assembler:
         }
         self.m = offsets[-1]
         self._slices = [self.rows[p.name] for p in self._rows]
-        self._buffers = (
-            np.zeros((n, n)),
-            np.zeros(n),
-            np.zeros((self.m, n)),
-            np.zeros(self.m),
-            np.zeros(n),
-            np.zeros(n),
-        )
-        self._filled = QPProblem(*self._buffers, self.rows)
+        self._filled = self._arrays()
+
+    def _arrays(self) -> QPProblem:
+        n, m = self.n, self.m
+        return QPProblem(
+            np.zeros((n, n)), np.zeros(n), np.zeros((m, n)), np.zeros(m), np.zeros(n),
+            np.zeros(n), self.rows,
+        )  # fmt: skip
 
     def __call__(self, tick: Tick, dt: float) -> QPProblem:
-        """The problem of ``tick`` with control period ``dt`` (s), in arrays of its own."""
-        p = self.fill(tick, dt)
-        return QPProblem(
-            p.H.copy(), p.c.copy(), p.G.copy(), p.h.copy(), p.lb.copy(), p.ub.copy(), self.rows
-        )
+        """The problem of ``tick`` with control period ``dt`` (s), in arrays of its own
+        (never touching those of :meth:`fill`)."""
+        return self._write(tick, dt, self._arrays())
 
     def fill(self, tick: Tick, dt: float) -> QPProblem:
         """The problem of ``tick``, written into the assembler's own arrays: no allocation,
         but valid only until the next :meth:`fill` (the controller's loop; else use
         :meth:`__call__`)."""
-        H, c, G, h, lb, ub = self._buffers
+        return self._write(tick, dt, self._filled)
+
+    def _write(self, tick: Tick, dt: float, out: QPProblem) -> QPProblem:
+        H, c, G, h, lb, ub = out.H, out.c, out.G, out.h, out.lb, out.ub
         H[:], c[:], lb[:], ub[:] = self.H0, self.c0, self.lb0, self.ub0
         for p in self._objectives:
             p.add_qp_objective(tick, dt, H, c)
@@ -139,4 +139,4 @@ class Assembler:
             p.write_qp_inequalities(tick, dt, G[rows], h[rows])
         for p in self._bounds:
             p.tighten_qp_bounds(tick, dt, lb, ub)
-        return self._filled
+        return out

@@ -19,7 +19,7 @@ import numpy as np
 from ..compiling import kernel_input
 from ..ssm import BOUND_INACTIVE_MPS
 from ..tick import Tick
-from .kernels import pair_inputs, separation_rows
+from .kernels import check_rows, pair_inputs, separation_rows
 from .pieces import Constraint, QPPiece, no_rows
 from .variables import Variables
 
@@ -43,7 +43,7 @@ class SeparationLimit(QPPiece):
         self, variables: Variables, rows: int, inactive_above_mps: float = BOUND_INACTIVE_MPS
     ):
         self.variables, self.rows = variables, rows
-        self.inactive_above_mps = inactive_above_mps
+        self.inactive_above_mps = float(inactive_above_mps)  # as compiled
 
     def compute_qp_inequalities(self, tick: Tick, dt: float) -> Constraint:
         """(rows, n) G and (rows,) h, one row per set × part pair."""
@@ -52,6 +52,7 @@ class SeparationLimit(QPPiece):
         return Constraint(G, h)
 
     def write_qp_inequalities(self, tick: Tick, dt: float, G: np.ndarray, h: np.ndarray) -> None:
+        check_rows(self.name, self.rows, tick.approach_limit.size, G, h)
         separation_rows(  # the joint velocities are the first columns
             kernel_input(tick.approach_limit.reshape(-1), np.float64),
             *pair_inputs(tick.table, tick.kin),

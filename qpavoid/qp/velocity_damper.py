@@ -22,7 +22,8 @@ import numpy as np
 
 from ..compiling import kernel_input
 from ..controller import Tick
-from .kernels import damper_rows, pair_inputs
+from ..errors import InputError
+from .kernels import check_rows, damper_rows, pair_inputs
 from .pieces import Constraint, QPPiece, no_rows
 from .variables import Variables
 
@@ -56,7 +57,14 @@ class VelocityDamper(QPPiece):
     ):
         self.variables = variables
         self.d_stop = np.repeat(np.asarray(d_stop, dtype=float), n_parts)
-        self.influence_m, self.gain = influence_m, gain_mps
+        if not influence_m > self.d_stop.max():  # else the bound divides by d_i − d_s <= 0
+            raise InputError(
+                f"damper_influence_m = {influence_m} m must exceed every stop distance "
+                f"({self.d_stop.max():.4f} m)",
+                name="damper_influence_m",
+                value=influence_m,
+            )
+        self.influence_m, self.gain = float(influence_m), float(gain_mps)  # as compiled
         self.rows = len(self.d_stop)
 
     def compute_qp_inequalities(self, tick: Tick, dt: float) -> Constraint:
@@ -66,6 +74,7 @@ class VelocityDamper(QPPiece):
         return Constraint(G, h)
 
     def write_qp_inequalities(self, tick: Tick, dt: float, G: np.ndarray, h: np.ndarray) -> None:
+        check_rows(self.name, self.rows, tick.table.distance.size, G, h)
         damper_rows(  # the joint velocities are the first columns
             kernel_input(tick.table.distance.reshape(-1), np.float64),
             *pair_inputs(tick.table, tick.kin),
