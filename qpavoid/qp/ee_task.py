@@ -7,7 +7,7 @@ import numpy as np
 from ..compiling import kernel_input
 from ..controller import Tick
 from .kernels import ee_task_cost
-from .pieces import Objective, QPPiece, zero_objective
+from .pieces import QPPiece
 from .variables import Variables
 
 
@@ -39,12 +39,6 @@ class EndEffectorTask(QPPiece):
         v = tick.task_twist.copy()
         v[:3] += tick.v_rep_EE
         return v
-
-    def compute_qp_objective(self, tick: Tick | None, dt: float) -> Objective:
-        assert tick is not None
-        H, c = zero_objective(self.variables.n)
-        self.add_qp_objective(tick, dt, H, c)
-        return Objective(H, c)
 
     def add_qp_objective(self, tick: Tick, dt: float, H: np.ndarray, c: np.ndarray) -> None:
         """``H[q̇, q̇] += 2 JᵀW²J``, ``c[q̇] −= 2 JᵀW²v*`` (the joint velocities come first)."""

@@ -14,10 +14,11 @@ Every method takes the tick's measurements and the control period, as mink's tak
 
 Each tick the assembler asks for the same blocks in place, into its own arrays (no
 allocation): :meth:`QPPiece.add_qp_objective`, :meth:`QPPiece.write_qp_inequalities`,
-:meth:`QPPiece.tighten_qp_bounds`. By default they go through the ``compute_qp_*``
-methods; the pieces that change every tick do it the other way round: their arithmetic
-is written once, in place (often a compiled kernel of :mod:`.kernels`), and their
-``compute_qp_*`` apply it to fresh zeros.
+:meth:`QPPiece.tighten_qp_bounds`. A piece writes either form and the base class derives
+the other: the in-place one from ``compute_qp_*`` (add, copy, intersect), or
+``compute_qp_*`` from the in-place one applied to fresh zeros (the pieces that change
+every tick, whose arithmetic is often a compiled kernel of :mod:`.kernels`). So each
+piece's math is written once.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..controller import Tick
+from .variables import Variables
 
 
 @dataclass(frozen=True)
@@ -71,18 +73,41 @@ class QPPiece:
     rows = 0
     constant_objective = False
     constant_bounds = False
+    variables: Variables
+
+    def gives(self, kind: str) -> bool:
+        """True if the piece has a ``kind`` (``"objective"``, ``"inequalities"`` or
+        ``"bounds"``): it defines one of the two methods that give it."""
+        return any(
+            getattr(type(self), m) is not getattr(QPPiece, m)
+            for m in (f"compute_qp_{kind}", _IN_PLACE[kind])
+        )
 
     def compute_qp_objective(self, tick: Tick | None, dt: float) -> Objective | None:
         """The piece's cost, or None."""
-        return None
+        if not self.gives("objective"):
+            return None
+        assert tick is not None
+        H, c = zero_objective(self.variables.n)
+        self.add_qp_objective(tick, dt, H, c)
+        return Objective(H, c)
 
     def compute_qp_inequalities(self, tick: Tick, dt: float) -> Constraint | None:
         """The piece's ``rows`` rows, or None."""
-        return None
+        if not self.gives("inequalities"):
+            return None
+        G, h = no_rows(self.rows, self.variables.n)
+        self.write_qp_inequalities(tick, dt, G, h)
+        return Constraint(G, h)
 
     def compute_qp_bounds(self, tick: Tick | None, dt: float) -> Bounds | None:
         """The piece's bounds, or None."""
-        return None
+        if not self.gives("bounds"):
+            return None
+        assert tick is not None
+        lb, ub = free_bounds(self.variables.n)
+        self.tighten_qp_bounds(tick, dt, lb, ub)
+        return Bounds(lb, ub)
 
     def add_qp_objective(self, tick: Tick, dt: float, H: np.ndarray, c: np.ndarray) -> None:
         """Add the piece's cost to ``H`` (n, n) and ``c`` (n,), in place."""
@@ -103,6 +128,14 @@ class QPPiece:
         if b is not None:
             np.maximum(lb, b.lb, out=lb)
             np.minimum(ub, b.ub, out=ub)
+
+
+#: The in-place method of each kind of block.
+_IN_PLACE = {
+    "objective": "add_qp_objective",
+    "inequalities": "write_qp_inequalities",
+    "bounds": "tighten_qp_bounds",
+}
 
 
 def zero_objective(n: int) -> tuple[np.ndarray, np.ndarray]:

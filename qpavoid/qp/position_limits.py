@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..controller import Tick
-from .pieces import Bounds, QPPiece, free_bounds
+from .pieces import QPPiece
 from .variables import Variables
 
 
@@ -30,12 +30,6 @@ class PositionLimit(QPPiece):
     def __init__(self, variables: Variables, q_min: np.ndarray, q_max: np.ndarray, gain: float):
         self.variables = variables
         self.q_min, self.q_max, self.gain = q_min, q_max, gain
-
-    def compute_qp_bounds(self, tick: Tick | None, dt: float) -> Bounds:
-        assert tick is not None
-        lb, ub = free_bounds(self.variables.n)
-        self.tighten_qp_bounds(tick, dt, lb, ub)
-        return Bounds(lb, ub)
 
     def tighten_qp_bounds(self, tick: Tick, dt: float, lb: np.ndarray, ub: np.ndarray) -> None:
         k = self.gain / dt

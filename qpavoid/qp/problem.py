@@ -101,8 +101,11 @@ class Assembler:
                 if b is not None:
                     np.maximum(self.lb0, b.lb, out=self.lb0)
                     np.minimum(self.ub0, b.ub, out=self.ub0)
-        self._objectives = [p for p in self.pieces if not p.constant_objective]
-        self._bounds = [p for p in self.pieces if not p.constant_bounds]
+        # each tick: only the pieces that have a block of that kind and whose block changes
+        self._objectives = [
+            p for p in self.pieces if p.gives("objective") and not p.constant_objective
+        ]
+        self._bounds = [p for p in self.pieces if p.gives("bounds") and not p.constant_bounds]
         self._rows = [p for p in self.pieces if p.rows]
         offsets = np.cumsum([0] + [p.rows for p in self._rows]).tolist()
         self.rows = {

@@ -25,7 +25,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..controller import Tick
-from .pieces import Bounds, Constraint, Objective, QPPiece, free_bounds, no_rows, readonly
+from .pieces import Bounds, Objective, QPPiece, free_bounds, readonly
 from .variables import Variables
 
 #: Repulsive speeds below this are treated as none (m/s): 0.1 mm/s.
@@ -79,13 +79,8 @@ class RepulsionTask(QPPiece):
         """``s ≥ 0``."""
         return self._bounds
 
-    def compute_qp_inequalities(self, tick: Tick, dt: float) -> Constraint:
-        """One row: ``−uᵀ J_p q̇ − s ≤ −(uᵀ ṗ_nominal + |v|)``."""
-        G, h = no_rows(1, self.variables.n)
-        self.write_qp_inequalities(tick, dt, G, h)
-        return Constraint(G, h)
-
     def write_qp_inequalities(self, tick: Tick, dt: float, G: np.ndarray, h: np.ndarray) -> None:
+        """One row: ``−uᵀ J_p q̇ − s ≤ −(uᵀ ṗ_nominal + |v|)``."""
         row = G[0]
         row[:] = 0.0
         row[self.slack] = -1.0

@@ -20,7 +20,7 @@ from ..compiling import kernel_input
 from ..ssm import BOUND_INACTIVE_MPS
 from ..tick import Tick
 from .kernels import check_rows, pair_inputs, separation_rows
-from .pieces import Constraint, QPPiece, no_rows
+from .pieces import QPPiece
 from .variables import Variables
 
 
@@ -45,13 +45,8 @@ class SeparationLimit(QPPiece):
         self.variables, self.rows = variables, rows
         self.inactive_above_mps = float(inactive_above_mps)  # as compiled
 
-    def compute_qp_inequalities(self, tick: Tick, dt: float) -> Constraint:
-        """(rows, n) G and (rows,) h, one row per set × part pair."""
-        G, h = no_rows(self.rows, self.variables.n)
-        self.write_qp_inequalities(tick, dt, G, h)
-        return Constraint(G, h)
-
     def write_qp_inequalities(self, tick: Tick, dt: float, G: np.ndarray, h: np.ndarray) -> None:
+        """(rows, n) G and (rows,) h, one row per set × part pair."""
         check_rows(self.name, self.rows, tick.approach_limit.size, G, h)
         separation_rows(  # the joint velocities are the first columns
             kernel_input(tick.approach_limit.reshape(-1), np.float64),

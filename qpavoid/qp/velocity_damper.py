@@ -24,7 +24,7 @@ from ..compiling import kernel_input
 from ..controller import Tick
 from ..errors import InputError
 from .kernels import check_rows, damper_rows, pair_inputs
-from .pieces import Constraint, QPPiece, no_rows
+from .pieces import QPPiece
 from .variables import Variables
 
 
@@ -67,13 +67,8 @@ class VelocityDamper(QPPiece):
         self.influence_m, self.gain = float(influence_m), float(gain_mps)  # as compiled
         self.rows = len(self.d_stop)
 
-    def compute_qp_inequalities(self, tick: Tick, dt: float) -> Constraint:
-        """(rows, n) G and (rows,) h, one row per set × part pair."""
-        G, h = no_rows(self.rows, self.variables.n)
-        self.write_qp_inequalities(tick, dt, G, h)
-        return Constraint(G, h)
-
     def write_qp_inequalities(self, tick: Tick, dt: float, G: np.ndarray, h: np.ndarray) -> None:
+        """(rows, n) G and (rows,) h, one row per set × part pair."""
         check_rows(self.name, self.rows, tick.table.distance.size, G, h)
         damper_rows(  # the joint velocities are the first columns
             kernel_input(tick.table.distance.reshape(-1), np.float64),

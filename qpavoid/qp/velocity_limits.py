@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..controller import Tick
-from .pieces import Bounds, QPPiece, free_bounds
+from .pieces import QPPiece
 from .variables import Variables
 
 
@@ -20,12 +20,6 @@ class VelocityLimit(QPPiece):
 
     def __init__(self, variables: Variables):
         self.variables = variables
-
-    def compute_qp_bounds(self, tick: Tick | None, dt: float) -> Bounds:
-        assert tick is not None
-        lb, ub = free_bounds(self.variables.n)
-        self.tighten_qp_bounds(tick, dt, lb, ub)
-        return Bounds(lb, ub)
 
     def tighten_qp_bounds(self, tick: Tick, dt: float, lb: np.ndarray, ub: np.ndarray) -> None:
         lo, hi = lb[self.variables.dq], ub[self.variables.dq]
