@@ -8,6 +8,7 @@ usable point has distance +inf, a zero vector and NaN witness points.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -54,7 +55,7 @@ class DistanceTable:
     human_index: np.ndarray
     set_names: tuple[str, ...]
     part_names: tuple[str, ...]
-    _witness: tuple = field(repr=False, default=())
+    _witness: tuple | Callable[[], tuple[np.ndarray, np.ndarray]] = field(repr=False, default=())
 
     @cached_property
     def robot_point(self) -> np.ndarray:
@@ -66,7 +67,9 @@ class DistanceTable:
 
     @cached_property
     def _witnesses(self) -> tuple[np.ndarray, np.ndarray]:
-        if len(self._witness) == 2:  # capsules, or computed already (several people)
+        if callable(self._witness):  # several people's: picked from theirs when asked
+            return self._witness()
+        if len(self._witness) == 2:  # capsules
             return self._witness
         # spheres: the centres moved by their radii along the direction.
         P, H, r_robot, r_human, part_margin = self._witness
