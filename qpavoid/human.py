@@ -26,7 +26,7 @@ import numpy as np
 
 from .compiling import kernel_input
 from .frames import N_KINECT_JOINTS, HumanFrame, JointType, TrackingState
-from .perception_kernels import capsules, largest_per_part, warm_up
+from .perception_kernels import tracked_body, warm_up
 
 __all__ = [
     "N_KINECT_JOINTS",
@@ -274,6 +274,30 @@ class KinectHuman:
         """
         return self.geometry(joints, state).points
 
+    def tracked_geometry(
+        self, frame: HumanFrame, joint_radius: np.ndarray, joint_velocity: np.ndarray
+    ) -> tuple[HumanGeometry, np.ndarray]:
+        """A tracker's frame (:class:`~qpavoid.perception.Perceived`) in one compiled call:
+        :meth:`geometry` with ``joint_radius`` (25,), m, and each part's velocity (K, 3),
+        m/s, that of its fastest joint (:func:`~qpavoid.perception.part_velocities`).
+
+        Each part's capsule runs between the first and last usable joints of its chain;
+        how far the fingers stick out of it widens it (perception_kernels.capsules)."""
+        points, point_valid, segments, segment_valid, reach, margin, velocity = tracked_body(
+            kernel_input(frame.joints, np.float64),
+            kernel_input(frame.state, np.int8),
+            kernel_input(joint_radius, np.float64),
+            kernel_input(joint_velocity, np.float64),
+            self.joint_ids,
+            self._mid_ids,
+            self._chains,
+            self._reach,
+            self._radii,
+            self._members,
+        )
+        geometry = HumanGeometry(points, point_valid, segments, segment_valid, margin, reach)
+        return geometry, velocity
+
     def part_joints(self) -> np.ndarray:
         """(K, 25) bool: the Kinect joints of each part (chain, mid-point ends and reach)."""
         return self._members.copy()
@@ -289,20 +313,5 @@ class KinectHuman:
         ``part_margin`` is the largest of its joints'.
         """
         frame = HumanFrame.check(joints, state)
-        # each part's capsule: the first and last usable joints of its chain; the points;
-        # how far the fingers stick out (perception_kernels.capsules)
-        points, point_valid, segments, segment_valid, reach = capsules(
-            kernel_input(frame.joints, np.float64),
-            kernel_input(frame.state, np.int8),
-            self.joint_ids,
-            self._mid_ids,
-            self._chains,
-            self._reach,
-            self._radii,
-        )
-        margin = (
-            None
-            if joint_radius is None
-            else largest_per_part(self._members, np.asarray(joint_radius, dtype=np.float64))
-        )
-        return HumanGeometry(points, point_valid, segments, segment_valid, margin, reach)
+        radius = np.zeros(N_KINECT_JOINTS) if joint_radius is None else joint_radius
+        return self.tracked_geometry(frame, radius, np.zeros((N_KINECT_JOINTS, 3)))[0]

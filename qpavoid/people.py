@@ -22,7 +22,7 @@ from .distance_table import DistanceTable
 from .errors import InputError
 from .frames import HumanFrame, HumanMotion
 from .human import HumanGeometry, KinectHuman
-from .perception import PeopleTracker, Perceived, PerceptionConfig, part_velocities
+from .perception import PeopleTracker, Perceived, PerceptionConfig
 from .recording import Recording
 
 __all__ = ["NOBODY", "Crowd", "People", "Perceiver", "as_people", "closest_of", "same_frames"]
@@ -117,7 +117,6 @@ class Perceiver:
     def __init__(self, human: KinectHuman, cfg: PerceptionConfig | None = None):
         self.human = human
         self.trackers = PeopleTracker(cfg)
-        self.part_joints = human.part_joints()
         self.perceived: list[Perceived] = []
         self.geometry: list[HumanGeometry] = []
         self.part_velocity = np.zeros((0, len(human.parts), 3))
@@ -128,12 +127,12 @@ class Perceiver:
         last = self._frame
         if last is None or not same_frames(people, last[0]) or frame_time_s != last[1]:
             self.perceived = self.trackers.update(people.ids, people.frames, captured_s)
-            self.geometry = [
-                self.human.geometry(p.frame, joint_radius=p.joint_radius) for p in self.perceived
+            bodies = [
+                self.human.tracked_geometry(p.frame, p.joint_radius, p.joint_velocity)
+                for p in self.perceived
             ]
-            self.part_velocity = np.stack(
-                [part_velocities([p.joint_velocity], self.part_joints) for p in self.perceived]
-            )
+            self.geometry = [geometry for geometry, _ in bodies]
+            self.part_velocity = np.array([velocity for _, velocity in bodies])
             self._frame = (people, frame_time_s)
         return self
 

@@ -232,6 +232,30 @@ def fastest_joint(members: np.ndarray, velocity: np.ndarray) -> np.ndarray:
     return out
 
 
+@njit(cache=True)
+def tracked_body(
+    joints: np.ndarray,
+    state: np.ndarray,
+    joint_radius: np.ndarray,
+    joint_velocity: np.ndarray,
+    joint_ids: np.ndarray,
+    mid_ids: np.ndarray,
+    chains: np.ndarray,
+    reach_pairs: np.ndarray,
+    capsule_radii: np.ndarray,
+    members: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A tracked frame's body in one call: :func:`capsules`, then each part's margin
+    (:func:`largest_per_part` of the joints' uncertainty ``joint_radius``, m) and
+    velocity (:func:`fastest_joint` of ``joint_velocity``, m/s), (K,) and (K, 3)."""
+    points, point_valid, segments, segment_valid, reach = capsules(
+        joints, state, joint_ids, mid_ids, chains, reach_pairs, capsule_radii
+    )
+    margin = largest_per_part(members, joint_radius)
+    velocity = fastest_joint(members, joint_velocity)
+    return points, point_valid, segments, segment_valid, reach, margin, velocity
+
+
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) every kernel, once per process."""
@@ -267,3 +291,5 @@ def warm_up() -> None:
         members = np.ones((2, 25), dtype=np.bool_)
         largest_per_part(members, np.zeros(25))
         fastest_joint(members, z)
+        pairs = np.zeros((1, 2), dtype=np.int64)
+        tracked_body(z, state, np.zeros(25), z, ids, pairs, pairs, pairs, np.ones(1), members)

@@ -206,3 +206,28 @@ def test_a_stop_is_a_ramp_after_the_reaction_time():
     assert stop_time(dq, [8.0, 8.0]) == pytest.approx(0.05)
     first_zero = int(np.flatnonzero(~out.any(axis=1))[0])
     assert first_zero == 2 + 24  # 0.05 s / 2 ms = 25 steps, the 25th lands on zero
+
+
+def test_tracked_geometry_is_geometry_and_part_velocities_in_one_call():
+    """The perceiver's one compiled call (capsules, margins, part velocities) against the
+    separate calls it replaced, on random frames with lost, inferred and NaN joints."""
+    rng = np.random.default_rng(7)
+    human = KinectHuman()
+    parts = human.part_joints()
+    for _ in range(200):
+        joints = Operator().rest() + rng.normal(0.0, 0.05, (25, 3))
+        state = rng.choice([0, 1, 2], size=25, p=[0.15, 0.15, 0.7]).astype(np.int8)
+        joints[rng.random(25) < 0.1] = np.nan
+        frame = HumanFrame.check(joints, state)
+        radius, velocity = rng.random(25) * 0.2, rng.normal(0.0, 1.0, (25, 3))
+        geo, part_v = human.tracked_geometry(frame, radius, velocity)
+        ref = human.geometry(frame, joint_radius=radius)
+        for name in ("points", "point_valid", "segments", "segment_valid", "part_margin",
+                     "reach_margin"):  # fmt: skip
+            np.testing.assert_array_equal(getattr(geo, name), getattr(ref, name), err_msg=name)
+        np.testing.assert_array_equal(part_v, part_velocities([velocity], parts))
+        # and against brute force: each part's largest radius and fastest joint
+        np.testing.assert_array_equal(geo.part_margin, [radius[row].max() for row in parts])
+        fastest = [np.flatnonzero(row)[np.argmax(np.linalg.norm(velocity[row], axis=1))]
+                   for row in parts]  # fmt: skip
+        np.testing.assert_array_equal(part_v, velocity[fastest])

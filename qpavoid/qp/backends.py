@@ -24,7 +24,7 @@ import scipy.sparse as sp
 
 from ..compiling import kernel_input
 from ..errors import InputError, SolverError
-from .checks import check_shapes, crossed_bounds, infeasible_bounds, not_finite
+from .checks import DEFECTS, check_shapes, crossed_bounds, infeasible_bounds, not_finite
 from .config import QPConfig
 from .kernels import flush_tiny, osqp_arrays
 from .problem import QPProblem, QPSolution
@@ -125,12 +125,10 @@ class PersistentOSQP:
 
     def solve(self, prob: QPProblem) -> QPSolution:
         check_shapes(prob, self.n, self.m)
-        failed = not_finite(prob)
-        if failed is not None:
-            return failed
         Px, Ax, lower, upper = self._Px, self._Ax, self._l, self._u
-        crossed = osqp_arrays(
+        defect, crossed = osqp_arrays(  # checked (checks.not_finite) and copied in one pass
             kernel_input(prob.H, np.float64),
+            kernel_input(prob.c, np.float64),
             kernel_input(prob.G, np.float64),
             kernel_input(prob.h, np.float64),
             kernel_input(prob.lb, np.float64),
@@ -142,6 +140,8 @@ class PersistentOSQP:
             lower,
             upper,
         )
+        if defect:
+            return QPSolution(None, False, DEFECTS[defect])
         # OSQP rejects l > u (or a non-convex P) in an update by keeping the *previous*
         # data, after which solve() reports "solved" for that old problem: never let it.
         if crossed >= 0:
@@ -166,7 +166,7 @@ class PersistentOSQP:
             status_val, status, iters = res.info.status_val, res.info.status, res.info.iter
             x = self._clean_warm_start(self._solver, res)
         found = status_val == self._solved
-        return QPSolution(np.array(x) if found else None, found, str(status), int(iters))
+        return QPSolution(x if found else None, found, str(status), int(iters))  # x: a copy
 
     @staticmethod
     def _clean_warm_start(solver: Any, solution: Any) -> np.ndarray:

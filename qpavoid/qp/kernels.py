@@ -181,6 +181,7 @@ def problem_defect(
 @njit(cache=True)
 def osqp_arrays(
     H: np.ndarray,
+    c: np.ndarray,
     G: np.ndarray,
     h: np.ndarray,
     lb: np.ndarray,
@@ -191,12 +192,18 @@ def osqp_arrays(
     Ax: np.ndarray,
     lower: np.ndarray,
     upper: np.ndarray,
-) -> int:
+) -> tuple[int, int]:
     """OSQP's data of ``min ½xᵀHx + cᵀx, Gx ≤ h, lb ≤ x ≤ ub`` as ``l ≤ A x ≤ u`` with
     ``A = [I; G]``, in place: ``Px`` the entries ``H.flat[p_index]`` (its upper
     triangle in CSC order), ``Ax`` A's entries column by column (every entry of G is in
     the pattern), ``lower = [lb; −∞]``, ``upper = [ub; h]``, infinities clipped to OSQP's
-    ``infinity``. Returns the first row with ``lower > upper``, or −1."""
+    ``infinity``.
+
+    Returns ``(defect, crossed)``: :func:`problem_defect`'s code (nothing is written
+    unless it is 0) and the first row with ``lower > upper``, or −1."""
+    defect = problem_defect(H, c, G, h, lb, ub)
+    if defect:
+        return defect, -1
     n, m = G.shape[1], G.shape[0]
     for k in range(p_index.shape[0]):
         Px[k] = H.flat[p_index[k]]
@@ -212,8 +219,8 @@ def osqp_arrays(
         upper[n + r] = min(h[r], infinity)
     for k in range(n + m):
         if lower[k] > upper[k]:
-            return k
-    return -1
+            return 0, k
+    return 0, -1
 
 
 @njit(cache=True)
@@ -274,7 +281,7 @@ def warm_up() -> None:
         flush_tiny(c, 1e-20)
         lower, upper = np.zeros(n + 2), np.zeros(n + 2)
         osqp_arrays(
-            H, G, h, c, c, np.zeros(3, dtype=np.int64), 1e30, c, np.zeros(3 * n), lower, upper
+            H, c, G, h, c, c, np.zeros(3, dtype=np.int64), 1e30, c, np.zeros(3 * n), lower, upper
         )
 
 
