@@ -17,6 +17,10 @@ qpavoid's waits while it stops; the peers always chase the reference of the mome
   daqp backend (``QPConfig(backend="daqp")``: daqp called directly); and, in a second interleaved
   phase of the same run, six people (the same person and five others standing 0.8 m
   apart along the table, every skeleton new every tick).
+* **floor**: right after qpavoid's sphere tick, at its q, only the library calls such a
+  tick cannot do without (:class:`Floor`: Pinocchio's kinematics and the control frames'
+  placements and Jacobians, OSQP's update and solve of that tick's own data): the time
+  left to qpavoid's own code is the difference. A time only (it commands nothing).
 * **pink**: ``solve_ik`` with a ``FrameTask`` (the flange), a ``PostureTask`` (1e-3),
   configuration and velocity limits and **one** ``BodySphericalBarrier`` between the
   flange and a frame placed at the hand each tick (d_min 0.15 m), on our reduced
@@ -48,6 +52,7 @@ from qpavoid.geometry import point_segment_distance
 from qpavoid.people import People
 from qpavoid.perception import PerceptionConfig
 from qpavoid.qp import QPConfig, QPController
+from qpavoid.qp.backends import PersistentOSQP
 from qpavoid.robot import load_robot
 from qpavoid.scenarios import make_scenario
 from qpavoid.task import ArcPath, inverse_kinematics
@@ -148,6 +153,41 @@ class Mink:
         )
 
 
+class Floor:
+    """The library calls a qpavoid tick cannot do without, and nothing else: Pinocchio's
+    joint Jacobians and frame placements, each control frame's position and Jacobian,
+    then OSQP's update and solve of the very data the sphere tick just built (read from
+    its persistent problem's buffers; a second model and a second persistent problem of
+    the same pattern), stepped right after that tick at its q; it commands nothing."""
+
+    def __init__(self, robot, source: QPController):
+        self.model = robot.model.copy()
+        self.data = self.model.createData()
+        frames = set(robot.point_frames) | {f for s in robot.sets for f in s.capsule_frames}
+        self.frames, self.ee = sorted(frames), robot.ee_frame
+        # the sphere tick's OSQP data: its backend's buffers and its assembler's c, the
+        # same arrays every tick (private: a benchmark's peek, not an interface)
+        self.source, self.c = source.backend, source.assembler._filled.c
+        self.osqp = PersistentOSQP(self.source.n, self.source.m, QPConfig())._native
+
+    def step(self, q) -> None:
+        model, data, src = self.model, self.data, self.source
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        frames = [*self.frames, self.ee]
+        self.kinematics = (  # what a tick reads: placements and Jacobians
+            [data.oMf[f].homogeneous for f in frames],
+            [pin.getFrameJacobian(model, data, f, LWA) for f in frames],
+        )
+        self.osqp.update_data_vec(q=self.c, l=src._l, u=src._u)
+        self.osqp.update_data_mat(P_x=src._Px, P_i=None, A_x=src._Ax, A_i=None)
+        self.osqp.solve()
+        self.x = self.osqp.solution.x
+
+
+LWA = pin.LOCAL_WORLD_ALIGNED
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=15.0)
@@ -161,8 +201,11 @@ def main() -> None:
     def ours(kind: str, distance: str, **qp) -> tuple[str, QPController]:
         return kind, QPController(robot, config=ideal(distance=distance), qp=QPConfig(**qp))
 
+    spheres = ours("qp", "spheres")
     variants = {
-        "qpavoid QP, spheres (persistent OSQP)": ours("qp", "spheres"),
+        "qpavoid QP, spheres (persistent OSQP)": spheres,
+        # right after it in each tick, the floor of its libraries (see Floor)
+        "floor: Pinocchio + OSQP calls of that tick": ("floor", Floor(robot, spheres[1])),
         "qpavoid QP, capsules (persistent OSQP)": ours("qp", "capsules"),
         "qpavoid QP, spheres (daqp)": ours("qp", "spheres", backend="daqp"),
     }
@@ -199,8 +242,15 @@ def _interleaved(variants: dict, robot, path, motion, q0, seconds: float) -> dic
         crowd = People(tuple(range(6)), (frame, *others))  # and five others at the table
         hand = frame.joints[JointType.HandRight]
         target = pin.SE3(path.reference(t)[0])
+        stepped_q = q0  # the q of the variant stepped last (the floor times its calls)
         for name, (kind, ctrl) in variants.items():
-            q, tau = state[name], clock[name]
+            if kind == "floor":  # at the q of the tick just stepped: its time alone
+                t0 = time.perf_counter_ns()
+                ctrl.step(stepped_q)
+                times[name].append((time.perf_counter_ns() - t0) / 1e3)
+                continue
+            stepped_q = q = state[name]
+            tau = clock[name]
             t0 = time.perf_counter_ns()
             if kind in ("qp", "qp6"):  # qpavoid's path clock waits while it stops
                 cmd = ctrl.step(q, frame if kind == "qp" else crowd, None, tau)
@@ -221,9 +271,11 @@ def _interleaved(variants: dict, robot, path, motion, q0, seconds: float) -> dic
     )
     for name in variants:
         tt = np.array(times[name][10:])
-        rows[name] = {
-            "median_us": float(np.median(tt)),
-            "p99_us": float(np.percentile(tt, 99)),
+        rows[name] = {"median_us": float(np.median(tt)), "p99_us": float(np.percentile(tt, 99))}
+        if not clear[name]:  # the floor: a time, no motion of its own
+            print(f"{name:48s} {rows[name]['median_us']:10.0f} {rows[name]['p99_us']:8.0f}")
+            continue
+        rows[name] |= {
             "min_clearance_m": float(np.min(clear[name])),
             "max_path_error_mm": float(np.max(error[name]) * 1e3),
             "path_time_behind_s": float(seconds - clock[name]),
