@@ -22,18 +22,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._checks import finite_number
+from .compiling import kernel_input
 from .distances import distance_method
 from .errors import SolverError
 from .frames import HumanFrame
 from .human import HumanGeometry, KinectHuman
-from .laws import (
-    ee_repulsive_velocity,
-    l1_factor,
-    modified_ik,
-    repulsive_velocity,
-    scaled_velocity_limits,
-    stop_reason,
-)
+from .law_kernels import avoidance_terms, law_constants, warm_up
+from .laws import modified_ik, scaled_velocity_limits, stop_reason
 from .people import NOBODY, People, Perceiver, as_people
 from .perception import Perceived
 from .robot import Robot, joint_columns
@@ -92,6 +87,8 @@ class Controller:
         self._no_bound, self._no_approach = np.full(shape, np.inf), np.zeros(shape)
         for a in (self._no_bound, self._no_approach):
             a.setflags(write=False)
+        self._law_constants = law_constants(self.config.avoidance)
+        warm_up()  # law_kernels, before the first tick
         self._clock_s = 0.0  # the controller's own clock: control periods since it started
         self.closest_frame: HumanFrame | None = None  # the closest person's, last tick
 
@@ -137,7 +134,15 @@ class Controller:
             geos = self.geometry(people)
             v_people = np.zeros((len(percs), len(self.human.parts), 3))
         table, who = self.distances.closest(kin, geos)
-        dmin = table.min_per_set()
+        # the minima, eqs. (2), (4)-(5) and (7) in one compiled call (law_kernels)
+        dmin, f, j, v_rep_L2, v_rep_EE = avoidance_terms(
+            kernel_input(table.distance, np.float64),
+            kernel_input(table.vector, np.float64),
+            self.i_L1,
+            self.i_L2,
+            self.i_EE,
+            *self._law_constants,
+        )
         nearest = (
             int(who.flat[np.argmin(table.distance)])
             if len(geos) > 1 and np.isfinite(dmin).any()
@@ -146,7 +151,6 @@ class Controller:
         perceived, geo = percs[nearest], geos[nearest]
         frame = self.closest_frame = people.frames[nearest] if people.ids else NOBODY
         cfg = self.config.avoidance
-        f = float(l1_factor(dmin[self.i_L1], cfg))  # eq. (2)
         limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)  # eq. (3)
         if self.config.safety == "ssm":
             ssm = with_stop_time(self.ssm, self.stop_budget.budget())
@@ -155,13 +159,6 @@ class Controller:
             limits = np.minimum(limits, self.accel * ssm.stop_time_s)  # |q̇_j| ≤ a_j T_s
         else:
             approach_limit, human_approach = self._no_bound, self._no_approach
-        j = table.closest_part(self.i_L2)
-        v_rep_L2 = repulsive_velocity(
-            table.distance[self.i_L2, j], table.vector[self.i_L2, j], cfg
-        )  # eqs. (4)-(5)
-        v_rep_EE = ee_repulsive_velocity(
-            table.distance[self.i_EE], table.vector[self.i_EE], cfg
-        )  # eq. (7)
         ref_pose, ref_twist = self.path.reference(t)
         error = pose_error(ref_pose, kin.ee_placement)
         frozen = self.config.perception.max_identical_frames

@@ -14,7 +14,7 @@ import sys
 LOOP = """
 import json
 import numpy as np
-from qpavoid import distance_kernels, fusion_kernels, fusion_person, perception_kernels
+from qpavoid import distance_kernels, fusion_kernels, fusion_person, law_kernels, perception_kernels
 from qpavoid.qp import kernels as qp_kernels
 from qpavoid.calibration import Calibration
 from qpavoid.controller import ControllerConfig
@@ -27,7 +27,8 @@ from qpavoid.runs import RunSpec, simulate_one
 from qpavoid.scenarios import make_scenario
 from qpavoid.two_sensors import TwoSensorConfig, two_sensor_data
 
-modules = (distance_kernels, fusion_kernels, fusion_person, perception_kernels, qp_kernels)
+modules = (distance_kernels, fusion_kernels, fusion_person, law_kernels, perception_kernels,
+           qp_kernels)
 kernels = {
     f"{m.__name__}.{n}": getattr(m, n)
     for m in modules

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from qpavoid.law_kernels import avoidance_terms, law_constants
 from qpavoid.laws import (
     AvoidanceConfig,
     damped_pinv,
@@ -116,3 +117,33 @@ def test_stop_rules(f, d_l2, d_ee, expect):
         assert reason is None
     else:
         assert reason.startswith(expect)
+
+
+def test_the_compiled_avoidance_terms_are_the_laws():
+    """law_kernels.avoidance_terms against the laws it composes (and the table's minima),
+    on random tables with unseen parts (+inf, NaN directions), ties and contact."""
+    rng = np.random.default_rng(3)
+    for n in range(500):
+        cfg = AvoidanceConfig(
+            rho_L1_m=rng.uniform(0.05, 0.3),
+            alpha_L1=rng.uniform(3.0, 12.0),
+            rho_rep_m=rng.uniform(0.05, 0.4),
+            alpha_rep=rng.uniform(3.0, 12.0),
+            v_max_mps=rng.uniform(0.1, 1.0),
+        )
+        d = rng.uniform(-0.02, 0.4, (3, 8))
+        v = rng.normal(size=(3, 8, 3))
+        v /= np.linalg.norm(v, axis=2, keepdims=True)
+        unseen = rng.random((3, 8)) < 0.3
+        d[unseen], v[unseen] = np.inf, np.nan
+        if n % 50 == 0:
+            d[1] = np.inf  # L2 sees nobody
+        if n % 50 == 1:
+            d[1, 2:4], v[1, 2:4] = d[1].min(), [0.0, 0.0, 1.0]  # a tie: the first, as argmin
+        dmin, f, j, v_l2, v_ee = avoidance_terms(d, v, 0, 1, 2, *law_constants(cfg))
+        np.testing.assert_array_equal(dmin, d.min(axis=1))
+        assert j == int(np.argmin(d[1]))
+        assert f == pytest.approx(float(l1_factor(d[0].min(), cfg)), abs=1e-15)
+        np.testing.assert_allclose(v_l2, repulsive_velocity(d[1, j], v[1, j], cfg), atol=1e-15)
+        np.testing.assert_allclose(v_ee, ee_repulsive_velocity(d[2], v[2], cfg), atol=1e-15)
+        assert np.isfinite(v_l2).all() and np.isfinite(v_ee).all()

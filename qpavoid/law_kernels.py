@@ -1,0 +1,96 @@
+"""One tick's avoidance terms, compiled (numba): the minima and eqs. (2), (4), (5), (7).
+
+:class:`~qpavoid.controller.Controller.measure` needs, from the distance table, each
+set's minimum distance, the factor f of eq. (2), the part closest to L2 and the
+repulsive velocities of eqs. (5) and (7): a dozen numpy calls on arrays of eight parts,
+whose call overhead outweighed their arithmetic (docs/performance.md §2a).
+:func:`avoidance_terms` makes them one call. The logistic of eqs. (2) and (4) is
+:func:`qpavoid.laws.logistic` itself, compiled from its source; the rest composes it as
+:func:`~qpavoid.laws.repulsive_velocity` and :func:`~qpavoid.laws.ee_repulsive_velocity`
+do, and ``tests/test_laws.py`` checks the two against each other.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+from numba import njit
+
+from .compiling import ctrl_c_deferred
+from .laws import AvoidanceConfig, logistic
+
+__all__ = ["avoidance_terms", "law_constants", "warm_up"]
+
+_logistic = njit(cache=True)(logistic)  # the law's own source, compiled
+
+
+@njit(cache=True)
+def avoidance_terms(
+    distance: np.ndarray,
+    vector: np.ndarray,
+    i_L1: int,
+    i_L2: int,
+    i_EE: int,
+    rho_L1: float,
+    alpha_L1: float,
+    rho_rep: float,
+    alpha_rep: float,
+    v_max: float,
+) -> tuple[np.ndarray, float, int, np.ndarray, np.ndarray]:
+    """The avoidance terms of one tick.
+
+    Parameters
+    ----------
+    distance, vector
+        The distance table's (S, K) distances, m, and (S, K, 3) unit directions human →
+        robot (+inf and anything for a part not seen).
+    i_L1, i_L2, i_EE
+        Rows of the sets L1, L2 and EE.
+    rho_L1, alpha_L1, rho_rep, alpha_rep, v_max
+        ρ and α of eq. (2) and of eq. (4) (m, 1) and V_max (m/s): an
+        :class:`~qpavoid.laws.AvoidanceConfig`'s.
+
+    Returns
+    -------
+    dmin, f, j, v_rep_L2, v_rep_EE
+        (S,) each set's minimum distance (``DistanceTable.min_per_set``); f of eq. (2)
+        at L1's; the column of the part closest to L2 (``closest_part``); eq. (5)'s
+        velocity (3,) of L2 away from that part (0 if it is not seen) and eq. (7)'s sum
+        (3,) over the parts EE sees, m/s.
+    """
+    S = distance.shape[0]
+    dmin = np.empty(S)
+    for s in range(S):
+        dmin[s] = distance[s].min()
+    f = _logistic(dmin[i_L1], rho_L1, alpha_L1)  # eq. (2)
+    j = np.argmin(distance[i_L2])
+    v_rep_L2 = np.zeros(3)
+    d = distance[i_L2, j]
+    if np.isfinite(d):  # eqs. (4)-(5)
+        v_rep_L2[:] = v_max * _logistic(d, rho_rep, alpha_rep) * vector[i_L2, j]
+    v_rep_EE = np.zeros(3)
+    for k in range(distance.shape[1]):  # eq. (7): 0 for a part not seen (d = +inf)
+        speed = v_max * _logistic(distance[i_EE, k], rho_rep, alpha_rep)
+        if speed > 0.0:
+            v_rep_EE += speed * vector[i_EE, k]
+    return dmin, float(f), int(j), v_rep_L2, v_rep_EE
+
+
+def law_constants(cfg: AvoidanceConfig) -> tuple[float, float, float, float, float]:
+    """``cfg``'s constants in :func:`avoidance_terms`' order, as floats (an int would make
+    numba compile a second specialisation at the first tick)."""
+    return (
+        float(cfg.rho_L1_m),
+        float(cfg.alpha_L1),
+        float(cfg.rho_rep_m),
+        float(cfg.alpha_rep),
+        float(cfg.v_max_mps),
+    )
+
+
+@functools.cache
+def warm_up() -> None:
+    """Compile (or load from the disk cache) the kernel, once per process."""
+    with ctrl_c_deferred():
+        avoidance_terms(np.ones((3, 2)), np.zeros((3, 2, 3)), 0, 1, 2, 0.1, 9.0, 0.2, 9.0, 0.25)
