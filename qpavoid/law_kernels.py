@@ -72,7 +72,7 @@ def avoidance_terms(
     v_rep_EE = np.zeros(3)
     for k in range(distance.shape[1]):  # eq. (7): 0 for a part not seen (d = +inf)
         speed = v_max * _logistic(distance[i_EE, k], rho_rep, alpha_rep)
-        if speed > 0.0:
+        if speed > 0.0 or np.isnan(speed):  # a NaN distance spoils the sum, as in laws.py
             v_rep_EE += speed * vector[i_EE, k]
     return dmin, float(f), int(j), v_rep_L2, v_rep_EE
 
