@@ -28,7 +28,7 @@ from .errors import SolverError
 from .frames import HumanFrame
 from .human import HumanGeometry, KinectHuman
 from .law_kernels import avoidance_terms, law_constants, warm_up
-from .laws import modified_ik, scaled_velocity_limits, stop_reason
+from .laws import l1_factor, modified_ik, scaled_velocity_limits, stop_reason
 from .people import NOBODY, People, Perceiver, as_people
 from .perception import Perceived
 from .robot import Robot, joint_columns
@@ -87,7 +87,6 @@ class Controller:
         self._no_bound, self._no_approach = np.full(shape, np.inf), np.zeros(shape)
         for a in (self._no_bound, self._no_approach):
             a.setflags(write=False)
-        self._law_constants = law_constants(self.config.avoidance)
         warm_up()  # law_kernels, before the first tick
         self._clock_s = 0.0  # the controller's own clock: control periods since it started
         self.closest_frame: HumanFrame | None = None  # the closest person's, last tick
@@ -134,14 +133,14 @@ class Controller:
             geos = self.geometry(people)
             v_people = np.zeros((len(percs), len(self.human.parts), 3))
         table, who = self.distances.closest(kin, geos)
-        # the minima, eqs. (2), (4)-(5) and (7) in one compiled call (law_kernels)
-        dmin, f, j, v_rep_L2, v_rep_EE = avoidance_terms(
+        cfg = self.config.avoidance
+        # the minima, eqs. (4)-(5) and (7) in one compiled call (law_kernels)
+        dmin, j, v_rep_L2, v_rep_EE = avoidance_terms(
             kernel_input(table.distance, np.float64),
             kernel_input(table.vector, np.float64),
-            self.i_L1,
             self.i_L2,
             self.i_EE,
-            *self._law_constants,
+            *law_constants(cfg),
         )
         nearest = (
             int(who.flat[np.argmin(table.distance)])
@@ -150,7 +149,7 @@ class Controller:
         )
         perceived, geo = percs[nearest], geos[nearest]
         frame = self.closest_frame = people.frames[nearest] if people.ids else NOBODY
-        cfg = self.config.avoidance
+        f = float(l1_factor(dmin[self.i_L1], cfg))  # eq. (2)
         limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)  # eq. (3)
         if self.config.safety == "ssm":
             ssm = with_stop_time(self.ssm, self.stop_budget.budget())

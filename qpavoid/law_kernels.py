@@ -1,13 +1,14 @@
-"""One tick's avoidance terms, compiled (numba): the minima and eqs. (2), (4), (5), (7).
+"""One tick's avoidance terms, compiled (numba): the minima and eqs. (4), (5), (7).
 
 :class:`~qpavoid.controller.Controller.measure` needs, from the distance table, each
-set's minimum distance, the factor f of eq. (2), the part closest to L2 and the
-repulsive velocities of eqs. (5) and (7): a dozen numpy calls on arrays of eight parts,
-whose call overhead outweighed their arithmetic (docs/performance.md §2a).
-:func:`avoidance_terms` makes them one call. The logistic of eqs. (2) and (4) is
-:func:`qpavoid.laws.logistic` itself, compiled from its source; the rest composes it as
-:func:`~qpavoid.laws.repulsive_velocity` and :func:`~qpavoid.laws.ee_repulsive_velocity`
-do, and ``tests/test_laws.py`` checks the two against each other.
+set's minimum distance, the part closest to L2 and the repulsive velocities of eqs. (5)
+and (7): a dozen numpy calls on arrays of eight parts, whose call overhead outweighed
+their arithmetic (docs/performance.md §2a). :func:`avoidance_terms` makes them one call.
+The logistic of eq. (4) is :func:`qpavoid.laws.logistic` itself, compiled from its
+source; the rest composes it as :func:`~qpavoid.laws.repulsive_velocity` and
+:func:`~qpavoid.laws.ee_repulsive_velocity` do, and ``tests/test_laws.py`` checks the
+two against each other. f of eq. (2) stays :func:`~qpavoid.laws.l1_factor`'s: numba's
+tanh and numpy's differ in the last bit for some distances, and f decides a stop.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from .compiling import ctrl_c_deferred
-from .laws import AvoidanceConfig, logistic
+from .laws import AvoidanceConfig, ee_repulsive_velocity, logistic
 
 __all__ = ["avoidance_terms", "law_constants", "warm_up"]
 
@@ -29,15 +30,12 @@ _logistic = njit(cache=True)(logistic)  # the law's own source, compiled
 def avoidance_terms(
     distance: np.ndarray,
     vector: np.ndarray,
-    i_L1: int,
     i_L2: int,
     i_EE: int,
-    rho_L1: float,
-    alpha_L1: float,
     rho_rep: float,
     alpha_rep: float,
     v_max: float,
-) -> tuple[np.ndarray, float, int, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, int, np.ndarray, np.ndarray]:
     """The avoidance terms of one tick.
 
     Parameters
@@ -45,25 +43,24 @@ def avoidance_terms(
     distance, vector
         The distance table's (S, K) distances, m, and (S, K, 3) unit directions human →
         robot (+inf and anything for a part not seen).
-    i_L1, i_L2, i_EE
-        Rows of the sets L1, L2 and EE.
-    rho_L1, alpha_L1, rho_rep, alpha_rep, v_max
-        ρ and α of eq. (2) and of eq. (4) (m, 1) and V_max (m/s): an
-        :class:`~qpavoid.laws.AvoidanceConfig`'s.
+    i_L2, i_EE
+        Rows of the sets L2 and EE.
+    rho_rep, alpha_rep, v_max
+        ρ (m) and α of eq. (4) and V_max (m/s): an
+        :class:`~qpavoid.laws.AvoidanceConfig`'s (:func:`law_constants`).
 
     Returns
     -------
-    dmin, f, j, v_rep_L2, v_rep_EE
-        (S,) each set's minimum distance (``DistanceTable.min_per_set``); f of eq. (2)
-        at L1's; the column of the part closest to L2 (``closest_part``); eq. (5)'s
-        velocity (3,) of L2 away from that part (0 if it is not seen) and eq. (7)'s sum
-        (3,) over the parts EE sees, m/s.
+    dmin, j, v_rep_L2, v_rep_EE
+        (S,) each set's minimum distance (``DistanceTable.min_per_set``); the column of
+        the part closest to L2 (``closest_part``); eq. (5)'s velocity (3,) of L2 away
+        from that part (0 if it is not seen) and eq. (7)'s sum (3,) over the parts EE
+        sees, m/s.
     """
     S = distance.shape[0]
     dmin = np.empty(S)
     for s in range(S):
         dmin[s] = distance[s].min()
-    f = _logistic(dmin[i_L1], rho_L1, alpha_L1)  # eq. (2)
     j = np.argmin(distance[i_L2])
     v_rep_L2 = np.zeros(3)
     d = distance[i_L2, j]
@@ -74,23 +71,30 @@ def avoidance_terms(
         speed = v_max * _logistic(distance[i_EE, k], rho_rep, alpha_rep)
         if speed > 0.0 or np.isnan(speed):  # a NaN distance spoils the sum, as in laws.py
             v_rep_EE += speed * vector[i_EE, k]
-    return dmin, float(f), int(j), v_rep_L2, v_rep_EE
+    return dmin, int(j), v_rep_L2, v_rep_EE
 
 
-def law_constants(cfg: AvoidanceConfig) -> tuple[float, float, float, float, float]:
+def law_constants(cfg: AvoidanceConfig) -> tuple[float, float, float]:
     """``cfg``'s constants in :func:`avoidance_terms`' order, as floats (an int would make
     numba compile a second specialisation at the first tick)."""
-    return (
-        float(cfg.rho_L1_m),
-        float(cfg.alpha_L1),
-        float(cfg.rho_rep_m),
-        float(cfg.alpha_rep),
-        float(cfg.v_max_mps),
-    )
+    return float(cfg.rho_rep_m), float(cfg.alpha_rep), float(cfg.v_max_mps)
+
+
+def _agrees_with_laws() -> bool:
+    """The kernel's eq. (7) equals :func:`~qpavoid.laws.ee_repulsive_velocity`'s on a
+    small table (to 1e-12)."""
+    cfg = AvoidanceConfig()
+    d = np.array([[0.3, 0.2], [0.25, 0.15], [0.05, 0.1]])
+    v = np.tile(np.array([0.6, 0.0, 0.8]), (3, 2, 1))
+    got = avoidance_terms(d, v, 1, 2, *law_constants(cfg))[3]
+    return bool(np.allclose(got, ee_repulsive_velocity(d[2], v[2], cfg), rtol=1e-12, atol=0))
 
 
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) the kernel, once per process."""
     with ctrl_c_deferred():
-        avoidance_terms(np.ones((3, 2)), np.zeros((3, 2, 3)), 0, 1, 2, 0.1, 9.0, 0.2, 9.0, 0.25)
+        # numba keys the disk cache on this file alone: a cache made before an edit of
+        # laws.logistic would keep the old law; compiled afresh, it agrees.
+        if not _agrees_with_laws():
+            avoidance_terms.recompile()

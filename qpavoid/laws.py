@@ -11,12 +11,14 @@ Every constant lives in :class:`AvoidanceConfig`; nothing here keeps state.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from numbers import Real
 
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.linalg import lapack
 
-from .errors import SolverError
+from ._checks import finite_number
+from .errors import InputError, SolverError
 
 
 @dataclass(frozen=True)
@@ -39,6 +41,12 @@ class AvoidanceConfig:
         Stop the robot when f exceeds this (paper Sect. 5.4: 0.8).
     d_stop_L2_m, d_stop_EE_m
         Stop the robot when L2 or EE is this close or closer (paper: 0.05 m).
+
+    Raises
+    ------
+    InputError
+        If a ρ or α is not positive and finite, V_max or a stop distance is negative or
+        not finite, or ``f_stop`` is not strictly between 0 and 1.
     """
 
     rho_L1_m: float = 0.1
@@ -49,6 +57,18 @@ class AvoidanceConfig:
     f_stop: float = 0.8
     d_stop_L2_m: float = 0.05
     d_stop_EE_m: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if isinstance(value, bool) or not isinstance(value, Real):
+                raise InputError(f"{name} must be a number, got {value!r}", name=name, value=value)
+        for name in ("rho_L1_m", "alpha_L1", "rho_rep_m", "alpha_rep"):  # eqs. (2), (4)
+            finite_number(getattr(self, name), name, positive=True)
+        for name in ("v_max_mps", "d_stop_L2_m", "d_stop_EE_m", "f_stop"):
+            value = finite_number(getattr(self, name), name)
+            if value < 0.0 or (name == "f_stop" and not 0.0 < value < 1.0):  # eq. (2): f in (0, 1)
+                kind = "between 0 and 1 (exclusive)" if name == "f_stop" else "at least 0"
+                raise InputError(f"{name} must be {kind}, got {value!r}", name=name, value=value)
 
     def d_stop_L1_m(self) -> float:
         """The L1 distance at which f reaches ``f_stop`` (eq. 2 solved for d), m."""

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from qpavoid.errors import InputError
 from qpavoid.law_kernels import avoidance_terms, law_constants
 from qpavoid.laws import (
     AvoidanceConfig,
@@ -142,11 +143,23 @@ def test_the_compiled_avoidance_terms_are_the_laws():
             d[rng.integers(3), rng.integers(8)] = np.nan
         if n % 50 == 1:
             d[1, 2:4], v[1, 2:4] = d[1].min(), [0.0, 0.0, 1.0]  # a tie: the first, as argmin
-        dmin, f, j, v_l2, v_ee = avoidance_terms(d, v, 0, 1, 2, *law_constants(cfg))
-        np.testing.assert_array_equal(dmin, d.min(axis=1))
+        dmin, j, v_l2, v_ee = avoidance_terms(d, v, 1, 2, *law_constants(cfg))
+        np.testing.assert_array_equal(dmin, d.min(axis=1))  # exact: the stop rules read it
         assert j == int(np.argmin(d[1]))
-        assert f == pytest.approx(float(l1_factor(d[0].min(), cfg)), abs=1e-15, nan_ok=True)
         np.testing.assert_allclose(v_l2, repulsive_velocity(d[1, j], v[1, j], cfg), atol=1e-15)
         np.testing.assert_allclose(v_ee, ee_repulsive_velocity(d[2], v[2], cfg), atol=1e-15)
         if not np.isnan(d).any():
             assert np.isfinite(v_l2).all() and np.isfinite(v_ee).all()
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("rho_L1_m", 0.0), ("rho_rep_m", np.float64(0.0)), ("alpha_L1", -9.0),
+     ("alpha_rep", math.inf), ("v_max_mps", -0.25), ("d_stop_L2_m", math.nan),
+     ("d_stop_EE_m", -0.05), ("f_stop", 1.0), ("f_stop", 0.0), ("rho_L1_m", "0.1")],
+)  # fmt: skip
+def test_a_degenerate_avoidance_config_is_refused(field, value):
+    """ρ = 0 divides by zero in eqs. (2) and (4); f_stop outside (0, 1) has no distance."""
+    with pytest.raises(InputError) as err:
+        AvoidanceConfig(**{field: value})
+    assert err.value.name == field
