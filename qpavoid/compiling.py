@@ -12,15 +12,17 @@ handler that only notes the Ctrl-C, and calls the previous one right after the b
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
-from types import FrameType
+from types import FrameType, ModuleType
+from typing import Any
 
 import numpy as np
 
-__all__ = ["ctrl_c_deferred", "kernel_input"]
+__all__ = ["ctrl_c_deferred", "kernel_input", "recompile_if_stale"]
 
 
 @contextmanager
@@ -62,3 +64,24 @@ def kernel_input(array: object, dtype: type) -> np.ndarray:
     ):
         return array
     return np.array(array, dtype=dtype, order="C")
+
+
+def recompile_if_stale(kernel: Any, *modules: ModuleType) -> bool:
+    """Recompile ``kernel`` if one of ``modules`` (whose kernels or constants it compiles
+    in) changed after ``kernel``'s disk cache was written; True if it did.
+
+    numba keys a kernel's disk cache on the kernel's own source file alone: a cache made
+    before an edit of a function it calls from another file keeps the old function
+    (numba's documented limit). An install writes every file before any cache exists, so
+    this matters while the package is edited. Without the cache's index file (nothing
+    cached yet, or a numba that keeps it elsewhere) nothing is done.
+    """
+    cache_file = getattr(getattr(kernel, "_cache", None), "_cache_file", None)
+    index = getattr(cache_file, "_index_path", None)
+    if index is None or not os.path.exists(index):
+        return False
+    written = os.stat(index).st_mtime
+    if all(os.stat(str(m.__file__)).st_mtime <= written for m in modules):
+        return False
+    kernel.recompile()
+    return True

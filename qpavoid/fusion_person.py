@@ -15,7 +15,8 @@ import functools
 import numpy as np
 from numba import njit
 
-from .compiling import ctrl_c_deferred
+from . import frames, fusion_kernels, perception
+from .compiling import ctrl_c_deferred, recompile_if_stale
 from .frames import MIRROR
 from .fusion_kernels import believed, disagreement, mean_gaps, merge, update_track
 from .fusion_kernels import warm_up as warm_up_pieces
@@ -208,3 +209,5 @@ def warm_up() -> None:
             0.05,
             True,
         )
+        for kernel in (mirror_costs, fuse_person):  # they compile these modules' code in
+            recompile_if_stale(kernel, fusion_kernels, frames, perception)

@@ -18,8 +18,9 @@ import functools
 import numpy as np
 from numba import njit
 
-from .compiling import ctrl_c_deferred
-from .laws import AvoidanceConfig, ee_repulsive_velocity, logistic
+from . import laws
+from .compiling import ctrl_c_deferred, recompile_if_stale
+from .laws import AvoidanceConfig, logistic
 
 __all__ = ["avoidance_terms", "law_constants", "warm_up"]
 
@@ -80,21 +81,9 @@ def law_constants(cfg: AvoidanceConfig) -> tuple[float, float, float]:
     return float(cfg.rho_rep_m), float(cfg.alpha_rep), float(cfg.v_max_mps)
 
 
-def _agrees_with_laws() -> bool:
-    """The kernel's eq. (7) equals :func:`~qpavoid.laws.ee_repulsive_velocity`'s on a
-    small table (to 1e-12)."""
-    cfg = AvoidanceConfig()
-    d = np.array([[0.3, 0.2], [0.25, 0.15], [0.05, 0.1]])
-    v = np.tile(np.array([0.6, 0.0, 0.8]), (3, 2, 1))
-    got = avoidance_terms(d, v, 1, 2, *law_constants(cfg))[3]
-    return bool(np.allclose(got, ee_repulsive_velocity(d[2], v[2], cfg), rtol=1e-12, atol=0))
-
-
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) the kernel, once per process."""
     with ctrl_c_deferred():
-        # numba keys the disk cache on this file alone: a cache made before an edit of
-        # laws.logistic would keep the old law; compiled afresh, it agrees.
-        if not _agrees_with_laws():
-            avoidance_terms.recompile()
+        avoidance_terms(np.ones((3, 2)), np.zeros((3, 2, 3)), 1, 2, 0.2, 9.0, 0.25)
+        recompile_if_stale(avoidance_terms, laws)  # it compiles laws.logistic in

@@ -4,8 +4,14 @@ at construction, for the very argument types the loop passes."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
+import types
+from pathlib import Path
+
+from qpavoid import fusion_person, law_kernels
+from qpavoid.compiling import recompile_if_stale
 
 # A fresh process runs the loop's every compiled path (both distance methods, both
 # controllers, SSM, several people, two-sensor fusion with mirrors and outliers) and
@@ -81,3 +87,37 @@ def test_the_loop_uses_only_the_kernels_warm_up_compiled():
     assert out["counters"].get("mirrored_corrected", 0) > 0  # mirrors were undone
     assert out["counters"].get("outliers_resolved", 0) > 0  # and outliers settled
     assert all(n <= 1 for n in counts.values()), counts
+
+
+def test_a_kernel_cached_before_an_edit_of_what_it_calls_is_recompiled(tmp_path):
+    """numba keys a cache on the kernel's own file: compiling.recompile_if_stale compares
+    it with the files whose code the kernel compiles in."""
+    index = tmp_path / "kernel.nbi"
+    index.write_text("")
+    module = types.ModuleType("callee")
+    module.__file__ = str(tmp_path / "callee.py")
+    Path(module.__file__).write_text("")
+    os.utime(index, (1000.0, 1000.0))
+
+    class Kernel:  # numba's attributes for the cache's index file
+        recompiled = 0
+        _cache = types.SimpleNamespace(_cache_file=types.SimpleNamespace(_index_path=str(index)))
+
+        def recompile(self):
+            self.recompiled += 1
+
+    kernel = Kernel()
+    os.utime(module.__file__, (999.0, 999.0))  # older than the cache: kept
+    assert not recompile_if_stale(kernel, module) and kernel.recompiled == 0
+    os.utime(module.__file__, (1001.0, 1001.0))  # edited after: recompiled
+    assert recompile_if_stale(kernel, module) and kernel.recompiled == 1
+    index.unlink()  # nothing cached: nothing to do
+    assert not recompile_if_stale(kernel, module)
+
+
+def test_numba_still_keeps_a_cache_index_where_recompile_if_stale_looks():
+    """A numba that moved it would silently switch the check off."""
+    law_kernels.warm_up()
+    fusion_person.warm_up()
+    for kernel in (law_kernels.avoidance_terms, fusion_person.fuse_person):
+        assert os.path.exists(kernel._cache._cache_file._index_path)
