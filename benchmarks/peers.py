@@ -164,6 +164,9 @@ class Floor:
         self.model = robot.model.copy()
         self.data = self.model.createData()
         frames = set(robot.point_frames) | {f for s in robot.sets for f in s.capsule_frames}
+        # each placement read through a reference held into the data (as Robot does)
+        self.placements = [self.data.oMf[f] for f in sorted(frames)]
+        self.ee_placement = self.data.oMf[robot.ee_frame]
         self.frames, self.ee = sorted(frames), robot.ee_frame
         # the sphere tick's OSQP data: its backend's buffers and its assembler's c, the
         # same arrays every tick (private: a benchmark's peek, not an interface)
@@ -176,7 +179,7 @@ class Floor:
         pin.updateFramePlacements(model, data)
         frames = [*self.frames, self.ee]
         self.kinematics = (  # what a tick reads: placements and Jacobians
-            [data.oMf[f].homogeneous for f in frames],
+            [m.translation for m in self.placements] + [self.ee_placement.homogeneous],
             [pin.getFrameJacobian(model, data, f, LWA) for f in frames],
         )
         self.osqp.update_data_vec(q=self.c, l=src._l, u=src._u)

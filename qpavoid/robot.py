@@ -38,6 +38,8 @@ __all__ = [
 ]
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+#: Robot attributes that reference into its Pinocchio data (rebuilt, never copied).
+_HELD = ("_placements", "_ee_placement")
 
 
 @dataclass(frozen=True)
@@ -123,7 +125,6 @@ class Robot:
         locked: Mapping[str, float],
     ):
         self.model = model
-        self.data = model.createData()
         self.sets = tuple(sets)
         self.point_frames = tuple(point_frames)
         self.ee_frame = ee_frame
@@ -156,6 +157,29 @@ class Robot:
         self._frames = tuple(frames)
         self._segment_index = np.array(seg_idx)
         self._n_points = len(self.point_frames)
+        self.data = model.createData()
+
+    @property
+    def data(self) -> pin.Data:
+        """The Pinocchio data that :meth:`kinematics` computes in (assignable: a thread of
+        its own gets its own)."""
+        return self._data
+
+    @data.setter
+    def data(self, data: pin.Data) -> None:
+        self._data = data
+        # the placements a tick reads, held: each ``data.oMf[f]`` is a reference into
+        # ``data`` that updateFramePlacements rewrites; indexing anew costs 3 µs a tick
+        self._placements = tuple(data.oMf[f] for f in self._frames)
+        self._ee_placement = data.oMf[self.ee_frame]
+
+    def __getstate__(self) -> dict:
+        # copies and pickles hold no references into a data they do not carry along
+        return {k: v for k, v in self.__dict__.items() if k not in _HELD}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self.data = state["_data"]
 
     def _frame_key(self, frame_id: int) -> tuple[int, tuple[float, ...]]:
         """Identity of a frame's origin: its parent joint and placement (rounded)."""
@@ -202,12 +226,9 @@ class Robot:
         else:
             pin.forwardKinematics(model, data, q)
         pin.updateFramePlacements(model, data)
-        omf = data.oMf
-        # (4, 4) placements in one array, then their translations: 25 % faster than asking
-        # each SE3 for its translation (contiguous: the compiled kernels take no views)
-        pos = np.ascontiguousarray(np.array([omf[f].homogeneous for f in self._frames])[:, :3, 3])
+        pos = np.array([m.translation for m in self._placements])  # (F, 3), contiguous
         points, segments = pos[: self._n_points], pos[self._segment_index]
-        ee = omf[self.ee_frame].homogeneous
+        ee = self._ee_placement.homogeneous  # a copy
         pj = sj = ej = None
         if jacobians:
             jac = np.ascontiguousarray(

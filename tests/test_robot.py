@@ -147,6 +147,49 @@ def test_jacobians_match_finite_differences(which, request):
         np.testing.assert_allclose(kin.ee_jacobian[3:], jw, atol=1e-6)
 
 
+def _fresh_reads(r, q):
+    """Positions and EE pose at ``q`` read from a new Pinocchio data, frame by frame."""
+    data = r.model.createData()
+    pin.forwardKinematics(r.model, data, q)
+    pin.updateFramePlacements(r.model, data)
+    points = np.array([data.oMf[f].translation for f in r.point_frames])
+    return points, data.oMf[r.ee_frame].homogeneous
+
+
+def test_kinematics_reads_the_current_placements_of_its_own_data(robot):
+    """The placements are held references into ``robot.data``: they must follow every new
+    q, a reassigned data, copies and pickles (which would otherwise read another data)."""
+    import copy
+    import pickle
+
+    rng = np.random.default_rng(3)
+    twins = {
+        "itself": robot,
+        "copy": copy.copy(robot),
+        "deepcopy": copy.deepcopy(robot),
+        "pickle": pickle.loads(pickle.dumps(robot)),
+    }
+    reassigned = copy.copy(robot)
+    reassigned.data = robot.model.createData()
+    twins["reassigned"] = reassigned
+    for name, r in twins.items():
+        kins = []
+        for _ in range(3):
+            q = random_q(rng, robot)
+            kin = r.kinematics(q)
+            points, ee = _fresh_reads(robot, q)
+            np.testing.assert_allclose(kin.points, points, atol=1e-12, err_msg=name)
+            np.testing.assert_allclose(kin.ee_placement, ee, atol=1e-12, err_msg=name)
+            kins.append((kin, points))
+        for kin, points in kins:  # an earlier tick's arrays are its own, never rewritten
+            np.testing.assert_array_equal(kin.points, points)
+    if robot.data is not reassigned.data:  # the twin computes in its own data
+        q = random_q(rng, robot)
+        robot.kinematics(q)
+        reassigned.kinematics(q + 0.1)
+        np.testing.assert_allclose(robot.kinematics(q).points, _fresh_reads(robot, q)[0])
+
+
 def test_point_sets(robot):
     assert robot.set_names == ("L1", "L2", "EE")
     assert [len(s.points) for s in robot.sets] == [4, 4, 1]
