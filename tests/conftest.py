@@ -9,6 +9,7 @@ import qpavoid
 from qpavoid import distance_kernels, fusion_person, law_kernels, perception_kernels
 from qpavoid.perception import PerceptionConfig
 from qpavoid.qp import kernels as qp_kernels
+from qpavoid.qp import solver_kernels
 from qpavoid.sensor import SensorConfig
 
 
@@ -21,6 +22,7 @@ def pytest_configure(config):
         perception_kernels.warm_up()
         distance_kernels.warm_up()
         qp_kernels.warm_up()
+        solver_kernels.warm_up()
         law_kernels.warm_up()
 
 

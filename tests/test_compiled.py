@@ -21,7 +21,7 @@ LOOP = """
 import json
 import numpy as np
 from qpavoid import distance_kernels, fusion_kernels, fusion_person, law_kernels, perception_kernels
-from qpavoid.qp import kernels as qp_kernels
+from qpavoid.qp import kernels as qp_kernels, solver_kernels
 from qpavoid.calibration import Calibration
 from qpavoid.controller import ControllerConfig
 from qpavoid.frames import HumanFrame
@@ -34,7 +34,7 @@ from qpavoid.scenarios import make_scenario
 from qpavoid.two_sensors import TwoSensorConfig, two_sensor_data
 
 modules = (distance_kernels, fusion_kernels, fusion_person, law_kernels, perception_kernels,
-           qp_kernels)
+           qp_kernels, solver_kernels)
 kernels = {
     f"{m.__name__}.{n}": getattr(m, n)
     for m in modules

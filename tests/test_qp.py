@@ -158,6 +158,38 @@ def test_persistent_paths_agree(recorded_problems):
         np.testing.assert_allclose(a.x, b.x, atol=1e-9)
 
 
+def test_persistent_takes_a_problem_changed_in_place(recorded_problems):
+    """A problem object is checked for kernel-ready arrays once (the assembler's, every
+    tick): values written into it later are solved; a NaN written into it is still
+    refused; an array reshaped in place, or a problem of other sizes whose pattern would
+    fit the solver's arrays, is a ValueError, never a write past an array's end."""
+    n, m = recorded_problems[0].H.shape[0], len(recorded_problems[0].h)
+    persistent, reference = PersistentOSQP(n, m, QPConfig()), DirectDAQP(n, m)
+    mutable = QPProblem(
+        *(np.array(getattr(recorded_problems[0], k)) for k in ["H", "c", "G", "h", "lb", "ub"])
+    )
+    for prob in recorded_problems[::7]:
+        for k in ("H", "c", "G", "h", "lb", "ub"):
+            getattr(mutable, k)[...] = getattr(prob, k)
+        sol, ref = persistent.solve(mutable), reference.solve(prob)
+        assert sol.found and ref.found
+        np.testing.assert_allclose(sol.x[:-2], ref.x[:-2], atol=SOLVER_TOL)
+    assert persistent._arrays.ready is mutable  # taken as it is
+    mutable.c[0] = np.nan
+    assert not persistent.solve(mutable).found
+    mutable.c[0] = 0.0
+    mutable.G.shape = (n, m)  # the same bytes, other sizes
+    with pytest.raises(ValueError, match="shapes"):
+        persistent.solve(mutable)
+    # n = 27, m = 7 give the same n + m and n (m + 1) as n = 8, m = 26
+    assert (n, m) == (8, 26)
+    other = QPProblem(
+        np.eye(27), np.zeros(27), np.zeros((7, 27)), np.zeros(7), -np.ones(27), np.ones(27)
+    )
+    with pytest.raises(ValueError, match="shapes"):
+        persistent.solve(other)
+
+
 def _start(robot):
     path = ArcPath()
     return path, inverse_kinematics(robot, path.reference(1.0)[0])
@@ -386,13 +418,17 @@ def test_daqp_answers_each_tick_as_if_it_were_the_first(first, second):
 )
 def test_a_nan_in_the_problem_is_never_solved_and_leaves_no_trace(field, value):
     """daqp takes a NaN row as no row and says 'solved'; one NaN in OSQP's warm start
-    spoiled every later solve: both backends refuse the problem, then solve the next."""
+    spoiled every later solve: every backend refuses the problem, then solves the next."""
     good = _recorded_pair(313)
     n, m = good.G.shape[1], good.G.shape[0]
     arrays = {k: getattr(good, k).copy() for k in ("H", "c", "G", "h", "lb", "ub")}
     arrays[field].flat[0] = value
     bad = QPProblem(**arrays)
-    for backend in (PersistentOSQP(n, m, QPConfig()), DirectDAQP(n, m)):
+    for backend in (
+        PersistentOSQP(n, m, QPConfig()),
+        DirectDAQP(n, m),
+        QPSolversBackend("daqp", QPConfig()),
+    ):
         assert backend.solve(good).found
         sol = backend.solve(bad)
         assert not sol.found

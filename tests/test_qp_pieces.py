@@ -12,9 +12,9 @@ import pytest
 from qpavoid.controller import ControllerConfig
 from qpavoid.errors import InputError
 from qpavoid.qp import QPConfig, QPController, QPProblem
-from qpavoid.qp.kernels import hard_excess, problem_defect
 from qpavoid.qp.problem import Assembler
 from qpavoid.qp.separation import SeparationLimit
+from qpavoid.qp.solver_kernels import hard_excess, problem_defect
 from qpavoid.qp.velocity_damper import VelocityDamper
 from qpavoid.scenarios import make_scenario
 from qpavoid.simulation import SimConfig, simulate

@@ -22,12 +22,11 @@ import osqp
 import qpsolvers
 import scipy.sparse as sp
 
-from ..compiling import kernel_input
 from ..errors import InputError, SolverError
-from .checks import DEFECTS, check_shapes, crossed_bounds, infeasible_bounds, not_finite
+from .checks import DEFECTS, KernelArrays, check_shapes, crossed_bounds, not_finite
 from .config import QPConfig
-from .kernels import flush_tiny, osqp_arrays
 from .problem import QPProblem, QPSolution
+from .solver_kernels import WRONG_SHAPES, daqp_arrays, flush_tiny, osqp_arrays, warm_up
 
 #: QP solvers that come with an extra of ours, and its name (``pip install "qpavoid[solvers]"``).
 SOLVER_EXTRAS = {"daqp": "solvers", "proxqp": "solvers"}
@@ -96,19 +95,21 @@ class PersistentOSQP:
         rows_p = [r for j in range(n) for r in range(j + 1)]
         cols_p = [j for j in range(n) for _ in range(j + 1)]
         self._p_idx = np.array(rows_p) * n + np.array(cols_p)
-        rows_a = [r for j in range(n) for r in (j, *range(n, n + m))]  # kernels.osqp_arrays
+        rows_a = [r for j in range(n) for r in (j, *range(n, n + m))]  # solver_kernels.osqp_arrays
         cols_a = [j for j in range(n) for _ in range(m + 1)]
         P = sp.csc_matrix((np.ones(len(rows_p)), (rows_p, cols_p)), shape=(n, n))
         A = sp.csc_matrix((np.ones(len(rows_a)), (rows_a, cols_a)), shape=(n + m, n))
         self._l = np.full(n + m, -np.inf)
         self._u = np.full(n + m, np.inf)
         self._Px, self._Ax = np.zeros(len(rows_p)), np.zeros(len(rows_a))
+        warm_up()  # solver_kernels, before the first solve
         self._solver = osqp.OSQP()
         # The numbers here are placeholders (P must be positive semidefinite for setup);
         # only the pattern matters: every tick replaces all of them.
         P.data[:] = np.eye(n)[rows_p, cols_p]
         self._solver.setup(P, np.zeros(n), A, self._l, self._u, **_osqp_settings(cfg))
         self._solved = osqp.SolverStatus.OSQP_SOLVED
+        self._arrays = KernelArrays()
         self._infinity = float(self._solver.constant("OSQP_INFTY"))
         # osqp's Python layer costs 5-8 times its C solve on a problem this small (it
         # rebuilds an info namespace per solve and caches data for derivatives per update):
@@ -124,22 +125,14 @@ class PersistentOSQP:
         )
 
     def solve(self, prob: QPProblem) -> QPSolution:
-        check_shapes(prob, self.n, self.m)
         Px, Ax, lower, upper = self._Px, self._Ax, self._l, self._u
-        defect, crossed = osqp_arrays(  # checked (checks.not_finite) and copied in one pass
-            kernel_input(prob.H, np.float64),
-            kernel_input(prob.c, np.float64),
-            kernel_input(prob.G, np.float64),
-            kernel_input(prob.h, np.float64),
-            kernel_input(prob.lb, np.float64),
-            kernel_input(prob.ub, np.float64),
-            self._p_idx,
-            self._infinity,
-            Px,
-            Ax,
-            lower,
-            upper,
+        # sizes and finiteness (checks.not_finite) checked and the data copied in one pass
+        H, c, G, h, lb, ub = self._arrays(prob)
+        defect, crossed = osqp_arrays(
+            H, c, G, h, lb, ub, self._p_idx, self._infinity, Px, Ax, lower, upper
         )
+        if defect == WRONG_SHAPES:
+            check_shapes(prob, self.n, self.m)  # raises, saying which
         if defect:
             return QPSolution(None, False, DEFECTS[defect])
         # OSQP rejects l > u (or a non-convex P) in an update by keeping the *previous*
@@ -222,21 +215,23 @@ class DirectDAQP:
                 status="not installed",
             ) from None
         self._daqp = daqp
+        warm_up()  # solver_kernels, before the first solve
         self.n, self.m = n, m
         self._upper = np.full(n + m, np.inf)
         self._lower = np.full(n + m, -np.inf)
+        self._arrays = KernelArrays()
 
     def solve(self, prob: QPProblem) -> QPSolution:
-        check_shapes(prob, self.n, self.m)
-        failed = not_finite(prob)
-        if failed is not None:
-            return failed
-        n = self.n
-        self._lower[:n], self._upper[:n], self._upper[n:] = prob.lb, prob.ub, prob.h
-        failed = infeasible_bounds(self._lower, self._upper)
-        if failed is not None:
-            return failed
-        x, _, flag, info = self._daqp.solve(prob.H, prob.c, prob.G, self._upper, self._lower)
+        H, c, G, h, lb, ub = self._arrays(prob)
+        # sizes and finiteness (checks.not_finite) checked and the bounds stacked in one pass
+        defect, crossed = daqp_arrays(H, c, G, h, lb, ub, self._lower, self._upper)
+        if defect == WRONG_SHAPES:
+            check_shapes(prob, self.n, self.m)  # raises, saying which
+        if defect:
+            return QPSolution(None, False, DEFECTS[defect])
+        if crossed >= 0:
+            return crossed_bounds(self._lower, self._upper, crossed)
+        x, _, flag, info = self._daqp.solve(H, c, G, self._upper, self._lower)
         iterations = int(info.get("iterations", -1)) if isinstance(info, dict) else -1
         if flag not in self.SOLVED:
             return QPSolution(None, False, f"daqp exit flag {flag}", iterations)
@@ -260,11 +255,15 @@ class QPSolversBackend:
                 status="not installed",
             )
         self.name, self._qpsolvers = solver, qpsolvers
+        warm_up()  # solver_kernels (checks.not_finite; the controller's hard_excess)
         self._settings = _osqp_settings(cfg) if solver == "osqp" else {}
         if solver == "proxqp":
             self._settings = dict(eps_abs=PROXQP_EPS_ABS, eps_rel=0.0)
 
     def solve(self, prob: QPProblem) -> QPSolution:
+        failed = not_finite(prob)  # solvers take a NaN silently (checks.not_finite)
+        if failed is not None:
+            return failed
         keep = np.isfinite(prob.h)
         H, G = prob.H, prob.G[keep]
         if self.name == "osqp":  # it wants sparse matrices (and warns otherwise)

@@ -11,13 +11,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..compiling import kernel_input
-from .kernels import problem_defect
 from .problem import QPProblem, QPSolution
+from .solver_kernels import problem_defect
 
-__all__ = ["DEFECTS", "check_shapes", "crossed_bounds", "infeasible_bounds", "not_finite"]
+__all__ = ["DEFECTS", "KernelArrays", "check_shapes", "crossed_bounds", "not_finite"]
 
 
-#: What :func:`~qpavoid.qp.kernels.problem_defect`'s codes mean.
+#: What :func:`~qpavoid.qp.solver_kernels.problem_defect`'s codes mean.
 DEFECTS = {
     1: "the QP's cost or rows are not finite",
     2: "the QP's h hold a NaN or −inf",
@@ -44,14 +44,29 @@ def not_finite(prob: QPProblem) -> QPSolution | None:
     return QPSolution(None, False, DEFECTS[defect]) if defect else None
 
 
-def infeasible_bounds(lower: np.ndarray, upper: np.ndarray) -> QPSolution | None:
-    """A failed solution naming the first row with ``lower > upper``, or None."""
-    bad = lower > upper
-    return crossed_bounds(lower, upper, int(np.argmax(bad))) if bad.any() else None
-
-
 def crossed_bounds(lower: np.ndarray, upper: np.ndarray, k: int) -> QPSolution:
     """The failed solution of bounds crossed in row ``k`` (``lower[k] > upper[k]``)."""
     return QPSolution(
         None, False, f"infeasible bounds: l > u in row {k} ({lower[k]:.4g} > {upper[k]:.4g})"
     )
+
+
+class KernelArrays:
+    """A problem's six arrays as the compiled checks take them (``kernel_input``), looked
+    at once per problem object: the assembler fills the same one every tick.
+
+    An array's dtype and layout do not change in place; its size can (``a.shape = ...``),
+    which the kernels check themselves (:data:`~qpavoid.qp.solver_kernels.WRONG_SHAPES`).
+    """
+
+    def __init__(self) -> None:
+        self.ready: QPProblem | None = None  # the last problem whose arrays were taken as is
+
+    def __call__(self, prob: QPProblem) -> tuple[np.ndarray, ...]:
+        arrays = (prob.H, prob.c, prob.G, prob.h, prob.lb, prob.ub)
+        if prob is self.ready:
+            return arrays
+        taken = tuple(kernel_input(a, np.float64) for a in arrays)
+        if all(a is b for a, b in zip(taken, arrays, strict=True)):
+            self.ready = prob
+        return taken

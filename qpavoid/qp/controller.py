@@ -13,13 +13,14 @@ from .backends import make_backend
 from .config import QPConfig
 from .ee_task import EndEffectorTask
 from .elbow_task import ElbowClearanceTask
-from .kernels import hard_excess, warm_up
+from .kernels import warm_up
 from .pieces import QPPiece
 from .position_limits import PositionLimit
 from .problem import Assembler, QPProblem
 from .regularization import Regularization
 from .repulsion import EERepulsionTask, L2RepulsionTask
 from .separation import SeparationLimit
+from .solver_kernels import hard_excess
 from .variables import Variables
 from .velocity_damper import VelocityDamper
 from .velocity_limits import VelocityLimit
@@ -105,7 +106,7 @@ class QPController(Controller):
             VelocityLimit(x),
             PositionLimit(x, robot.q_min, robot.q_max, w.position_limit_gain),
         ]
-        warm_up()  # the QP's compiled pieces, before the first tick
+        warm_up()  # the QP's compiled pieces, before the first tick (the backend warms its own)
         self.assembler = Assembler(x.n, pieces)
         self.backend = make_backend(w, x.n, self.assembler.m)
         # the rows of the hard pieces: the dampers', then the separation's (a slice: a view)
