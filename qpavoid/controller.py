@@ -15,7 +15,6 @@ joint angle or path time) raise :class:`~qpavoid.errors.InputError` before any o
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
@@ -27,7 +26,7 @@ from .distances import distance_method
 from .errors import SolverError
 from .frames import HumanFrame
 from .human import HumanGeometry, KinectHuman
-from .law_kernels import avoidance_terms, law_constants, warm_up
+from .law_kernels import NOT_FINITE, avoidance_terms, law_constants, limit_crossed, warm_up
 from .laws import l1_factor, modified_ik, scaled_velocity_limits, stop_reason
 from .people import NOBODY, People, Perceiver, as_people
 from .perception import Perceived
@@ -226,17 +225,20 @@ class Controller:
         if dq is not None:
             dq = np.asarray(dq, dtype=float)
         if not reason and dq is not None:
-            if not math.isfinite(dq.sum()):  # a finite sum: every entry finite
+            k = limit_crossed(  # one compiled pass (law_kernels)
+                kernel_input(tick.q, np.float64),
+                kernel_input(dq, np.float64),
+                float(self.config.control_period_s),
+                self.robot.q_min,
+                self.robot.q_max,
+            )
+            if k == NOT_FINITE:
                 reason = "non-finite joint velocity computed"
-            else:
-                q_next = tick.q + dq * self.config.control_period_s
-                out = (q_next > self.robot.q_max) | (q_next < self.robot.q_min)
-                if out.any():
-                    k = int(np.flatnonzero(out)[0])
-                    reason = (
-                        f"joint {self.robot.joint_names[k]} would cross its position limit "
-                        f"(q = {tick.q[k]:.4f} rad)"
-                    )
+            elif k >= 0:
+                reason = (
+                    f"joint {self.robot.joint_names[k]} would cross its position limit "
+                    f"(q = {tick.q[k]:.4f} rad)"
+                )
         stopped = bool(reason) or dq is None
         applied = np.zeros(self.robot.nv) if stopped or dq is None else dq
         if self.config.safety == "ssm":

@@ -9,6 +9,10 @@ source; the rest composes it as :func:`~qpavoid.laws.repulsive_velocity` and
 :func:`~qpavoid.laws.ee_repulsive_velocity` do, and ``tests/test_laws.py`` checks the
 two against each other. f of eq. (2) stays :func:`~qpavoid.laws.l1_factor`'s: numba's
 tanh and numpy's differ in the last bit for some distances, and f decides a stop.
+
+The last-resort check of every command (:meth:`~qpavoid.controller.Controller.command`:
+finite, and no joint past its position limit after one control period) is one call too,
+:func:`limit_crossed`.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from . import laws
 from .compiling import ctrl_c_deferred, recompile_if_stale
 from .laws import AvoidanceConfig, logistic
 
-__all__ = ["avoidance_terms", "law_constants", "warm_up"]
+__all__ = ["NOT_FINITE", "avoidance_terms", "law_constants", "limit_crossed", "warm_up"]
 
 _logistic = njit(cache=True)(logistic)  # the law's own source, compiled
 
@@ -81,9 +85,33 @@ def law_constants(cfg: AvoidanceConfig) -> tuple[float, float, float]:
     return float(cfg.rho_rep_m), float(cfg.alpha_rep), float(cfg.v_max_mps)
 
 
+#: :func:`limit_crossed`'s answer for a command that is not finite.
+NOT_FINITE = -2
+
+
+@njit(cache=True)
+def limit_crossed(
+    q: np.ndarray, dq: np.ndarray, dt: float, q_min: np.ndarray, q_max: np.ndarray
+) -> int:
+    """The first joint that ``q + dq dt`` would carry past ``[q_min, q_max]`` (rad),
+    :data:`NOT_FINITE` if the sum of ``dq`` (rad/s) is not finite (an entry is NaN or
+    infinite, or they overflow), else −1."""
+    total = 0.0
+    for v in dq:
+        total += v
+    if not np.isfinite(total):
+        return NOT_FINITE
+    for k in range(q.shape[0]):
+        q_next = q[k] + dq[k] * dt
+        if q_next > q_max[k] or q_next < q_min[k]:
+            return k
+    return -1
+
+
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) the kernel, once per process."""
     with ctrl_c_deferred():
         avoidance_terms(np.ones((3, 2)), np.zeros((3, 2, 3)), 1, 2, 0.2, 9.0, 0.25)
+        limit_crossed(np.zeros(2), np.zeros(2), 0.01, -np.ones(2), np.ones(2))
         recompile_if_stale(avoidance_terms, laws)  # it compiles laws.logistic in

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from qpavoid.errors import InputError
-from qpavoid.law_kernels import avoidance_terms, law_constants
+from qpavoid.law_kernels import NOT_FINITE, avoidance_terms, law_constants, limit_crossed
 from qpavoid.laws import (
     AvoidanceConfig,
     damped_pinv,
@@ -163,3 +163,63 @@ def test_a_degenerate_avoidance_config_is_refused(field, value):
     with pytest.raises(InputError) as err:
         AvoidanceConfig(**{field: value})
     assert err.value.name == field
+
+
+def _limit_crossed_numpy(q, dq, dt, q_min, q_max):
+    """The last-resort check as numpy said it before it was compiled."""
+    if not math.isfinite(dq.sum()):
+        return NOT_FINITE
+    q_next = q + dq * dt
+    out = (q_next > q_max) | (q_next < q_min)
+    return int(np.flatnonzero(out)[0]) if out.any() else -1
+
+
+def test_limit_crossed_equals_the_numpy_check():
+    """Random commands near and past the limits, exactly on them, NaN, ±inf, overflow."""
+    rng = np.random.default_rng(11)
+    q_min, q_max = -np.linspace(1.0, 3.0, 6), np.linspace(1.0, 3.0, 6)
+    seen = set()
+    for trial in range(3000):
+        q = rng.uniform(q_min, q_max)
+        dq = rng.normal(0.0, 2.0, 6)
+        dt = float(rng.choice([0.01, 0.002, 1.0]))
+        if trial % 7 == 0:  # land exactly on a limit: not a crossing
+            k = rng.integers(6)
+            dq[k], q[k] = 0.0, q_max[k]
+        if trial % 11 == 0:
+            dq[rng.integers(6)] = rng.choice([np.nan, np.inf, -np.inf])
+        if trial % 13 == 0:
+            dq[:] = 1e308  # finite entries whose sum overflows
+        got = limit_crossed(q, dq, dt, q_min, q_max)
+        assert got == _limit_crossed_numpy(q, dq, dt, q_min, q_max), (q, dq, dt)
+        seen.add(got if got < 0 else "joint")
+    assert seen == {NOT_FINITE, -1, "joint"}
+
+
+def test_a_command_past_a_limit_or_not_finite_is_a_stop(robot):
+    """The last-resort layer: the joint that would cross is named; NaN is never sent."""
+    from qpavoid.analytic import AnalyticController
+    from qpavoid.posture import Operator
+    from qpavoid.task import ArcPath, inverse_kinematics
+
+    path = ArcPath()
+    ctrl = AnalyticController(robot, path)
+    q = inverse_kinematics(robot, path.reference(1.0)[0])
+    tick = ctrl.measure(q, Operator().rest(), None, 1.0)
+    assert not tick.reason
+    fine = ctrl.command(tick, np.full(robot.nv, 0.01))
+    assert not fine.stopped
+    k = 3
+    step = (robot.q_max[k] - q[k]) / ctrl.config.control_period_s
+    past = np.zeros(robot.nv)
+    past[k] = step * 1.001
+    cmd = ctrl.command(tick, past)
+    assert cmd.stopped and f"joint {robot.joint_names[k]} would cross" in cmd.reason
+    np.testing.assert_array_equal(cmd.dq, 0.0)
+    past[k] = step * 0.999  # just short of it
+    assert not ctrl.command(tick, past).stopped
+    bad = np.full(robot.nv, 0.01)
+    bad[1] = np.nan
+    cmd = ctrl.command(tick, bad)
+    assert cmd.stopped and cmd.reason == "non-finite joint velocity computed"
+    np.testing.assert_array_equal(cmd.dq, 0.0)
