@@ -224,7 +224,9 @@ class Controller:
         reason = tick.reason or reason
         if dq is not None:
             dq = np.asarray(dq, dtype=float)
-        if not reason and dq is not None:
+        if not reason and dq is not None and dq.shape != tick.q.shape:
+            reason = f"joint velocity of shape {dq.shape} computed, not {tick.q.shape}"
+        elif not reason and dq is not None:
             k = limit_crossed(  # one compiled pass (law_kernels)
                 kernel_input(tick.q, np.float64),
                 kernel_input(dq, np.float64),

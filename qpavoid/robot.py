@@ -38,8 +38,6 @@ __all__ = [
 ]
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-#: Robot attributes that reference into its Pinocchio data (rebuilt, never copied).
-_HELD = ("_placements", "_ee_placement")
 
 
 @dataclass(frozen=True)
@@ -163,23 +161,26 @@ class Robot:
     def data(self) -> pin.Data:
         """The Pinocchio data that :meth:`kinematics` computes in (assignable: a thread of
         its own gets its own)."""
-        return self._data
+        return self._held[0]
 
     @data.setter
     def data(self, data: pin.Data) -> None:
-        self._data = data
-        # the placements a tick reads, held: each ``data.oMf[f]`` is a reference into
-        # ``data`` that updateFramePlacements rewrites; indexing anew costs 3 µs a tick
-        self._placements = tuple(data.oMf[f] for f in self._frames)
-        self._ee_placement = data.oMf[self.ee_frame]
+        # the placements a tick reads, held with their data as one tuple (read at once, so
+        # a data assigned meanwhile never mixes with another's placements): each
+        # ``data.oMf[f]`` is a reference that updateFramePlacements rewrites; indexing
+        # anew costs 3 µs a tick
+        self._held = (data, tuple(data.oMf[f] for f in self._frames), data.oMf[self.ee_frame])
 
     def __getstate__(self) -> dict:
-        # copies and pickles hold no references into a data they do not carry along
-        return {k: v for k, v in self.__dict__.items() if k not in _HELD}
+        # copies and pickles carry the data, never references into it
+        state = {k: v for k, v in self.__dict__.items() if k != "_held"}
+        return {**state, "data": self.data}
 
     def __setstate__(self, state: dict) -> None:
+        state = dict(state)
+        data = state.pop("data")
         self.__dict__.update(state)
-        self.data = state["_data"]
+        self.data = data
 
     def _frame_key(self, frame_id: int) -> tuple[int, tuple[float, ...]]:
         """Identity of a frame's origin: its parent joint and placement (rounded)."""
@@ -220,15 +221,15 @@ class Robot:
             Also compute the Jacobians (needed by the controllers, not by distances).
         """
         q = self.check_q(q)
-        model, data = self.model, self.data
+        model, (data, placements, ee_placement) = self.model, self._held
         if jacobians:
             pin.computeJointJacobians(model, data, q)
         else:
             pin.forwardKinematics(model, data, q)
         pin.updateFramePlacements(model, data)
-        pos = np.array([m.translation for m in self._placements])  # (F, 3), contiguous
+        pos = np.array([m.translation for m in placements])  # (F, 3), contiguous
         points, segments = pos[: self._n_points], pos[self._segment_index]
-        ee = self._ee_placement.homogeneous  # a copy
+        ee = ee_placement.homogeneous  # a copy
         pj = sj = ej = None
         if jacobians:
             jac = np.ascontiguousarray(

@@ -223,3 +223,10 @@ def test_a_command_past_a_limit_or_not_finite_is_a_stop(robot):
     cmd = ctrl.command(tick, bad)
     assert cmd.stopped and cmd.reason == "non-finite joint velocity computed"
     np.testing.assert_array_equal(cmd.dq, 0.0)
+    # a command of another shape is never sent nor read past its end
+    buf = np.r_[np.zeros(robot.nv - 1), 1e6]
+    for wrong in (buf[:-1], np.r_[np.zeros(robot.nv), 1e6], np.zeros((1, robot.nv)), 0.0):
+        cmd = ctrl.command(tick, wrong)
+        assert cmd.stopped and "joint velocity of shape" in cmd.reason, cmd.reason
+        assert cmd.dq.shape == (robot.nv,)
+        np.testing.assert_array_equal(cmd.dq, 0.0)

@@ -158,36 +158,56 @@ def test_persistent_paths_agree(recorded_problems):
         np.testing.assert_allclose(a.x, b.x, atol=1e-9)
 
 
-def test_persistent_takes_a_problem_changed_in_place(recorded_problems):
-    """A problem object is checked for kernel-ready arrays once (the assembler's, every
-    tick): values written into it later are solved; a NaN written into it is still
-    refused; an array reshaped in place, or a problem of other sizes whose pattern would
-    fit the solver's arrays, is a ValueError, never a write past an array's end."""
+def _problem(n: int, m: int) -> QPProblem:
+    """A feasible problem of ``n`` variables and ``m`` rows."""
+    return QPProblem(np.eye(n), np.ones(n), np.zeros((m, n)), np.ones(m), -np.ones(n), np.ones(n))
+
+
+@pytest.mark.parametrize("backend", ["persistent", "daqp"])
+def test_a_problem_changed_in_place_is_solved_or_refused(recorded_problems, backend):
+    """A problem object is looked at in full once (the assembler's, every tick): values
+    written into it later are solved; a NaN written into it is still refused; an array
+    made read-only is taken again; an array reshaped in place, arrays of another number
+    of dimensions, or a problem of other sizes that would fit the solver's arrays, is a
+    ValueError, never a wrong answer or a write past an array's end."""
     n, m = recorded_problems[0].H.shape[0], len(recorded_problems[0].h)
-    persistent, reference = PersistentOSQP(n, m, QPConfig()), DirectDAQP(n, m)
-    mutable = QPProblem(
-        *(np.array(getattr(recorded_problems[0], k)) for k in ["H", "c", "G", "h", "lb", "ub"])
-    )
+    assert (n, m) == (8, 26)
+    solver = PersistentOSQP(n, m, QPConfig()) if backend == "persistent" else DirectDAQP(n, m)
+    reference = QPSolversBackend("daqp", QPConfig())
+
+    def fresh() -> QPProblem:
+        return QPProblem(
+            *(np.array(getattr(recorded_problems[0], k)) for k in ["H", "c", "G", "h", "lb", "ub"])
+        )
+
+    mutable = fresh()
     for prob in recorded_problems[::7]:
         for k in ("H", "c", "G", "h", "lb", "ub"):
             getattr(mutable, k)[...] = getattr(prob, k)
-        sol, ref = persistent.solve(mutable), reference.solve(prob)
+        sol, ref = solver.solve(mutable), reference.solve(prob)
         assert sol.found and ref.found
         np.testing.assert_allclose(sol.x[:-2], ref.x[:-2], atol=SOLVER_TOL)
-    assert persistent._arrays.ready is mutable  # taken as it is
+    assert solver._arrays.ready is mutable  # taken as it is
     mutable.c[0] = np.nan
-    assert not persistent.solve(mutable).found
+    assert not solver.solve(mutable).found
     mutable.c[0] = 0.0
-    mutable.G.shape = (n, m)  # the same bytes, other sizes
+    mutable.h.setflags(write=False)  # taken again (a copy), still solved
+    assert solver.solve(mutable).found and solver.solve(mutable).found
+    for reshape in ("G", (n, m)), ("G", (m * n,)), ("h", (m, 1)):
+        again = fresh()
+        assert solver.solve(again).found
+        getattr(again, reshape[0]).shape = reshape[1]  # the same bytes, other sizes
+        with pytest.raises(ValueError, match="shapes"):
+            solver.solve(again)
+    H3 = np.zeros((n, n, 2))  # H.flat would read its first n² entries as an (n, n) H
+    H3.reshape(-1)[: n * n] = 5 * np.eye(n).ravel()
+    p = fresh()
     with pytest.raises(ValueError, match="shapes"):
-        persistent.solve(mutable)
-    # n = 27, m = 7 give the same n + m and n (m + 1) as n = 8, m = 26
-    assert (n, m) == (8, 26)
-    other = QPProblem(
-        np.eye(27), np.zeros(27), np.zeros((7, 27)), np.zeros(7), -np.ones(27), np.ones(27)
-    )
-    with pytest.raises(ValueError, match="shapes"):
-        persistent.solve(other)
+        solver.solve(QPProblem(H3, p.c, p.G, p.h, p.lb, p.ub))
+    # sizes that fit the solver's arrays: n + m = 34 (and for OSQP n (m + 1) = 216)
+    for other in (27, 7), (9, 25), (10, 24):
+        with pytest.raises(ValueError, match="shapes"):
+            solver.solve(_problem(*other))
 
 
 def _start(robot):

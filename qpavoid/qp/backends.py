@@ -109,7 +109,7 @@ class PersistentOSQP:
         P.data[:] = np.eye(n)[rows_p, cols_p]
         self._solver.setup(P, np.zeros(n), A, self._l, self._u, **_osqp_settings(cfg))
         self._solved = osqp.SolverStatus.OSQP_SOLVED
-        self._arrays = KernelArrays()
+        self._arrays = KernelArrays(n, m)
         self._infinity = float(self._solver.constant("OSQP_INFTY"))
         # osqp's Python layer costs 5-8 times its C solve on a problem this small (it
         # rebuilds an info namespace per solve and caches data for derivatives per update):
@@ -219,12 +219,12 @@ class DirectDAQP:
         self.n, self.m = n, m
         self._upper = np.full(n + m, np.inf)
         self._lower = np.full(n + m, -np.inf)
-        self._arrays = KernelArrays()
+        self._arrays = KernelArrays(n, m)
 
     def solve(self, prob: QPProblem) -> QPSolution:
         H, c, G, h, lb, ub = self._arrays(prob)
         # sizes and finiteness (checks.not_finite) checked and the bounds stacked in one pass
-        defect, crossed = daqp_arrays(H, c, G, h, lb, ub, self._lower, self._upper)
+        defect, crossed = daqp_arrays(H, c, G, h, lb, ub, self.n, self._lower, self._upper)
         if defect == WRONG_SHAPES:
             check_shapes(prob, self.n, self.m)  # raises, saying which
         if defect:

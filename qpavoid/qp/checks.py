@@ -53,20 +53,33 @@ def crossed_bounds(lower: np.ndarray, upper: np.ndarray, k: int) -> QPSolution:
 
 class KernelArrays:
     """A problem's six arrays as the compiled checks take them (``kernel_input``), looked
-    at once per problem object: the assembler fills the same one every tick.
+    at in full once per problem object: the assembler fills the same one every tick.
 
-    An array's dtype and layout do not change in place; its size can (``a.shape = ...``),
-    which the kernels check themselves (:data:`~qpavoid.qp.solver_kernels.WRONG_SHAPES`).
+    Its shapes are checked then (:func:`check_shapes`: a ``ValueError``); after that only
+    what can change in place without a copy is looked at again, each call: the number of
+    dimensions and the write flag (a change of either is looked at in full again), and
+    the sizes, which the kernels check themselves
+    (:data:`~qpavoid.qp.solver_kernels.WRONG_SHAPES`).
+
+    Parameters
+    ----------
+    n, m
+        The backend's numbers of variables and of G rows.
     """
 
-    def __init__(self) -> None:
+    NDIM = (2, 1, 2, 1, 1, 1)  # H, c, G, h, lb, ub
+
+    def __init__(self, n: int, m: int) -> None:
+        self.n, self.m = n, m
         self.ready: QPProblem | None = None  # the last problem whose arrays were taken as is
 
     def __call__(self, prob: QPProblem) -> tuple[np.ndarray, ...]:
         arrays = (prob.H, prob.c, prob.G, prob.h, prob.lb, prob.ub)
-        if prob is self.ready:
+        if prob is self.ready and all(
+            a.ndim == d and a.flags.writeable for a, d in zip(arrays, self.NDIM, strict=True)
+        ):
             return arrays
+        check_shapes(prob, self.n, self.m)
         taken = tuple(kernel_input(a, np.float64) for a in arrays)
-        if all(a is b for a, b in zip(taken, arrays, strict=True)):
-            self.ready = prob
+        self.ready = prob if all(a is b for a, b in zip(taken, arrays, strict=True)) else None
         return taken

@@ -162,12 +162,14 @@ def daqp_arrays(
     h: np.ndarray,
     lb: np.ndarray,
     ub: np.ndarray,
+    n: int,
     lower: np.ndarray,
     upper: np.ndarray,
 ) -> tuple[int, int]:
     """daqp's bounds ``lower = [lb; −∞] ≤ [x; G x] ≤ upper = [ub; h]``, in place, as
-    :func:`osqp_arrays` checks and writes them (daqp takes H, c and G as they are)."""
-    if not sizes_fit(H, c, G, h, lb, ub, lower, upper):
+    :func:`osqp_arrays` checks and writes them (daqp takes H, c and G as they are), for
+    a problem of ``n`` variables."""
+    if not (sizes_fit(H, c, G, h, lb, ub, lower, upper) and G.shape[1] == n):
         return WRONG_SHAPES, -1
     defect = problem_defect(H, c, G, h, lb, ub)
     if defect:
@@ -229,4 +231,4 @@ def warm_up() -> None:
         lower, upper = np.zeros(n + 2), np.zeros(n + 2)
         p_index, Px = np.zeros(n * (n + 1) // 2, dtype=np.int64), np.zeros(n * (n + 1) // 2)
         osqp_arrays(H, c, G, h, c, c, p_index, 1e30, Px, np.zeros(3 * n), lower, upper)
-        daqp_arrays(H, c, G, h, c, c, lower, upper)
+        daqp_arrays(H, c, G, h, c, c, n, lower, upper)
