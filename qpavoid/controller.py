@@ -224,7 +224,7 @@ class Controller:
         reason = tick.reason or reason
         if dq is not None:
             dq = np.asarray(dq, dtype=float)
-        if not reason and dq is not None and dq.shape != tick.q.shape:
+        if not reason and dq is not None and dq.shape != tick.q.shape:  # never sent nor read
             reason = f"joint velocity of shape {dq.shape} computed, not {tick.q.shape}"
         elif not reason and dq is not None:
             k = limit_crossed(  # one compiled pass (law_kernels)

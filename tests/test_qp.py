@@ -165,10 +165,10 @@ def _problem(n: int, m: int) -> QPProblem:
 
 @pytest.mark.parametrize("backend", ["persistent", "daqp"])
 def test_a_problem_changed_in_place_is_solved_or_refused(recorded_problems, backend):
-    """A problem object is looked at in full once (the assembler's, every tick): values
-    written into it later are solved; a NaN written into it is still refused; an array
-    made read-only is taken again; an array reshaped in place, arrays of another number
-    of dimensions, or a problem of other sizes that would fit the solver's arrays, is a
+    """The same problem object solved again and again (the assembler's, every tick):
+    values written into it are solved; a NaN written into it is refused; an array made
+    read-only is still taken; an array reshaped in place, arrays of another number of
+    dimensions, or a problem of other sizes that would fit the solver's arrays, is a
     ValueError, never a wrong answer or a write past an array's end."""
     n, m = recorded_problems[0].H.shape[0], len(recorded_problems[0].h)
     assert (n, m) == (8, 26)
@@ -187,7 +187,6 @@ def test_a_problem_changed_in_place_is_solved_or_refused(recorded_problems, back
         sol, ref = solver.solve(mutable), reference.solve(prob)
         assert sol.found and ref.found
         np.testing.assert_allclose(sol.x[:-2], ref.x[:-2], atol=SOLVER_TOL)
-    assert solver._arrays.ready is mutable  # taken as it is
     mutable.c[0] = np.nan
     assert not solver.solve(mutable).found
     mutable.c[0] = 0.0

@@ -23,10 +23,10 @@ import qpsolvers
 import scipy.sparse as sp
 
 from ..errors import InputError, SolverError
-from .checks import DEFECTS, KernelArrays, check_shapes, crossed_bounds, not_finite
+from .checks import DEFECTS, crossed_bounds, kernel_arrays, not_finite
 from .config import QPConfig
 from .problem import QPProblem, QPSolution
-from .solver_kernels import WRONG_SHAPES, daqp_arrays, flush_tiny, osqp_arrays, warm_up
+from .solver_kernels import daqp_arrays, flush_tiny, osqp_arrays, warm_up
 
 #: QP solvers that come with an extra of ours, and its name (``pip install "qpavoid[solvers]"``).
 SOLVER_EXTRAS = {"daqp": "solvers", "proxqp": "solvers"}
@@ -109,7 +109,6 @@ class PersistentOSQP:
         P.data[:] = np.eye(n)[rows_p, cols_p]
         self._solver.setup(P, np.zeros(n), A, self._l, self._u, **_osqp_settings(cfg))
         self._solved = osqp.SolverStatus.OSQP_SOLVED
-        self._arrays = KernelArrays(n, m)
         self._infinity = float(self._solver.constant("OSQP_INFTY"))
         # osqp's Python layer costs 5-8 times its C solve on a problem this small (it
         # rebuilds an info namespace per solve and caches data for derivatives per update):
@@ -126,13 +125,11 @@ class PersistentOSQP:
 
     def solve(self, prob: QPProblem) -> QPSolution:
         Px, Ax, lower, upper = self._Px, self._Ax, self._l, self._u
-        # sizes and finiteness (checks.not_finite) checked and the data copied in one pass
-        H, c, G, h, lb, ub = self._arrays(prob)
+        H, c, G, h, lb, ub = kernel_arrays(prob, self.n, self.m)  # sizes checked
+        # finiteness (checks.not_finite) checked and the data copied in one pass
         defect, crossed = osqp_arrays(
             H, c, G, h, lb, ub, self._p_idx, self._infinity, Px, Ax, lower, upper
         )
-        if defect == WRONG_SHAPES:
-            check_shapes(prob, self.n, self.m)  # raises, saying which
         if defect:
             return QPSolution(None, False, DEFECTS[defect])
         # OSQP rejects l > u (or a non-convex P) in an update by keeping the *previous*
@@ -219,14 +216,11 @@ class DirectDAQP:
         self.n, self.m = n, m
         self._upper = np.full(n + m, np.inf)
         self._lower = np.full(n + m, -np.inf)
-        self._arrays = KernelArrays(n, m)
 
     def solve(self, prob: QPProblem) -> QPSolution:
-        H, c, G, h, lb, ub = self._arrays(prob)
-        # sizes and finiteness (checks.not_finite) checked and the bounds stacked in one pass
-        defect, crossed = daqp_arrays(H, c, G, h, lb, ub, self.n, self._lower, self._upper)
-        if defect == WRONG_SHAPES:
-            check_shapes(prob, self.n, self.m)  # raises, saying which
+        H, c, G, h, lb, ub = kernel_arrays(prob, self.n, self.m)  # sizes checked
+        # finiteness (checks.not_finite) checked and the bounds stacked in one pass
+        defect, crossed = daqp_arrays(H, c, G, h, lb, ub, self._lower, self._upper)
         if defect:
             return QPSolution(None, False, DEFECTS[defect])
         if crossed >= 0:

@@ -14,7 +14,7 @@ from ..compiling import kernel_input
 from .problem import QPProblem, QPSolution
 from .solver_kernels import problem_defect
 
-__all__ = ["DEFECTS", "KernelArrays", "check_shapes", "crossed_bounds", "not_finite"]
+__all__ = ["DEFECTS", "check_shapes", "crossed_bounds", "kernel_arrays", "not_finite"]
 
 
 #: What :func:`~qpavoid.qp.solver_kernels.problem_defect`'s codes mean.
@@ -34,6 +34,15 @@ def check_shapes(prob: QPProblem, n: int, m: int) -> None:
         raise ValueError(f"a QP of shapes {shapes} for a backend of n = {n}, m = {m}")
 
 
+def kernel_arrays(prob: QPProblem, n: int, m: int) -> tuple[np.ndarray, ...]:
+    """``prob``'s H, c, G, h, lb, ub as the compiled checks take them (``kernel_input``),
+    after :func:`check_shapes` (every call: an array can be reshaped in place)."""
+    check_shapes(prob, n, m)
+    return tuple(
+        kernel_input(a, np.float64) for a in (prob.H, prob.c, prob.G, prob.h, prob.lb, prob.ub)
+    )
+
+
 def not_finite(prob: QPProblem) -> QPSolution | None:
     """A failed solution if the problem holds a NaN (or an infinite cost or row
     coefficient), else None. Solvers take such data silently: daqp ignores a NaN row and
@@ -49,37 +58,3 @@ def crossed_bounds(lower: np.ndarray, upper: np.ndarray, k: int) -> QPSolution:
     return QPSolution(
         None, False, f"infeasible bounds: l > u in row {k} ({lower[k]:.4g} > {upper[k]:.4g})"
     )
-
-
-class KernelArrays:
-    """A problem's six arrays as the compiled checks take them (``kernel_input``), looked
-    at in full once per problem object: the assembler fills the same one every tick.
-
-    Its shapes are checked then (:func:`check_shapes`: a ``ValueError``); after that only
-    what can change in place without a copy is looked at again, each call: the number of
-    dimensions and the write flag (a change of either is looked at in full again), and
-    the sizes, which the kernels check themselves
-    (:data:`~qpavoid.qp.solver_kernels.WRONG_SHAPES`).
-
-    Parameters
-    ----------
-    n, m
-        The backend's numbers of variables and of G rows.
-    """
-
-    NDIM = (2, 1, 2, 1, 1, 1)  # H, c, G, h, lb, ub
-
-    def __init__(self, n: int, m: int) -> None:
-        self.n, self.m = n, m
-        self.ready: QPProblem | None = None  # the last problem whose arrays were taken as is
-
-    def __call__(self, prob: QPProblem) -> tuple[np.ndarray, ...]:
-        arrays = (prob.H, prob.c, prob.G, prob.h, prob.lb, prob.ub)
-        if prob is self.ready and all(
-            a.ndim == d and a.flags.writeable for a, d in zip(arrays, self.NDIM, strict=True)
-        ):
-            return arrays
-        check_shapes(prob, self.n, self.m)
-        taken = tuple(kernel_input(a, np.float64) for a in arrays)
-        self.ready = prob if all(a is b for a, b in zip(taken, arrays, strict=True)) else None
-        return taken

@@ -1,7 +1,8 @@
 """What goes into and comes out of a QP solver, compiled (numba): one pass each.
 
-A problem is checked (sizes, finiteness) and copied into a solver's own arrays in one
-call (:func:`osqp_arrays`, :func:`daqp_arrays`); a solution is checked against the hard
+A problem whose sizes were checked (:func:`~qpavoid.qp.checks.kernel_arrays`) is
+checked for finiteness and copied into a solver's own arrays in one call
+(:func:`osqp_arrays`, :func:`daqp_arrays`); a solution is checked against the hard
 rows in one (:func:`hard_excess`); OSQP's warm start is cleaned of subnormal numbers by
 :func:`flush_tiny`. As numpy, each was a dozen calls whose overhead outweighed their
 arithmetic (docs/performance.md). Compiled code is cached on disk (``cache=True``);
@@ -18,13 +19,11 @@ from numba import njit
 from ..compiling import ctrl_c_deferred
 
 __all__ = [
-    "WRONG_SHAPES",
     "daqp_arrays",
     "flush_tiny",
     "hard_excess",
     "osqp_arrays",
     "problem_defect",
-    "sizes_fit",
     "stacked_bounds",
     "warm_up",
 ]
@@ -52,37 +51,6 @@ def problem_defect(
             if np.isnan(x) or x == sign * np.inf:
                 return code
     return 0
-
-
-#: :func:`osqp_arrays`' and :func:`daqp_arrays`' code for a problem of other sizes than
-#: the solver's arrays.
-WRONG_SHAPES = -1
-
-
-@njit(cache=True)
-def sizes_fit(
-    H: np.ndarray,
-    c: np.ndarray,
-    G: np.ndarray,
-    h: np.ndarray,
-    lb: np.ndarray,
-    ub: np.ndarray,
-    lower: np.ndarray,
-    upper: np.ndarray,
-) -> bool:
-    """True if H, c, G, h, lb, ub are a problem of G's sizes (n columns, m rows) and
-    ``lower``, ``upper`` hold its n + m stacked bounds."""
-    n, m = G.shape[1], G.shape[0]
-    return (
-        H.shape[0] == n
-        and H.shape[1] == n
-        and c.shape[0] == n
-        and h.shape[0] == m
-        and lb.shape[0] == n
-        and ub.shape[0] == n
-        and lower.shape[0] == n + m
-        and upper.shape[0] == n + m
-    )
 
 
 @njit(cache=True)
@@ -130,21 +98,14 @@ def osqp_arrays(
     the pattern), ``lower = [lb; −∞]``, ``upper = [ub; h]``, infinities clipped to OSQP's
     ``infinity``.
 
-    Returns ``(defect, crossed)``: :func:`problem_defect`'s code, or
-    :data:`WRONG_SHAPES` if the arrays are not of the sizes of ``Px``, ``Ax``, ``lower``
-    and ``upper`` (nothing is written unless it is 0), and the first row with
-    ``lower > upper``, or −1 (:func:`stacked_bounds`)."""
-    n, m = G.shape[1], G.shape[0]
-    if not (
-        sizes_fit(H, c, G, h, lb, ub, lower, upper)
-        and Px.shape[0] == n * (n + 1) // 2
-        and p_index.shape[0] == Px.shape[0]
-        and Ax.shape[0] == n * (m + 1)
-    ):
-        return WRONG_SHAPES, -1
+    Returns ``(defect, crossed)``: :func:`problem_defect`'s code (nothing is written
+    unless it is 0) and the first row with ``lower > upper``, or −1
+    (:func:`stacked_bounds`). The sizes are the caller's to check
+    (:func:`~qpavoid.qp.checks.check_shapes`): nothing here is bounds-checked."""
     defect = problem_defect(H, c, G, h, lb, ub)
     if defect:
         return defect, -1
+    n, m = G.shape[1], G.shape[0]
     for k in range(p_index.shape[0]):
         Px[k] = H.flat[p_index[k]]
     for j in range(n):
@@ -162,15 +123,11 @@ def daqp_arrays(
     h: np.ndarray,
     lb: np.ndarray,
     ub: np.ndarray,
-    n: int,
     lower: np.ndarray,
     upper: np.ndarray,
 ) -> tuple[int, int]:
     """daqp's bounds ``lower = [lb; −∞] ≤ [x; G x] ≤ upper = [ub; h]``, in place, as
-    :func:`osqp_arrays` checks and writes them (daqp takes H, c and G as they are), for
-    a problem of ``n`` variables."""
-    if not (sizes_fit(H, c, G, h, lb, ub, lower, upper) and G.shape[1] == n):
-        return WRONG_SHAPES, -1
+    :func:`osqp_arrays` checks and writes them (daqp takes H, c and G as they are)."""
     defect = problem_defect(H, c, G, h, lb, ub)
     if defect:
         return defect, -1
@@ -231,4 +188,4 @@ def warm_up() -> None:
         lower, upper = np.zeros(n + 2), np.zeros(n + 2)
         p_index, Px = np.zeros(n * (n + 1) // 2, dtype=np.int64), np.zeros(n * (n + 1) // 2)
         osqp_arrays(H, c, G, h, c, c, p_index, 1e30, Px, np.zeros(3 * n), lower, upper)
-        daqp_arrays(H, c, G, h, c, c, n, lower, upper)
+        daqp_arrays(H, c, G, h, c, c, lower, upper)
