@@ -6,18 +6,21 @@
 Each variant tracks the same planned end-effector path (qpavoid's ``ArcPath``: pose and
 twist) at 100 Hz in closed loop (``q += v dt``) while the hand of the paper's Test 1 moves
 near the end effector and L2; all variants step in one loop, interleaved tick by tick, so
-they share the machine's state. Per variant: the time of one tick (median, p99, µs) and
-the clearance it keeps from the moving hand (the distance from the hand point to the
-nearest capsule of the arm, minus a 0.05 m hand radius, m), the largest distance of the
-flange from its reference (mm) and how far its path clock is behind at the end (s:
-qpavoid's waits while it stops; the peers always chase the reference of the moment).
+they share the machine's state, in a new (seeded) order every tick, so that none always
+runs after the same neighbour (one of ours right after another of ours would find its
+code warm in the caches; until 2026-11-24 the order was fixed). Per variant: the time
+of one tick (median, p99, µs) and the clearance it keeps from the moving hand (the
+distance from the hand point to the nearest capsule of the arm, minus a 0.05 m hand
+radius, m), the largest distance of the flange from its reference (mm) and how far its
+path clock is behind at the end (s: qpavoid's waits while it stops; the peers always
+chase the reference of the moment).
 
 * **qpavoid**: ``QPController.step`` (persistent OSQP), spheres and capsules, the paper's
   rules, one person (the whole skeleton, as every tick sees it); spheres on the
   daqp backend (``QPConfig(backend="daqp")``: daqp called directly); and, in a second interleaved
   phase of the same run, six people (the same person and five others standing 0.8 m
   apart along the table, every skeleton new every tick).
-* **floor**: right after qpavoid's sphere tick, at its q, only the library calls such a
+* **floor**: at the q of qpavoid's sphere tick, only the library calls such a
   tick cannot do without (:class:`Floor`: Pinocchio's kinematics and the control frames'
   placements and Jacobians, OSQP's update and solve of that tick's own data): the time
   left to qpavoid's own code is the difference. A time only (it commands nothing).
@@ -42,6 +45,7 @@ import time
 import warnings
 from importlib.resources import files
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -52,7 +56,8 @@ from qpavoid.geometry import point_segment_distance
 from qpavoid.people import People
 from qpavoid.perception import PerceptionConfig
 from qpavoid.qp import QPConfig, QPController
-from qpavoid.qp.backends import PersistentOSQP
+from qpavoid.qp.backends import WARM_START_FLOOR, PersistentOSQP
+from qpavoid.qp.solver_kernels import flush_tiny
 from qpavoid.robot import load_robot
 from qpavoid.scenarios import make_scenario
 from qpavoid.task import ArcPath, inverse_kinematics
@@ -158,19 +163,20 @@ class Floor:
     joint Jacobians and frame placements, each control frame's position and Jacobian,
     then OSQP's update and solve of the very data the sphere tick just built (read from
     its persistent problem's buffers; a second model and a second persistent problem of
-    the same pattern), stepped right after that tick at its q; it commands nothing."""
+    the same pattern), stepped at the q of that tick's last step; it commands nothing."""
 
     def __init__(self, robot, source: QPController):
         self.model = robot.model.copy()
         self.data = self.model.createData()
-        frames = set(robot.point_frames) | {f for s in robot.sets for f in s.capsule_frames}
-        # each placement read through a reference held into the data (as Robot does)
-        self.placements = [self.data.oMf[f] for f in sorted(frames)]
+        # the frames a tick reads, each once (Robot's own list: a capsule end that is a
+        # control point is read once), each through a reference held into the data
+        self.frames, self.ee = list(robot._frames), robot.ee_frame
+        self.placements = [self.data.oMf[f] for f in self.frames]
         self.ee_placement = self.data.oMf[robot.ee_frame]
-        self.frames, self.ee = sorted(frames), robot.ee_frame
         # the sphere tick's OSQP data: its backend's buffers and its assembler's c, the
         # same arrays every tick (private: a benchmark's peek, not an interface)
-        self.source, self.c = source.backend, source.assembler._filled.c
+        self.controller, self.source = source, source.backend
+        self.c = source.assembler._filled.c
         self.osqp = PersistentOSQP(self.source.n, self.source.m, QPConfig())._native
 
     def step(self, q) -> None:
@@ -185,21 +191,31 @@ class Floor:
         self.osqp.update_data_vec(q=self.c, l=src._l, u=src._u)
         self.osqp.update_data_mat(P_x=src._Px, P_i=None, A_x=src._Ax, A_i=None)
         self.osqp.solve()
-        self.x = self.osqp.solution.x
+        solution = self.osqp.solution
+        self.x, y = np.array(solution.x), np.array(solution.y)
+        # as the tick does: no subnormal numbers left in the warm start (PersistentOSQP)
+        if flush_tiny(self.x, WARM_START_FLOOR) | flush_tiny(y, WARM_START_FLOOR):
+            self.osqp.warm_start(x=self.x, y=y)
 
 
 LWA = pin.LOCAL_WORLD_ALIGNED
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def setup(description: str) -> tuple[argparse.Namespace, Any, ArcPath, Any, np.ndarray]:
+    """The command line (``--seconds``, ``--json``), the arm, the path, Test 1's person and
+    the arm's start on the path: what every head-to-head here starts from."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--seconds", type=float, default=15.0)
     ap.add_argument("--json")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     robot = load_robot("iiwa14")
     path, motion = ArcPath(), make_scenario("test1", robot)
-    q0 = inverse_kinematics(robot, path.reference(0.0)[0])
+    return args, robot, path, motion, inverse_kinematics(robot, path.reference(0.0)[0])
+
+
+def main() -> None:
+    args, robot, path, motion, q0 = setup(__doc__.splitlines()[0])
 
     def ours(kind: str, distance: str, **qp) -> tuple[str, QPController]:
         return kind, QPController(robot, config=ideal(distance=distance), qp=QPConfig(**qp))
@@ -207,7 +223,7 @@ def main() -> None:
     spheres = ours("qp", "spheres")
     variants = {
         "qpavoid QP, spheres (persistent OSQP)": spheres,
-        # right after it in each tick, the floor of its libraries (see Floor)
+        # the floor of its libraries (see Floor)
         "floor: Pinocchio + OSQP calls of that tick": ("floor", Floor(robot, spheres[1])),
         "qpavoid QP, capsules (persistent OSQP)": ours("qp", "capsules"),
         "qpavoid QP, spheres (daqp)": ours("qp", "spheres", backend="daqp"),
@@ -238,6 +254,17 @@ def _interleaved(variants: dict, robot, path, motion, q0, seconds: float) -> dic
     error: dict[str, list[float]] = {name: [] for name in variants}
     robot7 = load_robot("iiwa14", locked=())
     dt = 1.0 / RATE_HZ
+    # A floor steps at the q its source tick last stepped at (see Floor).
+    source = {
+        name: next(n for n, (_, c) in variants.items() if c is ctrl.controller)
+        for name, (kind, ctrl) in variants.items()
+        if kind == "floor"
+    }
+    stepped_at: dict[str, np.ndarray] = {}
+    # Each tick in a new order (the first as given): a variant's time depends on what ran
+    # just before it (what is left in the caches; one of ours after another of ours finds
+    # its code warm), so no variant keeps a neighbour.
+    order, rng = list(variants), np.random.default_rng(0)
     for k in range(int(seconds * RATE_HZ)):
         t = k * dt
         frame = qpavoid.HumanFrame.check(*motion.frame_at(t))
@@ -245,14 +272,14 @@ def _interleaved(variants: dict, robot, path, motion, q0, seconds: float) -> dic
         crowd = People(tuple(range(6)), (frame, *others))  # and five others at the table
         hand = frame.joints[JointType.HandRight]
         target = pin.SE3(path.reference(t)[0])
-        stepped_q = q0  # the q of the variant stepped last (the floor times its calls)
-        for name, (kind, ctrl) in variants.items():
-            if kind == "floor":  # at the q of the tick just stepped: its time alone
+        for name in order:
+            kind, ctrl = variants[name]
+            if kind == "floor":  # at the q of its source's last tick: a time only
                 t0 = time.perf_counter_ns()
-                ctrl.step(stepped_q)
+                ctrl.step(stepped_at[source[name]])
                 times[name].append((time.perf_counter_ns() - t0) / 1e3)
                 continue
-            stepped_q = q = state[name]
+            stepped_at[name] = q = state[name]
             tau = clock[name]
             t0 = time.perf_counter_ns()
             if kind in ("qp", "qp6"):  # qpavoid's path clock waits while it stops
@@ -266,6 +293,7 @@ def _interleaved(variants: dict, robot, path, motion, q0, seconds: float) -> dic
             clear[name].append(_clearance7(robot7, q7, hand))
             ref = path.reference(clock[name])[0][:3, 3]
             error[name].append(float(np.linalg.norm(robot7.end_effector(q7)[:3, 3] - ref)))
+        rng.shuffle(order)
     rows = {}
     print(f"\n{int(seconds * RATE_HZ)} ticks at {RATE_HZ:.0f} Hz, variants interleaved\n")
     print(

@@ -10,8 +10,11 @@ import sys
 import types
 from pathlib import Path
 
+import numba
+import numpy as np
+
 from qpavoid import fusion_person, law_kernels
-from qpavoid.compiling import recompile_if_stale
+from qpavoid.compiling import kernel_input, recompile_if_stale
 
 # A fresh process runs the loop's every compiled path (both distance methods, both
 # controllers, SSM, several people, two-sensor fusion with mirrors and outliers) and
@@ -121,3 +124,26 @@ def test_numba_still_keeps_a_cache_index_where_recompile_if_stale_looks():
     fusion_person.warm_up()
     for kernel in (law_kernels.avoidance_terms, fusion_person.fuse_person):
         assert os.path.exists(kernel._cache._cache_file._index_path)
+
+
+def test_kernel_input_passes_only_the_warmed_up_array_type_through():
+    plain = np.arange(6.0).reshape(2, 3)
+    assert kernel_input(plain, np.float64) is plain  # no copy in the control loop
+    readonly = plain.copy()
+    readonly.setflags(write=False)
+    odd = {
+        "read-only": readonly,
+        "a strided view": np.arange(12.0).reshape(2, 6)[:, ::2],
+        "Fortran order": np.asfortranarray(np.arange(6.0).reshape(3, 2)).T,
+        "big-endian": plain.astype(">f8"),
+        "float32": plain.astype(np.float32),
+        "a list": plain.tolist(),
+    }
+    for name, value in odd.items():
+        got = kernel_input(value, np.float64)
+        assert numba.typeof(got) == numba.typeof(plain), name  # the one specialisation
+        assert got.flags.c_contiguous and got.flags.writeable, name
+        np.testing.assert_array_equal(got, np.asarray(value, dtype=np.float64), err_msg=name)
+    states = np.array([2, 1, 0], dtype=np.int8)
+    assert kernel_input(states, np.int8) is states
+    assert numba.typeof(kernel_input(states.astype(int), np.int8)) == numba.typeof(states)
