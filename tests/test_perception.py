@@ -231,3 +231,49 @@ def test_tracked_geometry_is_geometry_and_part_velocities_in_one_call():
         fastest = [np.flatnonzero(row)[np.argmax(np.linalg.norm(velocity[row], axis=1))]
                    for row in parts]  # fmt: skip
         np.testing.assert_array_equal(part_v, velocity[fastest])
+
+
+def test_the_perceivers_one_call_per_person_is_the_tracker_then_the_body():
+    """The perceiver's tracker and body in one compiled call (``perceive``) against the
+    two calls it replaced (``Tracker.update``, then ``tracked_geometry``), bit for bit, on
+    random frames of up to three people who come and go, with lost, inferred and NaN
+    joints, repeated skeletons and frames out of order."""
+    from qpavoid.people import People, Perceiver
+    from qpavoid.perception import PeopleTracker
+
+    rng = np.random.default_rng(11)
+    human = KinectHuman()
+    perceiver, reference = Perceiver(human), PeopleTracker()
+    rest = Operator().rest()
+    t, last, seen_kept, repeats = 0.0, {}, 0, 0
+    for _ in range(400):
+        ids = tuple(int(i) for i in rng.choice(3, size=rng.integers(1, 4), replace=False))
+        frames = []
+        for i in ids:
+            if i in last and rng.random() < 0.1:  # the same skeleton again, bit for bit
+                frames.append(last[i])
+                continue
+            joints = rest + np.array([0.4 * i, 0.0, 0.0]) + rng.normal(0.0, 0.05, (25, 3))
+            state = rng.choice([0, 1, 2], size=25, p=[0.15, 0.15, 0.7]).astype(np.int8)
+            joints[rng.random(25) < 0.1] = np.nan
+            frames.append(HumanFrame.check(joints, state))
+        last.update(zip(ids, frames, strict=True))
+        t += rng.choice([1 / 30, -1 / 60, 0.0], p=[0.8, 0.1, 0.1])  # out of order, repeated
+        seen = perceiver.update(People(ids, tuple(frames)), t, t)
+        expected = reference.update(ids, tuple(frames), t)
+        for got, want, geometry, velocity in zip(
+            seen.perceived, expected, seen.geometry, seen.part_velocity, strict=True
+        ):
+            seen_kept += got.capture_time_s > t  # a frame not taken: the newer one kept
+            repeats += got.identical > 0
+            for name in ("joint_radius", "joint_velocity"):
+                np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
+            np.testing.assert_array_equal(got.frame.joints, want.frame.joints)
+            np.testing.assert_array_equal(got.frame.state, want.frame.state)
+            assert (got.identical, got.capture_time_s) == (want.identical, want.capture_time_s)
+            geo, part_v = human.tracked_geometry(want.frame, want.joint_radius, want.joint_velocity)
+            for name in ("points", "point_valid", "segments", "segment_valid", "part_margin",
+                         "reach_margin"):  # fmt: skip
+                np.testing.assert_array_equal(getattr(geometry, name), getattr(geo, name))
+            np.testing.assert_array_equal(velocity, part_v)
+    assert seen_kept > 20 and repeats > 5  # the out-of-order and frozen paths ran
