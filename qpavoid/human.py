@@ -200,15 +200,13 @@ class KinectHuman:
         (13,) Kinect joints used as points, in point order.
     point_part
         (M, K) bool, True where point m belongs to part k.
-    body
-        The model's arrays as the compiled perception takes them (joint ids, mid-point
-        ends, chains, reach pairs, capsule radii, part membership: perception_kernels).
     """
 
     parts: tuple[BodyPart, ...] = UPPER_BODY
     joint_ids: np.ndarray = field(init=False, repr=False)
     point_part: np.ndarray = field(init=False, repr=False)
-    body: tuple[np.ndarray, ...] = field(init=False, repr=False)
+    _mid_ids: np.ndarray = field(init=False, repr=False)
+    _chains: np.ndarray = field(init=False, repr=False)
     _members: np.ndarray = field(init=False, repr=False)
     _reach: np.ndarray = field(init=False, repr=False)
     _radii: np.ndarray = field(init=False, repr=False)
@@ -232,11 +230,20 @@ class KinectHuman:
             member[len(joints) + k, k] = True
         object.__setattr__(self, "joint_ids", np.array(joints))
         object.__setattr__(self, "point_part", member)
-        mids = np.array([[int(a), int(b)] for a, b in (p.mid for p in self.parts)])
-        width = max(len(p.chain) for p in self.parts)  # chains padded with their last joint
-        chains = [[int(j) for j in (*p.chain, *[p.chain[-1]] * width)][:width] for p in self.parts]
-        body = (self.joint_ids, mids, np.array(chains), self._reach, self._radii, members)
-        object.__setattr__(self, "body", body)
+        object.__setattr__(
+            self, "_mid_ids", np.array([[int(a), int(b)] for a, b in (p.mid for p in self.parts)])
+        )
+        width = max(len(p.chain) for p in self.parts)
+        object.__setattr__(
+            self,
+            "_chains",
+            np.array(
+                [
+                    [int(j) for j in p.chain] + [int(p.chain[-1])] * (width - len(p.chain))
+                    for p in self.parts
+                ]
+            ),
+        )
 
     @property
     def part_names(self) -> tuple[str, ...]:
@@ -276,22 +283,20 @@ class KinectHuman:
 
         Each part's capsule runs between the first and last usable joints of its chain;
         how far the fingers stick out of it widens it (perception_kernels.capsules)."""
-        return self.body_geometry(
-            tracked_body(
-                kernel_input(frame.joints, np.float64),
-                kernel_input(frame.state, np.int8),
-                kernel_input(joint_radius, np.float64),
-                kernel_input(joint_velocity, np.float64),
-                *self.body,
-            )
+        points, point_valid, segments, segment_valid, reach, margin, velocity = tracked_body(
+            kernel_input(frame.joints, np.float64),
+            kernel_input(frame.state, np.int8),
+            kernel_input(joint_radius, np.float64),
+            kernel_input(joint_velocity, np.float64),
+            self.joint_ids,
+            self._mid_ids,
+            self._chains,
+            self._reach,
+            self._radii,
+            self._members,
         )
-
-    @staticmethod
-    def body_geometry(body: tuple[np.ndarray, ...]) -> tuple[HumanGeometry, np.ndarray]:
-        """A tracked frame's body as the kernels return it (``tracked_body``'s outputs) as
-        its geometry and each part's velocity (K, 3), m/s."""
-        points, point_valid, segments, segment_valid, reach, margin, velocity = body
-        return HumanGeometry(points, point_valid, segments, segment_valid, margin, reach), velocity
+        geometry = HumanGeometry(points, point_valid, segments, segment_valid, margin, reach)
+        return geometry, velocity
 
     def part_joints(self) -> np.ndarray:
         """(K, 25) bool: the Kinect joints of each part (chain, mid-point ends and reach)."""

@@ -126,15 +126,10 @@ class Perceiver:
         """Take ``people`` (captured at ``captured_s``) unless it is the frame in hand."""
         last = self._frame
         if last is None or not same_frames(people, last[0]) or frame_time_s != last[1]:
-            human = self.human
-            # each person's tracker and body in one compiled call (perception_kernels.perceive)
-            taken = self.trackers.update_bodies(people.ids, people.frames, captured_s, human.body)
-            self.perceived = [p for p, _ in taken]
-            bodies = [  # a frame not taken (out of order): the body of the one kept
-                human.tracked_geometry(p.frame, p.joint_radius, p.joint_velocity)
-                if body is None
-                else human.body_geometry(body)
-                for p, body in taken
+            self.perceived = self.trackers.update(people.ids, people.frames, captured_s)
+            bodies = [
+                self.human.tracked_geometry(p.frame, p.joint_radius, p.joint_velocity)
+                for p in self.perceived
             ]
             self.geometry = [geometry for geometry, _ in bodies]
             self.part_velocity = np.array([velocity for _, velocity in bodies])

@@ -37,11 +37,7 @@ import numpy as np
 
 from .compiling import kernel_input
 from .frames import N_KINECT_JOINTS, HumanFrame, JointType, TrackingState
-from .perception_kernels import fastest_joint, perceive, track, warm_up
-
-#: A body model's arrays as the compiled perception takes them
-#: (:attr:`~qpavoid.human.KinectHuman.body`), or a tracked frame's body as it returns them.
-Body = tuple[np.ndarray, ...]
+from .perception_kernels import fastest_joint, track, warm_up
 
 J = JointType
 
@@ -171,19 +167,9 @@ class Tracker:
 
     def update(self, frame: HumanFrame, capture_time_s: float) -> Perceived:
         """Take a new frame captured at ``capture_time_s`` (s) and return what to trust."""
-        return self.update_body(frame, capture_time_s)[0]
-
-    def update_body(
-        self, frame: HumanFrame, capture_time_s: float, body: Body | None = None
-    ) -> tuple[Perceived, Body | None]:
-        """:meth:`update`, and with ``body`` (a body model's arrays,
-        :attr:`~qpavoid.human.KinectHuman.body`) that body's capsules, part margins and
-        part velocities of the frame to trust, in the same compiled call
-        (:func:`~qpavoid.perception_kernels.perceive`: the outputs of ``tracked_body``).
-        None in their place for a frame not taken (out of order or repeated)."""
         cfg = self.cfg
         if self._perceived is not None and capture_time_s <= self._perceived.capture_time_s:
-            return self._perceived, None  # out of order or repeated: keep the newer one
+            return self._perceived  # out of order or repeated: keep the newer one
         last = self._last
         identical = 0
         if last is not None and self._perceived is not None:
@@ -196,7 +182,7 @@ class Tracker:
             identical = self._perceived.identical + 1 if same else 0
         # the α-β filter, the bones, each joint's uncertainty and the lost joints placed
         # within reach of their nearest tracked ancestor (perception_kernels.track)
-        args = (
+        joints, state, radius, velocity = track(
             self.position,
             self.velocity,
             self.last_seen,
@@ -211,10 +197,6 @@ class Tracker:
             float(cfg.inferred_uncertainty_m),
             float(cfg.max_human_speed_mps),
         )
-        if body is None:
-            (joints, state, radius, velocity), outputs = track(*args), None
-        else:
-            (joints, state, radius, velocity), outputs = perceive(args, body)
         self._last = frame
         self._perceived = Perceived(
             HumanFrame(joints, state),
@@ -223,7 +205,7 @@ class Tracker:
             identical,
             float(capture_time_s),
         )
-        return self._perceived, outputs
+        return self._perceived
 
 
 class PeopleTracker:
@@ -244,20 +226,9 @@ class PeopleTracker:
         self, ids: tuple[int, ...], frames: tuple[HumanFrame, ...], capture_time_s: float
     ) -> list[Perceived]:
         """Each person's :meth:`Tracker.update`, in the order of ``ids``."""
-        return [p for p, _ in self.update_bodies(ids, frames, capture_time_s)]
-
-    def update_bodies(
-        self,
-        ids: tuple[int, ...],
-        frames: tuple[HumanFrame, ...],
-        capture_time_s: float,
-        body: Body | None = None,
-    ) -> list[tuple[Perceived, Body | None]]:
-        """Each person's :meth:`Tracker.update_body`, in the order of ``ids``."""
         self.trackers = {i: self.person(i) for i in ids}
         return [
-            self.trackers[i].update_body(f, capture_time_s, body)
-            for i, f in zip(ids, frames, strict=True)
+            self.trackers[i].update(f, capture_time_s) for i, f in zip(ids, frames, strict=True)
         ]
 
 

@@ -20,7 +20,7 @@ from numba import njit
 
 from .compiling import ctrl_c_deferred
 
-__all__ = ["capsules", "fastest_joint", "largest_per_part", "perceive", "track", "warm_up"]
+__all__ = ["capsules", "fastest_joint", "largest_per_part", "track", "warm_up"]
 
 TINY = 1e-12  #: a segment shorter than this is its end point, m (as geometry.TINY)
 
@@ -256,16 +256,6 @@ def tracked_body(
     return points, point_valid, segments, segment_valid, reach, margin, velocity
 
 
-@njit(cache=True)
-def perceive(tracking: tuple, body: tuple) -> tuple[tuple, tuple]:
-    """One person's frame from the sensor to the body in one call: :func:`track` of the
-    arguments ``tracking`` (its four outputs), then :func:`tracked_body` of the frame it
-    trusts with the body model's arguments ``body`` (its seven): a call less per person
-    and frame (docs/performance.md §2c)."""
-    trusted = track(*tracking)
-    return trusted, tracked_body(*trusted, *body)
-
-
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) every kernel, once per process."""
@@ -273,18 +263,33 @@ def warm_up() -> None:
         z = np.zeros((25, 3))
         state = np.full(25, 2, dtype=np.int8)
         parent = np.full(25, -1, dtype=np.int64)
-
-        def memory() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-            return z.copy(), z.copy(), np.zeros(25), np.zeros(25), np.zeros(25)  # fresh
-
-        settings = (1.0, 0.3, 0.05, 0.05, 1.6)
-        track(*memory(), parent, z, state, *settings)  # (track writes in the memory)
+        track(
+            z.copy(),
+            z.copy(),
+            np.zeros(25),
+            np.zeros(25),
+            np.zeros(25),
+            parent,
+            z,
+            state,
+            1.0,
+            0.3,
+            0.05,
+            0.05,
+            1.6,
+        )
         ids = np.arange(3, dtype=np.int64)
-        pairs = np.zeros((1, 2), dtype=np.int64)
-        capsules(z, state, ids, pairs, pairs, pairs, np.ones(1))
+        capsules(
+            z,
+            state,
+            ids,
+            np.zeros((1, 2), dtype=np.int64),
+            np.zeros((1, 2), dtype=np.int64),
+            np.zeros((1, 2), dtype=np.int64),
+            np.ones(1),
+        )
         members = np.ones((2, 25), dtype=np.bool_)
         largest_per_part(members, np.zeros(25))
         fastest_joint(members, z)
-        body = (ids, pairs, pairs, pairs, np.ones(1), members)
-        tracked_body(z, state, np.zeros(25), z, *body)
-        perceive((*memory(), parent, z, state, *settings), body)
+        pairs = np.zeros((1, 2), dtype=np.int64)
+        tracked_body(z, state, np.zeros(25), z, ids, pairs, pairs, pairs, np.ones(1), members)
