@@ -10,8 +10,8 @@ solver data). The other design would run them all in one compiled pass. Before
 building it, this script measures what it would reach.
 
 Each tick, qpavoid's sphere tick (persistent OSQP) runs as in ``peers.py``, and its
-kernel calls are recorded with copies of their arguments. At that tick's q,
-``SinglePass`` times the rest of such a tick:
+kernel calls are recorded with copies of their arguments. In the next tick, at its q,
+``SinglePass`` replays it (each record once, in order), timing the rest of such a tick:
 
 * what cannot be compiled: the q check, Pinocchio (the calls of ``Robot.kinematics``:
   joint Jacobians, frame placements, the control frames' positions and Jacobians), the
@@ -91,15 +91,15 @@ def _copy(a: Any) -> Any:
 
 
 class Recorded(QPController):
-    """The sphere tick, its kernel calls kept for :class:`SinglePass`: with fresh copies
-    of their arguments (the call writes into the tracker's memory), a key of their kernels
-    and argument types, and the one compiled call made for that key (compiled and run
-    once here, outside any timing that counts)."""
+    """The sphere tick, its kernel calls kept for :class:`SinglePass`: their arguments
+    (copied as each call began: the kernels write into the tracker's memory), and the one
+    compiled call made for their kernels and argument types (compiled and run once here,
+    outside any timing that counts)."""
 
     def __init__(self, recorder: Recorder, *args: Any, **kw: Any):
         super().__init__(*args, **kw)
         self.recorder, self.compiled = recorder, {}
-        self.q, self.t, self.solved, self.call, self.fresh = None, 0.0, False, None, []
+        self.t, self.solved, self.call, self.record = 0.0, False, None, []
 
     def step(self, q, joints, state=None, t=0.0, *args: Any, **kw: Any):  # type: ignore[override]
         rec = self.recorder
@@ -114,11 +114,8 @@ class Recorded(QPController):
             if key not in self.compiled:
                 self.compiled[key] = one_call(seq)
                 self.compiled[key](*[_copy(x) for _, a in seq for x in a])
-            # two fresh copies: in the shuffled order the single pass may replay a record
-            # twice (once after it, once before the next), and a replay writes into them
-            self.call = self.compiled[key]
-            self.fresh = [[_copy(x) for _, a in seq for x in a] for _ in range(2)]
-            self.q, self.t = np.array(q, dtype=np.float64), t
+            self.call, self.record = self.compiled[key], [x for _, a in seq for x in a]
+            self.t = t
             self.solved = any(k.__name__ == "osqp_arrays" for k, _ in seq)  # not a stop
 
 
@@ -160,7 +157,8 @@ class Command(NamedTuple):  # as many fields as qpavoid's Command
 
 class SinglePass(peers.Floor):
     """The floor's library calls, the Python a tick cannot do without, and the recorded
-    kernels in one compiled call (see the module docstring), at the recorded tick's q."""
+    kernels in one compiled call (see the module docstring): each tick, the recorded
+    tick's before (as the floor, :meth:`take`: every record replayed once, in order)."""
 
     def __init__(self, robot, source: Recorded, ticks: int):
         super().__init__(robot, source)
@@ -168,11 +166,22 @@ class SinglePass(peers.Floor):
         self.clock = np.zeros((ticks, len(STAGES) + 1), dtype=np.int64)  # ns, each tick
         self.k = 0
 
-    def step(self, _q) -> None:
-        src, rec, robot = self.source, self.recorded, self.robot
+    def take(self, q: np.ndarray) -> None:
+        """The floor's copy, and the record's: its one call, a copy of its arguments, its
+        path time, whether it solved, and the problem's hard rows and bounds."""
+        super().take(q)
+        rec = self.recorded
+        prob = rec.assembler._filled
+        self.replay = (rec.call, [_copy(x) for x in rec.record], rec.t, rec.solved)
+        self.problem = tuple(a.copy() for a in (prob.lb, prob.ub, prob.G, prob.h))
+
+    def step(self, _q=None) -> None:
+        assert self.taken is not None
+        robot, (call, args, t, solved) = self.robot, self.replay
+        q, c, lower, upper, Px, Ax = self.taken
         clock, row = time.perf_counter_ns, self.clock[self.k]
         row[0] = clock()
-        q = np.asarray(rec.q, dtype=np.float64)
+        q = np.asarray(q, dtype=np.float64)
         if not np.isfinite(q).all():
             raise ValueError("q")
         model, data, LWA = self.model, self.data, pin.LOCAL_WORLD_ALIGNED
@@ -185,12 +194,12 @@ class SinglePass(peers.Floor):
         )
         pin.getFrameJacobian(model, data, self.ee, LWA)
         row[1] = clock()
-        ref_pose, _ = rec.path.reference(rec.t)
+        ref_pose, _ = self.recorded.path.reference(t)
         pose_error(ref_pose, ee)
         row[2] = clock()
-        rec.call(*rec.fresh.pop())
+        call(*args)
         row[3] = clock()
-        if not rec.solved:  # a stop: no QP
+        if not solved:  # a stop: no QP
             row[4] = row[5] = clock()
             self.command = Command(
                 np.zeros(robot.nv), True, "stop", 0.0, 0.0, None, None, None, None, None,
@@ -199,17 +208,17 @@ class SinglePass(peers.Floor):
             self.k += 1
             return
         solver = self.osqp
-        solver.update_data_vec(q=self.c, l=src._l, u=src._u)
-        solver.update_data_mat(P_x=src._Px, P_i=None, A_x=src._Ax, A_i=None)
+        solver.update_data_vec(q=c, l=lower, u=upper)
+        solver.update_data_mat(P_x=Px, P_i=None, A_x=Ax, A_i=None)
         solver.solve()
         row[4] = clock()
         info, solution = solver.info, solver.solution
         x, y = np.array(solution.x), np.array(solution.y)
         if flush_tiny(x, WARM_START_FLOOR) | flush_tiny(y, WARM_START_FLOOR):
             solver.warm_start(x=x, y=y)
-        prob, hard, nv = rec.assembler._filled, rec._hard, robot.nv
-        hard_excess(x, nv, prob.lb, prob.ub, prob.G, prob.h, hard.start, hard.stop)
-        dq = np.minimum(np.maximum(x[:nv], prob.lb[:nv]), prob.ub[:nv])
+        (lb, ub, G, h), hard, nv = self.problem, self.recorded._hard, robot.nv
+        hard_excess(x, nv, lb, ub, G, h, hard.start, hard.stop)
+        dq = np.minimum(np.maximum(x[:nv], lb[:nv]), ub[:nv])
         limit_crossed(q, dq, 1.0 / peers.RATE_HZ, robot.q_min, robot.q_max)
         self.command = Command(
             dq, False, "", 1.0, 0.0, None, None, np.zeros(3), np.zeros(3), None,
@@ -225,7 +234,7 @@ def main() -> None:
     plain = QPController(robot, config=config, qp=QPConfig())
     recorded = Recorded(Recorder(), robot, config=config, qp=QPConfig())
     single = SinglePass(robot, recorded, int(args.seconds * peers.RATE_HZ))
-    variants = {  # recorded first in the first tick (the single pass replays its record)
+    variants = {
         "qpavoid QP, spheres, recording its kernels": ("qp", recorded),
         "qpavoid QP, spheres (persistent OSQP)": ("qp", plain),
         "floor: Pinocchio + OSQP calls of that tick": ("floor", peers.Floor(robot, plain)),
