@@ -38,6 +38,11 @@ def kernel_arrays(prob: QPProblem, n: int, m: int) -> tuple[np.ndarray, ...]:
     """``prob``'s H, c, G, h, lb, ub as the compiled checks take them (``kernel_input``),
     after :func:`check_shapes` (every call: an array can be reshaped in place)."""
     check_shapes(prob, n, m)
+    return _as_kernel_input(prob)
+
+
+def _as_kernel_input(prob: QPProblem) -> tuple[np.ndarray, ...]:
+    """``prob``'s H, c, G, h, lb, ub, each through ``kernel_input`` (float64, C order)."""
     return tuple(
         kernel_input(a, np.float64) for a in (prob.H, prob.c, prob.G, prob.h, prob.lb, prob.ub)
     )
@@ -47,9 +52,7 @@ def not_finite(prob: QPProblem) -> QPSolution | None:
     """A failed solution if the problem holds a NaN (or an infinite cost or row
     coefficient), else None. Solvers take such data silently: daqp ignores a NaN row and
     reports success; one NaN left in OSQP's warm start spoils every later solve."""
-    defect = problem_defect(
-        *(kernel_input(a, np.float64) for a in (prob.H, prob.c, prob.G, prob.h, prob.lb, prob.ub))
-    )
+    defect = problem_defect(*_as_kernel_input(prob))  # any sizes: no shape to check
     return QPSolution(None, False, DEFECTS[defect]) if defect else None
 
 
