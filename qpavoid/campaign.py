@@ -17,6 +17,7 @@ case beside them.
 from __future__ import annotations
 
 import json
+import logging
 import os
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor
@@ -34,12 +35,23 @@ from .robot import load_robot
 from .strike_sweep import StrikeCheck, strike_sweep
 from .strikes import strike_case, strike_motion
 
-__all__ = ["RayExecutor", "run_campaign", "summarize_campaign", "write_campaign"]
+__all__ = [
+    "MAX_RUNS",
+    "RayExecutor",
+    "replay_command",
+    "run_campaign",
+    "summarize_campaign",
+    "write_campaign",
+]
 
 #: A run lasts until the goal or this cap, s: the 15 s path, a strike's stops and margin.
 CAMPAIGN_MAX_TIME_S = 30.0
 #: How many of the worst runs are written out.
 WORST = 5
+#: The most runs of one campaign: each run's result is held for the summary and is one
+#: row of runs.json (about 0.5 kB), and 100 000 runs are the campaign docs/performance.md
+#: prices; split a larger one by --seed.
+MAX_RUNS = 1_000_000
 
 
 class RayExecutor(Executor):
@@ -56,17 +68,28 @@ class RayExecutor(Executor):
                 name="--executor",
                 value="ray",
             ) from None
-        self.ray = ray
-        if not ray.is_initialized():
-            address = os.environ.get("RAY_ADDRESS")
+        self.ray, self.started = ray, False
+        if ray.is_initialized():
+            return
+        address = os.environ.get("RAY_ADDRESS")
+        try:
             if address:
-                ray.init(address=address, log_to_driver=False)
+                ray.init(address=address, log_to_driver=False, logging_level=logging.ERROR)
             else:
                 ray.init(
                     num_cpus=workers or os.cpu_count(),
                     include_dashboard=False,
                     log_to_driver=False,
+                    logging_level=logging.ERROR,
                 )
+        except Exception as exc:  # Ray's own errors, whatever their type: not our bug
+            where = f"the Ray cluster at RAY_ADDRESS={address!r}" if address else "a local Ray"
+            raise InputError(
+                f"cannot start or reach {where}: {type(exc).__name__}: {exc}",
+                name="RAY_ADDRESS" if address else "--workers",
+                value=address or workers,
+            ) from None
+        self.started = not address
 
     def map(self, fn: Callable[..., Any], *iterables: Iterable[Any], **_: Any) -> Iterator[Any]:
         """``fn`` over the items as Ray tasks; results yielded in order as they complete."""
@@ -76,7 +99,11 @@ class RayExecutor(Executor):
             yield self.ray.get(ref)
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
-        """Leave Ray as it is (a cluster outlives the campaign)."""
+        """Stop the local Ray this executor started, its processes with it; leave any
+        other as it is (a cluster outlives the campaign)."""
+        if self.started:
+            self.ray.shutdown()
+            self.started = False
 
 
 def run_campaign(
@@ -94,8 +121,8 @@ def run_campaign(
 ) -> list[StrikeCheck]:
     """``n`` strikes from seed ``seed`` on, each until the goal (or ``max_time_s``), in
     seed order."""
-    if n < 1:
-        raise InputError(f"--n must be at least 1, got {n}", name="--n", value=n)
+    if not 1 <= n <= MAX_RUNS:
+        raise InputError(f"--n must be from 1 to {MAX_RUNS}, got {n}", name="--n", value=n)
     return strike_sweep(
         range(seed, seed + n),
         controller,
@@ -158,6 +185,17 @@ def true_recording(run: StrikeCheck, max_speed_mps: float, rate_hz: float = 30.0
     )
 
 
+def replay_command(run: StrikeCheck, settings: dict[str, Any]) -> str:
+    """The ``qpavoid run`` line that drives the campaign's controller with ``run``'s true
+    motion (from inside ``worst/``). Its sensor faults are not in the recording: the
+    replay sees the person through ``run``'s ordinary Kinect (``--bench real``)."""
+    return (
+        f"qpavoid run --human seed{run.seed}.npz --controller {settings['controller']} "
+        f"--distance {settings['distance']} --safety {settings['safety']} --bench real "
+        f"--rate {settings['rate_hz']:g} --max-time {CAMPAIGN_MAX_TIME_S:g}"
+    )
+
+
 def write_campaign(out: str | Path, settings: dict[str, Any], runs: list[StrikeCheck]) -> dict:
     """Write ``summary.json``, ``runs.json`` and ``worst/`` into ``out``; return the summary."""
     summary = {"settings": settings, **summarize_campaign(runs)}
@@ -168,5 +206,6 @@ def write_campaign(out: str | Path, settings: dict[str, Any], runs: list[StrikeC
         worst.mkdir()
         for r in worst_runs(runs):
             save_npz(worst / f"seed{r.seed}.npz", true_recording(r, settings["max_speed_mps"]))
-            (worst / f"seed{r.seed}.json").write_text(json.dumps(asdict(r), indent=1))
+            case = {**asdict(r), "replay": replay_command(r, settings)}
+            (worst / f"seed{r.seed}.json").write_text(json.dumps(case, indent=1))
     return summary

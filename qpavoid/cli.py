@@ -20,19 +20,26 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from .calibration import load_calibration
-from .cli_args import HelpFormatter, Parser, count, package_version, positive_float, workers
+from .cli_args import (
+    HelpFormatter,
+    Parser,
+    count,
+    folder,
+    package_version,
+    positive_float,
+    run_command,
+    workers,
+)
 from .cli_bench import add_bench_command
 from .cli_campaign import add_campaign_command
 from .cli_sensors import add_sensor_commands
 from .cli_view import add_view_command
 from .compare import compare
-from .errors import QpavoidError
 from .io import check_output_dir
 from .jobs import progress_bar
 from .metrics import describe
@@ -111,7 +118,7 @@ def build_parser() -> Parser:
         action="store_true",
         help="QP only: free A3 (7 joints) and keep the elbow away from the person",
     )
-    run.add_argument("--out", metavar="DIR", help="output folder (default: runs/NAME)")
+    run.add_argument("--out", type=folder, metavar="DIR", help="output folder (default: runs/NAME)")
     run.add_argument(
         "--view",
         nargs="?",
@@ -131,7 +138,9 @@ def build_parser() -> Parser:
         "methods; write compare.json, compare.md and one plot "
         "per input into --out.",
     )
-    cmp.add_argument("--out", metavar="DIR", default="runs/compare", help="output folder")
+    cmp.add_argument(
+        "--out", type=folder, metavar="DIR", default="runs/compare", help="output folder"
+    )
     cmp.add_argument(
         "--scenarios",
         nargs="*",
@@ -277,41 +286,14 @@ def _compare(args: argparse.Namespace) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; return the exit status."""
+    """Run the command line; return the exit status (:func:`~qpavoid.cli_args.run_command`)."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        if args.command == "run":
-            text = _run(args, args.parser)
-        elif args.command == "compare":
-            text = _compare(args)
-        else:
-            text = args.handler(args)
-    except QpavoidError as exc:
-        return _fail(f"qpavoid: error: {exc}", 2)
-    except OSError as exc:
-        return _fail(
-            f"qpavoid: error: {exc.strerror or exc}"
-            + (f": {exc.filename}" if exc.filename else ""),
-            2,
-        )
-    except KeyboardInterrupt:
-        return _fail("qpavoid: interrupted; nothing written", 130)
-    except Exception as exc:  # a bug: one line, the traceback on request
-        if os.environ.get("QPAVOID_DEBUG"):
-            raise
-        return _fail(
-            f"qpavoid: error: internal error, please report it: "
-            f"{type(exc).__name__}: {exc} (QPAVOID_DEBUG=1 shows the traceback)",
-            2,
-        )
-    print(text)
-    return 0
-
-
-def _fail(line: str, status: int) -> int:
-    print(" ".join(line.split()), file=sys.stderr)
-    return status
+    if args.command == "run":
+        return run_command(lambda: _run(args, args.parser))
+    if args.command == "compare":
+        return run_command(lambda: _compare(args))
+    return run_command(lambda: args.handler(args))
 
 
 if __name__ == "__main__":

@@ -6,11 +6,18 @@ Kept apart from :mod:`qpavoid.cli` so that each command's module can use them.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+import io
+import os
+import signal
+import sys
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any, NoReturn
 
 from . import __version__
+from .errors import QpavoidError
 
 
 class Parser(argparse.ArgumentParser):
@@ -62,8 +69,85 @@ count = _number(int, lambda n: n >= 0, "a whole number >= 0")
 workers = _number(int, lambda n: n >= 1, "a whole number >= 1")
 
 
+def folder(text: str) -> str:
+    """An argument type: a folder's path, not empty (``""`` would be the current folder)."""
+    if not text:
+        raise argparse.ArgumentTypeError("must name a folder, got an empty path")
+    return text
+
+
+def whole_number(low: int, high: int) -> Callable[[str], int]:
+    """An argument type: a whole number from ``low`` to ``high``."""
+    return _number(int, lambda n: low <= n <= high, f"a whole number from {low} to {high}")
+
+
 def package_version() -> str:
     try:
         return version("qpavoid")
     except PackageNotFoundError:  # running from a source tree
         return __version__
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so that it ends as on Ctrl-C: the workers
+    stopped, the staging folders removed, nothing written."""
+
+
+@contextmanager
+def sigterm_raises() -> Iterator[None]:
+    """Inside, SIGTERM raises :class:`Terminated` (in the main thread, unless the program
+    already handles or ignores SIGTERM)."""
+    if (
+        threading.current_thread() is not threading.main_thread()
+        or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL
+    ):
+        yield
+        return
+
+    def terminated(signum: int, frame: object) -> None:
+        raise Terminated
+
+    signal.signal(signal.SIGTERM, terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def run_command(command: Callable[[], str]) -> int:
+    """Run a command and print its text: status 0. Anything else is one line on standard
+    error: bad input or a file error 2, a bug 2 (``QPAVOID_DEBUG=1`` raises it), Ctrl-C
+    130, SIGTERM 143, standard output closed (``| head`` done) 1."""
+    try:
+        with sigterm_raises():
+            text = command()
+    except QpavoidError as exc:
+        return _fail(f"qpavoid: error: {exc}", 2)
+    except OSError as exc:
+        where = f": {exc.filename}" if exc.filename else ""
+        return _fail(f"qpavoid: error: {exc.strerror or exc}{where}", 2)
+    except KeyboardInterrupt as exc:
+        if isinstance(exc, Terminated):
+            return _fail("qpavoid: terminated; nothing written", 143)
+        return _fail("qpavoid: interrupted; nothing written", 130)
+    except Exception as exc:  # a bug: one line, the traceback on request
+        if os.environ.get("QPAVOID_DEBUG"):
+            raise
+        return _fail(
+            f"qpavoid: error: internal error, please report it: "
+            f"{type(exc).__name__}: {exc} (QPAVOID_DEBUG=1 shows the traceback)",
+            2,
+        )
+    try:
+        if isinstance(sys.stdout, io.TextIOWrapper):  # a terminal that cannot show µs
+            sys.stdout.reconfigure(errors="backslashreplace")
+        print(text, flush=True)
+    except BrokenPipeError:  # the reader is gone: nothing more to say, nor at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+    return 0
+
+
+def _fail(line: str, status: int) -> int:
+    print(" ".join(line.split()), file=sys.stderr)
+    return status

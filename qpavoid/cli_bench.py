@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from .bench import format_bench, run_bench
 from .cli_args import HelpFormatter
-from .errors import InputError
+from .io import check_output_file
 
 __all__ = ["add_bench_command", "bench_command"]
 
@@ -35,9 +34,7 @@ def add_bench_command(sub: argparse._SubParsersAction) -> None:
 
 def bench_command(args: argparse.Namespace) -> str:
     """``qpavoid bench``: run, print, and write the JSON if asked."""
-    target = Path(args.json) if args.json else None
-    if target is not None and (target.is_dir() or not target.parent.exists()):
-        raise InputError(f"--json {args.json!r}: not a writable file path", name="--json")
+    target = None if args.json is None else check_output_file(args.json, "--json")
     result = run_bench(quick=args.quick)
     if target is not None:
         target.write_text(json.dumps(result, indent=1))

@@ -11,10 +11,9 @@ from __future__ import annotations
 import argparse
 import json
 from concurrent.futures import Executor
-from pathlib import Path
 
-from .campaign import RayExecutor, run_campaign, write_campaign
-from .cli_args import HelpFormatter, count, workers
+from .campaign import MAX_RUNS, RayExecutor, run_campaign, write_campaign
+from .cli_args import HelpFormatter, count, folder, whole_number, workers
 from .io import check_output_dir
 from .run_spec import CONTROLLERS, DISTANCES
 from .tick import SAFETY_MODES
@@ -34,7 +33,7 @@ def add_campaign_command(sub: argparse._SubParsersAction) -> None:
         "with sensor faults; docs/safety.md) along the whole path, judged against the "
         "true motion; write summary.json, runs.json and the worst runs into --out.",
     )
-    sweep.add_argument("--n", type=count, required=True, help="number of runs")
+    sweep.add_argument("--n", type=whole_number(1, MAX_RUNS), required=True, help="number of runs")
     sweep.add_argument("--controller", choices=CONTROLLERS, required=True)
     sweep.add_argument("--distance", choices=DISTANCES, default=DISTANCES[0])
     sweep.add_argument("--safety", choices=SAFETY_MODES, default="ssm")
@@ -43,25 +42,29 @@ def add_campaign_command(sub: argparse._SubParsersAction) -> None:
         "--workers", type=workers, default=None, metavar="W", help="processes (default: all cores)"
     )
     sweep.add_argument("--executor", choices=EXECUTORS, default="local")
-    sweep.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    sweep.add_argument("--out", type=folder, required=True, metavar="DIR", help="output folder")
     sweep.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     sweep.set_defaults(parser=sweep, handler=sweep_command)
 
 
 def sweep_command(args: argparse.Namespace) -> str:
     """``qpavoid sweep``: check, run, write, print the summary."""
-    out = check_output_dir(Path(args.out))
+    out = check_output_dir(args.out)
     executor: Executor | None = RayExecutor(args.workers) if args.executor == "ray" else None
-    runs = run_campaign(
-        args.n,
-        args.controller,
-        args.distance,
-        args.safety,
-        args.seed,
-        workers=args.workers,
-        executor=executor,
-        progress=not args.quiet,
-    )
+    try:
+        runs = run_campaign(
+            args.n,
+            args.controller,
+            args.distance,
+            args.safety,
+            args.seed,
+            workers=args.workers,
+            executor=executor,
+            progress=not args.quiet,
+        )
+    finally:  # a local Ray goes with the campaign, however it ends
+        if executor is not None:
+            executor.shutdown()
     settings = {
         "n": args.n,
         "controller": args.controller,

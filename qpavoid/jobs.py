@@ -9,9 +9,11 @@ caller's process, with its own type.
 
 from __future__ import annotations
 
+import multiprocessing
 import os
+import signal
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from concurrent.futures import Executor
 from typing import Any, TypeVar
 
 from tqdm.auto import tqdm
@@ -70,17 +72,30 @@ def map_jobs(
         if workers == 1:
             return list(_ticking(map(fn, items), bar))
         results: list[Any] = [None] * len(items)
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = {pool.submit(fn, x): i for i, x in enumerate(items)}
-            try:
-                for future in as_completed(futures):
-                    results[futures[future]] = future.result()
-                    bar.update(1)
-            except BaseException:
-                for f in futures:
-                    f.cancel()
-                raise
+        # Pool.__exit__ terminates the workers: a Ctrl-C, a SIGTERM turned into an
+        # exception, or a worker's error ends the pool at once, with nothing left running
+        with multiprocessing.Pool(workers, initializer=_worker_signals) as pool:
+            for i, result in pool.imap_unordered(_Indexed(fn), enumerate(items)):
+                results[i] = result
+                bar.update(1)
         return results
+
+
+class _Indexed:
+    """``fn`` of an ``(index, item)`` pair, returning ``(index, result)`` (picklable)."""
+
+    def __init__(self, fn: Callable[[Any], Any]):
+        self.fn = fn
+
+    def __call__(self, pair: tuple[int, Any]) -> tuple[int, Any]:
+        return pair[0], self.fn(pair[1])
+
+
+def _worker_signals() -> None:
+    """A worker leaves Ctrl-C to its caller, which ends the pool, and dies on SIGTERM
+    (the caller's own SIGTERM handler, inherited on fork, is not for it)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _ticking(results: Iterable[R], bar: Any) -> Iterable[R]:

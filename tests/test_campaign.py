@@ -4,22 +4,34 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import shlex
 
 import numpy as np
 import pytest
 
 from qpavoid.campaign import (
+    CAMPAIGN_MAX_TIME_S,
     RayExecutor,
     run_campaign,
     summarize_campaign,
     worst_runs,
     write_campaign,
 )
+from qpavoid.cli import build_parser
+from qpavoid.errors import InputError
 from qpavoid.recording import load_recording
 from qpavoid.runs import RunSpec, simulate_one
 from qpavoid.strike_sweep import StrikeCheck
 
-SETTINGS = {"n": 3, "controller": "qp", "max_speed_mps": 2.0}
+SETTINGS = {
+    "n": 3,
+    "controller": "qp",
+    "distance": "spheres",
+    "safety": "ssm",
+    "seed": 11,
+    "max_speed_mps": 2.0,
+    "rate_hz": 100.0,
+}
 
 
 def check(seed, contact=0, clearance=0.1, goal=True, **kw) -> StrikeCheck:
@@ -80,6 +92,18 @@ def test_a_campaign_is_the_same_on_one_or_two_workers_and_its_worst_runs_replay(
     assert rec.duration_s >= 2.0
     run = simulate_one(RunSpec(human_file=str(worst[0]), rate_hz=100.0, max_time_s=1.0))
     assert run.metrics["ticks_moving_in_true_contact"] == 0
+    # each worst run says how to replay it, with the campaign's controller and rate
+    case = json.loads(worst[0].with_suffix(".json").read_text())
+    line = shlex.split(case["replay"])
+    assert line[:2] == ["qpavoid", "run"]
+    args = build_parser().parse_args(line[1:])
+    assert (args.human, args.controller, args.distance, args.safety) == (
+        [worst[0].name],
+        "qp",
+        "spheres",
+        "ssm",
+    )
+    assert (args.rate, args.max_time, args.bench) == (100.0, CAMPAIGN_MAX_TIME_S, "real")
 
 
 @pytest.mark.slow
@@ -87,8 +111,21 @@ def test_a_campaign_is_the_same_on_one_or_two_workers_and_its_worst_runs_replay(
 def test_ray_gives_the_same_summary_as_local_processes():
     kw = dict(n=4, controller="analytic", seed=3, max_time_s=3.0)
     local = run_campaign(**kw, workers=2)
-    on_ray = run_campaign(**kw, executor=RayExecutor(2))
+    executor = RayExecutor(2)
+    on_ray = run_campaign(**kw, executor=executor)
     assert strip(summarize_campaign(local)) == strip(summarize_campaign(on_ray))
+    executor.shutdown()  # the local Ray it started goes (a Ctrl-C left its agents running)
+    assert not executor.ray.is_initialized()
+
+
+@pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason='needs "qpavoid[cluster]"')
+@pytest.mark.parametrize("address", ["not a host", "ray://"])
+def test_a_ray_that_cannot_be_reached_is_an_input_error(monkeypatch, address):
+    """Ray's own errors (a ValueError here) were reported as qpavoid's bugs."""
+    monkeypatch.setenv("RAY_ADDRESS", address)
+    with pytest.raises(InputError, match="cannot start or reach the Ray cluster") as caught:
+        RayExecutor(2)
+    assert (caught.value.name, caught.value.value) == ("RAY_ADDRESS", address)
 
 
 def test_qpavoid_sweep_from_the_command_line(tmp_path):

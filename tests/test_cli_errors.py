@@ -10,9 +10,11 @@ the default folder go through the installed entry point in a subprocess.
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -91,6 +93,16 @@ BAD_INPUTS = [
     (["sweep", "--n", "3", "--controller", "qp", "--out", "afile"], "is a file"),
     (["sweep", "--n", "3", "--controller", "qp", "--out", "c", "--executor", "dask"], "--executor"),
     (["sweep", "--n", "3", "--controller", "qp", "--out", "c", "--workers", "0"], "--workers"),
+    # what an adversarial tester found after the work, or never (issue 11)
+    (["sweep", "--n", "1000001", "--controller", "qp", "--out", "c"], "--n"),
+    (["sweep", "--n", "3", "--controller", "qp", "--out", ""], "empty path"),
+    (["sweep", "--n", "3", "--controller", "qp", "--out", "dangling"], "symbolic link"),
+    (["sweep", "--n", "3", "--controller", "qp", "--out", "dangling/c"], "symbolic link"),
+    (["sweep", "--n", "3", "--controller", "qp", "--out", "c/" + "x" * 300], "longer than"),
+    (["bench", "--json", ""], "--json"),
+    (["bench", "--json", "."], "--json"),
+    (["bench", "--json", "afile/x.json"], "--json"),
+    (["bench", "--json", "missing/x.json"], "--json"),
 ]
 
 
@@ -98,6 +110,7 @@ BAD_INPUTS = [
 def workdir(tmp_path_factory):
     d = tmp_path_factory.mktemp("cli")
     (d / "afile").write_text("")
+    (d / "dangling").symlink_to(d / "nowhere")
     (d / "text.npz").write_text("hello, not an archive\n")
     (d / "calib.toml").write_text(
         "[sensors.a]\nbase_from_camera = [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n"
@@ -184,3 +197,87 @@ def test_ctrl_c_while_the_library_loads_is_one_line(tmp_path):
     assert proc.returncode == 130, err
     assert err.strip() == "qpavoid: interrupted; nothing written" and "Traceback" not in err
     assert not (tmp_path / "x").exists()
+
+
+def _processes_with(marker: str) -> list[int]:
+    """The processes whose command line holds ``marker`` (forked workers share their
+    parent's)."""
+    found = []
+    for d in Path("/proc").iterdir():
+        try:
+            if d.name.isdigit() and marker.encode() in (d / "cmdline").read_bytes():
+                found.append(int(d.name))
+        except OSError:  # ended meanwhile
+            continue
+    return found
+
+
+@pytest.mark.parametrize(
+    "signals, status, line",
+    [
+        (["INT"], 130, "interrupted"),
+        (["INT", "INT"], 130, "interrupted"),  # hung forever in the adversary's hands
+        (["TERM"], 143, "terminated"),  # left both workers running, orphaned
+    ],
+    ids=["ctrl-c", "ctrl-c twice", "sigterm"],
+)
+def test_a_sweep_stopped_by_a_signal_ends_at_once_and_leaves_nothing(
+    tmp_path, signals, status, line
+):
+    """Ctrl-C goes to the terminal's whole process group (the workers too), ``kill`` to
+    the main process alone: either way the command ends with its one line, its workers
+    with it, and no folder, staging or final."""
+    import signal
+    import time
+
+    out = tmp_path / "campaign"
+    command = ["sweep", "--n", "6", "--controller", "qp", "--workers", "2", "--out", str(out)]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "qpavoid", *command],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    deadline = time.monotonic() + 60
+    while len(_processes_with(str(out))) < 3 and time.monotonic() < deadline:
+        time.sleep(0.05)  # until both workers run
+    assert len(_processes_with(str(out))) == 3, "the pool never started"
+    time.sleep(0.5)
+    for name in signals:
+        if name == "INT":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            proc.send_signal(signal.SIGTERM)
+        time.sleep(0.3)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == status, err
+    assert err.strip() == f"qpavoid: {line}; nothing written", err
+    assert list(tmp_path.iterdir()) == []
+    deadline = time.monotonic() + 5
+    while _processes_with(str(out)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert _processes_with(str(out)) == [], "workers left running"
+
+
+def test_output_to_a_closed_pipe_or_a_narrow_terminal_is_no_traceback(tmp_path):
+    """``qpavoid ... | head`` and a terminal without µs ended in tracebacks at the final
+    print."""
+    code = "import sys; from qpavoid.cli_args import run_command; "
+    piped = subprocess.run(
+        f"{sys.executable} -c \"{code}sys.exit(run_command(lambda: 'x' * 1000000))\" | true",
+        shell=True,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert piped.stderr == ""
+    ascii_only = subprocess.run(
+        [sys.executable, "-c", f"{code}sys.exit(run_command(lambda: '291 µs'))"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "PYTHONIOENCODING": "ascii"},
+    )
+    assert ascii_only.returncode == 0 and ascii_only.stderr == ""
+    assert ascii_only.stdout == "291 \\xb5s\n"
