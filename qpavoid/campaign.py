@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import socket
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor
 from dataclasses import asdict
@@ -74,6 +75,7 @@ class RayExecutor(Executor):
         address = os.environ.get("RAY_ADDRESS")
         try:
             if address:
+                _reachable(address)
                 ray.init(address=address, log_to_driver=False, logging_level=logging.ERROR)
             else:
                 ray.init(
@@ -104,6 +106,18 @@ class RayExecutor(Executor):
         if self.started:
             self.ray.shutdown()
             self.started = False
+
+
+def _reachable(address: str, timeout_s: float = 5.0) -> None:
+    """Raise ``ConnectionError`` if nothing answers at a ``host:port`` address within
+    ``timeout_s`` (Ray itself retries an unreachable head for minutes); other forms
+    (``auto``, ``ray://...``) are Ray's to resolve."""
+    host, _, port = address.rpartition(":")
+    if host and port.isdigit() and "://" not in host:
+        try:
+            socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+        except (OSError, ValueError) as exc:
+            raise ConnectionError(f"nothing answers at {address} ({exc})") from None
 
 
 def run_campaign(

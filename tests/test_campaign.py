@@ -119,9 +119,10 @@ def test_ray_gives_the_same_summary_as_local_processes():
 
 
 @pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason='needs "qpavoid[cluster]"')
-@pytest.mark.parametrize("address", ["not a host", "ray://"])
+@pytest.mark.parametrize("address", ["not a host", "ray://", "127.0.0.1:1"])
 def test_a_ray_that_cannot_be_reached_is_an_input_error(monkeypatch, address):
-    """Ray's own errors (a ValueError here) were reported as qpavoid's bugs."""
+    """Ray's own errors (a ValueError) were reported as qpavoid's bugs, and Ray waited for
+    minutes on an address where nothing listens."""
     monkeypatch.setenv("RAY_ADDRESS", address)
     with pytest.raises(InputError, match="cannot start or reach the Ray cluster") as caught:
         RayExecutor(2)
