@@ -19,7 +19,9 @@ from __future__ import annotations
 import json
 import logging
 import os
+import signal
 import socket
+import threading
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor
 from dataclasses import asdict
@@ -28,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, Terminated
 from .frames import HumanFrame
 from .io import staged_output
 from .recording import Recording, save_npz
@@ -73,25 +75,35 @@ class RayExecutor(Executor):
         if ray.is_initialized():
             return
         address = os.environ.get("RAY_ADDRESS")
+        handlers = _signal_handlers()  # ray.init sets its own SIGTERM handler: ours stays
         try:
             if address:
                 _reachable(address)
                 ray.init(address=address, log_to_driver=False, logging_level=logging.ERROR)
             else:
+                self.started = True  # from here a Ctrl-C must take a half-started Ray down
                 ray.init(
+                    address="local",  # a new one, even beside a `ray start` cluster
                     num_cpus=workers or os.cpu_count(),
                     include_dashboard=False,
                     log_to_driver=False,
                     logging_level=logging.ERROR,
                 )
-        except Exception as exc:  # Ray's own errors, whatever their type: not our bug
+        except BaseException as exc:
+            ray.shutdown()  # whatever it started or joined
+            self.started = False
+            if isinstance(exc, SystemExit) and exc.code == signal.SIGTERM:
+                raise Terminated from None  # ray.init's own SIGTERM handler exits so
+            if not isinstance(exc, Exception):  # Ctrl-C, SIGTERM: as they are
+                raise
             where = f"the Ray cluster at RAY_ADDRESS={address!r}" if address else "a local Ray"
-            raise InputError(
+            raise InputError(  # Ray's own errors, whatever their type: not our bug
                 f"cannot start or reach {where}: {type(exc).__name__}: {exc}",
                 name="RAY_ADDRESS" if address else "--workers",
                 value=address or workers,
             ) from None
-        self.started = not address
+        finally:
+            _restore(handlers)
 
     def map(self, fn: Callable[..., Any], *iterables: Iterable[Any], **_: Any) -> Iterator[Any]:
         """``fn`` over the items as Ray tasks; results yielded in order as they complete."""
@@ -109,15 +121,31 @@ class RayExecutor(Executor):
 
 
 def _reachable(address: str, timeout_s: float = 5.0) -> None:
-    """Raise ``ConnectionError`` if nothing answers at a ``host:port`` address within
-    ``timeout_s`` (Ray itself retries an unreachable head for minutes); other forms
-    (``auto``, ``ray://...``) are Ray's to resolve."""
+    """Raise ``ConnectionError`` unless ``address`` is ``auto``, ``ray://...`` (Ray's to
+    resolve) or a ``host:port`` where something answers within ``timeout_s`` (Ray itself
+    retries an unreachable head for minutes)."""
+    if address == "auto" or address.startswith("ray://"):
+        return
     host, _, port = address.rpartition(":")
-    if host and port.isdigit() and "://" not in host:
-        try:
-            socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
-        except (OSError, ValueError) as exc:
-            raise ConnectionError(f"nothing answers at {address} ({exc})") from None
+    if not (host and port.isdigit()) or address != address.strip() or "://" in host:
+        raise ConnectionError(f"{address!r} is not host:port, auto or ray://host:port")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except (OSError, ValueError) as exc:
+        raise ConnectionError(f"nothing answers at {address} ({exc})") from None
+
+
+def _signal_handlers() -> dict[int, Any]:
+    """The handlers of Ctrl-C and SIGTERM (main thread only; elsewhere none to keep)."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+
+def _restore(handlers: dict[int, Any]) -> None:
+    for sig, handler in handlers.items():
+        if handler is not None:  # set outside Python: nothing to put back
+            signal.signal(sig, handler)
 
 
 def run_campaign(

@@ -33,6 +33,7 @@ from .cli_args import (
     package_version,
     positive_float,
     run_command,
+    whole_number,
     workers,
 )
 from .cli_bench import add_bench_command
@@ -153,7 +154,7 @@ def build_parser() -> Parser:
     )
     cmp.add_argument(
         "--random",
-        type=count,
+        type=whole_number(0, 10_000),  # each run keeps its log for the plots
         default=0,
         metavar="N",
         help="also N random hand approaches (seeds SEED .. SEED+N-1)",

@@ -17,7 +17,7 @@ from importlib.metadata import PackageNotFoundError, version
 from typing import Any, NoReturn
 
 from . import __version__
-from .errors import QpavoidError
+from .errors import QpavoidError, Terminated
 
 
 class Parser(argparse.ArgumentParser):
@@ -88,28 +88,27 @@ def package_version() -> str:
         return __version__
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where the program is, so that it ends as on Ctrl-C: the workers
-    stopped, the staging folders removed, nothing written."""
-
-
 @contextmanager
-def sigterm_raises() -> Iterator[None]:
-    """Inside, SIGTERM raises :class:`Terminated` (in the main thread, unless the program
-    already handles or ignores SIGTERM)."""
+def sigterm_raises() -> Iterator[list[int]]:
+    """Inside, SIGTERM raises :class:`~qpavoid.errors.Terminated` (in the main thread,
+    unless the program already handles or ignores SIGTERM). Yields the signals received:
+    a library's blocking call (Ray's ``get``) may hand the exception on as a plain
+    ``KeyboardInterrupt``."""
+    received: list[int] = []
     if (
         threading.current_thread() is not threading.main_thread()
         or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL
     ):
-        yield
+        yield received
         return
 
     def terminated(signum: int, frame: object) -> None:
+        received.append(signum)
         raise Terminated
 
     signal.signal(signal.SIGTERM, terminated)
     try:
-        yield
+        yield received
     finally:
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
@@ -118,8 +117,9 @@ def run_command(command: Callable[[], str]) -> int:
     """Run a command and print its text: status 0. Anything else is one line on standard
     error: bad input or a file error 2, a bug 2 (``QPAVOID_DEBUG=1`` raises it), Ctrl-C
     130, SIGTERM 143, standard output closed (``| head`` done) 1."""
+    received: list[int] = []
     try:
-        with sigterm_raises():
+        with sigterm_raises() as received:
             text = command()
     except QpavoidError as exc:
         return _fail(f"qpavoid: error: {exc}", 2)
@@ -127,9 +127,11 @@ def run_command(command: Callable[[], str]) -> int:
         where = f": {exc.filename}" if exc.filename else ""
         return _fail(f"qpavoid: error: {exc.strerror or exc}{where}", 2)
     except KeyboardInterrupt as exc:
-        if isinstance(exc, Terminated):
-            return _fail("qpavoid: terminated; nothing written", 143)
-        return _fail("qpavoid: interrupted; nothing written", 130)
+        term = isinstance(exc, Terminated) or signal.SIGTERM in received
+        word, status = ("terminated", 143) if term else ("interrupted", 130)
+        written = getattr(exc, "written", None)  # set by io.staged_output
+        done = f" after writing its files to {written}/" if written else "; nothing written"
+        return _fail(f"qpavoid: {word}{done}", status)
     except Exception as exc:  # a bug: one line, the traceback on request
         if os.environ.get("QPAVOID_DEBUG"):
             raise

@@ -27,6 +27,7 @@ __all__ = [
     "RecordingError",
     "RobotDescriptionError",
     "SolverError",
+    "Terminated",
 ]
 
 
@@ -198,3 +199,9 @@ class SolverError(QpavoidError):
     def __init__(self, message: str, *, solver: str | None = None, status: object = None):
         super().__init__(message)
         self.solver, self.status = solver, status
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is (the command line's handler, or a library
+    that turned its own into this), so that it ends as on Ctrl-C: workers stopped,
+    staging folders removed, nothing written. Not a :class:`QpavoidError`: an interrupt."""

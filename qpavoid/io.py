@@ -8,13 +8,17 @@ run's summary (:func:`qpavoid.metrics.run_metrics`). Recorded human motion is re
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
+import signal
 import tempfile
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 import numpy as np
@@ -120,23 +124,29 @@ def check_output_dir(path: str | Path) -> Path:
 
 
 def check_output_file(path: str, flag: str) -> Path:
-    """``path`` if a file can be written there (tried now, left as it was); else
+    """``path`` if a regular file can be written there (tried now, left as it was); else
     :class:`InputError` naming ``flag``: so that a long job fails before it starts."""
     target = Path(path)
+
+    def refuse(why: str) -> InputError:
+        return InputError(f"{flag} {path!r}: {why}", name=flag, value=path)
+
+    if not path:
+        raise refuse("an empty path")
+    if path.endswith(os.sep) or target.is_dir():
+        raise refuse("a folder, not a file")
+    if target.is_symlink() and not target.exists():
+        raise refuse("a symbolic link to nothing")
+    if target.exists() and not target.is_file():  # a FIFO would block, a device...
+        raise refuse("not a regular file")
     existed = target.exists()
     try:
-        if not path or target.is_dir():
-            raise IsADirectoryError(0, "a folder, not a file")
         with open(target, "a"):
             pass
         if not existed:
             target.unlink()
     except OSError as exc:
-        raise InputError(
-            f"{flag} {path!r}: cannot write this file ({exc.strerror or exc})",
-            name=flag,
-            value=path,
-        ) from None
+        raise refuse(f"cannot write this file ({exc.strerror or exc})") from None
     return target
 
 
@@ -145,24 +155,86 @@ def staged_output(path: str | Path) -> Iterator[Path]:
     """Write a job's files into a staging folder; move them into ``path`` only on success.
 
     Yields the staging folder (in ``path`` if it exists, else beside it: so the final
-    move is a rename). If the ``with`` block raises, the staging folder is removed and
-    ``path`` is left as it was. Files and folders already in ``path`` with other names
-    are kept; those of the same name are replaced (a folder with its contents).
+    move is a rename). If the ``with`` block raises, the staging folder and any folder
+    made for ``path`` are removed and ``path`` is left as it was. Files and folders
+    already in ``path`` with other names are kept; those of the same name are replaced
+    (a folder with its contents). The move is all or nothing: Ctrl-C and SIGTERM wait
+    for its end, and the ``KeyboardInterrupt`` they raise then carries ``written = path``.
     """
     out = check_output_dir(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    home = out if out.is_dir() else out.parent
-    stage = Path(tempfile.mkdtemp(prefix=STAGE_PREFIX, dir=home))
-    old = stage / f"{STAGE_PREFIX}replaced"  # what the new files replace, removed with it
+    made = [p for p in (out, *out.parents) if not p.exists()][::-1]  # outermost first
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        home = out if out.is_dir() else out.parent
+        stage = Path(tempfile.mkdtemp(prefix=STAGE_PREFIX, dir=home))
+    except BaseException:
+        _remove_empty(made)
+        raise
     try:
         yield stage
-        out.mkdir(exist_ok=True)
-        items = [item for item in stage.iterdir() if item != old]
-        old.mkdir()
-        for item in items:  # first every replaced folder out of the way, then the renames
-            if (out / item.name).is_dir() and not (out / item.name).is_symlink():
-                os.replace(out / item.name, old / item.name)
+        try:
+            with _signals_held():
+                _move_in(stage, out)
+        except KeyboardInterrupt as exc:  # after the move: the files are there
+            exc.written = out  # type: ignore[attr-defined]
+            raise
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        if not any(out.iterdir() if out.is_dir() else ()):
+            _remove_empty(made)
+        raise
+
+
+def _move_in(stage: Path, out: Path) -> None:
+    """Move ``stage``'s items into ``out``: first every item of the same name out of the
+    way (a folder with its files, a file a folder replaces), then the renames."""
+    out.mkdir(exist_ok=True)
+    items = list(stage.iterdir())
+    old = stage / f"{STAGE_PREFIX}replaced"
+    old.mkdir()
+    for item in items:
+        if os.path.lexists(out / item.name):
+            os.replace(out / item.name, old / item.name)
+    try:
         for item in items:
             os.replace(item, out / item.name)
+    except BaseException:  # a rename failed (same file system: hardly ever): put back
+        for item in old.iterdir():
+            if not os.path.lexists(out / item.name):
+                os.replace(item, out / item.name)
+        raise
+    shutil.rmtree(stage)
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove the ``folders`` a job made (outermost first), where they stayed empty."""
+    for folder in reversed(folders):
+        with contextlib.suppress(OSError):
+            folder.rmdir()
+
+
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """Ctrl-C and SIGTERM held back while inside, then handled as they would have been:
+    the main thread's critical sections; elsewhere a no-op. (Python-level handlers, not a
+    signal mask: a mask is per thread, and another thread, tqdm's, would take them.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[tuple[int, FrameType | None]] = []
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    for s, handler in previous.items():
+        if handler is not None:  # None: set outside Python, left alone
+            signal.signal(s, lambda signum, frame: pending.append((signum, frame)))
+    try:
+        yield
     finally:
-        shutil.rmtree(stage, ignore_errors=True)
+        for s, handler in previous.items():
+            if handler is not None:
+                signal.signal(s, handler)
+        for signum, frame in pending[:1]:
+            handler = previous[signal.Signals(signum)]
+            if callable(handler):
+                handler(signum, frame)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(signum)

@@ -119,7 +119,9 @@ def test_ray_gives_the_same_summary_as_local_processes():
 
 
 @pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason='needs "qpavoid[cluster]"')
-@pytest.mark.parametrize("address", ["not a host", "ray://", "127.0.0.1:1"])
+@pytest.mark.parametrize(
+    "address", ["not a host", "ray://", "127.0.0.1:1", ":6379", "localhost:1 ", "127.0.0.1:"]
+)
 def test_a_ray_that_cannot_be_reached_is_an_input_error(monkeypatch, address):
     """Ray's own errors (a ValueError) were reported as qpavoid's bugs, and Ray waited for
     minutes on an address where nothing listens."""
@@ -142,3 +144,29 @@ def test_qpavoid_sweep_from_the_command_line(tmp_path):
     assert summary["runs_moving_in_true_contact"] == 0
     assert (out / "worst" / "seed4.npz").is_file() and (out / "runs.json").is_file()
     assert r.stdout.strip().endswith(f"wrote summary.json, runs.json and worst/ to {out}/")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason='needs "qpavoid[cluster]"')
+@pytest.mark.parametrize("delay_s", [1.5, 5.0])  # while Ray starts, while it runs
+def test_sigterm_during_a_ray_sweep_is_one_line_and_status_143(tmp_path, delay_s):
+    """ray.init sets its own SIGTERM handler (a silent exit 15), and Ray's ``get``
+    handed ours on as a plain Ctrl-C."""
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "c"
+    cmd = [sys.executable, "-m", "qpavoid", "sweep", "--n", "6", "--controller", "qp"]
+    proc = subprocess.Popen(
+        [*cmd, "--executor", "ray", "-q", "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    time.sleep(delay_s)
+    proc.terminate()
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines()[-1] == "qpavoid: terminated; nothing written"
+    assert not out.exists()

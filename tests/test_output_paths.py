@@ -88,3 +88,71 @@ def test_a_file_path_is_tried_and_left_as_it_was(tmp_path):
             check_output_file(bad, "--json")
         assert caught.value.value == bad
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "old.json"]
+
+
+@pytest.mark.parametrize("kind", ["file", "symlink"])
+def test_a_file_or_link_is_replaced_by_a_folder_of_its_name(tmp_path, kind):
+    out = tmp_path / "c"
+    out.mkdir()
+    if kind == "file":
+        (out / "worst").write_text("mine")
+    else:
+        (tmp_path / "mine").mkdir()
+        (out / "worst").symlink_to(tmp_path / "mine")
+    with staged_output(out) as stage:
+        write(stage, {"worst/seed1.npz": "a"})
+    assert tree(out) == {"worst/seed1.npz": "a"} and not (out / "worst").is_symlink()
+    assert kind == "file" or (tmp_path / "mine").is_dir()  # a link's target is not touched
+
+
+def test_ctrl_c_during_the_move_waits_for_its_end_and_says_so(tmp_path, monkeypatch):
+    """An adversary's Ctrl-C within the move's millisecond left a folder without its
+    worst/ (the old one removed, the new one never moved in), saying nothing written."""
+    import signal
+
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        pytest.skip("Ctrl-C is not Python's KeyboardInterrupt here")
+    out = tmp_path / "c"
+    with staged_output(out) as stage:
+        write(stage, {"summary.json": "1", "worst/seed1.npz": "a"})
+    replace = os.replace
+    calls = []
+
+    def interrupted_replace(src, dst):
+        if not calls:
+            os.kill(os.getpid(), signal.SIGINT)  # held back until the move ends
+        calls.append(dst)
+        replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", interrupted_replace)
+    with pytest.raises(KeyboardInterrupt) as caught, staged_output(out) as stage:
+        write(stage, {"summary.json": "2", "worst/seed7.npz": "c"})
+    assert caught.value.written == out  # type: ignore[attr-defined]
+    assert tree(out) == {"summary.json": "2", "worst/seed7.npz": "c"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c"]
+
+
+def test_a_failed_job_removes_the_folders_it_made(tmp_path):
+    out = tmp_path / "new" / "deeper" / "c"
+    with pytest.raises(KeyboardInterrupt), staged_output(out) as stage:
+        write(stage, {"x.json": "1"})
+        raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "name, why",
+    [("", "empty"), ("fifo", "not a regular file"), ("link.json", "symbolic link to nothing"),
+     ("x.json/", "a folder")],
+)  # fmt: skip
+def test_odd_file_paths_are_refused_at_once(tmp_path, name, why):
+    """A FIFO blocked the check forever, a dangling link became a file, ``x.json/``
+    overwrote ``x.json``."""
+    os.mkfifo(tmp_path / "fifo")
+    (tmp_path / "link.json").symlink_to(tmp_path / "missing.json")
+    (tmp_path / "x.json").write_text("kept")
+    path = f"{tmp_path}/{name}" if name else ""
+    with pytest.raises(InputError, match=why):
+        check_output_file(path, "--json")
+    assert (tmp_path / "link.json").is_symlink() and not (tmp_path / "missing.json").exists()
+    assert (tmp_path / "x.json").read_text() == "kept"
