@@ -180,8 +180,7 @@ def staged_output(path: str | Path) -> Iterator[Path]:
             raise
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
-        if not any(out.iterdir() if out.is_dir() else ()):
-            _remove_empty(made)
+        _remove_empty(made)  # those that stayed empty: all of them, unless the move ended
         raise
 
 
