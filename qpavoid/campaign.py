@@ -21,7 +21,6 @@ import logging
 import os
 import signal
 import socket
-import threading
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor
 from dataclasses import asdict
@@ -35,6 +34,7 @@ from .frames import HumanFrame
 from .io import staged_output
 from .recording import Recording, save_npz
 from .robot import load_robot
+from .signals import handled_by
 from .strike_sweep import StrikeCheck, strike_sweep
 from .strikes import strike_case, strike_motion
 
@@ -75,20 +75,9 @@ class RayExecutor(Executor):
         if ray.is_initialized():
             return
         address = os.environ.get("RAY_ADDRESS")
-        handlers = _signal_handlers()  # ray.init sets its own SIGTERM handler: ours stays
         try:
-            if address:
-                _reachable(address)
-                ray.init(address=address, log_to_driver=False, logging_level=logging.ERROR)
-            else:
-                self.started = True  # from here a Ctrl-C must take a half-started Ray down
-                ray.init(
-                    address="local",  # a new one, even beside a `ray start` cluster
-                    num_cpus=workers or os.cpu_count(),
-                    include_dashboard=False,
-                    log_to_driver=False,
-                    logging_level=logging.ERROR,
-                )
+            with handled_by(None):  # ray.init sets its own SIGTERM handler: ours comes back
+                self._init(address, workers)
         except BaseException as exc:
             ray.shutdown()  # whatever it started or joined
             self.started = False
@@ -102,8 +91,20 @@ class RayExecutor(Executor):
                 name="RAY_ADDRESS" if address else "--workers",
                 value=address or workers,
             ) from None
-        finally:
-            _restore(handlers)
+
+    def _init(self, address: str | None, workers: int | None) -> None:
+        if address:
+            _reachable(address)
+            self.ray.init(address=address, log_to_driver=False, logging_level=logging.ERROR)
+        else:
+            self.started = True  # from here a Ctrl-C must take a half-started Ray down
+            self.ray.init(
+                address="local",  # a new one, even beside a `ray start` cluster
+                num_cpus=workers or os.cpu_count(),
+                include_dashboard=False,
+                log_to_driver=False,
+                logging_level=logging.ERROR,
+            )
 
     def map(self, fn: Callable[..., Any], *iterables: Iterable[Any], **_: Any) -> Iterator[Any]:
         """``fn`` over the items as Ray tasks; results yielded in order as they complete."""
@@ -133,19 +134,6 @@ def _reachable(address: str, timeout_s: float = 5.0) -> None:
         socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
     except (OSError, ValueError) as exc:
         raise ConnectionError(f"nothing answers at {address} ({exc})") from None
-
-
-def _signal_handlers() -> dict[int, Any]:
-    """The handlers of Ctrl-C and SIGTERM (main thread only; elsewhere none to keep)."""
-    if threading.current_thread() is not threading.main_thread():
-        return {}
-    return {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
-
-
-def _restore(handlers: dict[int, Any]) -> None:
-    for sig, handler in handlers.items():
-        if handler is not None:  # set outside Python: nothing to put back
-            signal.signal(sig, handler)
 
 
 def run_campaign(

@@ -10,7 +10,6 @@ import io
 import os
 import signal
 import sys
-import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from importlib.metadata import PackageNotFoundError, version
@@ -18,6 +17,7 @@ from typing import Any, NoReturn
 
 from . import __version__
 from .errors import QpavoidError, Terminated
+from .signals import handled_by
 
 
 class Parser(argparse.ArgumentParser):
@@ -95,22 +95,14 @@ def sigterm_raises() -> Iterator[list[int]]:
     a library's blocking call (Ray's ``get``) may hand the exception on as a plain
     ``KeyboardInterrupt``."""
     received: list[int] = []
-    if (
-        threading.current_thread() is not threading.main_thread()
-        or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL
-    ):
-        yield received
-        return
 
     def terminated(signum: int, frame: object) -> None:
         received.append(signum)
         raise Terminated
 
-    signal.signal(signal.SIGTERM, terminated)
-    try:
+    unset = lambda previous: previous is signal.SIG_DFL  # noqa: E731
+    with handled_by(terminated, (signal.SIGTERM,), replace=unset):
         yield received
-    finally:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def run_command(command: Callable[[], str]) -> int:

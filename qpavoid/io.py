@@ -12,19 +12,17 @@ import contextlib
 import json
 import os
 import shutil
-import signal
 import tempfile
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 import numpy as np
 
 from .errors import InputError
 from .recording import Recording, load_recording, read_file, read_npz, save_csv, save_npz
+from .signals import held
 from .simulation import SimResult
 
 __all__ = [
@@ -173,7 +171,7 @@ def staged_output(path: str | Path) -> Iterator[Path]:
     try:
         yield stage
         try:
-            with _signals_held():
+            with held():
                 _move_in(stage, out)
         except KeyboardInterrupt as exc:  # after the move: the files are there
             exc.written = out  # type: ignore[attr-defined]
@@ -210,30 +208,3 @@ def _remove_empty(folders: list[Path]) -> None:
     for folder in reversed(folders):
         with contextlib.suppress(OSError):
             folder.rmdir()
-
-
-@contextmanager
-def _signals_held() -> Iterator[None]:
-    """Ctrl-C and SIGTERM held back while inside, then handled as they would have been:
-    the main thread's critical sections; elsewhere a no-op. (Python-level handlers, not a
-    signal mask: a mask is per thread, and another thread, tqdm's, would take them.)"""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    pending: list[tuple[int, FrameType | None]] = []
-    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-    for s, handler in previous.items():
-        if handler is not None:  # None: set outside Python, left alone
-            signal.signal(s, lambda signum, frame: pending.append((signum, frame)))
-    try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            if handler is not None:
-                signal.signal(s, handler)
-        for signum, frame in pending[:1]:
-            handler = previous[signal.Signals(signum)]
-            if callable(handler):
-                handler(signum, frame)
-            elif handler == signal.SIG_DFL:
-                signal.raise_signal(signum)

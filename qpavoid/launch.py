@@ -14,6 +14,8 @@ import signal
 import sys
 from types import FrameType
 
+from .signals import handled_by
+
 
 def _stopped_while_loading(signum: int, frame: FrameType | None) -> None:
     if signum == signal.SIGTERM:
@@ -23,17 +25,10 @@ def _stopped_while_loading(signum: int, frame: FrameType | None) -> None:
     raise SystemExit(130)
 
 
-# Process-wide, but only for the entry point's own loading: restored right below. A
+# Process-wide, but only for the entry point's own loading: put back right after it. A
 # program started with Ctrl-C ignored (a background job of a script, nohup) keeps it so.
-_previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-for _signal, _handler in _previous.items():
-    if _handler is not signal.SIG_IGN:
-        signal.signal(_signal, _stopped_while_loading)
-from .cli import main as _main  # noqa: E402  (after the handlers, on purpose)
-
-for _signal, _handler in _previous.items():
-    if _handler is not signal.SIG_IGN:
-        signal.signal(_signal, _handler)
+with handled_by(_stopped_while_loading, replace=lambda previous: previous is not signal.SIG_IGN):
+    from .cli import main as _main
 
 
 def main() -> int:
