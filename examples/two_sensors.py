@@ -2,8 +2,9 @@
 
     python examples/two_sensors.py [OUT_DIR]
 
-Writes OUT_DIR/calib.toml and one per-sensor recording per Kinect (joints in its own
-camera frame, its own clock), then fuses them as `qpavoid fuse` does. Try next:
+Writes OUT_DIR/calib.toml, each Kinect's key file (its datagrams are signed: kept if
+present) and one per-sensor recording per Kinect (joints in its own camera frame, its own
+clock), then fuses them as `qpavoid fuse` does. Try next:
 
     cd OUT
     qpavoid fuse kinect_left.npz kinect_right.npz --sensors calib.toml --out fused.npz
@@ -12,6 +13,7 @@ camera frame, its own clock), then fuses them as `qpavoid fuse` does. Try next:
     qpavoid replay kinect_left.npz kinect_right.npz --to 127.0.0.1:5005 --sensors calib.toml
 """
 
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -19,6 +21,7 @@ import numpy as np
 
 import qpavoid
 from qpavoid.fused import fuse_recordings
+from qpavoid.keys import load_key_file, new_key_file
 from qpavoid.scenarios import make_scenario
 from qpavoid.sensor_recording import save_sensor_npz
 from qpavoid.two_sensors import TwoSensorConfig, two_sensor_data
@@ -30,7 +33,13 @@ truth = make_scenario("test1", robot)  # the paper's Test 1, as the true motion
 
 # 50 mm mean error per sensor, occlusions, left/right swaps, a 13 ms phase, a 0.25 s clock
 data = two_sensor_data([truth], 20.0, TwoSensorConfig(seed=1))
-(out / "calib.toml").write_text(data.calibration.to_toml())
+key_files = {name: f"{name}.key" for name in data.recordings}
+keys = {
+    name: load_key_file(out / f, name) if (out / f).exists() else new_key_file(out / f, name)
+    for name, f in key_files.items()
+}
+calibration = dataclasses.replace(data.calibration, keys=keys)
+(out / "calib.toml").write_text(calibration.to_toml(key_files))
 for name, recording in data.recordings.items():
     save_sensor_npz(out / f"{name}.npz", recording)
 
@@ -41,4 +50,5 @@ print(
     f"{len(fused.t)} fused frames, mean joint error {1e3 * np.nanmean(error):.1f} mm "
     f"(each sensor: 50 mm), mean confidence {np.nanmean(fused.confidence):.2f}"
 )
-print(f"wrote {out}/calib.toml and {', '.join(f'{n}.npz' for n in data.recordings)}")
+written = [f"{n}.npz" for n in data.recordings] + list(key_files.values())
+print(f"wrote {out}/calib.toml and {', '.join(written)}")

@@ -10,6 +10,12 @@ from its camera frame to the robot base frame, m (docs/sensors.md)::
                         [0, 0, 0, 1]]
     time_offset_s = 0.0     # optional: added to the sensor's time stamps (its clock -> ours)
     weight = 1.0            # optional: trust in this sensor relative to the others
+    key_file = "kinect_left.key"   # its datagrams' key (qpavoid.keys), relative to this file
+    key_ids = [2, 1]        # optional: the key ids accepted, the first signing (default: all)
+
+with, when the sensors have keys, the cell's name at the top (``cell = "cell-1"``): it is
+signed into every datagram, so that one cell's datagrams are refused by another's. Either
+every sensor has a ``key_file`` or none does (docs/security.md).
 
 A transform whose rotation block is not a rotation (``RᵀR = I`` and ``det R = +1`` within
 :data:`RIGID_TOLERANCE`), whose last row is not ``[0, 0, 0, 1]`` or that holds a
@@ -21,9 +27,10 @@ printed decimals do not turn into a scale error.
 from __future__ import annotations
 
 import math
+import re
 import sys
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +38,7 @@ from scipy.spatial.transform import Rotation
 
 from ._checks import one_line
 from .errors import CalibrationError
+from .keys import SensorKeys, load_key_file, read_bounded
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -49,7 +57,13 @@ MAX_TRANSLATION_M = 100.0
 MAX_TIME_OFFSET_S = 86_400.0
 MIN_WEIGHT, MAX_WEIGHT = 1e-3, 1e3
 #: The keys a sensor's table may hold.
-SENSOR_KEYS = ("base_from_camera", "time_offset_s", "weight")
+SENSOR_KEYS = ("base_from_camera", "time_offset_s", "weight", "key_file", "key_ids")
+#: A calibration file is a few tables of numbers (about 400 bytes a sensor): 1 MiB holds
+#: thousands, and refuses a device or a huge file before it is read (``--sensors /dev/zero``
+#: once read until the memory ran out).
+MAX_CALIBRATION_BYTES = 1 << 20
+#: A cell's name: a short printable label, signed into every datagram.
+_CELL_NAME = re.compile(r"[A-Za-z0-9._:-]{1,64}")
 
 
 @dataclass(frozen=True)
@@ -101,10 +115,53 @@ class SensorCalibration:
 
 @dataclass(frozen=True)
 class Calibration:
-    """The sensors of a cell, by name (:func:`load_calibration`)."""
+    """The sensors of a cell, by name (:func:`load_calibration`).
+
+    Attributes
+    ----------
+    sensors
+        Each sensor's place and clock, by name.
+    path
+        The file read, if any.
+    cell
+        The cell's name, signed into every datagram ("" without keys).
+    keys
+        Each sensor's keys (:mod:`qpavoid.keys`), by name: every sensor or none.
+    """
 
     sensors: Mapping[str, SensorCalibration]
     path: str | None = None
+    cell: str = ""
+    keys: Mapping[str, SensorKeys] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        """Keys for every sensor or for none, and a cell name with them."""
+        where = self._where()
+        if self.keys:
+            missing = [name for name in self.sensors if name not in self.keys]
+            extra = [name for name in self.keys if name not in self.sensors]
+            if missing or extra:
+                which = sorted(set(self.keys) & set(self.sensors)) or sorted(self.keys)
+                raise CalibrationError(
+                    f"{where}names a key for {', '.join(which)} only: every sensor needs a "
+                    f"key_file, or none does",
+                    path=self.path,
+                    sensor=(missing or extra)[0],
+                    name="key_file",
+                )
+            if not _CELL_NAME.fullmatch(self.cell):
+                raise CalibrationError(
+                    f"{where}with keys, cell must be the cell's name (1 to 64 letters, digits, "
+                    f"'.', '_', ':' or '-'), got {self.cell!r}",
+                    path=self.path,
+                    name="cell",
+                    value=self.cell,
+                )
+
+    @property
+    def authenticated(self) -> bool:
+        """True if the sensors have keys (their datagrams are signed: wire format v2)."""
+        return bool(self.keys)
 
     def __getitem__(self, name: str) -> SensorCalibration:
         try:
@@ -129,9 +186,10 @@ class Calibration:
         """The sensors' names, in the file's order."""
         return tuple(self.sensors)
 
-    def to_toml(self) -> str:
-        """The calibration as the text of a calibration file (:func:`load_calibration`)."""
-        lines = []
+    def to_toml(self, key_files: Mapping[str, str] | None = None) -> str:
+        """The calibration as the text of a calibration file (:func:`load_calibration`);
+        ``key_files`` names each sensor's key file (relative to the calibration file)."""
+        lines = [f'cell = "{self.cell}"', ""] if key_files else []
         for cal in self.sensors.values():
             rows = ",\n                    ".join(
                 "[" + ", ".join(repr(float(v)) for v in row) + "]" for row in cal.base_from_camera
@@ -141,8 +199,10 @@ class Calibration:
                 f"base_from_camera = [{rows}]",
                 f"time_offset_s = {cal.time_offset_s!r}",
                 f"weight = {cal.weight!r}",
-                "",
             ]
+            if key_files:
+                lines.append(f'key_file = "{key_files[cal.name]}"')
+            lines.append("")
         return "\n".join(lines)
 
     def _where(self) -> str:
@@ -153,10 +213,11 @@ class Calibration:
         """A calibration from the parsed TOML (``{"sensors": {name: {...}}}``)."""
         where = f"calibration {path}: " if path else "calibration: "
         sensors = data.get("sensors") if isinstance(data, Mapping) else None
-        extra = sorted(set(data) - {"sensors"}) if isinstance(data, Mapping) else []
+        extra = sorted(set(data) - {"sensors", "cell"}) if isinstance(data, Mapping) else []
         if extra:
             raise CalibrationError(
-                f"{where}unknown top-level key {extra[0]!r} (expected [sensors.NAME] tables)",
+                f"{where}unknown top-level key {extra[0]!r} (expected cell and [sensors.NAME] "
+                "tables)",
                 path=path,
                 name=extra[0],
             )
@@ -164,10 +225,42 @@ class Calibration:
             raise CalibrationError(
                 f"{where}no sensor: expected at least one [sensors.NAME] table", path=path
             )
-        out = {}
+        out, keys = {}, {}
         for name, table in sensors.items():
             out[name] = _sensor(name, table, where, path)
-        return cls(out, path)
+            if isinstance(table, Mapping) and "key_file" in table:
+                keys[name] = _keys(name, table, where, path)
+        cell = data.get("cell", "")
+        if not isinstance(cell, str):
+            raise CalibrationError(f"{where}cell must be a string", path=path, name="cell")
+        return cls(out, path, cell, keys)
+
+
+def _keys(name: str, table: Mapping, where: str, path: str | None) -> SensorKeys:
+    """A sensor's keys: its ``key_file`` (relative to the calibration file), restricted to
+    its ``key_ids`` if it names them."""
+    key_file, ids = table["key_file"], table.get("key_ids")
+    if not isinstance(key_file, str) or not key_file:
+        raise CalibrationError(
+            f"{where}sensor {name!r}: key_file must be a path", path=path, sensor=name
+        )
+    folder = Path(path).parent if path else Path(".")
+    keys = load_key_file(folder / key_file, name)
+    if ids is None:
+        return keys
+    if (
+        not isinstance(ids, list)
+        or not ids
+        or not all(isinstance(i, int) and not isinstance(i, bool) for i in ids)
+    ):
+        raise CalibrationError(
+            f"{where}sensor {name!r}: key_ids must be a list of key ids, got {ids!r}",
+            path=path,
+            sensor=name,
+            name="key_ids",
+            value=ids,
+        )
+    return keys.only(tuple(ids), where)
 
 
 def _sensor(name: str, table: object, where: str, path: str | None) -> SensorCalibration:
@@ -266,14 +359,16 @@ def load_calibration(path: str | Path) -> Calibration:
     Raises
     ------
     CalibrationError
-        If the file cannot be read or parsed, holds no sensor, an unknown key, or a
-        transform that is malformed or not rigid; the message names the file, the sensor
-        and the key.
+        If the file cannot be read or parsed, is not a regular file of at most
+        :data:`MAX_CALIBRATION_BYTES`, holds no sensor, an unknown key, a transform that
+        is malformed or not rigid, or keys that cannot be loaded (:mod:`qpavoid.keys`) or
+        are given for some sensors only; the message names the file, the sensor and the
+        key.
     """
     p = str(path)
     try:
-        text = Path(p).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+        text = read_bounded(p, MAX_CALIBRATION_BYTES).decode("utf-8")
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
         raise CalibrationError(
             f"cannot read calibration {p}: {one_line(exc)}", path=p, name="path", value=p
         ) from None

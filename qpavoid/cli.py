@@ -43,6 +43,7 @@ from .cli_view import add_view_command
 from .compare import compare
 from .io import check_output_dir
 from .jobs import progress_bar
+from .live import check_listening, parse_address
 from .metrics import describe
 from .motions import check_inputs
 from .run_spec import BENCHES, CONTROLLERS, DISTANCES, LIMIT_MODES
@@ -96,7 +97,13 @@ def build_parser() -> Parser:
         "--sensors",
         metavar="TOML",
         help="calibration of the sensors (docs/sensors.md), for per-sensor --human files "
-        "or --listen",
+        "or --listen (with key files: docs/security.md)",
+    )
+    run.add_argument(
+        "--allow-unauthenticated",
+        action="store_true",
+        help="with --listen on a loopback address only: also accept unsigned (version 1) "
+        "datagrams, which anybody who can send to the port could forge",
     )
     for flag, choices, help_text in (
         ("--controller", CONTROLLERS, "the paper's controller or its QP variant"),
@@ -221,6 +228,7 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
         sensor_files=files if args.sensors else (),
         sensors=args.sensors,
         listen=args.listen,
+        allow_unauthenticated=args.allow_unauthenticated,
         controller=args.controller,
         distance=args.distance,
         safety=args.safety,
@@ -236,8 +244,10 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
     )
     out = Path(args.out or Path("runs") / spec.label.replace(":", "-"))
     check_output_dir(out)
-    if args.listen:
-        load_calibration(args.sensors)  # a bad file fails before the run
+    if args.listen:  # a bad file, a missing key, unsigned off loopback: before the run
+        check_listening(
+            parse_address(args.listen), load_calibration(args.sensors), spec.allow_unauthenticated
+        )
     else:
         check_inputs(files, args.sensors)
     with contextlib.ExitStack() as stack:

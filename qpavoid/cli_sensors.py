@@ -1,7 +1,9 @@
-"""The sensor commands of ``qpavoid``: ``fuse`` (offline) and ``replay`` (streams over UDP).
+"""The sensor commands of ``qpavoid``: ``fuse`` (offline), ``replay`` (streams over UDP)
+and ``keygen`` (a sensor's key file).
 
     qpavoid fuse A.npz B.npz --sensors calib.toml --out fused.npz
-    qpavoid replay A.npz B.npz --to HOST:PORT [--rate 30]
+    qpavoid replay A.npz B.npz --to HOST:PORT --sensors calib.toml [--rate 30]
+    qpavoid keygen SENSOR --out SENSOR.key [--rotate]
 
 Like :mod:`qpavoid.cli` they parse, call the library and print.
 """
@@ -18,14 +20,15 @@ from .cli_args import HelpFormatter, positive_float
 from .errors import InputError
 from .fused import fuse_recordings, save_fused_npz
 from .io import check_output_dir
+from .keys import new_key_file
 from .live import parse_address, replay
 from .sensor_recording import load_sensor_recording
 
-__all__ = ["add_sensor_commands", "fuse_command"]
+__all__ = ["add_sensor_commands", "fuse_command", "keygen_command", "replay_command"]
 
 
 def add_sensor_commands(sub: argparse._SubParsersAction) -> None:
-    """Add ``fuse`` and ``replay`` to the ``qpavoid`` sub-commands."""
+    """Add ``fuse``, ``replay`` and ``keygen`` to the ``qpavoid`` sub-commands."""
     fmt = HelpFormatter
     fuse = sub.add_parser(
         "fuse",
@@ -49,14 +52,22 @@ def add_sensor_commands(sub: argparse._SubParsersAction) -> None:
         formatter_class=fmt,
         help="stream per-sensor recordings over UDP, as live sensors would",
         description="Send per-sensor recordings as UDP datagrams in the wire format of "
-        "docs/sensors.md, paced in real time, to a 'qpavoid run --listen'.",
+        "docs/sensors.md, paced in real time, to a 'qpavoid run --listen', each signed with "
+        "its sensor's key (the calibration's key files, docs/security.md).",
     )
     replay.add_argument("files", nargs="+", metavar="FILE", help="per-sensor recordings")
     replay.add_argument("--to", required=True, metavar="HOST:PORT", help="where to send")
     replay.add_argument(
         "--sensors",
         metavar="TOML",
-        help="the sensors' calibration: their clock offsets set the order (default: none)",
+        help="the sensors' calibration: their keys sign the datagrams, their clock offsets "
+        "set the order",
+    )
+    replay.add_argument(
+        "--unsigned",
+        action="store_true",
+        help="send unsigned (version 1) datagrams, for a listener that accepts them "
+        "(--allow-unauthenticated, loopback only)",
     )
     replay.add_argument(
         "--rate",
@@ -66,6 +77,22 @@ def add_sensor_commands(sub: argparse._SubParsersAction) -> None:
         help="frames per second of each sensor (the recordings' own times set the order)",
     )
     replay.set_defaults(parser=replay, handler=replay_command)
+
+    keygen = sub.add_parser(
+        "keygen",
+        formatter_class=fmt,
+        help="write a sensor's key file (256 bits, mode 0600)",
+        description="Write a new key for a sensor into a key file readable by its owner "
+        "only; name it in the calibration file (key_file) of the listener and of the "
+        "sensor's sender. --rotate puts a new key first in an existing file and keeps the "
+        "current one second, accepted until the next rotation (docs/security.md).",
+    )
+    keygen.add_argument("sensor", metavar="SENSOR", help="the sensor's name in the calibration")
+    keygen.add_argument("--out", required=True, metavar="FILE", help="the key file to write")
+    keygen.add_argument(
+        "--rotate", action="store_true", help="add a new key to an existing key file"
+    )
+    keygen.set_defaults(parser=keygen, handler=keygen_command)
 
 
 def fuse_command(args: argparse.Namespace) -> str:
@@ -106,13 +133,38 @@ def replay_command(args: argparse.Namespace) -> str:
         raise InputError(f"--rate must be 1 to 1000 Hz, got {args.rate}", name="--rate")
     calibration = load_calibration(args.sensors) if args.sensors else None
     recordings = [load_sensor_recording(f) for f in args.files]
+    if not args.unsigned and (calibration is None or not calibration.authenticated):
+        raise InputError(
+            "replay signs each datagram with its sensor's key: give --sensors with a "
+            "calibration whose sensors have key files (qpavoid keygen), or --unsigned",
+            name="--sensors",
+        )
     if calibration is not None:
         for rec in recordings:
             calibration.check_names(rec.sensors)
     try:
-        sent = replay(recordings, address, args.rate, calibration)
+        sent = replay(recordings, address, args.rate, calibration, unsigned=args.unsigned)
     except OSError as exc:
         raise InputError(
             f"cannot send to {args.to}: {exc.strerror or exc}", name="--to", value=args.to
         ) from None
-    return f"sent {sent} datagrams to {address[0]}:{address[1]}"
+    kind = "unsigned" if args.unsigned else "signed"
+    return f"sent {sent} datagrams to {address[0]}:{address[1]} ({kind})"
+
+
+def keygen_command(args: argparse.Namespace) -> str:
+    """``qpavoid keygen``: a new key file, or a rotated one (:func:`qpavoid.keys.new_key_file`)."""
+    name = str(args.sensor)
+    if not name or len(name.encode()) > 255 or not name.isprintable() or '"' in name:
+        raise InputError(f"SENSOR {name!r} is not a sensor's name", name="sensor", value=name)
+    out = Path(args.out)
+    if out.is_dir():
+        raise InputError(f"--out {str(out)!r} is a folder, not a file", name="--out")
+    check_output_dir(out.parent if str(out.parent) else Path("."))
+    keys = new_key_file(out, name, rotate=args.rotate)
+    ids = " and ".join(map(str, keys.ids))
+    return (
+        f"wrote {out}: key {keys.ids[0]} of sensor {name!r} signs"
+        + (f", key {keys.ids[1]} still accepted" if len(keys.ids) > 1 else "")
+        + f" (ids {ids}; mode 0600: keep it secret)"
+    )

@@ -18,6 +18,7 @@ would: the whole path runs on one machine over loopback.
 
 from __future__ import annotations
 
+import ipaddress
 import multiprocessing
 import os
 import signal
@@ -31,11 +32,22 @@ from .calibration import Calibration
 from .errors import InputError
 from .fusion import Fuser, FusionConfig
 from .people import People
-from .receiver import SlotTable, serve
+from .receiver import FUTURE_TOLERANCE_S, SlotTable, serve
 from .sensor_recording import BodyFrame, SensorRecording
-from .wire import Workspace, encode
+from .wire import Signer, Workspace, encode
 
-__all__ = ["Listener", "LiveSource", "parse_address", "replay"]
+__all__ = ["Listener", "LiveSource", "check_listening", "is_loopback", "parse_address", "replay"]
+
+
+def is_loopback(host: str) -> bool:
+    """True if ``host`` (a name or an address) resolves to this machine's loopback."""
+    try:
+        infos = socket.getaddrinfo(host, None)
+        return bool(infos) and all(
+            ipaddress.ip_address(str(info[4][0]).split("%")[0]).is_loopback for info in infos
+        )
+    except (OSError, ValueError, UnicodeError):
+        return False
 
 
 def parse_address(text: str, name: str = "--listen", any_port: bool = False) -> tuple[str, int]:
@@ -70,16 +82,26 @@ class Listener:
     workspace
         Where a joint may be in the base frame; a datagram with a joint outside is dropped.
     max_age_s
-        A frame captured more than this before or after now is dropped on arrival, s
-        (the fusion's own limit, :class:`~qpavoid.fusion.FusionConfig`).
+        A frame captured more than this before now is dropped on arrival, s (the fusion's
+        own limit, :class:`~qpavoid.fusion.FusionConfig`).
     start_timeout_s
         Longest wait for the receiver process to start and bind, s (it imports numpy and
         scipy: about 0.5 s; 30 leaves room on a loaded machine).
+    accept_unauthenticated
+        Also take unsigned version-1 datagrams (:mod:`qpavoid.wire`). Anybody who can
+        send to the port can then hide a person (docs/security.md), so it is an explicit
+        opt-in and only on a loopback address; without it the calibration must give every
+        sensor a key.
+    future_tolerance_s
+        A frame captured more than this after now is dropped on arrival, s
+        (:data:`~qpavoid.receiver.FUTURE_TOLERANCE_S`).
 
     Raises
     ------
     InputError
-        If the address cannot be bound (in use, not local) or the receiver does not start.
+        If the calibration has no keys and unsigned datagrams are not accepted, if they
+        are and the address is not a loopback one, if the address cannot be bound (in
+        use, not local) or the receiver does not start.
     """
 
     def __init__(
@@ -89,7 +111,10 @@ class Listener:
         workspace: Workspace | None = None,
         max_age_s: float = FusionConfig.max_age_s,
         start_timeout_s: float = 30.0,
+        accept_unauthenticated: bool = False,
+        future_tolerance_s: float = FUTURE_TOLERANCE_S,
     ):
+        check_listening(address, calibration, accept_unauthenticated)
         self.calibration = calibration
         self.workspace = workspace or Workspace()
         context = multiprocessing.get_context("spawn")  # no fork of a threaded process
@@ -107,6 +132,8 @@ class Listener:
                 self._stop,
                 max_age_s,
                 os.getpid(),
+                accept_unauthenticated,
+                future_tolerance_s,
             ),
             name="qpavoid-udp",
             daemon=True,
@@ -162,6 +189,28 @@ class Listener:
     def drain(self) -> list[BodyFrame]:
         """Each body's newest valid frame received since the last call, oldest first."""
         return self._table.take()
+
+
+def check_listening(
+    address: tuple[str, int], calibration: Calibration, accept_unauthenticated: bool
+) -> None:
+    """Signed datagrams, or unsigned ones on loopback by explicit opt-in: else InputError."""
+    where = f"{address[0]}:{address[1]}"
+    if accept_unauthenticated and not is_loopback(address[0]):
+        raise InputError(
+            f"unsigned datagrams are accepted on loopback only (anybody who can send to the "
+            f"port could hide a person): cannot listen on {where} with them",
+            name="--listen",
+            value=address,
+        )
+    if not accept_unauthenticated and not calibration.authenticated:
+        raise InputError(
+            f"the calibration{' ' + calibration.path if calibration.path else ''} gives the "
+            "sensors no keys: give each a key_file (qpavoid keygen), or accept unsigned "
+            "datagrams on loopback (--allow-unauthenticated)",
+            name="--sensors",
+            value=calibration.path,
+        )
 
 
 class LiveSource:
@@ -227,8 +276,13 @@ def replay(
     clock: Callable[[], float] = time.time,
     sleep: Callable[[float], None] = time.sleep,
     mangle: Callable[[int, bytes], Sequence[bytes]] | None = None,
+    unsigned: bool = False,
 ) -> int:
     """Send ``recordings`` to ``address`` as live sensors would; returns datagrams sent.
+
+    Each datagram is signed with its sensor's key from ``calibration`` (wire format
+    version 2), or, with ``unsigned``, sent as an unsigned version-1 datagram (for a
+    listener that accepts them, on loopback).
 
     Frames go in the order of their capture times (each sensor's time stamps plus its
     ``time_offset_s`` in ``calibration``, 0 without one), paced so that the median frame
@@ -240,6 +294,16 @@ def replay(
 
     def offset(sensor: str) -> float:
         return calibration[sensor].time_offset_s if calibration is not None else 0.0
+
+    signers: dict[str, Signer] = {}
+    if not unsigned:
+        if calibration is None or not calibration.authenticated:
+            raise InputError(
+                "replay signs each datagram with its sensor's key: give a calibration with "
+                "key files (qpavoid keygen), or send unsigned datagrams (--unsigned)",
+                name="--sensors",
+            )
+        signers = {name: Signer(calibration.cell, keys) for name, keys in calibration.keys.items()}
 
     frames = sorted(
         (f for rec in recordings for f in rec.frames()), key=lambda f: f.t + offset(f.sensor)
@@ -260,7 +324,8 @@ def replay(
             wait = due - clock()
             if wait > 0:
                 sleep(wait)
-            data = encode(frame._replace(t=clock() - offset(frame.sensor)))
+            stamped = frame._replace(t=clock() - offset(frame.sensor))
+            data = encode(stamped) if unsigned else signers[frame.sensor].encode(stamped)
             for datagram in mangle(i, data) if mangle else (data,):
                 sock.sendto(datagram, address)
                 sent += 1

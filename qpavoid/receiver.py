@@ -9,9 +9,13 @@ runs in a child process (``multiprocessing``, spawn), at a lower priority than t
 (:func:`~qpavoid.wire.decode`, drops counted by reason), and keep each body's newest frame
 in a :class:`SlotTable`, one fixed slot per (sensor, body).
 
-A frame captured more than the fusion's ``max_age_s`` before or after now is dropped
-(``late``, ``from_the_future``: a clock ahead of ours must not poison the order), one
-not newer than its body's last too (``out_of_order_or_duplicate``); the others are
+Each datagram is verified first (:class:`~qpavoid.wire.Verifier`: length, header, key,
+the tag in constant time before any JSON, the sequence number against a replay window,
+then the skeleton); then, its time stamp now authenticated, a frame captured more than the
+fusion's ``max_age_s`` before now is dropped (``late``), one captured more than
+``future_tolerance_s`` after now too (``from_the_future``: a sensor stamps its capture
+before it sends, so a clock ahead of ours must not poison the order), and one not newer
+than its body's last (``out_of_order_or_duplicate``); the others are
 ``accepted``, and one replaced before the loop took it is counted ``superseded``:
 ``received`` is ``accepted`` plus every drop. The loop's side (:meth:`SlotTable.take`)
 costs the same whatever arrives: one lock, one copy of at most sensors × 6 slots.
@@ -35,9 +39,15 @@ import numpy as np
 from .calibration import Calibration
 from .frames import N_KINECT_JOINTS
 from .sensor_recording import MAX_BODIES, BodyFrame
-from .wire import REASONS, WireError, Workspace, decode
+from .wire import REASONS, Verifier, WireError, Workspace
 
-__all__ = ["COUNTERS", "SlotTable", "serve"]
+__all__ = ["COUNTERS", "FUTURE_TOLERANCE_S", "SlotTable", "serve"]
+
+#: How far after now a frame's capture time may be, s. On one shared clock a frame cannot
+#: arrive before it was captured (a Kinect stamps at least 60 ms before); 5 ms covers what
+#: PTP or NTP on a cell's network leaves between two clocks, and is far below the 0.1 s a
+#: forger once used to make every real frame of a body look out of order.
+FUTURE_TOLERANCE_S = 0.005
 
 #: What the receiver counts, in this order in shared memory.
 COUNTERS = (
@@ -122,14 +132,18 @@ def serve(
     stop: Any,
     max_age_s: float,
     parent_pid: int,
+    accept_v1: bool = False,
+    future_tolerance_s: float = FUTURE_TOLERANCE_S,
 ) -> None:
     """The receiver process: bind ``address``, tell ``status`` ``("ok", address)`` or
     ``("error", why)``, then receive until ``stop`` (an Event) is set or the parent
     process ``parent_pid`` is gone (killed: the port must not stay taken).
 
-    Ctrl-C is the parent's to handle (it stops this process): ignored here. A frame
-    captured more than ``max_age_s`` before now (``late``) or after now (``from_the_future``,
-    a clock ahead of ours) is dropped before it can count as its body's newest.
+    Ctrl-C is the parent's to handle (it stops this process): ignored here. Datagrams are
+    verified (unsigned ones taken only with ``accept_v1``); a frame captured more than
+    ``max_age_s`` before now (``late``) or more than ``future_tolerance_s`` after now
+    (``from_the_future``, a clock ahead of ours) is dropped before it can count as its
+    body's newest.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked by the parent
@@ -144,18 +158,21 @@ def serve(
             return
         status.send(("ok", sock.getsockname()[:2]))
         sock.settimeout(0.05)
-        _receive(sock, calibration, workspace, table, stop, max_age_s, parent_pid)
+        verifier = Verifier(calibration, workspace, accept_v1=accept_v1)
+        window = (max_age_s, future_tolerance_s)
+        _receive(sock, verifier, table, stop, window, parent_pid)
 
 
 def _receive(
     sock: socket.socket,
-    calibration: Calibration,
-    workspace: Workspace,
+    verifier: Verifier,
     table: SlotTable,
     stop: Any,
-    max_age_s: float,
+    window: tuple[float, float],
     parent_pid: int,
 ) -> None:
+    calibration = verifier.calibration
+    max_age_s, future_tolerance_s = window
     rows, counts = table._arrays()
     index = {name: i for i, name in enumerate(table.sensors)}
     code = {name: i for i, name in enumerate(COUNTERS)}
@@ -168,14 +185,14 @@ def _receive(
         except OSError:  # closed under us
             return
         try:
-            frame = decode(data, calibration, workspace)
+            frame = verifier.decode(data)
             slot = index[frame.sensor] * MAX_BODIES + int(frame.body)
             age = time.time() - (frame.t + calibration[frame.sensor].time_offset_s)
             reason = (
                 "late"
                 if age > max_age_s
                 else "from_the_future"
-                if age < -max_age_s
+                if age < -future_tolerance_s
                 else "out_of_order_or_duplicate"
                 if frame.t <= newest[slot]
                 else None

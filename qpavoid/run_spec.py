@@ -89,6 +89,9 @@ class RunSpec:
     listen
         ``HOST:PORT``: drive the controller in real time from live frames on UDP
         (:mod:`qpavoid.live`, with ``sensors``), the robot simulated; no truth.
+    allow_unauthenticated
+        With ``listen`` on a loopback address: also accept unsigned (version 1)
+        datagrams (docs/security.md).
     """
 
     scenario: str | None = None
@@ -109,6 +112,7 @@ class RunSpec:
     sensor_files: tuple[str, ...] = ()
     sensors: str | None = None
     listen: str | None = None
+    allow_unauthenticated: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sensor_files", tuple(str(f) for f in self.sensor_files))
@@ -124,6 +128,12 @@ class RunSpec:
                     value=self.listen,
                 )
             object.__setattr__(self, "measure_truth", False)  # live: no truth to measure
+        elif self.allow_unauthenticated:
+            raise InputError(
+                "--allow-unauthenticated is for --listen",
+                name="--allow-unauthenticated",
+                value=True,
+            )
         elif self.scenario is None and self.human_file is None:
             raise InputError(
                 "give a SCENARIO (test1, test2, free, random:SEED) or --human FILE",

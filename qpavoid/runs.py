@@ -95,7 +95,10 @@ def live_source(spec: RunSpec) -> Iterator[LiveSource | None]:
         yield None
         return
     calibration = load_calibration(str(spec.sensors))
-    with Listener(parse_address(spec.listen), calibration) as listener:
+    address = parse_address(spec.listen)
+    with Listener(
+        address, calibration, accept_unauthenticated=spec.allow_unauthenticated
+    ) as listener:
         yield LiveSource(listener)
 
 

@@ -30,6 +30,7 @@ from scipy.spatial.transform import Rotation
 
 from .calibration import Calibration, SensorCalibration
 from .frames import MIRROR, HumanFrame, HumanMotion, JointType, TrackingState
+from .keys import SensorKeys
 from .posture import ARM
 from .sensor_recording import BodyFrame, SensorRecording
 
@@ -68,9 +69,12 @@ class TwoSensorConfig:
         How far an Inferred joint is off, m.
     seed
         Seed of everything random.
+    cell
+        The cell's name in the calibration (each sensor gets a new random key).
     """
 
     names: tuple[str, str] = ("kinect_left", "kinect_right")
+    cell: str = "two-sensors"
     azimuth_deg: tuple[float, float] = (50.0, -50.0)
     distance_m: float = 1.6
     height_m: float = 1.3
@@ -130,7 +134,9 @@ def two_sensor_data(
         sensors[name] = SensorCalibration(
             name, look_at(where, chest), time_offset_s=cfg.clock_offset_s * k
         )
-    calibration = Calibration(sensors)
+    # each simulated sensor signs its datagrams with a key of its own (docs/security.md)
+    keys = {name: SensorKeys.generate(name) for name in sensors}
+    calibration = Calibration(sensors, cell=cfg.cell, keys=keys)
     sigma = cfg.noise_mean_m / _MEAN_NORM
     recordings = {}
     for k, name in enumerate(cfg.names):

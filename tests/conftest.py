@@ -57,3 +57,19 @@ def paper_config(**kw) -> qpavoid.ControllerConfig:
     perfect sensor films a still person bit for bit)."""
     kw.setdefault("distance", "spheres")
     return qpavoid.ControllerConfig(perception=PerceptionConfig(max_identical_frames=None), **kw)
+
+
+def write_calibration(folder, calibration) -> str:
+    """Write ``calibration`` as ``folder/calib.toml``, with each sensor's key file beside it
+    (mode 0600) when it has keys; the calibration file's path."""
+    from pathlib import Path
+
+    folder = Path(folder)
+    key_files = {name: f"{name}.key" for name in calibration.keys} or None
+    for name, keys in calibration.keys.items():
+        path = folder / f"{name}.key"
+        path.write_text(keys.to_toml())
+        path.chmod(0o600)
+    path = folder / "calib.toml"
+    path.write_text(calibration.to_toml(key_files))
+    return str(path)

@@ -224,6 +224,7 @@ def test_qpavoid_run_view_follows_a_live_run_in_a_browser(browser, tmp_path):
         port = s.getsockname()[1]
     cmd = [sys.executable, "-m", "qpavoid", "run", "--listen", f"127.0.0.1:{port}", "--sensors"]
     cmd += [str(calib), "--view", "--out", str(tmp_path / "live"), "--rate", "100", "-q"]
+    cmd += ["--allow-unauthenticated"]  # no sensor: the opt-in path, on loopback
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = proc.stdout.readline()
