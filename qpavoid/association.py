@@ -68,6 +68,10 @@ class PersonTrack:
         Last time any sensor saw the person, s.
     born_s
         When the fusion first saw the person, s.
+    seen_by
+        The sensors that saw the person during their first ``settle_s``.
+    flag
+        Why the person is suspect ("": not; :attr:`~qpavoid.fusion.FusedPerson.flag`).
     """
 
     id: int
@@ -77,6 +81,8 @@ class PersonTrack:
     bone: np.ndarray = field(default_factory=lambda: np.zeros(N_KINECT_JOINTS))
     seen_s: float = -np.inf
     born_s: float = -np.inf
+    seen_by: set[str] = field(default_factory=set)
+    flag: str = ""
 
     def mirror(self) -> None:
         """Swap the track's left and right (its joints, velocities, times and bones)."""

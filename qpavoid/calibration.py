@@ -12,6 +12,9 @@ from its camera frame to the robot base frame, m (docs/sensors.md)::
     weight = 1.0            # optional: trust in this sensor relative to the others
     key_file = "kinect_left.key"   # its datagrams' key (qpavoid.keys), relative to this file
     key_ids = [2, 1]        # optional: the key ids accepted, the first signing (default: all)
+    field_of_view_deg = [70.6, 60.0]  # optional: what it sees, horizontal and vertical ...
+    range_m = [0.5, 4.5]              # ... between these depths (a Kinect v2's): a person
+                                      # in its view that it does not see is suspect
 
 with, when the sensors have keys, the cell's name at the top (``cell = "cell-1"``): it is
 signed into every datagram, so that one cell's datagrams are refused by another's. Either
@@ -57,7 +60,15 @@ MAX_TRANSLATION_M = 100.0
 MAX_TIME_OFFSET_S = 86_400.0
 MIN_WEIGHT, MAX_WEIGHT = 1e-3, 1e3
 #: The keys a sensor's table may hold.
-SENSOR_KEYS = ("base_from_camera", "time_offset_s", "weight", "key_file", "key_ids")
+SENSOR_KEYS = (
+    "base_from_camera",
+    "time_offset_s",
+    "weight",
+    "key_file",
+    "key_ids",
+    "field_of_view_deg",
+    "range_m",
+)
 #: A calibration file is a few tables of numbers (about 400 bytes a sensor): 1 MiB holds
 #: thousands, and refuses a device or a huge file before it is read (``--sensors /dev/zero``
 #: once read until the memory ran out).
@@ -81,12 +92,18 @@ class SensorCalibration:
         (default 0: the sensors' clocks are already synchronised, e.g. by PTP).
     weight
         Trust in this sensor's joints relative to the others' (default 1).
+    field_of_view_deg, range_m
+        What the sensor sees: its full horizontal and vertical angles of view, deg, and
+        the nearest and farthest depth it measures, m (None: not known; then
+        :meth:`sees` is False everywhere). The camera frame looks along +z, y up.
     """
 
     name: str
     base_from_camera: np.ndarray
     time_offset_s: float = 0.0
     weight: float = 1.0
+    field_of_view_deg: tuple[float, float] | None = None
+    range_m: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         """The same limits as a calibration file's (a weight of 0 made seen joints
@@ -100,6 +117,18 @@ class SensorCalibration:
                 value=self.base_from_camera,
             )
         object.__setattr__(self, "base_from_camera", T)
+        for key, pair, low, high, what in (
+            ("field_of_view_deg", self.field_of_view_deg, 0.0, 180.0, "(horizontal, vertical)"),
+            ("range_m", self.range_m, 0.0, MAX_TRANSLATION_M, "(nearest, farthest)"),
+        ):
+            if pair is not None and not _pair_within(pair, low, high, key == "range_m"):
+                raise CalibrationError(
+                    f"sensor {self.name!r}: {key} must be two numbers above {low:g}, at most "
+                    f"{high:g} {what}",
+                    sensor=self.name,
+                    name=key,
+                    value=pair,
+                )
         bad = _settings_error(self.time_offset_s, self.weight)
         if bad is not None:
             key, message, value = bad
@@ -111,6 +140,20 @@ class SensorCalibration:
         """Joint positions (..., 3) in the camera frame → the robot base frame, m."""
         T = self.base_from_camera
         return np.asarray(joints, dtype=float) @ T[:3, :3].T + T[:3, 3]
+
+    def sees(self, point: np.ndarray) -> bool:
+        """True if ``point`` (3,), base frame, m, is inside the sensor's view (its angles
+        and depths; False if they are not known)."""
+        if self.field_of_view_deg is None or self.range_m is None:
+            return False
+        T = self.base_from_camera
+        x, y, z = (np.asarray(point, dtype=float) - T[:3, 3]) @ T[:3, :3]
+        half_h, half_v = (math.radians(a) / 2 for a in self.field_of_view_deg)
+        return bool(
+            self.range_m[0] <= z <= self.range_m[1]
+            and abs(math.atan2(x, z)) <= half_h
+            and abs(math.atan2(y, z)) <= half_v
+        )
 
 
 @dataclass(frozen=True)
@@ -202,6 +245,10 @@ class Calibration:
             ]
             if key_files:
                 lines.append(f'key_file = "{key_files[cal.name]}"')
+            for key in ("field_of_view_deg", "range_m"):
+                value = getattr(cal, key)
+                if value is not None:
+                    lines.append(f"{key} = [{float(value[0])!r}, {float(value[1])!r}]")
             lines.append("")
         return "\n".join(lines)
 
@@ -283,7 +330,35 @@ def _sensor(name: str, table: object, where: str, path: str | None) -> SensorCal
     bad = _settings_error(offset, weight)
     if bad is not None:
         raise fail(bad[1], bad[0], bad[2])
-    return SensorCalibration(name, T, float(offset), float(weight))
+    view = {}
+    for key in ("field_of_view_deg", "range_m"):
+        value = table.get(key)
+        if value is not None:
+            if not _pair_within(value, 0.0, math.inf, key == "range_m"):
+                raise fail(f"{key} must be two positive numbers, got {value!r}", key, value)
+            view[key] = (float(value[0]), float(value[1]))
+    try:
+        return SensorCalibration(name, T, float(offset), float(weight), **view)
+    except CalibrationError as exc:
+        raise fail(str(exc).split(": ", 1)[-1], exc.name, exc.value) from None
+
+
+def _pair_within(value: object, low: float, high: float, increasing: bool) -> bool:
+    """True if ``value`` is two finite numbers in (low, high] (``increasing``: the first
+    smaller, and from ``low`` on)."""
+    if not (
+        isinstance(value, (list, tuple))
+        and len(value) == 2
+        and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            for v in value
+        )
+    ):
+        return False
+    a, b = value
+    if increasing:
+        return bool(low <= a < b <= high)
+    return bool(low < a <= high and low < b <= high)
 
 
 def _settings_error(offset: object, weight: object) -> tuple[str, str, object] | None:

@@ -251,18 +251,24 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
     else:
         check_inputs(files, args.sensors)
     with contextlib.ExitStack() as stack:
-        watch = None
+        watch, clear = None, None
         if args.view is not None:
             live = stack.enter_context(live_view(spec, args.view))
             print(f"live view: {live.url} (open it in a browser)", flush=True)
-            watch = live.update
+            watch, clear = live.update, live.clear_requested
         bar = stack.enter_context(progress_bar(spec.max_time_s, spec.label, "s", not args.quiet))
 
         def advance(t: float) -> None:
             bar.update(t - bar.n)
 
         m = run_one(
-            spec, out, plots=not args.no_plots, progress=advance, view=not args.no_view, watch=watch
+            spec,
+            out,
+            plots=not args.no_plots,
+            progress=advance,
+            view=not args.no_view,
+            watch=watch,
+            clear=clear,
         )
     lines = [describe(m)]
     for what in ("plots", "view"):

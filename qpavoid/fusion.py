@@ -18,6 +18,11 @@ every person it knows (:class:`FusedFrame`). docs/sensors.md details and measure
 A person no sensor sees any more is reported with every joint missing for
 ``person_timeout_s`` (the controller's tracker bounds them meanwhile), then dropped, unless
 they were last seen within ``forget_beyond_m`` of the robot: those are kept until seen.
+
+One sender cannot hold the cell: at most ``max_people`` are tracked (the nearest the robot
+kept), new ones far from the robot appear at a bounded rate, and a person who appears near
+the robot out of nowhere, or whom only one sensor sees where another looks, is flagged
+(:attr:`FusedPerson.flag`); :meth:`Fuser.clear_flagged` lets an operator drop them.
 """
 
 from __future__ import annotations
@@ -67,6 +72,10 @@ class FusedPerson(NamedTuple):
         Joints on which sensors disagreed, and who was believed.
     mirrored
         Sensors whose body was relabelled left/right.
+    flag
+        Why this person is suspect ("" if not): appeared near the robot never seen
+        approaching, or seen by one sensor only where another looks (a forged or phantom
+        body). The controllers still treat them as a person.
     """
 
     id: int
@@ -75,6 +84,7 @@ class FusedPerson(NamedTuple):
     sensors: tuple[str, ...]
     outliers: tuple[OutlierChoice, ...]
     mirrored: tuple[str, ...]
+    flag: str = ""
 
 
 class FusedFrame(NamedTuple):
@@ -126,6 +136,9 @@ class Fuser:
         self._latest: dict[str, dict[int, list[_Frame]]] = {s: {} for s in calibration.names}
         self._assigned: dict[str, dict[int, int]] = {s: {} for s in calibration.names}
         self._next_id = 0
+        self._first_s: float | None = None  # the first fusion time
+        self._tokens, self._tokens_s = float(self.cfg.new_people_burst), -math.inf
+        self._heard: dict[str, float] = {}  # each sensor's newest capture time
         self._sensor_weight = {n: calibration[n].weight for n in calibration.names}
         # each camera's rotation and translation as contiguous arrays: the types the
         # compiled intake was warmed up for (a view would compile anew at the first frame)
@@ -166,11 +179,19 @@ class Fuser:
         joints, state = ingest(joints_in, state_in, rotation, translation)
         history.append(_Frame(t, joints, state, tuple(torso_centre(joints).tolist())))
         del history[:-HISTORY]
+        self._heard[frame.sensor] = max(t, self._heard.get(frame.sensor, -math.inf))
         return True
 
     def fuse(self, t: float) -> FusedFrame:
         """Every known person at time ``t`` (s, controller clock), from frames captured by ``t``."""
         cfg = self.cfg
+        if self._first_s is None:
+            self._first_s = t
+        self._tokens = min(
+            float(cfg.new_people_burst),
+            self._tokens + cfg.max_new_people_per_s * max(t - self._tokens_s, 0.0),
+        )
+        self._tokens_s = t
         per_track: dict[int, list[_Contribution]] = {}
         track_centres = {tr.id: tuple(tr.centre().tolist()) for tr in self.tracks}
         for sensor in self.calibration.names:
@@ -191,12 +212,12 @@ class Fuser:
             )
             self._assigned[sensor] = {b: tid for b, tid in mapping.items() if tid is not None}
             for body, tid in mapping.items():
-                tc, joints, state, _ = bodies[body]
+                tc, joints, state, centre = bodies[body]
                 if tid is None:
-                    track = PersonTrack(self._next_id, joints.copy(), born_s=t)
-                    self._next_id += 1
-                    self.tracks.append(track)
-                    track_centres[track.id] = bodies[body].centre
+                    track = self._new_person(joints, centre, t, per_track, track_centres)
+                    if track is None:
+                        continue
+                    track_centres[track.id] = centre
                     self._assigned[sensor][body] = tid = track.id
                 per_track.setdefault(tid, []).append(_Contribution(sensor, joints, state, t - tc))
         people = []
@@ -207,9 +228,78 @@ class Fuser:
             elif t - track.seen_s > cfg.person_timeout_s and self._far(track):
                 self.tracks.remove(track)
             else:
-                people.append(FusedPerson(track.id, NOBODY, np.zeros(N_KINECT_JOINTS), (), (), ()))
+                nobody = np.zeros(N_KINECT_JOINTS)
+                people.append(FusedPerson(track.id, NOBODY, nobody, (), (), (), track.flag))
         ages = [c.age for cs in per_track.values() for c in cs]
         return FusedFrame(float(t), tuple(people), float(t - min(ages)) if ages else -np.inf)
+
+    def clear_flagged(self) -> tuple[int, ...]:
+        """Drop every flagged person (an operator who has looked and found nobody there);
+        their ids. A flagged body still sent comes back as a new person, flagged again."""
+        cleared = tuple(tr.id for tr in self.tracks if tr.flag)
+        for tid in cleared:
+            self._drop(tid)
+        self.counters["flagged_cleared"] += len(cleared)
+        return cleared
+
+    def _drop(self, tid: int) -> None:
+        """Forget person ``tid``: the track and every body assigned to it."""
+        self.tracks = [tr for tr in self.tracks if tr.id != tid]
+        for assigned in self._assigned.values():
+            for body in [b for b, i in assigned.items() if i == tid]:
+                del assigned[body]
+
+    def _new_person(
+        self,
+        joints: np.ndarray,
+        centre: tuple[float, float, float],
+        t: float,
+        per_track: dict[int, list[_Contribution]],
+        track_centres: dict[int, tuple[float, ...]],
+    ) -> PersonTrack | None:
+        """A new person for a body that fits nobody, or None if the caps refuse it
+        (:class:`FusionConfig` ``max_people``, ``max_new_people_per_s``); flagged if they
+        appear near the robot after the start-up grace."""
+        cfg = self.cfg
+        distance = math.hypot(*centre)
+        near = distance <= cfg.forget_beyond_m
+        if not near and self._tokens < 1.0:
+            self.counters["too_many_new_people"] += 1
+            return None
+        if len(self.tracks) >= cfg.max_people:
+            farthest = max(self.tracks, key=lambda tr: _distance_or_inf(tr.centre()))
+            if not _distance_or_inf(farthest.centre()) > distance:
+                self.counters["too_many_people"] += 1
+                return None
+            self._drop(farthest.id)  # the controller needs the nearest
+            per_track.pop(farthest.id, None)
+            track_centres.pop(farthest.id, None)
+            self.counters["dropped_for_a_nearer_person"] += 1
+        if not near:
+            self._tokens -= 1.0
+        track = PersonTrack(self._next_id, joints.copy(), born_s=t)
+        self._next_id += 1
+        if near and self._first_s is not None and t - self._first_s > cfg.phantom_grace_s:
+            track.flag = f"appeared {distance:.2f} m from the robot's base, never seen approaching"
+            self.counters["flagged_people"] += 1
+        self.tracks.append(track)
+        return track
+
+    def _check_coverage(self, track: PersonTrack, t: float) -> None:
+        """Once a new person has settled: flag them if one sensor alone saw them while
+        another, fresh, has that place in its view (``field_of_view_deg``, ``range_m``)."""
+        cfg = self.cfg
+        late = self._first_s is not None and track.born_s - self._first_s > cfg.phantom_grace_s
+        if track.flag or not late or len(track.seen_by) != 1:
+            return
+        (only,) = track.seen_by
+        centre = track.centre()
+        for name in self.calibration.names:
+            fresh = t - self._heard.get(name, -math.inf) <= cfg.max_age_s
+            if name != only and fresh and self.calibration[name].sees(centre):
+                track.flag = f"seen by {only} only, in the view of {name}"
+                self.counters["flagged_people"] += 1
+                return
 
     def _renumbered(self, sensor: str, bodies: dict[int, _Frame]) -> None:
         """Drop from ``sensor``'s ``bodies`` those it has renumbered: a camera frame
@@ -266,6 +356,11 @@ class Fuser:
             cfg.smooth,
         )
         track.seen_s = t
+        if settling:
+            track.seen_by.update(names)
+        elif track.seen_by:  # settled: judged once, on who saw them meanwhile
+            self._check_coverage(track, t)
+            track.seen_by = set()
         outliers = self._outliers(names, S, disputed, keep) if disputed.size else ()
         flipped: tuple[str, ...] = ()
         if mirrored.any():
@@ -278,6 +373,7 @@ class Fuser:
             tuple(n for n in self.calibration.names if n in names),
             outliers,
             flipped,
+            track.flag,
         )
 
     def _far(self, track: PersonTrack) -> bool:
@@ -307,3 +403,9 @@ class Fuser:
             OutlierChoice(j, names[c], tuple(n for n, d in zip(names, ds, strict=True) if d))
             for j, c, ds in by_joint
         )
+
+
+def _distance_or_inf(centre: np.ndarray) -> float:
+    """Distance of a torso centre from the robot's base, m (inf if not known)."""
+    distance = float(np.linalg.norm(centre))
+    return distance if math.isfinite(distance) else math.inf

@@ -48,6 +48,26 @@ class FusionConfig:
         unseen (they may be hidden next to it, e.g. behind the operator): the robot stays
         stopped by their growing uncertainty until a sensor sees them again, m (1.5: the
         iiwa's 0.82 m reach plus an arm's length).
+    max_people
+        At most this many people are tracked (6: a Kinect v2 tracks six bodies, and no
+        cell's table seats more). A body that would be one more is tracked only if it is
+        nearer the robot's base than someone tracked, who is dropped for it (the
+        controller acts on the nearest); otherwise it is dropped and counted
+        (``too_many_people``). A flood of forged bodies cannot grow the fusion's work.
+    max_new_people_per_s, new_people_burst
+        New people far from the robot (beyond ``forget_beyond_m``) may appear at this
+        mean rate, 1/s, in bursts of at most ``new_people_burst`` (a token bucket: people
+        walk in one at a time, and six cover a whole cell in view at the start); more are
+        dropped and counted (``too_many_new_people``). A body near the robot is never held
+        back by the rate, only by ``max_people``.
+    phantom_grace_s
+        Who appears within this time of the fusion's first frame is the cell's people at
+        start-up, s; after it, a person who appears within ``forget_beyond_m`` of the
+        robot's base, never seen approaching, is flagged (:attr:`FusedPerson.flag`), and
+        so is one seen by one sensor only through their first ``settle_s`` while another
+        sensor, fresh, has them in its view (``field_of_view_deg``, ``range_m`` in the
+        calibration). A flag changes nothing in what the robot does (an unexplained body
+        near it still stops it): it tells the operator why, who may clear it.
     velocity_alpha, velocity_beta
         Gains of the α-β filter on each person's fused joints (measured: docs/sensors.md).
     smooth
@@ -68,6 +88,10 @@ class FusionConfig:
     same_frame_s: float = 0.005
     person_timeout_s: float = 2.0
     forget_beyond_m: float = 1.5
+    max_people: int = 6
+    max_new_people_per_s: float = 2.0
+    new_people_burst: int = 6
+    phantom_grace_s: float = 1.0
     velocity_alpha: float = 0.3
     velocity_beta: float = 0.05
     smooth: bool = True

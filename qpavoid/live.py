@@ -23,6 +23,7 @@ import multiprocessing
 import os
 import signal
 import socket
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -225,6 +226,16 @@ class LiveSource:
     clock
         Wall clock (s) that datagram time stamps share; the run clock is its time since
         the first :meth:`frame_at`.
+    clear
+        An event another thread (the live view's server) sets to ask that the people
+        flagged as suspect be cleared (:meth:`~qpavoid.fusion.Fuser.clear_flagged`); done
+        at the next :meth:`frame_at`, in the control loop's thread.
+
+    Attributes
+    ----------
+    alert
+        Why someone in view is suspect, after the last :meth:`frame_at` ("" if nobody
+        is): logged every tick (``input_alert``) and shown by the live view.
     """
 
     def __init__(
@@ -232,12 +243,15 @@ class LiveSource:
         listener: Listener,
         fusion: FusionConfig | None = None,
         clock: Callable[[], float] = time.time,
+        clear: threading.Event | None = None,
     ):
         self.listener = listener
         self.fuser = Fuser(listener.calibration, fusion)
         self.clock = clock
+        self.clear = clear
         self.start_s: float | None = None  # the wall time of run time 0, set on first use
         self.counters = self.fuser.counters  # out of order, duplicates, outliers, late
+        self.alert = ""
         self._captured = float("-inf")
 
     def report(self) -> dict[str, int]:
@@ -261,7 +275,11 @@ class LiveSource:
                 self.counters["from_the_future"] += 1
             else:
                 self.fuser.add(frame)
+        if self.clear is not None and self.clear.is_set():
+            self.clear.clear()
+            self.fuser.clear_flagged()
         fused = self.fuser.fuse(t)
+        self.alert = "; ".join(f"person {p.id}: {p.flag}" for p in fused.people if p.flag)
         if fused.captured_s > self._captured:
             self._captured = fused.captured_s
         people = People(tuple(p.id for p in fused.people), tuple(p.frame for p in fused.people))

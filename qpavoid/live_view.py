@@ -84,6 +84,10 @@ class LiveView:
     url
         ``http://HOST:PORT/TOKEN/``, ending in ``/`` (``url + "state"``: the newest tick);
         printed for the user, never in a page.
+    clear_requested
+        Set when the operator asks, from the page (``POST url + "clear"``), to clear the
+        people flagged as suspect (:meth:`qpavoid.fusion.Fuser.clear_flagged`); the live
+        source acts on it at its next frame and clears it.
 
     Raises
     ------
@@ -110,6 +114,7 @@ class LiveView:
         self._lock = threading.Lock()  # _latest and _handed: the control loop and the server
         self._state: tuple[int, bytes] = (0, b"null")  # (ticks handed so far, its JSON)
         self._robot_lock = threading.Lock()  # self.robot (its data) and _state: one thread
+        self.clear_requested = threading.Event()
         first = replay_data(_one_tick(self.robot), self.metrics, self.robot)
         self.page = replay_html(first, title, live=True).encode("utf-8")
         self.token = secrets.token_urlsafe(TOKEN_BYTES)
@@ -323,8 +328,9 @@ class _DeadlineReader(io.RawIOBase):
 
 
 class _Handler(BaseHTTPRequestHandler):
-    """``/TOKEN/``: the page; ``/TOKEN/state``: the newest tick; ``/TOKEN``: to the page; a
-    foreign ``Host``: 403; anything else: 404 (each with a one-line reason only)."""
+    """``/TOKEN/``: the page; ``/TOKEN/state``: the newest tick; ``/TOKEN``: to the page;
+    ``POST /TOKEN/clear``: clear the flagged people; a foreign ``Host``: 403; anything else:
+    404 (each with a one-line reason only)."""
 
     protocol_version = "HTTP/1.0"  # one request per connection: each has its own deadline
 
@@ -339,15 +345,32 @@ class _Handler(BaseHTTPRequestHandler):
         deadline = self.server.deadline(self.request)  # type: ignore[attr-defined]
         self.rfile = io.BufferedReader(_DeadlineReader(self.connection, deadline))
 
-    def do_GET(self) -> None:
+    def do_POST(self) -> None:
+        rest = self._checked_path()
+        if rest == "clear":  # no body is read: the request line says it all
+            self.view.clear_requested.set()
+            self._send(b"clearing the flagged people\n", "text/plain; charset=utf-8")
+        elif rest is not None:
+            self.send_error(404)
+
+    def _checked_path(self) -> str | None:
+        """The path after ``/TOKEN/`` (None, answered already, for a foreign Host or a
+        wrong token)."""
         if not self._host_allowed():
             self.send_error(403, explain="the Host header does not name this live view")
-            return
+            return None
         path = self.path.partition("?")[0]  # a path only (not urlsplit: "//x" is no host)
         token, slash, rest = path.removeprefix("/").partition("/")
         if not hmac.compare_digest(token.encode("utf-8"), self.view.token.encode("ascii")):
             self.send_error(404)
-        elif not slash:  # the token without its "/": the page's relative "state" needs it
+            return None
+        return rest if slash else "\0"
+
+    def do_GET(self) -> None:
+        rest = self._checked_path()
+        if rest is None:
+            return
+        if rest == "\0":  # the token without its "/": the page's relative "state" needs it
             self._send(b"", "text/plain", 301, location=f"/{self.view.token}/")
         elif rest in ("", "index.html"):
             self._send(self.view.page, "text/html; charset=utf-8")

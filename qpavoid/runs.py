@@ -11,6 +11,7 @@ The names a run can take live in :mod:`qpavoid.run_spec`, with :class:`RunSpec`.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -89,8 +90,9 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
 
 
 @contextmanager
-def live_source(spec: RunSpec) -> Iterator[LiveSource | None]:
-    """The live source of a ``--listen`` run (listening while the run lasts), else None."""
+def live_source(spec: RunSpec, clear: threading.Event | None = None) -> Iterator[LiveSource | None]:
+    """The live source of a ``--listen`` run (listening while the run lasts), else None;
+    ``clear``: the live view's request to clear flagged people (:class:`LiveSource`)."""
     if spec.listen is None:
         yield None
         return
@@ -99,7 +101,7 @@ def live_source(spec: RunSpec) -> Iterator[LiveSource | None]:
     with Listener(
         address, calibration, accept_unauthenticated=spec.allow_unauthenticated
     ) as listener:
-        yield LiveSource(listener)
+        yield LiveSource(listener, clear=clear)
 
 
 def spec_robot(spec: RunSpec) -> Robot:
@@ -127,6 +129,7 @@ def simulate_one(
     motion: HumanMotion | None = None,
     progress: Callable[[float], None] | None = None,
     watch: Callable[[dict[str, Any]], None] | None = None,
+    clear: threading.Event | None = None,
 ) -> RunResult:
     """Build the robot, controller and motion of ``spec`` and simulate them.
 
@@ -141,13 +144,16 @@ def simulate_one(
     watch
         Called with ticks as they are logged (:func:`~qpavoid.simulation.simulate`), e.g.
         :meth:`LiveView.update <qpavoid.live_view.LiveView.update>`.
+    clear
+        A live run's request to clear the people flagged as suspect
+        (:attr:`LiveView.clear_requested <qpavoid.live_view.LiveView.clear_requested>`).
     """
     robot = spec_robot(spec)
     controller = build_controller(spec, robot)
     live = spec.listen is not None
     if motion is None and not live:
         motion = load_motion(spec, robot)
-    with live_source(spec) as source:
+    with live_source(spec, clear) as source:
         sim = simulate(
             controller,
             motion,
@@ -233,7 +239,9 @@ def run_one(
     progress: Callable[[float], None] | None = None,
     view: bool = True,
     watch: Callable[[dict[str, Any]], None] | None = None,
+    clear: threading.Event | None = None,
 ) -> dict:
-    """Simulate ``spec`` and write its files into ``out``; return its metrics (``watch``:
-    :func:`simulate_one`)."""
-    return write_outputs(simulate_one(spec, progress=progress, watch=watch), out, plots, view)
+    """Simulate ``spec`` and write its files into ``out``; return its metrics (``watch``,
+    ``clear``: :func:`simulate_one`)."""
+    run = simulate_one(spec, progress=progress, watch=watch, clear=clear)
+    return write_outputs(run, out, plots, view)

@@ -36,6 +36,10 @@ from .sensor_recording import BodyFrame, SensorRecording
 
 __all__ = ["TwoSensorConfig", "TwoSensorData", "look_at", "two_sensor_data"]
 
+#: A Kinect v2's depth camera: 70.6 × 60 degrees, 0.5 to 4.5 m (Microsoft's specification);
+#: written into the simulated sensors' calibration so that the fusion knows where each looks.
+KINECT_V2_FIELD_OF_VIEW_DEG = (70.6, 60.0)
+KINECT_V2_RANGE_M = (0.5, 4.5)
 #: The mean norm of a 3D isotropic Gaussian of unit σ per axis: √(8/π).
 _MEAN_NORM = float(np.sqrt(8.0 / np.pi))
 
@@ -132,7 +136,11 @@ def two_sensor_data(
         where = chest + cfg.distance_m * Rotation.from_euler("z", az, degrees=True).apply(facing)
         where[2] = cfg.height_m
         sensors[name] = SensorCalibration(
-            name, look_at(where, chest), time_offset_s=cfg.clock_offset_s * k
+            name,
+            look_at(where, chest),
+            time_offset_s=cfg.clock_offset_s * k,
+            field_of_view_deg=KINECT_V2_FIELD_OF_VIEW_DEG,
+            range_m=KINECT_V2_RANGE_M,
         )
     # each simulated sensor signs its datagrams with a key of its own (docs/security.md)
     keys = {name: SensorKeys.generate(name) for name in sensors}

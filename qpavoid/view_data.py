@@ -78,7 +78,10 @@ _OPTIONAL: dict[str, tuple[int | None, ...]] = {
     "human_point": (3, 3),
     "frame_age_s": (),
     "true_distance": (3,),
+    "input_alert": (),
 }
+#: The arrays of text (one string a tick).
+_TEXT = ("stop_reason", "input_alert")
 
 
 def checked_log(log: dict[str, np.ndarray], robot: Robot) -> dict[str, np.ndarray]:
@@ -108,7 +111,7 @@ def checked_log(log: dict[str, np.ndarray], robot: Robot) -> dict[str, np.ndarra
         value = np.asarray(log[name])
         if name == "q":
             row = (robot.nq,)
-        text = name == "stop_reason"
+        text = name in _TEXT
         if value.shape != (len(t), *row) or (value.dtype.kind == "U") != text:
             shape = (len(t), *row)
             raise refuse(name, f"must be {'text' if text else 'numbers'} of shape {shape}")
@@ -181,6 +184,9 @@ def replay_data(
     reason_text = log.get("stop_reason", np.full(n, "(reason not logged)"))
     reasons = sorted({str(r) for r in reason_text[stopped]})
     code = {r: i for i, r in enumerate(reasons)}
+    alert_text = np.asarray(log.get("input_alert", np.full(n, "")), dtype=str)
+    alerts = sorted({str(a) for a in alert_text if a})
+    alert_code = {a: i for i, a in enumerate(alerts)}
     true = np.asarray(log.get("true_distance", np.full((n, 3), np.nan)), dtype=float)
     f32 = np.float32
     if "robot_point" in log and "human_point" in log:  # older logs have no closest pairs
@@ -212,6 +218,8 @@ def replay_data(
             [code[str(r)] if s else -1 for r, s in zip(reason_text, stopped, strict=True)],
             dtype=np.int32,
         ),
+        "alerts": alerts,
+        "alert": np.array([alert_code.get(str(a), -1) for a in alert_text], dtype=np.int32),
         "frame_age": np.asarray(log.get("frame_age_s", np.zeros(n)), dtype=f32),
         "true_distance": true.astype(f32),
         "path": np.asarray(log["ee_ref"], dtype=f32)[:: max(1, stride // 2)],

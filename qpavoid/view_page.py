@@ -4,10 +4,13 @@ fills in the viewer bundle, the scene commands and the run's arrays).
 The script keeps one tick index. The slider (``#time``, seconds) and play/pause
 (``#play``, at ``#speed`` times real time) move it; each move shows that tick's numbers
 (``#t``, ``#f``, ``#d0``-``#d2`` and ``#s0``-``#s2`` per robot set, ``#reason``,
-``#safety``) and places every object from the scene frame at or before it. Shapes are
+``#alert``: a suspect input, ``#safety``) and places every object from the scene frame
+at or before it. Shapes are
 unit cylinders (axis y) and spheres, scaled and placed by one matrix each; a shape that
 is not seen is scaled to nothing. In live mode (``LIVE``) the controls are hidden and the
-script shows the newest tick its server gives (``state``) ten times a second.
+script shows the newest tick its server gives (``state``) ten times a second, and, while
+the input is suspect, a button (``#clear``) that asks the server to clear the flagged
+people (``POST clear``).
 ``window.qpavoidReplay`` exposes ``seek(t)``,
 ``tick()``, ``visible(name, on)`` and ``objects()`` for tests.
 """
@@ -31,6 +34,7 @@ PAGE = r"""<!DOCTYPE html>
   #time { flex: 1; }
   .swatch { display: inline-block; width: 10px; height: 10px; border-radius: 2px; }
   #reason { color: #b00; min-height: 1.3em; }
+  #alert { color: #a50; }
   #safety { color: #444; }
 </style>
 </head>
@@ -58,6 +62,8 @@ PAGE = r"""<!DOCTYPE html>
         <td><span class="swatch" id="c2"></span> <span id="s2"></span></td></tr>
   </table>
   <div id="reason"></div>
+  <div id="alert"></div>
+  <button id="clear" type="button" hidden>clear the flagged people</button>
   <div id="safety"></div>
 </div>
 <script>{{VIEWER}}</script>
@@ -179,6 +185,9 @@ function showNumbers(k) {
   }
   document.getElementById("reason").textContent =
     D.stopped[k] ? "stopped: " + (D.reasons[D.reason[k]] || "") : "";
+  const alert = D.alert && D.alert[k] >= 0 ? D.alerts[D.alert[k]] : "";
+  document.getElementById("alert").textContent = alert ? "suspect input: " + alert : "";
+  document.getElementById("clear").hidden = !(LIVE && alert);
   const truth = [0, 1, 2].map((s) => D.true_distance[k * 3 + s]);
   const clearance = truth.map((v) => fmt(v, 3)).join(" / ");
   document.getElementById("safety").textContent =
@@ -247,6 +256,9 @@ show(0);
 requestAnimationFrame(frame);
 if (LIVE) {  // a run as it happens: the newest tick from the server, ten times a second
   document.getElementById("controls").style.display = "none";
+  document.getElementById("clear").addEventListener("click", () => {
+    fetch("clear", { method: "POST", cache: "no-store" });
+  });
   const poll = () => fetch("state", { cache: "no-store" })
     .then((r) => r.json())
     .then((raw) => {

@@ -1,0 +1,329 @@
+"""Only the cell's own sensors are believed (issue 24): keys, signed datagrams, the replay
+window, the receiver's order of checks, the caps on people and the flags on phantoms."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import write_calibration
+
+from qpavoid.association import torso_centre
+from qpavoid.calibration import Calibration, SensorCalibration, load_calibration
+from qpavoid.errors import CalibrationError, InputError
+from qpavoid.fusion import Fuser, FusionConfig
+from qpavoid.keys import MAX_KEY_FILE_BYTES, SensorKeys, load_key_file, new_key_file
+from qpavoid.live import Listener, is_loopback
+from qpavoid.posture import Operator
+from qpavoid.sensor_recording import BodyFrame
+from qpavoid.two_sensors import KINECT_V2_FIELD_OF_VIEW_DEG, KINECT_V2_RANGE_M, look_at
+from qpavoid.wire import REPLAY_WINDOW, ReplayWindow, Signer, Verifier, WireError, encode, fields
+
+POSES = {
+    "a": look_at(np.array([1.0, 2.5, 1.3]), np.zeros(3)),
+    "b": look_at(np.array([-1.0, 2.5, 1.3]), np.zeros(3)),
+}
+
+
+def cell(name: str = "cell-1", view: bool = False) -> Calibration:
+    extra = {"field_of_view_deg": KINECT_V2_FIELD_OF_VIEW_DEG, "range_m": KINECT_V2_RANGE_M}
+    sensors = {n: SensorCalibration(n, T, **(extra if view else {})) for n, T in POSES.items()}
+    return Calibration(sensors, cell=name, keys={n: SensorKeys.generate(n) for n in POSES})
+
+
+def body(sensor: str = "a", t: float = 10.0, body_id: int = 0, shift=(0.0, 0.0, 0.0)):
+    """The seated operator at rest (moved by ``shift``, base frame, m) as ``sensor`` sees it."""
+    T = np.linalg.inv(POSES[sensor])
+    joints = (Operator().rest() + shift) @ T[:3, :3].T + T[:3, 3]
+    return BodyFrame(sensor, body_id, t, joints, np.full(25, 2, dtype=np.int8))
+
+
+# --- keys and key files ------------------------------------------------------------------
+
+
+def test_a_key_file_round_trips_rotates_and_never_shows_its_secret(tmp_path):
+    path = tmp_path / "a.key"
+    first = new_key_file(path, "a")
+    assert oct(path.stat().st_mode & 0o777) == "0o600"
+    assert load_key_file(path, "a") == first and first.ids == (1,)
+    with pytest.raises(CalibrationError, match="exists"):
+        new_key_file(path, "a")
+    second = new_key_file(path, "a", rotate=True)
+    assert second.ids == (2, 1) and second.keys[1] == first.keys[0]  # the old one kept
+    third = new_key_file(path, "a", rotate=True)
+    assert third.ids == (3, 2)  # the oldest dropped
+    for text in (repr(third), str(third)):
+        assert all(secret.hex() not in text for _, secret in third.keys)
+    assert not list(tmp_path.glob(".*"))  # no temporary file left
+
+
+@pytest.mark.parametrize(
+    ("content", "mode", "words"),
+    [
+        ("ok", 0o640, "lets its group or others"),
+        ("ok", 0o604, "lets its group or others"),
+        ('sensor = "b"\n', 0o600, "the key of sensor 'b'"),
+        ('sensor = "a"\n[[key]]\nid = 1\nsecret = "00"\n', 0o600, "not 64 hex digits"),
+        ('sensor = "a"\n', 0o600, "1 or 2"),
+        ("x" * (MAX_KEY_FILE_BYTES + 1), 0o600, "more than the 4096"),
+        ("ok3", 0o600, "1 or 2"),
+        ("dup", 0o600, "same id"),
+        ("{", 0o600, "key file"),
+    ],
+)
+def test_a_bad_key_file_is_refused_naming_why(tmp_path, content, mode, words):
+    keys = SensorKeys.generate("a")
+    text = {
+        "ok": keys.to_toml(),
+        "ok3": keys.to_toml() + "\n[[key]]\nid = 7\nsecret = '" + "ab" * 32 + "'\n" * 2,
+        "dup": keys.to_toml() + f"\n[[key]]\nid = 1\nsecret = '{'ab' * 32}'\n",
+    }.get(content, content)
+    if content == "ok3":
+        text = keys.to_toml() + "".join(
+            f"\n[[key]]\nid = {i}\nsecret = '{'ab' * 32}'\n" for i in (7, 8)
+        )
+    path = tmp_path / "a.key"
+    path.write_text(text)
+    path.chmod(mode)
+    with pytest.raises(CalibrationError, match=words):
+        load_key_file(path, "a")
+
+
+def test_a_device_or_a_huge_calibration_is_refused_before_it_is_read(tmp_path):
+    with pytest.raises(CalibrationError, match="not a regular file"):
+        load_calibration("/dev/zero")
+    big = tmp_path / "big.toml"
+    with big.open("wb") as f:
+        f.truncate((1 << 20) + 1)  # sparse: no time to write it
+    with pytest.raises(CalibrationError, match="more than"):
+        load_calibration(big)
+
+
+def test_a_calibration_gives_keys_to_every_sensor_or_none(tmp_path):
+    path = Path(write_calibration(tmp_path, cell()))
+    loaded = load_calibration(path)
+    assert loaded.cell == "cell-1" and set(loaded.keys) == {"a", "b"}
+    text = path.read_text()
+    one = text.replace('key_file = "b.key"\n', "")
+    path.write_text(one)
+    with pytest.raises(CalibrationError, match="names a key for a only"):
+        load_calibration(path)
+    path.write_text(text.replace('key_file = "b.key"', 'key_file = "b.key"\nkey_ids = [1, 4]'))
+    with pytest.raises(CalibrationError, match="unknown key id 4"):
+        load_calibration(path)
+    path.write_text(text.replace('key_file = "b.key"', 'key_file = "nosuch.key"'))
+    with pytest.raises(CalibrationError, match="missing"):
+        load_calibration(path)
+    path.write_text(text.replace('cell = "cell-1"', 'cell = ""'))
+    with pytest.raises(CalibrationError, match="cell must be"):
+        load_calibration(path)
+
+
+def test_key_errors_on_the_command_line_are_one_line_with_status_2_and_write_nothing(tmp_path):
+    calib = Path(write_calibration(tmp_path, cell()))
+    text = calib.read_text()
+    cases = {
+        "loose": lambda: (tmp_path / "a.key").chmod(0o644),
+        "missing": lambda: calib.write_text(text.replace('"a.key"', '"gone.key"')),
+        "unknown id": lambda: calib.write_text(text.replace('"a.key"', '"a.key"\nkey_ids = [9]')),
+        "one sensor": lambda: calib.write_text(text.replace('key_file = "a.key"\n', "")),
+    }
+    for name, spoil in cases.items():
+        calib.write_text(text)
+        (tmp_path / "a.key").chmod(0o600)
+        spoil()
+        out = tmp_path / f"out-{name.replace(' ', '-')}"
+        cmd = [sys.executable, "-m", "qpavoid", "run", "--listen", "127.0.0.1:9"]
+        cmd += ["--sensors", str(calib), "--out", str(out), "--max-time", "1"]
+        result = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        assert result.returncode == 2, (name, result.stderr)
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("qpavoid: error:"), (name, lines)
+        assert not out.exists(), name
+
+
+def test_keygen_writes_a_private_key_file_and_refuses_to_overwrite(tmp_path):
+    path = tmp_path / "left.key"
+    cmd = [sys.executable, "-m", "qpavoid", "keygen", "kinect_left", "--out", str(path)]
+    first = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert first.returncode == 0 and "key 1 of sensor 'kinect_left' signs" in first.stdout
+    assert path.stat().st_mode & 0o077 == 0
+    before = path.read_bytes()
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert again.returncode == 2 and "exists" in again.stderr and path.read_bytes() == before
+    rotated = subprocess.run([*cmd, "--rotate"], capture_output=True, text=True, timeout=60)
+    assert rotated.returncode == 0 and "key 1 still accepted" in rotated.stdout
+    assert load_key_file(path, "kinect_left").ids == (2, 1)
+
+
+# --- the replay window and the signed datagram ------------------------------------------
+
+
+def test_the_replay_window_accepts_each_number_once_as_a_set_would():
+    rng = random.Random(3)
+    for _ in range(50):
+        window, seen, top = ReplayWindow(), set(), -1
+        for _ in range(300):
+            n = max(0, top + rng.randint(-2 * REPLAY_WINDOW, 8))
+            expected = n not in seen and n > top - REPLAY_WINDOW
+            assert window.accept(n) == expected, n
+            if expected:
+                seen.add(n)
+                top = max(top, n)
+
+
+def test_a_signed_datagram_round_trips_and_each_forgery_is_refused_by_its_reason():
+    cal = cell()
+    verifier = Verifier(cal)
+    sign_a = Signer(cal.cell, cal.keys["a"], first_sequence=100)
+    good = sign_a.encode(body("a", t=5.0, body_id=2))
+    frame = verifier.decode(good)
+    assert (frame.sensor, frame.body, frame.t) == ("a", 2, 5.0)
+    sensor, key_id, sequence, payload = fields(good)
+    assert (sensor, key_id, sequence) == ("a", 1, 100)
+
+    def forged(payload_change=None, **header) -> bytes:
+        """``good`` with its payload or header changed, its tag kept (no key)."""
+        msg = json.loads(payload)
+        if payload_change:
+            payload_change(msg)
+        new = json.dumps(msg, separators=(",", ":")).encode()
+        return good[: len(good) - len(payload) - 32] + new + good[-32:]
+
+    attacker = SensorKeys("a", ((1, os.urandom(32)),))  # a key of the attacker's own
+    other_cell = Signer("cell-2", cal.keys["a"], first_sequence=200)
+    as_b_with_a_key = Signer(cal.cell, SensorKeys("b", cal.keys["a"].keys), 300)
+    cases = {
+        "replayed": good,  # taken once already
+        "bad_tag": forged(lambda m: m.__setitem__("t", m["t"] + 1.0)),  # re-stamped
+        "bad_tag ": forged(lambda m: m.__setitem__("body", 5)),  # re-slotted
+        "bad_tag  ": Signer(cal.cell, attacker, 400).encode(body("a")),  # forged
+        "bad_tag   ": as_b_with_a_key.encode(body("b")),  # impersonating b with a's key
+        "bad_tag    ": other_cell.encode(body("a")),  # another cell's datagram
+        "bad_tag     ": good[:-1] + bytes([good[-1] ^ 1]),  # a bit flipped
+        "unknown_key": Signer(cal.cell, SensorKeys("a", ((9, os.urandom(32)),)), 9).encode(
+            body("a")
+        ),
+        "unknown_sensor": Signer(cal.cell, SensorKeys("z", attacker.keys), 1).seal(b"{}"),
+        "unauthenticated": encode(body("a")),  # version 1
+        "bad_header": b"QPAV\x03" + good[5:],
+        "too_long": good + b" " * 8192,
+    }
+    for reason, data in cases.items():
+        with pytest.raises(WireError) as err:
+            verifier.decode(data)
+        assert err.value.reason == reason.strip(), reason
+    # a sensor's own broken payload is checked after its tag
+    for payload_bytes, reason in ((b"{]", "bad_json"), (b'{"body":7}', "bad_field")):
+        with pytest.raises(WireError) as err:
+            verifier.decode(sign_a.seal(payload_bytes))
+        assert err.value.reason == reason
+    # the bodies of one frame may come in any order within the window; once each
+    late_in_window = sign_a.encode(body("a", t=5.1))
+    newer = sign_a.encode(body("a", t=5.2))
+    assert verifier.decode(newer).t == 5.2 and verifier.decode(late_in_window).t == 5.1
+    assert Verifier(cal, accept_v1=True).decode(encode(body("a"))).sensor == "a"
+
+
+def test_a_forged_datagram_is_refused_before_its_json_is_read(monkeypatch):
+    cal = cell()
+    verifier = Verifier(cal)
+    good = Signer(cal.cell, cal.keys["a"]).encode(body("a"))
+    monkeypatch.setattr("qpavoid.wire._json", lambda data: pytest.fail("JSON parsed"))
+    with pytest.raises(WireError, match="tag"):
+        verifier.decode(good[:-1] + bytes([good[-1] ^ 1]))
+
+
+def test_a_listener_takes_unsigned_datagrams_only_by_opt_in_and_on_loopback():
+    plain = Calibration({"a": SensorCalibration("a", POSES["a"])})
+    with pytest.raises(InputError, match="no keys"):
+        Listener(("127.0.0.1", 0), plain)
+    with pytest.raises(InputError, match="loopback only"):
+        Listener(("0.0.0.0", 0), plain, accept_unauthenticated=True)
+    assert is_loopback("localhost") and is_loopback("::1") and not is_loopback("0.0.0.0")
+    assert not is_loopback("no.such.host.invalid")
+
+
+# --- one sender cannot hold the cell -----------------------------------------------------
+
+
+def far_body(k: int, t: float) -> BodyFrame:
+    """Body k of a scatter flood: anywhere in a 6 m square whose nearest point is 3 m
+    from the robot's base (the operator's seat moved 2.1 to 8.1 m away)."""
+    rng = np.random.default_rng(k)
+    return body("a", t, k % 6, (rng.uniform(-3.0, 3.0), rng.uniform(2.1, 8.1), 0.0))
+
+
+def test_a_scatter_flood_cannot_grow_the_people_tracked():
+    fuser = Fuser(cell())
+    cfg = fuser.cfg
+    for tick in range(300):  # 10 s at 30 Hz, six new far bodies every frame
+        t = tick / 30
+        for k in range(6):
+            fuser.add(far_body(6 * tick + k, t))
+        fused = fuser.fuse(t)
+        assert len(fused.people) <= cfg.max_people
+    # at most the burst plus the rate's share were ever made
+    assert fuser._next_id <= cfg.new_people_burst + cfg.max_new_people_per_s * 10 + 1
+    assert fuser.counters["too_many_new_people"] > 300
+
+
+def test_a_person_near_the_robot_displaces_the_farthest_when_the_cell_is_full():
+    fuser = Fuser(cell(), FusionConfig(max_people=2))
+    for k in range(2):
+        fuser.add(far_body(k, 0.0))
+    assert len(fuser.fuse(0.0).people) == 2
+    near = body("b", 0.02, 0, (0.0, 0.2, 0.0))  # the operator's seat, 0.9 m from the base
+    fuser.add(near)
+    people = fuser.fuse(0.02).people
+    assert len(people) == 2 and fuser.counters["dropped_for_a_nearer_person"] == 1
+    centres = [np.nanmean(p.frame.joints, axis=0) for p in people]
+    assert min(np.linalg.norm(c[:2]) for c in centres) < 1.2  # the near one is tracked
+
+
+def test_a_phantom_near_the_robot_is_flagged_still_stops_and_can_be_cleared():
+    fuser = Fuser(cell(view=True))
+    for k in range(60):  # the operator seen by both sensors from the start, 2 s
+        for s in "ab":
+            fuser.add(body(s, k / 30, 0))
+        assert not any(p.flag for p in fuser.fuse(k / 30).people)
+    # a body out of nowhere, 0.5 m from the base, from sensor "a" alone, for 0.1 s
+    for k in range(3):
+        t = 2.0 + k / 30
+        fuser.add(body("a", t, 3, (0.4, -0.5, 0.0)))
+        fuser.fuse(t)
+    flagged = [p for p in fuser.fuse(2.1).people if p.flag]
+    assert len(flagged) == 1 and "never seen approaching" in flagged[0].flag
+    for k in range(120):  # it is never seen again: held (near the robot), still flagged
+        t = 2.2 + k / 30
+        fuser.fuse(t)
+    assert [p.flag for p in fuser.fuse(6.2).people if p.id == flagged[0].id]
+    assert fuser.clear_flagged() == (flagged[0].id,)
+    assert all(p.id != flagged[0].id for p in fuser.fuse(6.3).people)
+
+
+def test_a_body_one_sensor_sees_where_the_other_looks_is_flagged():
+    fuser = Fuser(cell(view=True))
+    for k in range(60):
+        for s in "ab":
+            fuser.add(body(s, k / 30, 0))
+        fuser.fuse(k / 30)
+    # a second person 1.7 m away (beyond the reach: not flagged on appearing), seen by "a"
+    # only for a second while "b", fresh, has that place in its view
+    shift = (-0.6, 0.6, 0.0)
+    where = torso_centre(Operator().rest() + shift)
+    assert all(cell(view=True)[s].sees(where) for s in "ab") and np.linalg.norm(where) > 1.6
+    for k in range(30):
+        t = 2.0 + k / 30
+        fuser.add(body("a", t, 4, shift))
+        fuser.add(body("b", t, 0))
+        fuser.add(body("a", t, 0))
+        fuser.fuse(t)
+    flags = [p.flag for p in fuser.fuse(3.0).people if p.flag]
+    assert flags == ["seen by a only, in the view of b"]
