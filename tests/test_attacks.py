@@ -1,0 +1,335 @@
+"""An attacker on the cell's network, live on loopback (issue 24; slow suite).
+
+Each run: two simulated Kinects film a known motion and are replayed in real time over
+UDP to a listener (:class:`~qpavoid.live.Listener`), whose frames drive the QP controller
+(SSM on) and a simulated arm at 100 Hz; an attacker sends from another process at the
+same time. Safety is judged afterwards against the truth: the motion at each tick's
+wall time, against the arm's real geometry (:class:`~qpavoid.truth.TrueClearance`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import time
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from qpavoid.calibration import Calibration
+from qpavoid.controller import ControllerConfig
+from qpavoid.human import KinectHuman
+from qpavoid.keys import SensorKeys
+from qpavoid.live import Listener, LiveSource, replay
+from qpavoid.posture import Operator
+from qpavoid.qp import QPController
+from qpavoid.scenarios import nominal_configurations, reach_and_return
+from qpavoid.sensor_recording import BodyFrame
+from qpavoid.simulation import SimConfig, simulate
+from qpavoid.task import ArcPath
+from qpavoid.truth import TrueClearance
+from qpavoid.two_sensors import TwoSensorConfig, two_sensor_data
+from qpavoid.wire import Signer, encode, fields
+
+pytestmark = pytest.mark.slow
+
+RUN_S = 6.5  #: the run's length, s
+FILMED_S = 5.0  #: the motion filmed and replayed, s (it ends before the run does)
+START_S = 0.6  #: when the replay begins after the run is set up, s
+
+
+def hand_on_the_path(robot):
+    """The operator's right hand reaches, by 1.5 s, to where the end effector's planned
+    path will be at 4 s, and holds it there: the robot must stop before it."""
+    q = nominal_configurations(robot, ArcPath(), np.array([4.0]))[0]
+    target = robot.end_effector(q)[:3, 3]
+    return reach_and_return(Operator(), "right", target, (0.3, 1.5, 60.0, 61.0))
+
+
+def camera_frame(calibration: Calibration, sensor: str, joints: np.ndarray, t: float, body=0):
+    """A body frame of base-frame ``joints`` as ``sensor`` would see them."""
+    T = np.linalg.inv(calibration[sensor].base_from_camera)
+    state = np.full(25, 2, dtype=np.int8)
+    return BodyFrame(sensor, body, t, joints @ T[:3, :3].T + T[:3, 3], state)
+
+
+class Attacker:
+    """Datagrams an attacker sends without the sensors' keys.
+
+    Parameters
+    ----------
+    calibration
+        The cell (only the public part is used: names and poses, which an attacker may
+        learn by watching).
+    signed
+        Send signed-looking datagrams under a key of the attacker's own (the cell accepts
+        only signed ones), else unsigned version-1 datagrams.
+    """
+
+    def __init__(self, calibration: Calibration, signed: bool):
+        self.calibration, self.signed = calibration, signed
+        self.signers = {
+            name: Signer(calibration.cell, SensorKeys(name, ((1, os.urandom(32)),)))
+            for name in calibration.names
+        }
+
+    def datagram(self, sensor: str, joints: np.ndarray, t: float, body: int = 0) -> bytes:
+        """A frame of ``joints`` (base frame) captured at ``t`` on the listener's clock
+        (the sensor's own clock, which the attacker has watched, is behind or ahead)."""
+        t -= self.calibration[sensor].time_offset_s
+        frame = camera_frame(self.calibration, sensor, joints, t, body)
+        return self.signers[sensor].encode(frame) if self.signed else encode(frame)
+
+
+def far_person(shift=(0.0, 1.8, 0.0)) -> np.ndarray:
+    """The operator's body moved 1.8 m away from the table (2.6 m from the robot)."""
+    return Operator().rest() + np.asarray(shift)
+
+
+def hide(attacker: Attacker, start_s: float) -> Callable[[socket.socket, tuple], None]:
+    """From ``start_s`` after the replay's start: a frame per sensor for body 0, every
+    2 ms, stamped 4 ms ahead (within the receiver's tolerance), of a person far away."""
+
+    def attack(sock: socket.socket, address: tuple, go: float, until: float) -> None:
+        while time.time() < go + start_s:
+            time.sleep(0.005)
+        joints = far_person()
+        while time.time() < until:
+            for sensor in attacker.calibration.names:
+                sock.sendto(attacker.datagram(sensor, joints, time.time() + 0.004), address)
+            time.sleep(0.002)
+
+    return attack
+
+
+def take_over(attacker: Attacker) -> Callable:
+    """From 1 s on, the operator at rest in their seat (inside the association gate),
+    stamped 4 ms ahead: the fusion would track the forgery and miss the reaching hand."""
+
+    def attack(sock: socket.socket, address: tuple, go: float, until: float) -> None:
+        while time.time() < go + 1.0:
+            time.sleep(0.005)
+        joints = Operator().rest()
+        while time.time() < until:
+            for sensor in attacker.calibration.names:
+                sock.sendto(attacker.datagram(sensor, joints, time.time() + 0.004), address)
+            time.sleep(0.002)
+
+    return attack
+
+
+def phantom_burst(attacker: Attacker) -> Callable:
+    """At 1 s: a phantom 0.9 m from the base, three frames a sensor over 0.1 s."""
+
+    def attack(sock: socket.socket, address: tuple, go: float, until: float) -> None:
+        while time.time() < go + 1.0:
+            time.sleep(0.005)
+        joints = Operator().rest() + np.array([0.0, -0.1, 0.3])
+        for _ in range(3):
+            for sensor in attacker.calibration.names:
+                sock.sendto(attacker.datagram(sensor, joints, time.time(), body=4), address)
+            time.sleep(0.033)
+
+    return attack
+
+
+def blind(attacker: Attacker) -> Callable:
+    """144 datagrams a second (every body of both sensors at 12 Hz) of empty frames
+    stamped 95 ms ahead."""
+
+    def attack(sock: socket.socket, address: tuple, go: float, until: float) -> None:
+        nobody = np.full((25, 3), np.nan)
+        while time.time() < until:
+            for sensor in attacker.calibration.names:
+                for body in range(6):
+                    frame = camera_frame(attacker.calibration, sensor, nobody, 0.0, body)
+                    t = time.time() + 0.095 - attacker.calibration[sensor].time_offset_s
+                    frame = frame._replace(t=t, state=np.zeros(25, np.int8))
+                    signer = attacker.signers[sensor]
+                    data = signer.encode(frame) if attacker.signed else encode(frame)
+                    sock.sendto(data, address)
+            time.sleep(1 / 12)
+
+    return attack
+
+
+def scatter(attacker: Attacker) -> Callable:
+    """1200 datagrams a second of whole people at random places 2-5 m from the robot."""
+
+    def attack(sock: socket.socket, address: tuple, go: float, until: float) -> None:
+        rng = np.random.default_rng(0)
+        while time.time() < until:
+            for _ in range(12):
+                shift = (rng.uniform(-2, 2), rng.uniform(1.5, 4), 0.0)
+                sensor = attacker.calibration.names[int(rng.integers(2))]
+                body = int(rng.integers(6))
+                data = attacker.datagram(sensor, far_person(shift), time.time(), body)
+                sock.sendto(data, address)
+            time.sleep(0.01)
+
+    return attack
+
+
+def tamper(calibration: Calibration) -> Callable[[int, bytes], list[bytes]]:
+    """What a man on the path does with the real datagrams he sees, besides letting them
+    through: sends each again later (replayed), re-stamped 4 ms ahead, re-slotted as
+    another body, and as the other sensor (impersonating), all with the tag unchanged."""
+    held: list[bytes] = []
+    names = calibration.names
+
+    def changed(datagram: bytes, change) -> bytes:
+        payload = fields(datagram)[3]
+        msg = json.loads(payload)
+        change(msg)
+        new = json.dumps(msg, separators=(",", ":")).encode()
+        return datagram[: len(datagram) - len(payload) - 32] + new + datagram[-32:]
+
+    def impersonate(datagram: bytes) -> bytes:
+        sensor = fields(datagram)[0]
+        other = names[1 - names.index(sensor)].encode()
+        return datagram[:5] + bytes([len(other)]) + other + datagram[6 + datagram[5] :]
+
+    def mangle(i: int, datagram: bytes) -> list[bytes]:
+        out = [datagram]
+        if i % 3 == 0:
+            out.append(changed(datagram, lambda m: m.__setitem__("t", m["t"] + 0.004)))
+            out.append(changed(datagram, lambda m: m.__setitem__("body", (m["body"] + 1) % 6)))
+            out.append(impersonate(datagram))
+        held.append(datagram)
+        if len(held) > 6:
+            out.append(held.pop(0))  # seen six datagrams ago: a replay
+        return out
+
+    return mangle
+
+
+def live_run(robot, motion, attack=None, signed=True, mangle_real=None):
+    """Replay ``motion`` filmed by two simulated Kinects to a live listener while
+    ``attack(sock, address, go, until)`` runs in another process; the run's log, the
+    listener's report, the number of real datagrams sent, and each tick's true distance
+    per robot set (m, against the motion at the tick's wall time)."""
+    data = two_sensor_data([motion], FILMED_S, TwoSensorConfig(seed=7))
+    calibration = data.calibration
+    recordings = list(data.recordings.values())
+    controller = QPController(
+        robot, config=ControllerConfig(control_period_s=0.01, safety="ssm", max_frame_age_s=0.1)
+    )
+    with Listener(("127.0.0.1", 0), calibration, accept_unauthenticated=not signed) as listener:
+        source = LiveSource(listener)
+        go = time.time() + START_S
+        until = go + RUN_S
+        children = []
+        reader, writer = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the sensors
+            os.close(reader)
+            while time.time() < go:
+                time.sleep(0.001)
+            sent = [0]
+
+            def count(i: int, datagram: bytes) -> list[bytes]:
+                sent[0] += 1
+                return mangle_real(i, datagram) if mangle_real else [datagram]
+
+            replay(
+                recordings, listener.address, 30.0, calibration, mangle=count, unsigned=not signed
+            )
+            os.write(writer, str(sent[0]).encode())
+            os._exit(0)
+        children.append(pid)
+        os.close(writer)
+        if attack is not None:
+            pid = os.fork()
+            if pid == 0:  # the attacker
+                try:
+                    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+                        attack(sock, listener.address, go, until - 0.5)
+                finally:
+                    os._exit(0)
+            children.append(pid)
+        sim = simulate(
+            controller,
+            None,
+            SimConfig(control_rate_hz=100.0, max_time_s=RUN_S, measure_truth=False),
+            source=source,
+            realtime=True,
+        )
+        for pid in children:
+            os.waitpid(pid, 0)
+        real_sent = int(os.read(reader, 64) or b"0")
+        os.close(reader)
+        time.sleep(0.2)  # the receiver's last counts
+        report = source.report()
+    truth = TrueClearance(robot, KinectHuman(), motion)
+    true = np.array(
+        [
+            truth(robot.kinematics(q, jacobians=False), source.start_s + t - go)
+            for q, t in zip(sim.log["q"], sim.log["t"])
+        ]
+    )
+    return sim, report, real_sent, true
+
+
+def moving_in_contact(sim, true) -> int:
+    moving = np.any(sim.log["dq"] != 0.0, axis=1)
+    return int((moving & (true.min(axis=1) <= 0.0)).sum())
+
+
+@pytest.fixture(scope="module")
+def honest(robot):
+    """The hand on the path, nobody attacking: the run every attack is compared with."""
+    return live_run(robot, hand_on_the_path(robot))
+
+
+def test_without_an_attacker_the_robot_works_and_stops_for_the_hand(honest):
+    sim, report, real_sent, true = honest
+    moving = np.any(sim.log["dq"] != 0.0, axis=1)
+    assert moving.sum() > 50  # it works ...
+    assert moving_in_contact(sim, true) == 0  # ... and never touches the hand
+    assert true.min() < 0.1  # the hand really is on its path: it had to stop
+    assert report["accepted"] == real_sent, report
+
+
+@pytest.mark.parametrize("attack", ["hide", "take over"])
+def test_a_forger_without_a_key_cannot_hide_the_hand(robot, attack):
+    motion = hand_on_the_path(robot)
+    data = two_sensor_data([motion], 0.1, TwoSensorConfig(seed=7))
+    attacker = Attacker(data.calibration, signed=True)
+    forge = hide(attacker, 0.0) if attack == "hide" else take_over(attacker)
+    sim, report, real_sent, true = live_run(
+        robot, motion, forge, mangle_real=tamper(data.calibration)
+    )
+    assert moving_in_contact(sim, true) == 0
+    assert report["accepted"] == real_sent, report  # every real frame, none of the others
+    assert report["dropped_bad_tag"] > 1000 and report["dropped_replayed"] > 50, report
+    assert not sim.log.get("input_alert", np.array([""])).any()  # no forged person ever reached the fusion
+
+
+def test_without_authentication_the_same_forger_hides_the_hand(robot):
+    """Why the keys: the opt-in unsigned path, attacked the same way, moves the robot
+    into the hand (the attack the issue measured: 535 ticks in contact)."""
+    motion = hand_on_the_path(robot)
+    data = two_sensor_data([motion], 0.1, TwoSensorConfig(seed=7))
+    attacker = Attacker(data.calibration, signed=False)
+    sim, report, real_sent, true = live_run(robot, motion, hide(attacker, 0.0), signed=False)
+    assert report["out_of_order_or_duplicate"] > real_sent / 2, report  # the real ones
+    assert moving_in_contact(sim, true) > 0
+
+
+@pytest.mark.parametrize("flood", ["phantom burst", "blinding", "scatter"])
+def test_a_flood_without_a_key_leaves_every_real_frame_accepted(robot, honest, flood):
+    motion = hand_on_the_path(robot)
+    data = two_sensor_data([motion], 0.1, TwoSensorConfig(seed=7))
+    attacker = Attacker(data.calibration, signed=True)
+    attack = {"phantom burst": phantom_burst, "blinding": blind, "scatter": scatter}[flood]
+    sim, report, real_sent, true = live_run(robot, motion, attack(attacker))
+    assert report["accepted"] == real_sent, report
+    assert report["dropped_bad_tag"] >= 6, report
+    assert moving_in_contact(sim, true) == 0
+    # the attacker's own process shares the machine's two cores with the run: 2 % of the
+    # ticks are left to it (before, a flood overran 434 of 1000)
+    baseline = honest[0].metrics["realtime_overruns"]
+    assert sim.metrics["realtime_overruns"] <= baseline + len(sim.log["t"]) // 50, flood
+    assert not sim.log.get("input_alert", np.array([""])).any()
