@@ -1,0 +1,104 @@
+"""What a datagram costs the receiver: verified or dropped (docs/performance.md, §4).
+
+    python benchmarks/wire.py [--n 20000] [--json FILE]
+
+The receiver's own per-datagram call (:meth:`qpavoid.wire.Verifier.decode`) on one body of
+the seated operator (about 1 kB), median and p99 over ``--n`` calls each, after warm-up:
+
+* ``v1 decode``: an unsigned datagram parsed and checked (:func:`qpavoid.wire.decode`:
+  what every datagram cost before issue 24, forged or not);
+* ``v2 valid``: a signed one verified, then parsed and checked;
+* ``v2 forged``: a signed-looking one whose tag does not verify (a forger without the
+  key): dropped before any JSON is read;
+* ``v2 unknown key``, ``v2 replayed``, ``unsigned refused``, ``junk``: the other drops, in
+  the order they are checked.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import platform
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from qpavoid.calibration import Calibration, SensorCalibration
+from qpavoid.keys import SensorKeys
+from qpavoid.posture import Operator
+from qpavoid.sensor_recording import BodyFrame
+from qpavoid.two_sensors import look_at
+from qpavoid.wire import Signer, Verifier, WireError, Workspace, decode, encode
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--n", type=int, default=20000, help="calls per case")
+    parser.add_argument("--json", help="write the results here")
+    args = parser.parse_args()
+
+    pose = look_at(np.array([1.0, 2.5, 1.3]), np.zeros(3))
+    cal = Calibration(
+        {"kinect_left": SensorCalibration("kinect_left", pose)},
+        cell="bench",
+        keys={"kinect_left": SensorKeys.generate("kinect_left")},
+    )
+    T = np.linalg.inv(pose)
+    joints = Operator().rest() @ T[:3, :3].T + T[:3, 3]
+    frame = BodyFrame("kinect_left", 0, 1.0, joints, np.full(25, 2, dtype=np.int8))
+    signer = Signer(cal.cell, cal.keys["kinect_left"], first_sequence=0)
+    valid = [signer.encode(frame) for _ in range(args.n)]
+    forged = [d[:-1] + bytes([d[-1] ^ 1]) for d in valid]
+    stranger = Signer(cal.cell, SensorKeys("kinect_left", ((9, os.urandom(32)),)), 0)
+    unknown = stranger.encode(frame)
+    v1 = encode(frame)
+    workspace = Workspace()
+
+    def fresh() -> Callable[[bytes], object]:
+        """A new receiver's check (its replay windows empty)."""
+        return Verifier(cal, workspace).decode
+
+    def having_seen_one() -> Callable[[bytes], object]:
+        """A receiver that has taken ``valid[0]`` already."""
+        call = fresh()
+        call(valid[0])
+        return call
+
+    def timed(call, inputs) -> list[float]:
+        times = []
+        for data in inputs:
+            t0 = time.perf_counter_ns()
+            with contextlib.suppress(WireError):
+                call(data)
+            times.append((time.perf_counter_ns() - t0) / 1e3)
+        return times
+
+    cases = {  # (a new receiver's check, its inputs)
+        "v1 decode": (lambda: lambda d: decode(d, cal, workspace), [v1] * args.n),
+        "v2 valid": (fresh, valid),
+        "v2 forged": (fresh, forged),
+        "v2 unknown key": (fresh, [unknown] * args.n),
+        "v2 replayed": (having_seen_one, [valid[0]] * args.n),
+        "unsigned refused": (fresh, [v1] * args.n),
+        "junk": (fresh, [b"\x00garbage"] * args.n),
+    }
+    results = {"bytes": len(valid[0]), "n": args.n, "machine": platform.processor() or ""}
+    print(f"one body: {len(valid[0])} bytes signed, {len(v1)} unsigned; {args.n} calls each")
+    print(f"{'case':<18} {'median us':>10} {'p99 us':>8}")
+    for name, (receiver, inputs) in cases.items():
+        timed(receiver(), inputs[:500])  # warm-up, on a receiver of its own
+        times = np.array(timed(receiver(), inputs))
+        median, p99 = float(np.median(times)), float(np.percentile(times, 99))
+        results[name] = {"median_us": round(median, 2), "p99_us": round(p99, 2)}
+        print(f"{name:<18} {median:10.2f} {p99:8.2f}")
+    if args.json:
+        with open(args.json, "w") as handle:
+            json.dump(results, handle, indent=2)
+        print(f"wrote {args.json}")
+
+
+if __name__ == "__main__":
+    main()
