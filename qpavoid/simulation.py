@@ -13,6 +13,8 @@ commanded joint velocities after a reaction time and with bounded acceleration
 (``SimConfig.braking``, :class:`~qpavoid.braking.ArmResponse`: a stop is a ramp, not a
 jump); the joint angles integrate the arm's velocity (explicit Euler:
 ``q[k+1] = q[k] + dq[k] · dt``). ``braking=None`` makes the arm follow its command exactly.
+In real time a late tick does not stop the arm: it and the path clock τ advance by the real
+time between ticks, the last command held (:class:`~qpavoid.braking.WallClockArm`).
 
 The path has its own clock τ. It advances at the rate the controller returns
 (``Command.time_scale``): 0 while stopped, so resuming causes no jump, and the factor by
@@ -38,7 +40,7 @@ from typing import Any, Protocol
 import numpy as np
 import pinocchio as pin
 
-from .braking import ArmResponse, BrakingConfig
+from .braking import ArmResponse, BrakingConfig, WallClockArm
 from .controller import Controller
 from .distances import distance_method
 from .errors import InputError
@@ -135,8 +137,10 @@ def simulate(
         ``stop_reason``), at most 30 times a second of run time (a live view).
     realtime
         Tick on the wall clock (a live run): a tick that comes late is stamped with the
-        wall time, so frame ages stay true when the loop falls behind; Ctrl-C ends the
-        run, which is summed up as usual with ``end_reason`` "interrupted".
+        wall time, so frame ages stay true when the loop falls behind, and the arm keeps
+        executing its last command until the next tick, however late; τ advances by
+        ``time_scale ×`` that real time too, so the reference keeps up with the arm; Ctrl-C
+        ends the run, which is summed up as usual with ``end_reason`` "interrupted".
 
     Returns
     -------
@@ -153,6 +157,7 @@ def simulate(
         person really is (NaN without ``measure_truth``), ``robot_point`` and
         ``human_point`` (T, 3, 3) the witness points of each set's closest pair (NaN if no
         part is seen), ``stop_reason`` (T,) str why the robot stops ("" while it moves).
+        In real time the metrics add ``realtime_overruns``, ``min_true_clearance_in_gaps_m``.
     """
     cfg = config or SimConfig()
     robot, path = controller.robot, controller.path
@@ -179,6 +184,7 @@ def simulate(
         else None
     )
     goal = path.reference(path.duration_s)[0]
+    wall = WallClockArm(arm, dt, robot, record=truth is not None)  # real time only
 
     log: dict[str, np.ndarray] = {
         "t": np.empty(n_max),
@@ -226,6 +232,8 @@ def simulate(
             human, captured_s = sensor.frame_at(t)
             if realtime:  # getting the frame took time too: the age is judged now
                 t = max(t, time.perf_counter() - wall0)
+                q, moved_tau = wall.advance(q, t)  # the arm kept moving until now
+                tau = min(tau + moved_tau, path.duration_s)
             if progress is not None and t - last_progress >= 1.0 / 30.0:
                 progress(t)
                 last_progress = t
@@ -237,7 +245,7 @@ def simulate(
             if truth is not None:
                 log["true_distance"][k] = truth(kin, t)
 
-            dq = cmd.dq if arm is None else arm(cmd.dq)
+            dq = wall.command(cmd.dq, t) if realtime else cmd.dq if arm is None else arm(cmd.dq)
             if np.any(np.abs(dq) > robot.dq_max * (1 + 1e-9)):
                 vel_violations += 1
                 dq = np.clip(dq, -robot.dq_max, robot.dq_max)
@@ -271,8 +279,10 @@ def simulate(
                 if pos_err < cfg.goal_tolerance_m and rot_err < cfg.goal_tolerance_rad:
                     reached = True
                     break
-            q = q + dq * dt
-            tau = min(tau + cmd.time_scale * dt, path.duration_s)
+            wall.hold(t, dq, cmd.time_scale)  # real time: it moves on when the next tick comes
+            if not realtime:
+                q = q + dq * dt
+                tau = min(tau + cmd.time_scale * dt, path.duration_s)
 
     finally:
         interrupt.restore()
@@ -286,6 +296,7 @@ def simulate(
         ending["end_reason"] = "interrupted"
     if realtime:
         ending["realtime_overruns"] = int(overruns)
+        ending["min_true_clearance_in_gaps_m"] = wall.least_clearance(truth)
     ending |= truth_metrics(log, robot, avoidance, stop_events, dt)
     return SimResult(
         log,
@@ -295,8 +306,8 @@ def simulate(
             goal,
             reached,
             stop_events,
-            vel_violations,
-            pos_violations,
+            vel_violations + wall.vel_violations,
+            pos_violations + wall.pos_violations,
             controller.name,
             controller.config.distance,
             cfg.control_rate_hz,
