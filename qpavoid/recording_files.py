@@ -5,19 +5,25 @@ The functions here know file formats, not recordings: :mod:`qpavoid.recording` b
 logs with the same NPZ reader. Every problem is a :class:`~qpavoid.errors.RecordingError`
 with a one-line message saying what is wrong and what was expected; no pickled object is
 ever loaded.
+
+Sizes are bounded before anything is read (:func:`~qpavoid._checks.check_file_size`,
+:func:`~qpavoid._checks.check_npy_headers`): a file's size on disk, an NPZ's declared
+size and each array's ``.npy`` header.
 """
 
 from __future__ import annotations
 
 import codecs
 import csv
+import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TypeVar
 
 import numpy as np
+from numpy.lib import format as npy_format
 
-from ._checks import one_line
+from ._checks import check_file_size, check_npy_headers, one_line
 from .errors import InputError, RecordingError
 from .frames import JointType
 
@@ -138,23 +144,26 @@ _KIND_TEXT = {
 def read_npz(path: Path, names: Sequence[str] | None, expected: str) -> dict[str, np.ndarray]:
     """Arrays of an NPZ file by name (``names``, or all if None); no pickled objects.
 
+    The file's size, the archive's declared size and every array's ``.npy`` header are
+    checked (:func:`~qpavoid._checks.check_npy_headers`) before any array is read.
+
     Raises
     ------
     RecordingError
-        Without the path (:func:`read_file` adds it): the file is not an NPZ archive, an
-        array is missing, holds Python objects or cannot be read. ``expected`` (what the
-        file should be) ends the message.
+        Without the path (:func:`read_file` adds it): the file is too large or not an NPZ
+        archive, an array is missing, too large, holds Python objects or cannot be read.
+        ``expected`` (what the file should be) ends format messages.
     """
+    check_file_size(path, "npz")
     kind = _file_kind(path)
     if kind != "zip":
         raise RecordingError(f"not a readable NPZ archive ({_KIND_TEXT[kind]}); {expected}")
     try:
-        # Our own handle: numpy leaks the one it opens when the archive is damaged.
-        with path.open("rb") as handle, np.load(handle, allow_pickle=False) as data:
-            members = set(data.zip.namelist())
-            found = [name for name in data.files if f"{name}.npy" in members]
+        with path.open("rb") as handle, zipfile.ZipFile(handle) as archive:
+            members = archive.namelist()
+            found = list(dict.fromkeys(m[: -len(".npy")] for m in members if m.endswith(".npy")))
             if not found:
-                others = ", ".join(data.files[:5]) or "none"
+                others = ", ".join(members[:5]) or "none"
                 raise RecordingError(
                     f"not a readable NPZ archive (a ZIP archive without .npy "
                     f"arrays; members: {others}); {expected}"
@@ -166,29 +175,19 @@ def read_npz(path: Path, names: Sequence[str] | None, expected: str) -> dict[str
                     f"{', '.join(map(repr, found))}); {expected}",
                     name=missing[0],
                 )
-            return {name: _npz_array(data, name, expected) for name in names or found}
+            wanted = list(names or found)
+            check_npy_headers(archive, wanted, expected)
+            arrays = {}
+            for name in wanted:
+                with archive.open(f"{name}.npy") as member:
+                    arrays[name] = npy_format.read_array(member, allow_pickle=False)
+            return arrays
     except RecordingError:
         raise
     except Exception as exc:  # zipfile, zlib, numpy's format parser: a damaged file
         raise RecordingError(
             f"not a readable NPZ archive (damaged: {one_line(exc)}); {expected}"
         ) from exc
-
-
-def _npz_array(data: Any, name: str, expected: str) -> np.ndarray:
-    """Member ``name`` of an open NPZ file, refusing pickled objects with a clear message."""
-    try:
-        arr = data[name]
-    except ValueError as exc:
-        if "allow_pickle" not in str(exc):
-            raise
-        raise RecordingError(
-            f"array {name!r} holds Python objects (pickled data, never loaded); {expected}",
-            name=name,
-        ) from None
-    if not isinstance(arr, np.ndarray):  # a member named .npy that is not one
-        raise RecordingError(f"member {name + '.npy'!r} is not a .npy array; {expected}", name=name)
-    return arr
 
 
 def read_csv_table(path: Path, names: list[str], expected: str) -> np.ndarray:
@@ -211,6 +210,7 @@ def read_csv_columns(
     Returns the numbers (rows, len(names)), NaN in the text columns, and each text
     column's cells (stripped) by name.
     """
+    check_file_size(path, "csv")
     kind = _file_kind(path)
     if kind != "text":
         raise RecordingError(f"not a CSV text file ({_KIND_TEXT[kind]}); {expected}")

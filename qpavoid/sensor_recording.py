@@ -20,6 +20,7 @@ sensors may share a time.
 from __future__ import annotations
 
 import csv
+import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +28,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._checks import as_array
+from ._checks import as_array, check_file_size
 from .compiling import kernel_input
 from .errors import InputError
 from .frames import N_KINECT_JOINTS, check_joints, check_states
@@ -216,19 +217,32 @@ def _names(with_body: bool) -> list[str]:
 
 
 def is_sensor_recording(path: str | Path) -> bool:
-    """True if the file at ``path`` names its sensor (a per-sensor recording)."""
+    """True if the file at ``path`` names its sensor (a per-sensor recording); reads no
+    array, and opens no file over its size bound (False: the loader says why)."""
     p = Path(path)
     try:
         if p.suffix.lower() == ".npz":
-            with np.load(p, allow_pickle=False) as data:
-                return "sensor" in data.files
+            check_file_size(p, "npz")
+            with zipfile.ZipFile(p) as archive:  # numpy's NpzFile.files: names less .npy
+                return any(m in ("sensor", "sensor.npy") for m in archive.namelist())
         if p.suffix.lower() == ".csv":
-            with p.open("r", encoding="utf-8-sig", newline="") as handle:
-                header = next(csv.reader(handle), [])
-            return len(header) > 1 and header[1].strip() == "sensor"
-    except Exception:  # unreadable: the loader that runs next says why
+            header = _csv_first_row(p)
+            return len(header) > 1 and header[1] == "sensor"
+    except Exception:  # unreadable or too large: the loader that runs next says why
         return False
     return False
+
+
+def _csv_first_row(path: Path) -> list[str]:
+    """The stripped cells of a CSV file's first row ([] if the csv module refuses it);
+    RecordingError, unopened, if the file is over :data:`~qpavoid._checks.MAX_CSV_BYTES`
+    (a line can be the whole file). Binary data is read_csv_columns' to refuse."""
+    check_file_size(path, "csv")
+    with path.open("r", encoding="utf-8-sig", errors="replace", newline="") as handle:
+        try:
+            return [cell.strip() for cell in next(csv.reader(handle), [])]
+        except csv.Error:  # a field over the csv module's limit...
+            return []
 
 
 def load_sensor_recording(path: str | Path) -> SensorRecording:
@@ -262,8 +276,7 @@ def _load_npz(path: Path) -> SensorRecording:
 
 
 def _load_csv(path: Path) -> SensorRecording:
-    with path.open("r", encoding="utf-8-sig", newline="") as handle:
-        header = [c.strip() for c in next(csv.reader(handle), [])]
+    header = _csv_first_row(path)
     names = _names(with_body=len(header) > 2 and header[2] == "body")
     data, words = read_csv_columns(path, names, SENSOR_CSV_EXPECTED, text=("sensor",))
     first = names.index("SpineBase_x")

@@ -44,10 +44,11 @@ from .braking import ArmResponse, BrakingConfig, WallClockArm
 from .controller import Controller
 from .distances import distance_method
 from .errors import InputError
-from .frames import N_KINECT_JOINTS, HumanFrame, HumanMotion
+from .frames import HumanFrame, HumanMotion
 from .interruption import Interruption
 from .metrics import end_of_run, run_metrics, truth_metrics
 from .people import People
+from .run_log import TEXT_KEYS, finished, new_log
 from .sensor import Sensor, SensorConfig
 from .task import inverse_kinematics
 from .truth import TrueClearance
@@ -98,7 +99,9 @@ class SimResult:
 
 
 class FrameSource(Protocol):
-    """What the controller is shown: ``frame_at(t)`` → (frame or people, capture time), s."""
+    """What the controller is shown: ``frame_at(t)`` → (frame or people, capture time), s.
+    A source may also say, in an ``alert`` attribute, why its input is suspect (logged
+    every tick as ``input_alert``: :class:`~qpavoid.live.LiveSource`)."""
 
     def frame_at(self, t: float) -> tuple[HumanFrame | People, float]: ...
 
@@ -156,7 +159,8 @@ def simulate(
         capture time), ``true_distance`` (T, 3) exact capsule distance per set to where the
         person really is (NaN without ``measure_truth``), ``robot_point`` and
         ``human_point`` (T, 3, 3) the witness points of each set's closest pair (NaN if no
-        part is seen), ``stop_reason`` (T,) str why the robot stops ("" while it moves).
+        part is seen), ``stop_reason`` (T,) str why the robot stops ("" while it moves),
+        ``input_alert`` (T,) str why the source's input is suspect ("" while it is not).
         In real time the metrics add ``realtime_overruns``, ``min_true_clearance_in_gaps_m``.
     """
     cfg = config or SimConfig()
@@ -186,29 +190,8 @@ def simulate(
     goal = path.reference(path.duration_s)[0]
     wall = WallClockArm(arm, dt, robot, record=truth is not None)  # real time only
 
-    log: dict[str, np.ndarray] = {
-        "t": np.empty(n_max),
-        "q": np.empty((n_max, robot.nq)),
-        "dq": np.empty((n_max, robot.nv)),
-        "dq_command": np.empty((n_max, robot.nv)),
-        "joints": np.empty((n_max, N_KINECT_JOINTS, 3)),
-        "state": np.empty((n_max, N_KINECT_JOINTS), dtype=np.int8),
-        "stopped": np.empty(n_max, dtype=bool),
-        "f": np.empty(n_max),
-        "distance": np.empty((n_max, 3)),
-        "distance_other": np.empty((n_max, 3)),
-        "v_rep_L2": np.empty((n_max, 3)),
-        "v_rep_EE": np.empty((n_max, 3)),
-        "ee_pos": np.empty((n_max, 3)),
-        "ee_ref": np.empty((n_max, 3)),
-        "tau": np.empty(n_max),
-        "tick_us": np.empty(n_max),
-        "frame_age_s": np.empty(n_max),
-        "true_distance": np.full((n_max, 3), np.nan),
-        "robot_point": np.empty((n_max, 3, 3)),
-        "human_point": np.empty((n_max, 3, 3)),
-    }
-    reasons: list[str] = []
+    log = new_log(n_max, robot)
+    texts: dict[str, list[str]] = {key: [] for key in TEXT_KEYS}
     stop_events = []
     vel_violations = pos_violations = 0
     tau, was_stopped, last_progress, last_watch = 0.0, False, -1.0, -1.0
@@ -230,6 +213,7 @@ def simulate(
                 # so the frames it holds are as old as they really are
                 t = max(t, time.perf_counter() - wall0)
             human, captured_s = sensor.frame_at(t)
+            alert = getattr(sensor, "alert", "")  # a live source's suspect input, if any
             if realtime:  # getting the frame took time too: the age is judged now
                 t = max(t, time.perf_counter() - wall0)
                 q, moved_tau = wall.advance(q, t)  # the arm kept moving until now
@@ -266,9 +250,12 @@ def simulate(
             sets = np.arange(len(closest))
             log["robot_point"][k] = cmd.table.robot_point[sets, closest]
             log["human_point"][k] = cmd.table.human_point[sets, closest]
-            reasons.append(cmd.reason if cmd.stopped else "")
+            texts["stop_reason"].append(cmd.reason if cmd.stopped else "")
+            texts["input_alert"].append(alert)
             if watch is not None and t - last_watch >= 1.0 / 30.0:
-                watch({key: v[k].copy() for key, v in log.items()} | {"stop_reason": reasons[k]})
+                watch(
+                    {key: v[k].copy() for key, v in log.items()} | {x: texts[x][k] for x in texts}
+                )
                 last_watch = t
             n = k + 1
 
@@ -286,8 +273,7 @@ def simulate(
 
     finally:
         interrupt.restore()
-    log = {key: v[:n] for key, v in log.items()}
-    log["stop_reason"] = np.array(reasons[:n], dtype=str)
+    log = finished(log, n, texts)
     if watch is not None and n:  # the last tick too, whenever it came
         watch({key: v[n - 1].copy() for key, v in log.items()})
     avoidance = controller.config.avoidance
