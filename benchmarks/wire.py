@@ -30,8 +30,9 @@ from qpavoid.calibration import Calibration, SensorCalibration
 from qpavoid.keys import SensorKeys
 from qpavoid.posture import Operator
 from qpavoid.sensor_recording import BodyFrame
+from qpavoid.signing import Signer, Verifier
 from qpavoid.two_sensors import look_at
-from qpavoid.wire import Signer, Verifier, WireError, Workspace, decode, encode
+from qpavoid.wire import WireError, Workspace, decode, encode
 
 
 def main() -> None:

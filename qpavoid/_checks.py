@@ -11,7 +11,9 @@ of its columns (:data:`ROW_VALUES`), or a size its member does not hold.
 
 from __future__ import annotations
 
+import ipaddress
 import math
+import socket
 import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -286,3 +288,14 @@ def _npy_header(
                 name=name,
             )
         return tuple(shape), dtype, member.tell()
+
+
+def is_loopback(host: str) -> bool:
+    """True if ``host`` (a name or an address) resolves to this machine's loopback only."""
+    try:
+        infos = socket.getaddrinfo(host, None)
+        return bool(infos) and all(
+            ipaddress.ip_address(str(info[4][0]).split("%")[0]).is_loopback for info in infos
+        )
+    except (OSError, ValueError, UnicodeError):
+        return False

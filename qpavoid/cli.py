@@ -24,7 +24,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from .calibration import load_calibration
+from .calibration_file import load_calibration
 from .cli_args import (
     HelpFormatter,
     Parser,

@@ -15,13 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration import load_calibration
+from .calibration_file import load_calibration
 from .cli_args import HelpFormatter, positive_float
 from .errors import InputError
 from .fused import fuse_recordings, save_fused_npz
 from .io import check_output_dir
 from .keys import new_key_file
-from .live import parse_address, replay
+from .live import parse_address
+from .replayer import replay
 from .sensor_recording import load_sensor_recording
 
 __all__ = ["add_sensor_commands", "fuse_command", "keygen_command", "replay_command"]
@@ -127,7 +128,7 @@ def fuse_command(args: argparse.Namespace) -> str:
 
 
 def replay_command(args: argparse.Namespace) -> str:
-    """``qpavoid replay``: stream recordings over UDP (:func:`qpavoid.live.replay`)."""
+    """``qpavoid replay``: stream recordings over UDP (:func:`qpavoid.replayer.replay`)."""
     address = parse_address(args.to, "--to")
     if not 1.0 <= args.rate <= 1000.0:
         raise InputError(f"--rate must be 1 to 1000 Hz, got {args.rate}", name="--rate")

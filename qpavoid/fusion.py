@@ -34,66 +34,18 @@ from typing import NamedTuple
 import numpy as np
 
 from ._checks import finite_number
+from .admission import Admission
 from .association import PersonTrack, associate, faces_robot, reference_rank, torso_centre
 from .calibration import Calibration
 from .frames import N_KINECT_JOINTS, HumanFrame, TrackingState
 from .fusion_config import FusionConfig
+from .fusion_frame import FusedFrame, FusedPerson, OutlierChoice
 from .fusion_kernels import ingest
 from .fusion_person import fuse_person, mirror_costs, warm_up
 from .people import NOBODY
 from .sensor_recording import BodyFrame, checked_arrays
 
-__all__ = ["FusedFrame", "FusedPerson", "Fuser", "FusionConfig", "OutlierChoice"]
-
-
-class OutlierChoice(NamedTuple):
-    """Sensors that disagreed on a joint: the one ``chosen`` and the ones dropped."""
-
-    joint: int
-    chosen: str
-    rejected: tuple[str, ...]
-
-
-class FusedPerson(NamedTuple):
-    """One person at the fusion time.
-
-    Attributes
-    ----------
-    id
-        Stable id (:class:`~qpavoid.association.PersonTrack`).
-    frame
-        Joints in the robot base frame, m, and states (NaN and NotTracked where no
-        sensor sees the joint).
-    confidence
-        (25,) per joint, in [0, 1].
-    sensors
-        Names of the sensors that contributed.
-    outliers
-        Joints on which sensors disagreed, and who was believed.
-    mirrored
-        Sensors whose body was relabelled left/right.
-    flag
-        Why this person is suspect ("" if not): appeared near the robot never seen
-        approaching, or seen by one sensor only where another looks (a forged or phantom
-        body). The controllers still treat them as a person.
-    """
-
-    id: int
-    frame: HumanFrame
-    confidence: np.ndarray
-    sensors: tuple[str, ...]
-    outliers: tuple[OutlierChoice, ...]
-    mirrored: tuple[str, ...]
-    flag: str = ""
-
-
-class FusedFrame(NamedTuple):
-    """Every person known at fusion time ``t`` (s, controller clock), and the capture time
-    of the newest frame used (``-inf`` if none: nobody seen by a fresh frame)."""
-
-    t: float
-    people: tuple[FusedPerson, ...]
-    captured_s: float = float("-inf")
+__all__ = ["Fuser", "FusionConfig"]
 
 
 HISTORY = 4  #: frames kept per (sensor, body)
@@ -136,9 +88,7 @@ class Fuser:
         self._latest: dict[str, dict[int, list[_Frame]]] = {s: {} for s in calibration.names}
         self._assigned: dict[str, dict[int, int]] = {s: {} for s in calibration.names}
         self._next_id = 0
-        self._first_s: float | None = None  # the first fusion time
-        self._tokens, self._tokens_s = float(self.cfg.new_people_burst), -math.inf
-        self._heard: dict[str, float] = {}  # each sensor's newest capture time
+        self._admission = Admission(calibration, self.cfg, self.counters)
         self._sensor_weight = {n: calibration[n].weight for n in calibration.names}
         # each camera's rotation and translation as contiguous arrays: the types the
         # compiled intake was warmed up for (a view would compile anew at the first frame)
@@ -179,19 +129,13 @@ class Fuser:
         joints, state = ingest(joints_in, state_in, rotation, translation)
         history.append(_Frame(t, joints, state, tuple(torso_centre(joints).tolist())))
         del history[:-HISTORY]
-        self._heard[frame.sensor] = max(t, self._heard.get(frame.sensor, -math.inf))
+        self._admission.heard(frame.sensor, t)
         return True
 
     def fuse(self, t: float) -> FusedFrame:
         """Every known person at time ``t`` (s, controller clock), from frames captured by ``t``."""
         cfg = self.cfg
-        if self._first_s is None:
-            self._first_s = t
-        self._tokens = min(
-            float(cfg.new_people_burst),
-            self._tokens + cfg.max_new_people_per_s * max(t - self._tokens_s, 0.0),
-        )
-        self._tokens_s = t
+        self._admission.tick(t)
         per_track: dict[int, list[_Contribution]] = {}
         track_centres = {tr.id: tuple(tr.centre().tolist()) for tr in self.tracks}
         for sensor in self.calibration.names:
@@ -257,49 +201,19 @@ class Fuser:
         per_track: dict[int, list[_Contribution]],
         track_centres: dict[int, tuple[float, ...]],
     ) -> PersonTrack | None:
-        """A new person for a body that fits nobody, or None if the caps refuse it
-        (:class:`FusionConfig` ``max_people``, ``max_new_people_per_s``); flagged if they
-        appear near the robot after the start-up grace."""
-        cfg = self.cfg
-        distance = math.hypot(*centre)
-        near = distance <= cfg.forget_beyond_m
-        if not near and self._tokens < 1.0:
-            self.counters["too_many_new_people"] += 1
+        """A new person for a body that fits nobody, or None if :class:`Admission` refuses
+        them (in place of the farthest person, if the cell is full)."""
+        admitted, evicted, flag = self._admission.admit(centre, t, self.tracks)
+        if not admitted:
             return None
-        if len(self.tracks) >= cfg.max_people:
-            farthest = max(self.tracks, key=lambda tr: _distance_or_inf(tr.centre()))
-            if not _distance_or_inf(farthest.centre()) > distance:
-                self.counters["too_many_people"] += 1
-                return None
-            self._drop(farthest.id)  # the controller needs the nearest
-            per_track.pop(farthest.id, None)
-            track_centres.pop(farthest.id, None)
-            self.counters["dropped_for_a_nearer_person"] += 1
-        if not near:
-            self._tokens -= 1.0
-        track = PersonTrack(self._next_id, joints.copy(), born_s=t)
+        if evicted is not None:
+            self._drop(evicted.id)
+            per_track.pop(evicted.id, None)
+            track_centres.pop(evicted.id, None)
+        track = PersonTrack(self._next_id, joints.copy(), born_s=t, flag=flag)
         self._next_id += 1
-        if near and self._first_s is not None and t - self._first_s > cfg.phantom_grace_s:
-            track.flag = f"appeared {distance:.2f} m from the robot's base, never seen approaching"
-            self.counters["flagged_people"] += 1
         self.tracks.append(track)
         return track
-
-    def _check_coverage(self, track: PersonTrack, t: float) -> None:
-        """Once a new person has settled: flag them if one sensor alone saw them while
-        another, fresh, has that place in its view (``field_of_view_deg``, ``range_m``)."""
-        cfg = self.cfg
-        late = self._first_s is not None and track.born_s - self._first_s > cfg.phantom_grace_s
-        if track.flag or not late or len(track.seen_by) != 1:
-            return
-        (only,) = track.seen_by
-        centre = track.centre()
-        for name in self.calibration.names:
-            fresh = t - self._heard.get(name, -math.inf) <= cfg.max_age_s
-            if name != only and fresh and self.calibration[name].sees(centre):
-                track.flag = f"seen by {only} only, in the view of {name}"
-                self.counters["flagged_people"] += 1
-                return
 
     def _renumbered(self, sensor: str, bodies: dict[int, _Frame]) -> None:
         """Drop from ``sensor``'s ``bodies`` those it has renumbered: a camera frame
@@ -359,7 +273,7 @@ class Fuser:
         if settling:
             track.seen_by.update(names)
         elif track.seen_by:  # settled: judged once, on who saw them meanwhile
-            self._check_coverage(track, t)
+            track.flag = self._admission.coverage_flag(track, t)
             track.seen_by = set()
         outliers = self._outliers(names, S, disputed, keep) if disputed.size else ()
         flipped: tuple[str, ...] = ()
@@ -403,9 +317,3 @@ class Fuser:
             OutlierChoice(j, names[c], tuple(n for n, d in zip(names, ds, strict=True) if d))
             for j, c, ds in by_joint
         )
-
-
-def _distance_or_inf(centre: np.ndarray) -> float:
-    """Distance of a torso centre from the robot's base, m (inf if not known)."""
-    distance = float(np.linalg.norm(centre))
-    return distance if math.isfinite(distance) else math.inf

@@ -12,43 +12,30 @@ moves each frame's time stamp onto the run clock, fuses (:class:`~qpavoid.fusion
 and returns everybody with the capture time of the newest frame used, so the controller
 judges the age of what it sees: no fresh frame for the stale limit, and it stops.
 
-:func:`replay` streams per-sensor recordings to a listener in real time, as live sensors
-would: the whole path runs on one machine over loopback.
+:func:`qpavoid.replayer.replay` streams per-sensor recordings to a listener in real time,
+as live sensors would: the whole path runs on one machine over loopback.
 """
 
 from __future__ import annotations
 
-import ipaddress
 import multiprocessing
 import os
 import signal
-import socket
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Sequence
-from itertools import pairwise
+from collections.abc import Callable
 
+from ._checks import is_loopback
 from .calibration import Calibration
 from .errors import InputError
 from .fusion import Fuser, FusionConfig
 from .people import People
 from .receiver import FUTURE_TOLERANCE_S, SlotTable, serve
-from .sensor_recording import BodyFrame, SensorRecording
-from .wire import Signer, Workspace, encode
+from .sensor_recording import BodyFrame
+from .wire import Workspace
 
-__all__ = ["Listener", "LiveSource", "check_listening", "is_loopback", "parse_address", "replay"]
-
-
-def is_loopback(host: str) -> bool:
-    """True if ``host`` (a name or an address) resolves to this machine's loopback."""
-    try:
-        infos = socket.getaddrinfo(host, None)
-        return bool(infos) and all(
-            ipaddress.ip_address(str(info[4][0]).split("%")[0]).is_loopback for info in infos
-        )
-    except (OSError, ValueError, UnicodeError):
-        return False
+__all__ = ["Listener", "LiveSource", "check_listening", "parse_address"]
 
 
 def parse_address(text: str, name: str = "--listen", any_port: bool = False) -> tuple[str, int]:
@@ -284,67 +271,3 @@ class LiveSource:
             self._captured = fused.captured_s
         people = People(tuple(p.id for p in fused.people), tuple(p.frame for p in fused.people))
         return people, self._captured
-
-
-def replay(
-    recordings: Sequence[SensorRecording],
-    address: tuple[str, int],
-    rate_hz: float = 30.0,
-    calibration: Calibration | None = None,
-    clock: Callable[[], float] = time.time,
-    sleep: Callable[[float], None] = time.sleep,
-    mangle: Callable[[int, bytes], Sequence[bytes]] | None = None,
-    unsigned: bool = False,
-) -> int:
-    """Send ``recordings`` to ``address`` as live sensors would; returns datagrams sent.
-
-    Each datagram is signed with its sensor's key from ``calibration`` (wire format
-    version 2), or, with ``unsigned``, sent as an unsigned version-1 datagram (for a
-    listener that accepts them, on loopback).
-
-    Frames go in the order of their capture times (each sensor's time stamps plus its
-    ``time_offset_s`` in ``calibration``, 0 without one), paced so that the median frame
-    interval of a sensor's body lasts ``1 / rate_hz`` (the recordings' own rate: real
-    time). Each is stamped with its send time on ``clock`` as its sensor's clock shows
-    it (minus the offset), so the listener's calibration puts it back. ``mangle(i,
-    datagram)`` (tests) may replace datagram i by any datagrams, to inject faults.
-    """
-
-    def offset(sensor: str) -> float:
-        return calibration[sensor].time_offset_s if calibration is not None else 0.0
-
-    signers: dict[str, Signer] = {}
-    if not unsigned:
-        if calibration is None or not calibration.authenticated:
-            raise InputError(
-                "replay signs each datagram with its sensor's key: give a calibration with "
-                "key files (qpavoid keygen), or send unsigned datagrams (--unsigned)",
-                name="--sensors",
-            )
-        signers = {name: Signer(calibration.cell, keys) for name, keys in calibration.keys.items()}
-
-    frames = sorted(
-        (f for rec in recordings for f in rec.frames()), key=lambda f: f.t + offset(f.sensor)
-    )
-    if not frames:
-        return 0
-    streams: dict[tuple[str, int], list[float]] = {}
-    for f in frames:
-        streams.setdefault((f.sensor, f.body), []).append(f.t)
-    steps = sorted(b - a for times in streams.values() for a, b in pairwise(times))
-    scale = (1.0 / rate_hz) / steps[len(steps) // 2] if steps else 1.0
-    family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
-    sent = 0
-    with socket.socket(family, socket.SOCK_DGRAM) as sock:
-        start, t0 = clock(), frames[0].t + offset(frames[0].sensor)
-        for i, frame in enumerate(frames):
-            due = start + (frame.t + offset(frame.sensor) - t0) * scale
-            wait = due - clock()
-            if wait > 0:
-                sleep(wait)
-            stamped = frame._replace(t=clock() - offset(frame.sensor))
-            data = encode(stamped) if unsigned else signers[frame.sensor].encode(stamped)
-            for datagram in mangle(i, data) if mangle else (data,):
-                sock.sendto(datagram, address)
-                sent += 1
-    return sent

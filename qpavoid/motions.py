@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from .calibration import load_calibration
+from .calibration_file import load_calibration
 from .errors import InputError
 from .frames import HumanMotion
 from .fused import fuse_recordings, load_people

@@ -39,7 +39,8 @@ import numpy as np
 from .calibration import Calibration
 from .frames import N_KINECT_JOINTS
 from .sensor_recording import MAX_BODIES, BodyFrame
-from .wire import REASONS, Verifier, WireError, Workspace
+from .signing import Verifier
+from .wire import REASONS, WireError, Workspace
 
 __all__ = ["COUNTERS", "FUTURE_TOLERANCE_S", "SlotTable", "serve"]
 

@@ -22,7 +22,7 @@ from . import motions, view_html
 from . import plots as plotting
 from .analytic import AnalyticConfig, AnalyticController
 from .braking import BrakingConfig
-from .calibration import load_calibration
+from .calibration_file import load_calibration
 from .controller import Controller, ControllerConfig
 from .io import staged_output, write_run
 from .live import Listener, LiveSource, parse_address

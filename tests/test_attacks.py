@@ -22,16 +22,18 @@ from qpavoid.calibration import Calibration
 from qpavoid.controller import ControllerConfig
 from qpavoid.human import KinectHuman
 from qpavoid.keys import SensorKeys
-from qpavoid.live import Listener, LiveSource, replay
+from qpavoid.live import Listener, LiveSource
 from qpavoid.posture import Operator
 from qpavoid.qp import QPController
+from qpavoid.replayer import replay
 from qpavoid.scenarios import nominal_configurations, reach_and_return
 from qpavoid.sensor_recording import BodyFrame
+from qpavoid.signing import Signer, fields
 from qpavoid.simulation import SimConfig, simulate
 from qpavoid.task import ArcPath
 from qpavoid.truth import TrueClearance
 from qpavoid.two_sensors import TwoSensorConfig, two_sensor_data
-from qpavoid.wire import Signer, encode, fields
+from qpavoid.wire import encode
 
 pytestmark = pytest.mark.slow
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from qpavoid.calibration import Calibration, SensorCalibration, load_calibration
+from qpavoid.calibration import SensorCalibration
+from qpavoid.calibration_file import calibration_from_dict, load_calibration
 from qpavoid.errors import CalibrationError, RecordingError
 from qpavoid.posture import Operator
 from qpavoid.sensor_recording import (
@@ -108,7 +109,7 @@ def test_files_without_sensors_are_refused(tmp_path, text, words):
 def test_a_missing_file_and_an_unknown_sensor_are_clear_errors(tmp_path):
     with pytest.raises(CalibrationError, match="cannot read calibration"):
         load_calibration(tmp_path / "nope.toml")
-    cal = Calibration.from_dict({"sensors": {"a": {"base_from_camera": np.eye(4).tolist()}}})
+    cal = calibration_from_dict({"sensors": {"a": {"base_from_camera": np.eye(4).tolist()}}})
     with pytest.raises(CalibrationError, match="no sensor 'kinect_9'") as err:
         cal.check_names(["a", "kinect_9"])
     assert err.value.sensor == "kinect_9"

@@ -22,14 +22,16 @@ from qpavoid.controller import ControllerConfig
 from qpavoid.frames import HumanFrame
 from qpavoid.fusion import FusionConfig
 from qpavoid.keys import SensorKeys
-from qpavoid.live import Listener, LiveSource, parse_address, replay
+from qpavoid.live import Listener, LiveSource, parse_address
 from qpavoid.posture import Operator
 from qpavoid.qp import QPController
+from qpavoid.replayer import replay
 from qpavoid.scenarios import make_scenario
 from qpavoid.sensor_recording import BodyFrame, save_sensor_npz
+from qpavoid.signing import Signer, Verifier, fields
 from qpavoid.simulation import SimConfig, simulate
 from qpavoid.two_sensors import TwoSensorConfig, look_at, two_sensor_data
-from qpavoid.wire import Signer, Verifier, WireError, Workspace, decode, encode, fields
+from qpavoid.wire import WireError, Workspace, decode, encode
 
 CAL = Calibration(
     {"a": SensorCalibration("a", look_at(np.array([1.0, 2.5, 1.3]), np.zeros(3)))},

@@ -18,7 +18,8 @@ from urllib.request import urlopen
 import pytest
 
 from qpavoid import live_view
-from qpavoid.live_view import MAX_CONNECTIONS, REQUEST_DEADLINE_S, LiveView
+from qpavoid.live_view import LiveView
+from qpavoid.view_server import MAX_CONNECTIONS, REQUEST_DEADLINE_S
 
 pytest.importorskip("meshcat", reason="the live view's page needs the extra 'view' (meshcat)")
 

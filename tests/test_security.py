@@ -14,16 +14,19 @@ import numpy as np
 import pytest
 from conftest import write_calibration
 
+from qpavoid._checks import is_loopback
 from qpavoid.association import torso_centre
-from qpavoid.calibration import Calibration, SensorCalibration, load_calibration
+from qpavoid.calibration import Calibration, SensorCalibration
+from qpavoid.calibration_file import load_calibration
 from qpavoid.errors import CalibrationError, InputError
 from qpavoid.fusion import Fuser, FusionConfig
 from qpavoid.keys import MAX_KEY_FILE_BYTES, SensorKeys, load_key_file, new_key_file
-from qpavoid.live import Listener, is_loopback
+from qpavoid.live import Listener
 from qpavoid.posture import Operator
 from qpavoid.sensor_recording import BodyFrame
+from qpavoid.signing import REPLAY_WINDOW, ReplayWindow, Signer, Verifier, fields
 from qpavoid.two_sensors import KINECT_V2_FIELD_OF_VIEW_DEG, KINECT_V2_RANGE_M, look_at
-from qpavoid.wire import REPLAY_WINDOW, ReplayWindow, Signer, Verifier, WireError, encode, fields
+from qpavoid.wire import WireError, encode
 
 POSES = {
     "a": look_at(np.array([1.0, 2.5, 1.3]), np.zeros(3)),
@@ -235,7 +238,7 @@ def test_a_forged_datagram_is_refused_before_its_json_is_read(monkeypatch):
     cal = cell()
     verifier = Verifier(cal)
     good = Signer(cal.cell, cal.keys["a"]).encode(body("a"))
-    monkeypatch.setattr("qpavoid.wire._json", lambda data: pytest.fail("JSON parsed"))
+    monkeypatch.setattr("qpavoid.signing.json_object", lambda data: pytest.fail("JSON parsed"))
     with pytest.raises(WireError, match="tag"):
         verifier.decode(good[:-1] + bytes([good[-1] ^ 1]))
 
