@@ -2,7 +2,8 @@
 
     python benchmarks/flood.py [--seconds 6] [--flood-s 3] [--port 5222]
 
-For each flood kind (none, garbage, valid skeletons): `qpavoid run --listen` at 100 Hz for
+For each flood kind (none; garbage; unsigned skeletons, wire format version 1; forged
+skeletons, signed with a key of the attacker's own): `qpavoid run --listen` at 100 Hz for
 ``--seconds``, fed by `qpavoid replay` of two simulated Kinects, while this process floods
 the port as fast as Python sends for ``--flood-s`` from 1.5 s on. Prints the loop's
 overruns, its control time per tick (p99), the longest interval between ticks, the time
@@ -22,13 +23,21 @@ from pathlib import Path
 
 import numpy as np
 
+from qpavoid.keys import SensorKeys
+from qpavoid.signing import Signer
+
 QPAVOID = [sys.executable, "-m", "qpavoid"]
 
 
 def flood(port: int, seconds: float, kind: str) -> int:
     """Send ``kind`` datagrams to ``port`` for ``seconds``; how many were sent."""
     valid = {"v": 1, "sensor": "kinect_left", "body": 3, "t": 0.0, "joints": [[0, 0, 2, 2]] * 25}
-    message = b"junk" * 50 if kind == "garbage" else json.dumps(valid).encode()
+    forger = Signer("two-sensors", SensorKeys.generate("kinect_left"))
+    message = {
+        "garbage": b"junk" * 50,
+        "unsigned": json.dumps(valid).encode(),
+        "forged": forger.seal(json.dumps({k: valid[k] for k in ("body", "t", "joints")}).encode()),
+    }[kind]
     sent, end = 0, time.time() + seconds
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         while time.time() < end:
@@ -51,7 +60,7 @@ def main() -> None:
         sensors = ["--sensors", str(data / "calib.toml")]
         recordings = [str(data / "kinect_left.npz"), str(data / "kinect_right.npz")]
         print("flood     sent      overruns  tick p99  longest interval  stopped  input")
-        for kind in ("none", "garbage", "valid"):
+        for kind in ("none", "garbage", "unsigned", "forged"):
             out = data / f"out_{kind}"
             listen = ["--listen", f"127.0.0.1:{args.port}", *sensors, "--out", str(out)]
             limits = ["--max-time", str(args.seconds), "--rate", "100", "--no-plots", "-q"]
