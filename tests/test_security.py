@@ -6,8 +6,10 @@ from __future__ import annotations
 import json
 import os
 import random
+import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -330,3 +332,34 @@ def test_a_body_one_sensor_sees_where_the_other_looks_is_flagged():
         fuser.fuse(t)
     flags = [p.flag for p in fuser.fuse(3.0).people if p.flag]
     assert flags == ["seen by a only, in the view of b"]
+
+
+def test_the_opt_in_listener_on_loopback_takes_unsigned_and_signed_datagrams():
+    cal = cell()
+    with Listener(("127.0.0.1", 0), cal, accept_unauthenticated=True) as listener:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            now = time.time()
+            sock.sendto(encode(body("a", now - 0.01, 1)), listener.address)
+            sock.sendto(Signer(cal.cell, cal.keys["b"]).encode(body("b", now)), listener.address)
+        deadline = time.time() + 10.0
+        while listener.counters["received"] < 2 and time.time() < deadline:
+            time.sleep(0.02)
+        frames = listener.drain()
+    assert [(f.sensor, f.body) for f in frames] == [("a", 1), ("b", 0)]
+    assert listener.counters["accepted"] == 2
+
+
+def test_the_sender_example_signs_frames_a_listener_accepts(tmp_path):
+    calib = write_calibration(tmp_path, cell())
+    example = Path(__file__).parents[1] / "examples" / "sensor_sender.py"
+    with Listener(("127.0.0.1", 0), load_calibration(calib)) as listener:
+        to = f"127.0.0.1:{listener.address[1]}"
+        cmd = [sys.executable, str(example), calib, "b", to, "0.3"]
+        result = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        time.sleep(0.2)
+        counts = listener.counters
+        frames = listener.drain()
+    assert result.returncode == 0, result.stderr
+    sent = int(result.stdout.split()[1])
+    assert sent >= 2 and counts["received"] == counts["accepted"] == sent, counts
+    assert [(f.sensor, f.body) for f in frames] == [("b", 0)]
