@@ -90,36 +90,30 @@ def far_person(shift=(0.0, 1.8, 0.0)) -> np.ndarray:
     return Operator().rest() + np.asarray(shift)
 
 
-def hide(attacker: Attacker, start_s: float) -> Callable[[socket.socket, tuple], None]:
-    """From ``start_s`` after the replay's start: a frame per sensor for body 0, every
-    2 ms, stamped 4 ms ahead (within the receiver's tolerance), of a person far away."""
+def impersonate(attacker: Attacker, joints: np.ndarray, start_s: float) -> Callable:
+    """From ``start_s`` after the replay's start: ``joints`` (base frame) as body 0 of
+    every sensor, every 2 ms, stamped 4 ms ahead (within the receiver's tolerance)."""
 
     def attack(sock: socket.socket, address: tuple, go: float, until: float) -> None:
         while time.time() < go + start_s:
             time.sleep(0.005)
-        joints = far_person()
         while time.time() < until:
             for sensor in attacker.calibration.names:
                 sock.sendto(attacker.datagram(sensor, joints, time.time() + 0.004), address)
             time.sleep(0.002)
 
     return attack
+
+
+def hide(attacker: Attacker) -> Callable:
+    """From the start, a person far away in the place of the real one."""
+    return impersonate(attacker, far_person(), 0.0)
 
 
 def take_over(attacker: Attacker) -> Callable:
-    """From 1 s on, the operator at rest in their seat (inside the association gate),
-    stamped 4 ms ahead: the fusion would track the forgery and miss the reaching hand."""
-
-    def attack(sock: socket.socket, address: tuple, go: float, until: float) -> None:
-        while time.time() < go + 1.0:
-            time.sleep(0.005)
-        joints = Operator().rest()
-        while time.time() < until:
-            for sensor in attacker.calibration.names:
-                sock.sendto(attacker.datagram(sensor, joints, time.time() + 0.004), address)
-            time.sleep(0.002)
-
-    return attack
+    """From 1 s on, the operator at rest in their seat (inside the association gate): the
+    fusion would track the forgery and miss the reaching hand."""
+    return impersonate(attacker, Operator().rest(), 1.0)
 
 
 def phantom_burst(attacker: Attacker) -> Callable:
@@ -299,7 +293,7 @@ def test_a_forger_without_a_key_cannot_hide_the_hand(robot, attack):
     motion = hand_on_the_path(robot)
     data = two_sensor_data([motion], 0.1, TwoSensorConfig(seed=7))
     attacker = Attacker(data.calibration, signed=True)
-    forge = hide(attacker, 0.0) if attack == "hide" else take_over(attacker)
+    forge = hide(attacker) if attack == "hide" else take_over(attacker)
     sim, report, real_sent, true = live_run(
         robot, motion, forge, mangle_real=tamper(data.calibration)
     )
@@ -315,7 +309,7 @@ def test_without_authentication_the_same_forger_hides_the_hand(robot):
     motion = hand_on_the_path(robot)
     data = two_sensor_data([motion], 0.1, TwoSensorConfig(seed=7))
     attacker = Attacker(data.calibration, signed=False)
-    sim, report, real_sent, true = live_run(robot, motion, hide(attacker, 0.0), signed=False)
+    sim, report, real_sent, true = live_run(robot, motion, hide(attacker), signed=False)
     assert report["out_of_order_or_duplicate"] > real_sent / 2, report  # the real ones
     assert moving_in_contact(sim, true) > 0
 
