@@ -7,7 +7,8 @@ the cell (docs/security.md §4; the settings are :class:`~qpavoid.fusion.FusionC
 * New people far from the robot (beyond ``forget_beyond_m``) come at most at
   ``max_new_people_per_s``, in bursts of ``new_people_burst`` (a token bucket); near the
   robot, nobody is held back by the rate.
-* After ``phantom_grace_s`` (the people there at start-up), a person who appears near the
+* After ``phantom_grace_s`` from the first frame (the people there at start-up), a person
+  who appears near the
   robot is flagged, and so is one whom a single sensor saw through their first
   ``settle_s`` while another, fresh, had that place in its view.
 
@@ -43,18 +44,19 @@ class Admission:
 
     def __init__(self, calibration: Calibration, config: FusionConfig, counters: Counter[str]):
         self.calibration, self.cfg, self.counters = calibration, config, counters
-        self.first_s: float | None = None  # the first fusion time
+        self.first_s: float | None = None  # the first frame's capture time
         self._tokens, self._tokens_s = float(config.new_people_burst), -math.inf
         self._heard: dict[str, float] = {}  # each sensor's newest capture time
 
     def heard(self, sensor: str, t: float) -> None:
-        """``sensor`` sent a frame captured at ``t`` (controller clock, s)."""
+        """``sensor`` sent a frame captured at ``t`` (controller clock, s); the first frame
+        starts the grace (the fusion may run long before any sensor sends)."""
         self._heard[sensor] = max(t, self._heard.get(sensor, -math.inf))
+        if self.first_s is None:
+            self.first_s = t
 
     def tick(self, t: float) -> None:
         """A fusion at time ``t``: the bucket refills for the time since the last."""
-        if self.first_s is None:
-            self.first_s = t
         refill = self.cfg.max_new_people_per_s * max(t - self._tokens_s, 0.0)
         self._tokens = min(float(self.cfg.new_people_burst), self._tokens + refill)
         self._tokens_s = t

@@ -61,7 +61,7 @@ class FusionConfig:
         dropped and counted (``too_many_new_people``). A body near the robot is never held
         back by the rate, only by ``max_people``.
     phantom_grace_s
-        Who appears within this time of the fusion's first frame is the cell's people at
+        Who appears within this time of the first frame any sensor sent is the cell's people at
         start-up, s; after it, a person who appears within ``forget_beyond_m`` of the
         robot's base, never seen approaching, is flagged (:attr:`FusedPerson.flag`), and
         so is one seen by one sensor only through their first ``settle_s`` while another
