@@ -156,10 +156,11 @@ def read_bounded(path: str | Path, max_bytes: int, *, private: bool = False) -> 
         message says which.
     """
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    info = os.fstat(fd)
+    if not stat.S_ISREG(info.st_mode):  # a folder, a device, a FIFO: never read
+        os.close(fd)
+        raise ValueError("not a regular file")
     with os.fdopen(fd, "rb") as handle:
-        info = os.fstat(fd)
-        if not stat.S_ISREG(info.st_mode):
-            raise ValueError("not a regular file")
         if info.st_size > max_bytes:
             raise ValueError(f"{info.st_size} bytes, more than the {max_bytes} allowed")
         if private and info.st_mode & LOOSE_BITS:

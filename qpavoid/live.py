@@ -31,8 +31,9 @@ from .calibration import Calibration
 from .errors import InputError
 from .fusion import Fuser, FusionConfig
 from .people import People
-from .receiver import FUTURE_TOLERANCE_S, SlotTable, serve
+from .receiver import SlotTable, serve
 from .sensor_recording import BodyFrame
+from .signing import FUTURE_TOLERANCE_S
 from .wire import Workspace
 
 __all__ = ["Listener", "LiveSource", "check_listening", "parse_address"]
@@ -82,7 +83,7 @@ class Listener:
         sensor a key.
     future_tolerance_s
         A frame captured more than this after now is dropped on arrival, s
-        (:data:`~qpavoid.receiver.FUTURE_TOLERANCE_S`).
+        (:data:`~qpavoid.signing.FUTURE_TOLERANCE_S`).
 
     Raises
     ------
@@ -184,6 +185,13 @@ def check_listening(
 ) -> None:
     """Signed datagrams, or unsigned ones on loopback by explicit opt-in: else InputError."""
     where = f"{address[0]}:{address[1]}"
+    if accept_unauthenticated and calibration.authenticated:
+        raise InputError(
+            "the sensors have keys: their unsigned datagrams are never believed, and "
+            "--allow-unauthenticated is for a calibration without keys",
+            name="--allow-unauthenticated",
+            value=True,
+        )
     if accept_unauthenticated and not is_loopback(address[0]):
         raise InputError(
             f"unsigned datagrams are accepted on loopback only (anybody who can send to the "

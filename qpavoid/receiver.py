@@ -27,7 +27,6 @@ import contextlib
 import os
 import signal
 import socket
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -39,16 +38,13 @@ import numpy as np
 from .calibration import Calibration
 from .frames import N_KINECT_JOINTS
 from .sensor_recording import MAX_BODIES, BodyFrame
-from .signing import Verifier
+from .signing import FUTURE_TOLERANCE_S, Verifier
 from .wire import REASONS, WireError, Workspace
 
-__all__ = ["COUNTERS", "FUTURE_TOLERANCE_S", "SlotTable", "serve"]
+__all__ = ["COUNTERS", "SlotTable", "serve"]
 
-#: How far after now a frame's capture time may be, s. On one shared clock a frame cannot
-#: arrive before it was captured (a Kinect stamps at least 60 ms before); 5 ms covers what
-#: PTP or NTP on a cell's network leaves between two clocks, and is far below the 0.1 s a
-#: forger once used to make every real frame of a body look out of order.
-FUTURE_TOLERANCE_S = 0.005
+#: The time window's drops, counted under their own names (not ``dropped_...``).
+TIME_REASONS = ("late", "from_the_future")
 
 #: What the receiver counts, in this order in shared memory.
 COUNTERS = (
@@ -58,7 +54,7 @@ COUNTERS = (
     "late",
     "from_the_future",
     "out_of_order_or_duplicate",
-    *(f"dropped_{reason}" for reason in REASONS),
+    *(f"dropped_{reason}" for reason in REASONS if reason not in TIME_REASONS),
     "dropped_unreadable",
 )
 _J = N_KINECT_JOINTS
@@ -159,21 +155,19 @@ def serve(
             return
         status.send(("ok", sock.getsockname()[:2]))
         sock.settimeout(0.05)
-        verifier = Verifier(calibration, workspace, accept_v1=accept_v1)
-        window = (max_age_s, future_tolerance_s)
-        _receive(sock, verifier, table, stop, window, parent_pid)
+        verifier = Verifier(
+            calibration,
+            workspace,
+            accept_v1=accept_v1,
+            max_age_s=max_age_s,
+            future_tolerance_s=future_tolerance_s,
+        )
+        _receive(sock, verifier, table, stop, parent_pid)
 
 
 def _receive(
-    sock: socket.socket,
-    verifier: Verifier,
-    table: SlotTable,
-    stop: Any,
-    window: tuple[float, float],
-    parent_pid: int,
+    sock: socket.socket, verifier: Verifier, table: SlotTable, stop: Any, parent_pid: int
 ) -> None:
-    calibration = verifier.calibration
-    max_age_s, future_tolerance_s = window
     rows, counts = table._arrays()
     index = {name: i for i, name in enumerate(table.sensors)}
     code = {name: i for i, name in enumerate(COUNTERS)}
@@ -188,18 +182,9 @@ def _receive(
         try:
             frame = verifier.decode(data)
             slot = index[frame.sensor] * MAX_BODIES + int(frame.body)
-            age = time.time() - (frame.t + calibration[frame.sensor].time_offset_s)
-            reason = (
-                "late"
-                if age > max_age_s
-                else "from_the_future"
-                if age < -future_tolerance_s
-                else "out_of_order_or_duplicate"
-                if frame.t <= newest[slot]
-                else None
-            )
+            reason = "out_of_order_or_duplicate" if frame.t <= newest[slot] else None
         except WireError as exc:
-            reason = f"dropped_{exc.reason}"
+            reason = exc.reason if exc.reason in TIME_REASONS else f"dropped_{exc.reason}"
         except Exception:  # a datagram must never end the receiver: dropped, counted
             reason = "dropped_unreadable"
         with table.lock:

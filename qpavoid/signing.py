@@ -1,8 +1,7 @@
 """Signed skeleton datagrams (wire format version 2): :class:`Signer` on the sensor's side,
 :class:`Verifier` on the receiver's (docs/security.md).
 
-A datagram is a binary header, a
-JSON payload and an HMAC-SHA256 tag (big-endian integers)::
+A datagram is a binary header, a JSON payload and an HMAC-SHA256 tag (big-endian)::
 
     offset  bytes  field
     0       4      magic b"QPAV"
@@ -11,18 +10,24 @@ JSON payload and an HMAC-SHA256 tag (big-endian integers)::
     6       n      the sensor's name (UTF-8), as in the calibration file
     6+n     4      key id (unsigned): which of the sensor's keys signed it
     10+n    8      sequence number (unsigned), one more per datagram of this sensor
-    18+n    ...    payload: {"body": 0, "t": 1763864400.0333, "joints": [[x, y, z, state], ...]}
+    18+n    8      capture time t, s (IEEE double), on the sensor's clock
+    26+n    ...    payload: {"body": 0, "joints": [[x, y, z, state], ... 25 rows]}
     end-32  32     tag = HMAC-SHA256(key, DOMAIN || len(cell) || cell || every byte before it)
 
 The tag covers a domain string (so that no other message signed with the key can pass for
 a datagram), the cell's name from the calibration file (so that one cell's datagrams are
-refused by another's), the sensor, the key id, the sequence number and the raw payload
-bytes. A sender's first sequence number is its start time in microseconds, so that a
-sensor restarted later always counts on from above its last run's numbers (a sensor sends
-some 200 datagrams a second, far fewer than a million). :class:`Signer` writes them;
-:class:`Verifier` checks them in the cheap order: length, header, key, then the tag with a
-constant-time compare **before any JSON is parsed**, then the sequence number against a
-replay window, and only then the payload.
+refused by another's), the sensor, the key id, the sequence number, the capture time and
+the raw payload bytes. A sender's first sequence number is its start time in
+microseconds, so that a sensor restarted later always counts on from above its last run's
+numbers (a sensor sends some 200 datagrams a second, far fewer than a million).
+
+:class:`Signer` writes them; :class:`Verifier` checks them in the cheap order, **all but
+the last before any JSON is parsed**: length, header, key, the tag (constant-time
+compare), the sequence number against a replay window, the capture time against the time
+window, and only then the payload. A sequence number is marked seen only once its
+datagram has passed the time window: an old genuine datagram (a recording of the cell's
+traffic) is ``late`` and moves nothing (an adversarial tester's: one week-old datagram
+per sensor had blinded both for good).
 
 HMAC-SHA256 rather than an AEAD (ChaCha20-Poly1305): Python's standard library computes
 it (no new dependency, no native code of ours), and it is what the black-channel safety
@@ -35,8 +40,11 @@ from __future__ import annotations
 
 import hmac
 import json
+import math
 import struct
 import time
+from collections.abc import Callable
+from typing import NamedTuple
 
 from .calibration import Calibration
 from .errors import InputError
@@ -54,9 +62,11 @@ from .wire import (
 
 __all__ = [
     "DOMAIN",
+    "FUTURE_TOLERANCE_S",
     "MAGIC",
     "REPLAY_WINDOW",
     "VERSION_2",
+    "Fields",
     "ReplayWindow",
     "Signer",
     "Verifier",
@@ -65,6 +75,11 @@ __all__ = [
 
 #: The signed version (:class:`Signer`, :class:`Verifier`).
 VERSION_2 = 2
+#: How far after now a frame's capture time may be, s. On one shared clock a frame cannot
+#: arrive before it was captured (a Kinect stamps at least 60 ms before); 5 ms covers what
+#: PTP or NTP on a cell's network leaves between two clocks, and is far below the 0.1 s a
+#: forger once used to make every real frame of a body look out of order.
+FUTURE_TOLERANCE_S = 0.005
 MAGIC = b"QPAV"
 #: What the tag signs first: no message of another protocol signed with the key can pass.
 DOMAIN = b"qpavoid skeleton datagram v2\x00"
@@ -74,8 +89,8 @@ TAG_BYTES = 32
 #: replay.
 REPLAY_WINDOW = 64
 _HEAD = struct.Struct("!4sBB")  # magic, version, length of the sensor's name
-_IDS = struct.Struct("!IQ")  # key id, sequence number
-#: The shortest signed datagram: a one-letter sensor, an empty payload of "{}", a tag.
+_IDS = struct.Struct("!IQd")  # key id, sequence number, capture time (s)
+#: The shortest signed datagram: a one-letter sensor, a payload of "{}", a tag.
 MIN_SIGNED_BYTES = _HEAD.size + 1 + _IDS.size + 2 + TAG_BYTES
 
 
@@ -112,13 +127,14 @@ class Signer:
     def __repr__(self) -> str:
         return f"Signer(sensor={self.sensor!r}, key_id={self.key_id}, sequence={self.sequence})"
 
-    def seal(self, payload: bytes, sequence: int | None = None) -> bytes:
-        """One signed datagram of ``payload`` (raw bytes), with the next sequence number
-        (or ``sequence``: a sensor's own fault played in a test, never a live sender)."""
+    def seal(self, t: float, payload: bytes, sequence: int | None = None) -> bytes:
+        """One signed datagram of ``payload`` (raw bytes) captured at ``t`` (s, the sensor's
+        clock), with the next sequence number (or ``sequence``: a sensor's own fault played
+        in a test, never a live sender)."""
         if sequence is None:
             sequence = self.sequence
             self.sequence += 1
-        body = self._head + _IDS.pack(self.key_id, sequence) + payload
+        body = self._head + _IDS.pack(self.key_id, sequence, t) + payload
         return body + hmac.digest(self._secret, self._prefix + body, "sha256")
 
     def encode(self, frame: BodyFrame) -> bytes:
@@ -127,13 +143,23 @@ class Signer:
             raise InputError(
                 f"a frame of sensor {frame.sensor!r} signed as {self.sensor!r}", name="sensor"
             )
-        message = {"body": int(frame.body), "t": frame.t, "joints": rows(frame)}
-        return self.seal(json.dumps(message, separators=(",", ":")).encode())
+        message = {"body": int(frame.body), "joints": rows(frame)}
+        return self.seal(float(frame.t), json.dumps(message, separators=(",", ":")).encode())
 
 
-def fields(datagram: bytes) -> tuple[str, int, int, bytes]:
-    """``(sensor, key id, sequence number, payload)`` of a signed datagram, NOT verified
-    (for tools and tests that look at or replay traffic).
+class Fields(NamedTuple):
+    """The fields of a signed datagram (:func:`fields`)."""
+
+    sensor: str
+    key_id: int
+    sequence: int
+    t: float
+    payload: bytes
+
+
+def fields(datagram: bytes) -> Fields:
+    """The fields of a signed datagram, NOT verified (for tools and tests that look at or
+    replay traffic).
 
     Raises
     ------
@@ -145,30 +171,40 @@ def fields(datagram: bytes) -> tuple[str, int, int, bytes]:
     end = 6 + datagram[5]
     if end + _IDS.size + TAG_BYTES > len(datagram):
         raise WireError("a sensor name longer than the datagram", reason="bad_header")
-    key_id, sequence = _IDS.unpack_from(datagram, end)
+    key_id, sequence, t = _IDS.unpack_from(datagram, end)
     payload = datagram[end + _IDS.size : -TAG_BYTES]
-    return datagram[6:end].decode("utf-8", "replace"), key_id, sequence, payload
+    return Fields(datagram[6:end].decode("utf-8", "replace"), key_id, sequence, t, payload)
 
 
 class ReplayWindow:
     """Which sequence numbers of one sender were seen: the highest, and a bit for each of
-    the :data:`REPLAY_WINDOW` below it (RFC 4303, section 3.4.3)."""
+    the :data:`REPLAY_WINDOW` below it (RFC 4303, section 3.4.3). :meth:`seen` and
+    :meth:`mark` are apart so that only a datagram that passed every other check moves it."""
 
     def __init__(self, size: int = REPLAY_WINDOW):
         self.size, self.top, self._bits = size, -1, 0
 
-    def accept(self, sequence: int) -> bool:
-        """True, and ``sequence`` marked seen, if it was not seen and is not below the
-        window; False otherwise (a replay)."""
-        if sequence > self.top:
-            shift = sequence - self.top
-            self._bits = ((self._bits << shift) | 1) & ((1 << self.size) - 1)
-            self.top = sequence
-            return True
+    def seen(self, sequence: int) -> bool:
+        """True if ``sequence`` was marked, or lies below the window (a replay)."""
         offset = self.top - sequence
-        if offset >= self.size or (self._bits >> offset) & 1:
+        return offset >= self.size or (offset >= 0 and bool((self._bits >> offset) & 1))
+
+    def mark(self, sequence: int) -> None:
+        """Mark ``sequence`` seen (one that :meth:`seen` let through)."""
+        shift = sequence - self.top
+        if shift > 0:  # a new highest: the window slides (never by more than its size)
+            self._bits = (
+                ((self._bits << shift) | 1) & ((1 << self.size) - 1) if shift < self.size else 1
+            )
+            self.top = sequence
+        else:
+            self._bits |= 1 << -shift
+
+    def accept(self, sequence: int) -> bool:
+        """True, and ``sequence`` marked, if it was not seen; False for a replay."""
+        if self.seen(sequence):
             return False
-        self._bits |= 1 << offset
+        self.mark(sequence)
         return True
 
 
@@ -182,8 +218,16 @@ class Verifier:
     workspace
         Where a joint may be in the base frame (None: anywhere).
     accept_v1
-        Also take unsigned version-1 datagrams (:func:`decode`): an explicit opt-in, for
-        loopback only (:class:`~qpavoid.live.Listener` enforces it).
+        Also take unsigned version-1 datagrams (:func:`decode`) of sensors that have no
+        key: an explicit opt-in, for loopback only (:class:`~qpavoid.live.Listener`
+        enforces it). A sensor with a key is never believed unsigned.
+    max_age_s, future_tolerance_s
+        The time window, s: a frame captured more than ``max_age_s`` before ``clock()``
+        is ``late``, one more than ``future_tolerance_s`` after it ``from_the_future``
+        (each sensor's ``time_offset_s`` applied). ``max_age_s=None``: no time window
+        (recordings, tests).
+    clock
+        The shared clock, s.
 
     Holds a :class:`ReplayWindow` per sensor: one verifier per receiver.
     """
@@ -194,8 +238,12 @@ class Verifier:
         workspace: Workspace | None = None,
         *,
         accept_v1: bool = False,
+        max_age_s: float | None = None,
+        future_tolerance_s: float = FUTURE_TOLERANCE_S,
+        clock: Callable[[], float] = time.time,
     ):
         self.calibration, self.workspace, self.accept_v1 = calibration, workspace, accept_v1
+        self.max_age_s, self.future_tolerance_s, self.clock = max_age_s, future_tolerance_s, clock
         self._prefix = _tag_prefix(calibration.cell)
         self._secrets = {
             (name.encode(), kid): secret
@@ -217,9 +265,11 @@ class Verifier:
         if n > MAX_DATAGRAM_BYTES:
             raise WireError(f"datagram of {n} bytes", reason="too_long")
         if data[:1] == b"{":
-            if not self.accept_v1:
+            if not self.accept_v1 or self.calibration.authenticated:
                 raise WireError("an unsigned (version 1) datagram", reason="unauthenticated")
-            return decode(data, self.calibration, self.workspace)
+            frame = decode(data, self.calibration, self.workspace)
+            self._check_time(frame.sensor, frame.t)
+            return frame
         if n < MIN_SIGNED_BYTES or data[:5] != MAGIC + bytes([VERSION_2]):
             raise WireError("not a signed (version 2) datagram", reason="bad_header")
         end = 6 + data[5]
@@ -228,14 +278,29 @@ class Verifier:
         name = self._sensors.get(data[6:end])
         if name is None:
             raise WireError("unknown sensor", reason="unknown_sensor")
-        key_id, sequence = _IDS.unpack_from(data, end)
+        key_id, sequence, t = _IDS.unpack_from(data, end)
         secret = self._secrets.get((data[6:end], key_id))
         if secret is None:
             raise WireError(f"unknown key id {key_id} of {name!r}", reason="unknown_key")
         body, tag = data[:-TAG_BYTES], data[-TAG_BYTES:]
         if not hmac.compare_digest(hmac.digest(secret, self._prefix + body, "sha256"), tag):
             raise WireError(f"a tag that does not verify ({name!r})", reason="bad_tag")
-        if not self._windows[name].accept(sequence):
+        window = self._windows[name]
+        if window.seen(sequence):
             raise WireError(f"sequence number {sequence} of {name!r} seen", reason="replayed")
-        payload = json_object(body[end + _IDS.size :])
-        return skeleton(payload, name, self.calibration, self.workspace)
+        self._check_time(name, t)
+        window.mark(sequence)  # only now: an old or future datagram moves nothing
+        message = json_object(body[end + _IDS.size :]) | {"t": t}
+        return skeleton(message, name, self.calibration, self.workspace)
+
+    def _check_time(self, sensor: str, t: float) -> None:
+        """:class:`WireError` ``late`` or ``from_the_future`` outside the time window."""
+        if self.max_age_s is None:
+            return
+        if not math.isfinite(t):
+            raise WireError(f"t {t!r}", reason="non_finite")
+        age = self.clock() - (t + self.calibration[sensor].time_offset_s)
+        if age > self.max_age_s:
+            raise WireError(f"captured {age:.3f} s ago", reason="late")
+        if age < -self.future_tolerance_s:
+            raise WireError(f"captured {-age:.3f} s from now", reason="from_the_future")

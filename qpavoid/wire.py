@@ -71,6 +71,8 @@ REASONS = (
     "unknown_key",
     "bad_tag",
     "replayed",
+    "late",
+    "from_the_future",
     "bad_json",
     "bad_version",
     "bad_field",

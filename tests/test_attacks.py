@@ -9,9 +9,11 @@ wall time, against the arm's real geometry (:class:`~qpavoid.truth.TrueClearance
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import socket
+import struct
 import time
 from collections.abc import Callable
 
@@ -175,12 +177,15 @@ def tamper(calibration: Calibration) -> Callable[[int, bytes], list[bytes]]:
     held: list[bytes] = []
     names = calibration.names
 
-    def changed(datagram: bytes, change) -> bytes:
-        payload = fields(datagram)[3]
+    def changed(datagram: bytes, change=None, dt: float = 0.0) -> bytes:
+        """The datagram with its payload or capture time changed, its tag kept."""
+        _, _, _, t, payload = fields(datagram)
         msg = json.loads(payload)
-        change(msg)
+        if change is not None:
+            change(msg)
         new = json.dumps(msg, separators=(",", ":")).encode()
-        return datagram[: len(datagram) - len(payload) - 32] + new + datagram[-32:]
+        head = datagram[: len(datagram) - len(payload) - 32 - 8] + struct.pack("!d", t + dt)
+        return head + new + datagram[-32:]
 
     def impersonate(datagram: bytes) -> bytes:
         sensor = fields(datagram)[0]
@@ -190,7 +195,7 @@ def tamper(calibration: Calibration) -> Callable[[int, bytes], list[bytes]]:
     def mangle(i: int, datagram: bytes) -> list[bytes]:
         out = [datagram]
         if i % 3 == 0:
-            out.append(changed(datagram, lambda m: m.__setitem__("t", m["t"] + 0.004)))
+            out.append(changed(datagram, dt=0.004))
             out.append(changed(datagram, lambda m: m.__setitem__("body", (m["body"] + 1) % 6)))
             out.append(impersonate(datagram))
         held.append(datagram)
@@ -208,6 +213,8 @@ def live_run(robot, motion, attack=None, signed=True, mangle_real=None):
     per robot set (m, against the motion at the tick's wall time)."""
     data = two_sensor_data([motion], FILMED_S, TwoSensorConfig(seed=7))
     calibration = data.calibration
+    if not signed:  # the opt-in: a calibration without keys
+        calibration = dataclasses.replace(calibration, cell="", keys={})
     recordings = list(data.recordings.values())
     controller = QPController(
         robot, config=ControllerConfig(control_period_s=0.01, safety="ssm", max_frame_age_s=0.1)

@@ -163,16 +163,16 @@ def test_loopback_replay_with_faults_never_moves_on_stale_or_invalid_data(robot)
 
     signers = {name: Signer(data.calibration.cell, k) for name, k in data.calibration.keys.items()}
 
-    def changed(datagram: bytes, change) -> bytes:
-        """The datagram with its payload changed, signed again by its own sensor under its
-        own sequence number: a sensor's own fault, which the tag cannot catch."""
-        sensor, _, sequence, payload = fields(datagram)
+    def changed(datagram: bytes, change, dt: float = 0.0) -> bytes:
+        """The datagram with its payload and capture time changed, signed again by its own
+        sensor under its own sequence number: a sensor's own fault, which the tag cannot
+        catch."""
+        sensor, _, sequence, t, payload = fields(datagram)
         msg = json.loads(payload)
         change(msg)
-        return signers[sensor].seal(json.dumps(msg).encode(), sequence)
+        return signers[sensor].seal(t + dt, json.dumps(msg).encode(), sequence)
 
     def late(msg: dict) -> None:
-        msg["t"] -= 0.5  # half a second late: dropped as old
         msg["body"] = 5  # (as body 5, with no newer frame: as late, not out of order)
 
     def mangle(i: int, datagram: bytes) -> list[bytes]:
@@ -189,7 +189,7 @@ def test_loopback_replay_with_faults_never_moves_on_stale_or_invalid_data(robot)
         if k == 13:
             return [datagram[:4] + b"\x07" + datagram[5:]]  # another version
         if k == 17:
-            return [changed(datagram, late)]
+            return [changed(datagram, late, -0.5)]  # half a second late: dropped as old
         if k == 21:  # garbage coordinates
             return [changed(datagram, lambda msg: msg["joints"][0].__setitem__(0, 1e9))]
         if k == 33:  # a bit flipped in transit

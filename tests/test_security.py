@@ -7,6 +7,7 @@ import json
 import os
 import random
 import socket
+import struct
 import subprocess
 import sys
 import time
@@ -183,6 +184,38 @@ def test_the_replay_window_accepts_each_number_once_as_a_set_would():
                 top = max(top, n)
 
 
+def test_a_jump_of_the_sequence_numbers_costs_nothing():
+    """An adversarial tester's case: a week-old datagram set the window's top, and the
+    next real one shifted its bits by 10^11 places (gigabytes, then a MemoryError that
+    dropped every later datagram of that sensor)."""
+    window = ReplayWindow()
+    assert window.accept(5) and window.accept(2**63) and window.accept(2**63 + 10**15)
+    assert window._bits < 2**REPLAY_WINDOW
+    assert not window.accept(2**63) and not window.accept(5)
+
+
+def test_an_old_or_future_genuine_datagram_moves_no_window():
+    """An adversarial tester's cases: a genuine datagram from an earlier run (higher
+    sequence numbers) or a week-old one was dropped as late, but only after it moved its
+    sensor's window: every real datagram after it was dropped as replayed."""
+    cal = cell()
+    now = [1000.0]
+    verifier = Verifier(cal, max_age_s=0.1, clock=lambda: now[0])
+    live = Signer(cal.cell, cal.keys["a"], first_sequence=1000)
+    earlier = Signer(cal.cell, cal.keys["a"], first_sequence=10**12)  # another run's numbers
+    for old in (
+        earlier.encode(body("a", t=999.0)),  # a second old
+        earlier.encode(body("a", t=1000.5)),  # half a second ahead
+        Signer(cal.cell, cal.keys["a"], first_sequence=2**63).encode(body("a", t=-6e5)),
+    ):
+        with pytest.raises(WireError) as err:
+            verifier.decode(old)
+        assert err.value.reason in ("late", "from_the_future")
+    for _ in range(100):
+        now[0] += 1 / 30
+        assert verifier.decode(live.encode(body("a", t=now[0] - 0.03))).t == now[0] - 0.03
+
+
 def test_a_signed_datagram_round_trips_and_each_forgery_is_refused_by_its_reason():
     cal = cell()
     verifier = Verifier(cal)
@@ -190,23 +223,24 @@ def test_a_signed_datagram_round_trips_and_each_forgery_is_refused_by_its_reason
     good = sign_a.encode(body("a", t=5.0, body_id=2))
     frame = verifier.decode(good)
     assert (frame.sensor, frame.body, frame.t) == ("a", 2, 5.0)
-    sensor, key_id, sequence, payload = fields(good)
-    assert (sensor, key_id, sequence) == ("a", 1, 100)
+    sensor, key_id, sequence, t, payload = fields(good)
+    assert (sensor, key_id, sequence, t) == ("a", 1, 100, 5.0)
 
-    def forged(payload_change=None, **header) -> bytes:
-        """``good`` with its payload or header changed, its tag kept (no key)."""
+    def forged(payload_change=None, t_change: float = 0.0) -> bytes:
+        """``good`` with its payload or capture time changed, its tag kept (no key)."""
         msg = json.loads(payload)
         if payload_change:
             payload_change(msg)
         new = json.dumps(msg, separators=(",", ":")).encode()
-        return good[: len(good) - len(payload) - 32] + new + good[-32:]
+        head = good[: len(good) - len(payload) - 32 - 8] + struct.pack("!d", t + t_change)
+        return head + new + good[-32:]
 
     attacker = SensorKeys("a", ((1, os.urandom(32)),))  # a key of the attacker's own
     other_cell = Signer("cell-2", cal.keys["a"], first_sequence=200)
     as_b_with_a_key = Signer(cal.cell, SensorKeys("b", cal.keys["a"].keys), 300)
     cases = {
         "replayed": good,  # taken once already
-        "bad_tag": forged(lambda m: m.__setitem__("t", m["t"] + 1.0)),  # re-stamped
+        "bad_tag": forged(t_change=0.004),  # re-stamped
         "bad_tag ": forged(lambda m: m.__setitem__("body", 5)),  # re-slotted
         "bad_tag  ": Signer(cal.cell, attacker, 400).encode(body("a")),  # forged
         "bad_tag   ": as_b_with_a_key.encode(body("b")),  # impersonating b with a's key
@@ -215,7 +249,7 @@ def test_a_signed_datagram_round_trips_and_each_forgery_is_refused_by_its_reason
         "unknown_key": Signer(cal.cell, SensorKeys("a", ((9, os.urandom(32)),)), 9).encode(
             body("a")
         ),
-        "unknown_sensor": Signer(cal.cell, SensorKeys("z", attacker.keys), 1).seal(b"{}"),
+        "unknown_sensor": Signer(cal.cell, SensorKeys("z", attacker.keys), 1).seal(0.0, b"{}"),
         "unauthenticated": encode(body("a")),  # version 1
         "bad_header": b"QPAV\x03" + good[5:],
         "too_long": good + b" " * 8192,
@@ -227,13 +261,16 @@ def test_a_signed_datagram_round_trips_and_each_forgery_is_refused_by_its_reason
     # a sensor's own broken payload is checked after its tag
     for payload_bytes, reason in ((b"{]", "bad_json"), (b'{"body":7}', "bad_field")):
         with pytest.raises(WireError) as err:
-            verifier.decode(sign_a.seal(payload_bytes))
+            verifier.decode(sign_a.seal(5.05, payload_bytes))
         assert err.value.reason == reason
     # the bodies of one frame may come in any order within the window; once each
     late_in_window = sign_a.encode(body("a", t=5.1))
     newer = sign_a.encode(body("a", t=5.2))
     assert verifier.decode(newer).t == 5.2 and verifier.decode(late_in_window).t == 5.1
-    assert Verifier(cal, accept_v1=True).decode(encode(body("a"))).sensor == "a"
+    with pytest.raises(WireError, match="unsigned"):  # never unsigned for a sensor with keys
+        Verifier(cal, accept_v1=True).decode(encode(body("a")))
+    plain = Calibration({"a": SensorCalibration("a", POSES["a"])})
+    assert Verifier(plain, accept_v1=True).decode(encode(body("a"))).sensor == "a"
 
 
 def test_a_forged_datagram_is_refused_before_its_json_is_read(monkeypatch):
@@ -334,19 +371,22 @@ def test_a_body_one_sensor_sees_where_the_other_looks_is_flagged():
     assert flags == ["seen by a only, in the view of b"]
 
 
-def test_the_opt_in_listener_on_loopback_takes_unsigned_and_signed_datagrams():
-    cal = cell()
-    with Listener(("127.0.0.1", 0), cal, accept_unauthenticated=True) as listener:
+def test_the_opt_in_listener_on_loopback_takes_unsigned_datagrams_of_sensors_without_keys():
+    plain = Calibration({n: SensorCalibration(n, T) for n, T in POSES.items()})
+    with pytest.raises(InputError, match="have keys"):  # keys and the opt-in: refused
+        Listener(("127.0.0.1", 0), cell(), accept_unauthenticated=True)
+    with Listener(("127.0.0.1", 0), plain, accept_unauthenticated=True) as listener:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
             now = time.time()
             sock.sendto(encode(body("a", now - 0.01, 1)), listener.address)
-            sock.sendto(Signer(cal.cell, cal.keys["b"]).encode(body("b", now)), listener.address)
+            sock.sendto(encode(body("b", now)), listener.address)
+            sock.sendto(encode(body("b", now - 1.0, 2)), listener.address)  # late
         deadline = time.time() + 10.0
-        while listener.counters["received"] < 2 and time.time() < deadline:
+        while listener.counters["received"] < 3 and time.time() < deadline:
             time.sleep(0.02)
         frames = listener.drain()
     assert [(f.sensor, f.body) for f in frames] == [("a", 1), ("b", 0)]
-    assert listener.counters["accepted"] == 2
+    assert listener.counters["accepted"] == 2 and listener.counters["late"] == 1
 
 
 def test_the_sender_example_signs_frames_a_listener_accepts(tmp_path):
