@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import CalibrationError
-from .keys import SensorKeys
+from .keys import SensorKeys, sensor_name_error, toml_string
 
 __all__ = ["Calibration", "SensorCalibration", "pair_within", "settings_error"]
 
@@ -81,6 +81,12 @@ class SensorCalibration:
     def __post_init__(self) -> None:
         """The same limits as a calibration file's (a weight of 0 made seen joints
         missing with a positive confidence: adversarial tester)."""
+        bad_name = sensor_name_error(self.name)
+        if bad_name is not None:
+            shown = repr(self.name)[:80]
+            raise CalibrationError(
+                f"sensor {shown}: {bad_name}", sensor=str(self.name)[:80], name="sensor"
+            )
         T = np.asarray(self.base_from_camera, dtype=float)
         if T.shape != (4, 4) or not np.isfinite(T).all():
             raise CalibrationError(
@@ -143,12 +149,16 @@ class Calibration:
         The cell's name, signed into every datagram ("" without keys).
     keys
         Each sensor's keys (:mod:`qpavoid.keys`), by name: every sensor or none.
+    key_files
+        The key files they were read from, by sensor (absolute paths; a listener reads
+        them again when they change: a key rotated without a stop).
     """
 
     sensors: Mapping[str, SensorCalibration]
     path: str | None = None
     cell: str = ""
     keys: Mapping[str, SensorKeys] = field(default_factory=dict)
+    key_files: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         """Keys for every sensor or for none, and a cell name with them."""
@@ -168,7 +178,7 @@ class Calibration:
             if not _CELL_NAME.fullmatch(self.cell):
                 raise CalibrationError(
                     f"{where}with keys, cell must be the cell's name (1 to 64 letters, digits, "
-                    f"'.', '_', ':' or '-'), got {self.cell!r}",
+                    f"'.', '_', ':' or '-'), got {repr(self.cell)[:80]}",
                     path=self.path,
                     name="cell",
                     value=self.cell,
@@ -205,19 +215,19 @@ class Calibration:
     def to_toml(self, key_files: Mapping[str, str] | None = None) -> str:
         """The calibration as the text of a calibration file (:func:`load_calibration`);
         ``key_files`` names each sensor's key file (relative to the calibration file)."""
-        lines = [f'cell = "{self.cell}"', ""] if key_files else []
+        lines = [f"cell = {toml_string(self.cell)}", ""] if key_files else []
         for cal in self.sensors.values():
             rows = ",\n                    ".join(
                 "[" + ", ".join(repr(float(v)) for v in row) + "]" for row in cal.base_from_camera
             )
             lines += [
-                f"[sensors.{cal.name}]",
+                f"[sensors.{toml_string(cal.name)}]",
                 f"base_from_camera = [{rows}]",
                 f"time_offset_s = {cal.time_offset_s!r}",
                 f"weight = {cal.weight!r}",
             ]
             if key_files:
-                lines.append(f'key_file = "{key_files[cal.name]}"')
+                lines.append(f"key_file = {toml_string(key_files[cal.name])}")
             for key in ("field_of_view_deg", "range_m"):
                 value = getattr(cal, key)
                 if value is not None:

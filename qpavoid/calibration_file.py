@@ -76,29 +76,30 @@ def calibration_from_dict(data: Mapping, path: str | None = None) -> Calibration
         raise CalibrationError(
             f"{where}no sensor: expected at least one [sensors.NAME] table", path=path
         )
-    out, keys = {}, {}
+    out, keys, key_files = {}, {}, {}
     for name, table in sensors.items():
         out[name] = _sensor(name, table, where, path)
         if isinstance(table, Mapping) and "key_file" in table:
-            keys[name] = _keys(name, table, where, path)
+            keys[name], key_files[name] = _keys(name, table, where, path)
     cell = data.get("cell", "")
     if not isinstance(cell, str):
         raise CalibrationError(f"{where}cell must be a string", path=path, name="cell")
-    return Calibration(out, path, cell, keys)
+    return Calibration(out, path, cell, keys, key_files)
 
 
-def _keys(name: str, table: Mapping, where: str, path: str | None) -> SensorKeys:
+def _keys(name: str, table: Mapping, where: str, path: str | None) -> tuple[SensorKeys, str]:
     """A sensor's keys: its ``key_file`` (relative to the calibration file), restricted to
-    its ``key_ids`` if it names them."""
+    its ``key_ids`` if it names them; and the key file's absolute path."""
     key_file, ids = table["key_file"], table.get("key_ids")
     if not isinstance(key_file, str) or not key_file:
         raise CalibrationError(
             f"{where}sensor {name!r}: key_file must be a path", path=path, sensor=name
         )
     folder = Path(path).parent if path else Path(".")
+    where_key = str((folder / key_file).absolute())
     keys = load_key_file(folder / key_file, name)
     if ids is None:
-        return keys
+        return keys, where_key
     if (
         not isinstance(ids, list)
         or not ids
@@ -111,7 +112,7 @@ def _keys(name: str, table: Mapping, where: str, path: str | None) -> SensorKeys
             name="key_ids",
             value=ids,
         )
-    return keys.only(tuple(ids), where)
+    return keys.only(tuple(ids), where), where_key
 
 
 def _sensor(name: str, table: object, where: str, path: str | None) -> SensorCalibration:
@@ -139,7 +140,8 @@ def _sensor(name: str, table: object, where: str, path: str | None) -> SensorCal
         value = table.get(key)
         if value is not None:
             if not pair_within(value, 0.0, math.inf, key == "range_m"):
-                raise fail(f"{key} must be two positive numbers, got {value!r}", key, value)
+                what = "increasing positive numbers" if key == "range_m" else "positive numbers"
+                raise fail(f"{key} must be two {what}, got {str(value)[:80]}", key, value)
             view[key] = (float(value[0]), float(value[1]))
     try:
         return SensorCalibration(name, T, float(offset), float(weight), **view)

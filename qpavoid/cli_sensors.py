@@ -11,6 +11,7 @@ Like :mod:`qpavoid.cli` they parse, call the library and print.
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ from .cli_args import HelpFormatter, positive_float
 from .errors import InputError
 from .fused import fuse_recordings, save_fused_npz
 from .io import check_output_dir
-from .keys import new_key_file
+from .keys import new_key_file, sensor_name_error
 from .live import parse_address
 from .replayer import replay
 from .sensor_recording import load_sensor_recording
@@ -104,12 +105,9 @@ def fuse_command(args: argparse.Namespace) -> str:
     check_output_dir(out.parent if str(out.parent) else Path("."))
     if out.is_dir():
         raise InputError(f"--out {str(out)!r} is a folder, not a file", name="--out")
-    inputs = [Path(f).resolve() for f in args.files]
-    if out.resolve() in inputs:
+    if out.resolve() in [Path(f).resolve() for f in args.files]:
         raise InputError(f"--out {str(out)!r} is one of the recordings read", name="--out")
-    if len(set(inputs)) < len(inputs):
-        twice = next(str(f) for f in args.files if inputs.count(Path(f).resolve()) > 1)
-        raise InputError(f"{twice!r} is given twice", name="files", value=twice)
+    check_distinct(args.files)
     calibration = load_calibration(args.sensors)
     recordings = [load_sensor_recording(f) for f in args.files]
     for rec in recordings:
@@ -127,11 +125,20 @@ def fuse_command(args: argparse.Namespace) -> str:
     )
 
 
+def check_distinct(files: list[str]) -> None:
+    """:class:`InputError` if a recording is given twice (the same file by two names too)."""
+    inputs = [Path(f).resolve() for f in files]
+    if len(set(inputs)) < len(inputs):
+        twice = next(str(f) for f in files if inputs.count(Path(f).resolve()) > 1)
+        raise InputError(f"{twice!r} is given twice", name="files", value=twice)
+
+
 def replay_command(args: argparse.Namespace) -> str:
     """``qpavoid replay``: stream recordings over UDP (:func:`qpavoid.replayer.replay`)."""
     address = parse_address(args.to, "--to")
     if not 1.0 <= args.rate <= 1000.0:
         raise InputError(f"--rate must be 1 to 1000 Hz, got {args.rate}", name="--rate")
+    check_distinct(args.files)
     calibration = load_calibration(args.sensors) if args.sensors else None
     recordings = [load_sensor_recording(f) for f in args.files]
     if not args.unsigned and (calibration is None or not calibration.authenticated):
@@ -156,8 +163,13 @@ def replay_command(args: argparse.Namespace) -> str:
 def keygen_command(args: argparse.Namespace) -> str:
     """``qpavoid keygen``: a new key file, or a rotated one (:func:`qpavoid.keys.new_key_file`)."""
     name = str(args.sensor)
-    if not name or len(name.encode()) > 255 or not name.isprintable() or '"' in name:
-        raise InputError(f"SENSOR {name!r} is not a sensor's name", name="sensor", value=name)
+    bad_name = sensor_name_error(name)
+    if bad_name is not None:
+        raise InputError(f"SENSOR {repr(name)[:80]}: {bad_name}", name="sensor", value=name)
+    if str(args.out).endswith(("/", os.sep)):
+        raise InputError(
+            f"--out {args.out!r} names a folder: give the key file's path", name="--out"
+        )
     out = Path(args.out)
     if out.is_dir():
         raise InputError(f"--out {str(out)!r} is a folder, not a file", name="--out")

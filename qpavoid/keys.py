@@ -46,6 +46,8 @@ __all__ = [
     "load_key_file",
     "new_key_file",
     "read_bounded",
+    "sensor_name_error",
+    "toml_string",
 ]
 
 #: A key is 256 bits, the size of HMAC-SHA256's hash (RFC 2104: longer adds nothing).
@@ -60,6 +62,34 @@ MAX_KEY_ID = 2**32 - 1
 #: Access bits that make a key file refused: any for the group or others (as ssh does).
 LOOSE_BITS = 0o077
 _HEX = re.compile(r"[0-9a-fA-F]{64}")
+#: A sensor's name is sent in each datagram's header after a one-byte length.
+MAX_SENSOR_NAME_BYTES = 255
+
+
+def sensor_name_error(name: object) -> str | None:
+    """Why ``name`` cannot be a sensor's name (None if it can): a string of 1 to 255 UTF-8
+    bytes (its length is one byte of the signed header) with no control character."""
+    if not isinstance(name, str) or not name:
+        return "a sensor's name is a non-empty string"
+    if len(name.encode("utf-8", "surrogatepass")) > MAX_SENSOR_NAME_BYTES:
+        return f"a sensor's name is at most {MAX_SENSOR_NAME_BYTES} bytes in UTF-8"
+    if not name.isprintable():
+        return "a sensor's name has no control characters"
+    return None
+
+
+def toml_string(text: str) -> str:
+    """``text`` as a TOML basic string: quoted, with backslash, quote and every control
+    character escaped (a name written must read back as itself)."""
+    out = []
+    for ch in text:
+        if ch in '"\\':
+            out.append("\\" + ch)
+        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
+            out.append(f"\\u{ord(ch):04X}")
+        else:
+            out.append(ch)
+    return '"' + "".join(out) + '"'
 
 
 @dataclass(frozen=True)
@@ -133,7 +163,7 @@ class SensorKeys:
         """The text of this sensor's key file."""
         lines = [
             "# qpavoid sensor key: keep it secret, mode 0600 (docs/security.md)",
-            f'sensor = "{self.sensor}"',
+            f"sensor = {toml_string(self.sensor)}",
         ]
         for kid, secret in self.keys:
             lines += ["", "[[key]]", f"id = {kid}", f'secret = "{secret.hex()}"']
@@ -200,6 +230,8 @@ def load_key_file(path: str | Path, sensor: str) -> SensorKeys:
     unknown = sorted(set(data) - {"sensor", "key"})
     if unknown:
         raise fail(f"unknown key {unknown[0]!r} (keys: sensor, [[key]])", unknown[0])
+    if "sensor" not in data:
+        raise fail("it names no sensor (sensor = NAME, then [[key]] tables)", "sensor")
     if data.get("sensor") != sensor:
         raise fail(f"it is the key of sensor {data.get('sensor')!r}", "sensor")
     entries = data.get("key")
@@ -235,6 +267,7 @@ def new_key_file(path: str | Path, sensor: str, *, rotate: bool = False) -> Sens
     """
     p = Path(path)
     if rotate:
+        p = p.resolve()  # a link to the key file: the file is rotated, the link kept
         old = load_key_file(p, sensor)
         keys = SensorKeys(sensor, ((max(old.ids) + 1, secrets.token_bytes(KEY_BYTES)), old.signing))
     else:
@@ -255,6 +288,9 @@ def new_key_file(path: str | Path, sensor: str, *, rotate: bool = False) -> Sens
         with os.fdopen(fd, "wb") as handle:
             handle.write(text)
         if rotate:
+            owner = p.stat()
+            if (owner.st_uid, owner.st_gid) != (os.getuid(), os.getgid()):
+                os.chown(temporary, owner.st_uid, owner.st_gid)  # still its owner's to read
             os.replace(temporary, p)
         else:
             os.link(temporary, p)  # fails if p appeared meanwhile: never overwrite a key

@@ -183,4 +183,31 @@ def describe(m: dict[str, Any]) -> str:
         f"  tick {m['tick_us']['median']:.0f} us median, {m['tick_us']['p99']:.0f} us p99; "
         f"limit violations: velocity {m['joint_velocity_limit_violations']}, "
         f"position {m['joint_position_limit_violations']}"
+    ) + (_input_line(m["input"]) if "input" in m else "")
+
+
+#: What a live run's drops most likely mean, for the one that dominates.
+_DROP_HINTS = {
+    "dropped_bad_tag": "not signed by this cell's keys: check the key files and the cell name",
+    "dropped_unknown_key": "signed with a key id this calibration does not hold",
+    "dropped_unauthenticated": "unsigned: sign them (replay --sensors) or, without keys, "
+    "--allow-unauthenticated on loopback",
+    "dropped_unknown_sensor": "from a sensor the calibration does not name",
+    "from_the_future": "stamped ahead of this clock: check the sensors' time_offset_s",
+    "late": "older than the age limit when they arrived: check the clocks and the network",
+}
+
+
+def _input_line(counts: dict[str, int]) -> str:
+    """A live run's datagrams: how many came, how many were taken, the drops, and what the
+    largest drop most likely means (docs/security.md)."""
+    drops = sorted(
+        ((n, k) for k, n in counts.items() if k.startswith("dropped_") or k in _DROP_HINTS),
+        reverse=True,
     )
+    line = f"\n  input: {counts.get('received', 0)} datagrams, {counts.get('accepted', 0)} taken"
+    if drops:
+        line += "; " + ", ".join(f"{k} {n}" for n, k in drops[:4])
+        if drops[0][1] in _DROP_HINTS and drops[0][0] > counts.get("accepted", 0):
+            line += f" ({_DROP_HINTS[drops[0][1]]})"
+    return line

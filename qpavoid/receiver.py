@@ -27,6 +27,7 @@ import contextlib
 import os
 import signal
 import socket
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -36,6 +37,8 @@ from typing import Any
 import numpy as np
 
 from .calibration import Calibration
+from .calibration_file import load_calibration
+from .errors import CalibrationError
 from .frames import N_KINECT_JOINTS
 from .sensor_recording import MAX_BODIES, BodyFrame
 from .signing import FUTURE_TOLERANCE_S, Verifier
@@ -56,7 +59,12 @@ COUNTERS = (
     "out_of_order_or_duplicate",
     *(f"dropped_{reason}" for reason in REASONS if reason not in TIME_REASONS),
     "dropped_unreadable",
+    "keys_reloaded",
+    "keys_reload_failed",
 )
+#: How often the receiver looks whether the calibration or a key file changed, s (a
+#: rotation is taken within a second, without a stop; a stat of three files costs µs).
+KEY_CHECK_S = 1.0
 _J = N_KINECT_JOINTS
 #: A slot: sequence number written, sequence number taken, t, joints (25 × 3), states (25).
 SLOT = 3 + 4 * _J
@@ -165,14 +173,60 @@ def serve(
         _receive(sock, verifier, table, stop, parent_pid)
 
 
+class _KeyWatch:
+    """The calibration file and its key files, read again when one of them changes, so
+    that a rotated key is taken without a stop (docs/security.md §6). A reading that fails
+    (a key file caught half-written, a mode made loose) keeps the keys in use."""
+
+    def __init__(self, calibration: Calibration):
+        self.path = calibration.path
+        self.files = [f for f in (calibration.path, *calibration.key_files.values()) if f]
+        self.stamp = self._stamp()
+        self.next_s = time.monotonic() + KEY_CHECK_S
+
+    def _stamp(self) -> tuple:
+        stamps: list[tuple[int, int, int, int] | None] = []
+        for f in self.files:
+            try:
+                info = os.stat(f)
+                stamps.append((info.st_mtime_ns, info.st_size, info.st_ino, info.st_mode))
+            except OSError:
+                stamps.append(None)
+        return tuple(stamps)
+
+    def changed(self) -> Calibration | str | None:
+        """A calibration read again if a file changed, why not if reading it failed (a
+        string), None if nothing changed (or it is not time to look)."""
+        now = time.monotonic()
+        if self.path is None or now < self.next_s:
+            return None
+        self.next_s = now + KEY_CHECK_S
+        stamp = self._stamp()
+        if stamp == self.stamp:
+            return None
+        self.stamp = stamp
+        try:
+            return load_calibration(self.path)
+        except CalibrationError as exc:
+            return str(exc)
+
+
 def _receive(
     sock: socket.socket, verifier: Verifier, table: SlotTable, stop: Any, parent_pid: int
 ) -> None:
+    watch = _KeyWatch(verifier.calibration)
     rows, counts = table._arrays()
     index = {name: i for i, name in enumerate(table.sensors)}
     code = {name: i for i, name in enumerate(COUNTERS)}
     newest = np.full(len(rows), -np.inf)
     while not stop.is_set() and os.getppid() == parent_pid:
+        reread = watch.changed()
+        if reread is not None:
+            if isinstance(reread, Calibration):
+                verifier.rekey(reread)
+            failed = isinstance(reread, str)
+            with table.lock:
+                counts[code["keys_reload_failed" if failed else "keys_reloaded"]] += 1
         try:
             data = sock.recv(65536)
         except TimeoutError:

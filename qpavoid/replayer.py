@@ -62,7 +62,8 @@ def replay(
     streams: dict[tuple[str, int], list[float]] = {}
     for f in frames:
         streams.setdefault((f.sensor, f.body), []).append(f.t)
-    steps = sorted(b - a for times in streams.values() for a, b in pairwise(times))
+    # the same frame twice (a recording given twice) is no step: only positive ones count
+    steps = sorted(b - a for times in streams.values() for a, b in pairwise(times) if b > a)
     scale = (1.0 / rate_hz) / steps[len(steps) // 2] if steps else 1.0
     family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
     sent = 0

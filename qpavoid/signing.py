@@ -244,14 +244,20 @@ class Verifier:
     ):
         self.calibration, self.workspace, self.accept_v1 = calibration, workspace, accept_v1
         self.max_age_s, self.future_tolerance_s, self.clock = max_age_s, future_tolerance_s, clock
+        self._sensors = {name.encode(): name for name in calibration.sensors}
+        self._windows = {name: ReplayWindow() for name in calibration.sensors}
+        self.rekey(calibration)
+
+    def rekey(self, calibration: Calibration) -> None:
+        """Take the cell's name and the keys of ``calibration`` (the same sensors, read
+        again: a key rotated), keeping each sensor's replay window."""
         self._prefix = _tag_prefix(calibration.cell)
         self._secrets = {
             (name.encode(), kid): secret
             for name, keys in calibration.keys.items()
+            if name in self._windows
             for kid, secret in keys.keys
         }
-        self._sensors = {name.encode(): name for name in calibration.sensors}
-        self._windows = {name: ReplayWindow() for name in calibration.sensors}
 
     def decode(self, data: bytes) -> BodyFrame:
         """The :class:`BodyFrame` of a datagram, verified and checked.

@@ -21,6 +21,7 @@ from qpavoid._checks import is_loopback
 from qpavoid.association import torso_centre
 from qpavoid.calibration import Calibration, SensorCalibration
 from qpavoid.calibration_file import load_calibration
+from qpavoid.cli import main as cli_main
 from qpavoid.errors import CalibrationError, InputError
 from qpavoid.fusion import Fuser, FusionConfig
 from qpavoid.keys import MAX_KEY_FILE_BYTES, SensorKeys, load_key_file, new_key_file
@@ -131,7 +132,9 @@ def test_a_calibration_gives_keys_to_every_sensor_or_none(tmp_path):
         load_calibration(path)
 
 
-def test_key_errors_on_the_command_line_are_one_line_with_status_2_and_write_nothing(tmp_path):
+def test_key_errors_on_the_command_line_are_one_line_with_status_2_and_write_nothing(
+    tmp_path, capsys
+):
     calib = Path(write_calibration(tmp_path, cell()))
     text = calib.read_text()
     cases = {
@@ -145,27 +148,36 @@ def test_key_errors_on_the_command_line_are_one_line_with_status_2_and_write_not
         (tmp_path / "a.key").chmod(0o600)
         spoil()
         out = tmp_path / f"out-{name.replace(' ', '-')}"
-        cmd = [sys.executable, "-m", "qpavoid", "run", "--listen", "127.0.0.1:9"]
-        cmd += ["--sensors", str(calib), "--out", str(out), "--max-time", "1"]
-        result = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
-        assert result.returncode == 2, (name, result.stderr)
-        lines = result.stderr.strip().splitlines()
+        argv = ["run", "--listen", "127.0.0.1:9", "--sensors", str(calib), "--out", str(out)]
+        assert cli_main([*argv, "--max-time", "1"]) == 2, name
+        lines = capsys.readouterr().err.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("qpavoid: error:"), (name, lines)
         assert not out.exists(), name
 
 
-def test_keygen_writes_a_private_key_file_and_refuses_to_overwrite(tmp_path):
+def test_keygen_writes_a_private_key_file_and_refuses_to_overwrite(tmp_path, capsys):
     path = tmp_path / "left.key"
-    cmd = [sys.executable, "-m", "qpavoid", "keygen", "kinect_left", "--out", str(path)]
-    first = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
-    assert first.returncode == 0 and "key 1 of sensor 'kinect_left' signs" in first.stdout
+    argv = ["keygen", "kinect_left", "--out", str(path)]
+    assert cli_main(argv) == 0
+    assert "key 1 of sensor 'kinect_left' signs" in capsys.readouterr().out
     assert path.stat().st_mode & 0o077 == 0
     before = path.read_bytes()
-    again = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
-    assert again.returncode == 2 and "exists" in again.stderr and path.read_bytes() == before
-    rotated = subprocess.run([*cmd, "--rotate"], capture_output=True, text=True, timeout=60)
-    assert rotated.returncode == 0 and "key 1 still accepted" in rotated.stdout
+    assert cli_main(argv) == 2 and "exists" in capsys.readouterr().err
+    assert path.read_bytes() == before
+    assert cli_main([*argv, "--rotate"]) == 0
+    assert "key 1 still accepted" in capsys.readouterr().out
     assert load_key_file(path, "kinect_left").ids == (2, 1)
+    for k, odd in enumerate(("a\\b", 'a"b', "ü x.y]")):  # TOML that reads back as itself
+        other = tmp_path / f"odd{k}.key"
+        assert cli_main(["keygen", odd, "--out", str(other)]) == 0
+        assert load_key_file(other, odd).sensor == odd
+    capsys.readouterr()
+    assert cli_main(["keygen", "x" * 256, "--out", str(tmp_path / "long.key")]) == 2
+    assert "at most 255 bytes" in capsys.readouterr().err
+    link = tmp_path / "link.key"
+    link.symlink_to(path)
+    assert cli_main(["keygen", "kinect_left", "--out", str(link), "--rotate"]) == 0
+    assert link.is_symlink() and load_key_file(path, "kinect_left").ids == (3, 2)
 
 
 # --- the replay window and the signed datagram ------------------------------------------
@@ -389,6 +401,7 @@ def test_the_opt_in_listener_on_loopback_takes_unsigned_datagrams_of_sensors_wit
     assert listener.counters["accepted"] == 2 and listener.counters["late"] == 1
 
 
+@pytest.mark.slow
 def test_the_sender_example_signs_frames_a_listener_accepts(tmp_path):
     calib = write_calibration(tmp_path, cell())
     example = Path(__file__).parents[1] / "examples" / "sensor_sender.py"
@@ -403,3 +416,47 @@ def test_the_sender_example_signs_frames_a_listener_accepts(tmp_path):
     sent = int(result.stdout.split()[1])
     assert sent >= 2 and counts["received"] == counts["accepted"] == sent, counts
     assert [(f.sensor, f.body) for f in frames] == [("b", 0)]
+
+
+def test_a_key_is_rotated_without_stopping_the_listener(tmp_path):
+    """An adversarial tester's case: the listener read its keys once, so a rotation needed
+    a restart (a stop). It now reads them again when a file changes."""
+    calib = write_calibration(tmp_path, cell())
+    key_a = tmp_path / "a.key"
+
+    def send(keys: SensorKeys, n: int = 5) -> None:
+        signer = Signer("cell-1", keys)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            for _ in range(n):
+                sock.sendto(signer.encode(body("a", time.time())), listener.address)
+                time.sleep(0.005)
+
+    def until(counter: str, value: int) -> dict:
+        deadline = time.time() + 20.0
+        while listener.counters[counter] < value and time.time() < deadline:
+            time.sleep(0.05)
+        return dict(listener.counters)
+
+    with Listener(("127.0.0.1", 0), load_calibration(calib)) as listener:
+        first = load_key_file(key_a, "a")
+        send(first)
+        assert until("accepted", 5)["accepted"] == 5
+        new_key_file(key_a, "a", rotate=True)  # the listener's file first: ids 2, 1
+        until("keys_reloaded", 1)
+        send(first)  # the sender still on key 1: still taken
+        assert until("accepted", 10)["accepted"] == 10
+        second = load_key_file(key_a, "a")
+        send(second)  # then the sender on key 2
+        assert until("accepted", 15)["accepted"] == 15
+        key_a.chmod(0o644)  # a bad reading keeps the keys in use
+        until("keys_reload_failed", 1)
+        send(second)
+        assert until("accepted", 20)["accepted"] == 20
+        key_a.chmod(0o600)
+        until("keys_reloaded", 2)
+        new_key_file(key_a, "a", rotate=True)  # ids 3, 2: key 1 is gone
+        until("keys_reloaded", 3)
+        send(first)
+        counts = until("dropped_unknown_key", 5)
+    assert counts["dropped_unknown_key"] == 5 and counts["accepted"] == 20, counts
+    assert counts["keys_reloaded"] == 3 and counts["keys_reload_failed"] == 1, counts
