@@ -10,6 +10,7 @@ import socket
 import struct
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -25,7 +26,7 @@ from qpavoid.cli import main as cli_main
 from qpavoid.errors import CalibrationError, InputError
 from qpavoid.fusion import Fuser, FusionConfig
 from qpavoid.keys import MAX_KEY_FILE_BYTES, SensorKeys, load_key_file, new_key_file
-from qpavoid.live import Listener
+from qpavoid.live import Listener, LiveSource
 from qpavoid.posture import Operator
 from qpavoid.sensor_recording import BodyFrame
 from qpavoid.signing import REPLAY_WINDOW, ReplayWindow, Signer, Verifier, fields
@@ -460,3 +461,30 @@ def test_a_key_is_rotated_without_stopping_the_listener(tmp_path):
         counts = until("dropped_unknown_key", 5)
     assert counts["dropped_unknown_key"] == 5 and counts["accepted"] == 20, counts
     assert counts["keys_reloaded"] == 3 and counts["keys_reload_failed"] == 1, counts
+
+
+def test_the_live_source_clears_the_flagged_people_when_the_view_asks():
+    class Frames:
+        """A listener's side: the frames sent so far, once each."""
+
+        def __init__(self):
+            self.calibration, self.counters = cell(view=True), {}
+            self.pending: list[BodyFrame] = []
+
+        def drain(self) -> list[BodyFrame]:
+            out, self.pending = self.pending, []
+            return out
+
+    listener, clear = Frames(), threading.Event()
+    source = LiveSource(listener, clock=lambda: 100.0, clear=clear)  # run time 0 = 100 s
+    for k in range(45):  # the operator from the start, then a phantom by the base at 1.2 s
+        t = k / 30
+        listener.pending = [body(s, 100.0 + t, 0) for s in "ab"]
+        if k >= 36:
+            listener.pending.append(body("a", 100.0 + t, 3, (0.4, -0.5, 0.0)))
+        people, _ = source.frame_at(t)
+    assert "never seen approaching" in source.alert and len(people.ids) == 2
+    clear.set()
+    listener.pending = [body(s, 101.69, 0) for s in "ab"]  # the phantom has gone
+    people, _ = source.frame_at(1.7)
+    assert source.alert == "" and len(people.ids) == 1 and not clear.is_set()
