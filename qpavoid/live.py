@@ -31,7 +31,7 @@ from .calibration import Calibration
 from .errors import InputError
 from .fusion import Fuser, FusionConfig
 from .people import People
-from .receiver import SlotTable, serve
+from .receiver import KEY_CHECK_S, SlotTable, serve
 from .sensor_recording import BodyFrame
 from .signing import FUTURE_TOLERANCE_S
 from .wire import Workspace
@@ -84,6 +84,9 @@ class Listener:
     future_tolerance_s
         A frame captured more than this after now is dropped on arrival, s
         (:data:`~qpavoid.signing.FUTURE_TOLERANCE_S`).
+    key_check_s
+        How often the receiver looks whether the calibration or a key file changed, and
+        reads them again if so (a key rotated without a stop), s.
 
     Raises
     ------
@@ -102,6 +105,7 @@ class Listener:
         start_timeout_s: float = 30.0,
         accept_unauthenticated: bool = False,
         future_tolerance_s: float = FUTURE_TOLERANCE_S,
+        key_check_s: float = KEY_CHECK_S,
     ):
         check_listening(address, calibration, accept_unauthenticated)
         self.calibration = calibration
@@ -123,6 +127,7 @@ class Listener:
                 os.getpid(),
                 accept_unauthenticated,
                 future_tolerance_s,
+                key_check_s,
             ),
             name="qpavoid-udp",
             daemon=True,

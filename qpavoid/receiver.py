@@ -139,6 +139,7 @@ def serve(
     parent_pid: int,
     accept_v1: bool = False,
     future_tolerance_s: float = FUTURE_TOLERANCE_S,
+    key_check_s: float = KEY_CHECK_S,
 ) -> None:
     """The receiver process: bind ``address``, tell ``status`` ``("ok", address)`` or
     ``("error", why)``, then receive until ``stop`` (an Event) is set or the parent
@@ -148,7 +149,8 @@ def serve(
     verified (unsigned ones taken only with ``accept_v1``); a frame captured more than
     ``max_age_s`` before now (``late``) or more than ``future_tolerance_s`` after now
     (``from_the_future``, a clock ahead of ours) is dropped before it can count as its
-    body's newest.
+    body's newest. The calibration and key files are looked at every ``key_check_s`` and
+    read again when one changed (a rotated key).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked by the parent
@@ -170,7 +172,7 @@ def serve(
             max_age_s=max_age_s,
             future_tolerance_s=future_tolerance_s,
         )
-        _receive(sock, verifier, table, stop, parent_pid)
+        _receive(sock, verifier, _KeyWatch(calibration, key_check_s), table, stop, parent_pid)
 
 
 class _KeyWatch:
@@ -178,11 +180,12 @@ class _KeyWatch:
     that a rotated key is taken without a stop (docs/security.md §6). A reading that fails
     (a key file caught half-written, a mode made loose) keeps the keys in use."""
 
-    def __init__(self, calibration: Calibration):
+    def __init__(self, calibration: Calibration, every_s: float):
         self.path = calibration.path
         self.files = [f for f in (calibration.path, *calibration.key_files.values()) if f]
         self.stamp = self._stamp()
-        self.next_s = time.monotonic() + KEY_CHECK_S
+        self.every_s = every_s
+        self.next_s = time.monotonic() + every_s
 
     def _stamp(self) -> tuple:
         stamps: list[tuple[int, int, int, int] | None] = []
@@ -200,7 +203,7 @@ class _KeyWatch:
         now = time.monotonic()
         if self.path is None or now < self.next_s:
             return None
-        self.next_s = now + KEY_CHECK_S
+        self.next_s = now + self.every_s
         stamp = self._stamp()
         if stamp == self.stamp:
             return None
@@ -212,9 +215,13 @@ class _KeyWatch:
 
 
 def _receive(
-    sock: socket.socket, verifier: Verifier, table: SlotTable, stop: Any, parent_pid: int
+    sock: socket.socket,
+    verifier: Verifier,
+    watch: _KeyWatch,
+    table: SlotTable,
+    stop: Any,
+    parent_pid: int,
 ) -> None:
-    watch = _KeyWatch(verifier.calibration)
     rows, counts = table._arrays()
     index = {name: i for i, name in enumerate(table.sensors)}
     code = {name: i for i, name in enumerate(COUNTERS)}
