@@ -1,12 +1,16 @@
 """Who may become a person, and who is suspect: the fusion's gate against one sender holding
 the cell (docs/security.md §4; the settings are :class:`~qpavoid.fusion.FusionConfig`'s).
 
-* At most ``max_people`` are tracked; a body that would be one more is let in only in
-  place of the person farthest from the robot's base, if it is nearer (the controller acts
-  on the nearest).
-* New people far from the robot (beyond ``forget_beyond_m``) come at most at
-  ``max_new_people_per_s``, in bursts of ``new_people_burst`` (a token bucket); near the
-  robot, nobody is held back by the rate.
+* A body seen near the robot (within ``forget_beyond_m`` of its base) always becomes a
+  person: nobody near it is refused or displaced, however many others there are (a
+  compromised sensor once pushed the real operator out of a full cell with six phantoms
+  under the table).
+* New people far from the robot come only while fewer than ``max_people`` are tracked,
+  and at most at ``max_new_people_per_s``, in bursts of ``new_people_burst`` (a token
+  bucket).
+* The fusion's work stays bounded: beyond ``max_tracks``, the people *not seen now* are
+  forgotten, flagged ones first, then those unseen longest
+  (:meth:`~qpavoid.fusion.Fuser.fuse`); those seen now are at most six per sensor.
 * After ``phantom_grace_s`` from the first frame (the people there at start-up), a person
   who appears near the
   robot is flagged, and so is one whom a single sensor saw through their first
@@ -19,8 +23,6 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-
-import numpy as np
 
 from .association import PersonTrack
 from .calibration import Calibration
@@ -62,30 +64,38 @@ class Admission:
         self._tokens_s = t
 
     def admit(
-        self, centre: tuple[float, float, float], t: float, tracks: list[PersonTrack]
-    ) -> tuple[bool, PersonTrack | None, str]:
+        self, centre: tuple[float, float, float], t: float, n_tracks: int
+    ) -> tuple[bool, str]:
         """May a body whose torso centre is ``centre`` (base frame, m) become a new person
-        at ``t``? ``(admitted, the tracked person to drop for it or None, its flag)``."""
+        at ``t``, with ``n_tracks`` people tracked? ``(admitted, its flag)``."""
         cfg = self.cfg
         distance = math.hypot(*centre)
         near = distance <= cfg.forget_beyond_m
-        if not near and self._tokens < 1.0:
-            self.counters["too_many_new_people"] += 1
-            return False, None, ""
-        evicted = None
-        if len(tracks) >= cfg.max_people:
-            evicted = max(tracks, key=lambda tr: _distance_or_inf(tr.centre()))
-            if not _distance_or_inf(evicted.centre()) > distance:
-                self.counters["too_many_people"] += 1
-                return False, None, ""
-            self.counters["dropped_for_a_nearer_person"] += 1
         if not near:
+            if n_tracks >= cfg.max_people:
+                self.counters["too_many_people"] += 1
+                return False, ""
+            if self._tokens < 1.0:
+                self.counters["too_many_new_people"] += 1
+                return False, ""
             self._tokens -= 1.0
         flag = ""
         if near and self.first_s is not None and t - self.first_s > cfg.phantom_grace_s:
             flag = f"appeared {distance:.2f} m from the robot's base, never seen approaching"
             self.counters["flagged_people"] += 1
-        return True, evicted, flag
+        return True, flag
+
+    def room(self, tracks: list[PersonTrack], seen: set[int]) -> list[PersonTrack]:
+        """The tracks to forget so that at most ``max_tracks`` remain: never one ``seen``
+        now; flagged ones first, then those unseen longest."""
+        excess = len(tracks) - self.cfg.max_tracks
+        if excess <= 0:
+            return []
+        unseen = sorted(
+            (tr for tr in tracks if tr.id not in seen), key=lambda tr: (not tr.flag, tr.seen_s)
+        )
+        self.counters["forgotten_for_room"] += min(excess, len(unseen))
+        return unseen[:excess]
 
     def coverage_flag(self, track: PersonTrack, t: float) -> str:
         """Once ``track`` has settled, its flag if a single sensor saw them while another,
@@ -102,9 +112,3 @@ class Admission:
                 self.counters["flagged_people"] += 1
                 return f"seen by {only} only, in the view of {name}"
         return ""
-
-
-def _distance_or_inf(centre: np.ndarray) -> float:
-    """Distance of a torso centre from the robot's base, m (inf if not known)."""
-    distance = float(np.linalg.norm(centre))
-    return distance if math.isfinite(distance) else math.inf

@@ -19,8 +19,9 @@ A person no sensor sees any more is reported with every joint missing for
 ``person_timeout_s`` (the controller's tracker bounds them meanwhile), then dropped, unless
 they were last seen within ``forget_beyond_m`` of the robot: those are kept until seen.
 
-One sender cannot hold the cell: at most ``max_people`` are tracked (the nearest the robot
-kept), new ones far from the robot appear at a bounded rate, and a person who appears near
+One sender cannot hold the cell: nobody seen near the robot is ever refused, new people
+far from it appear only in a cell of fewer than ``max_people`` and at a bounded rate, at
+most ``max_tracks`` are kept (those seen now first), and a person who appears near
 the robot out of nowhere, or whom only one sensor sees where another looks, is flagged
 (:attr:`FusedPerson.flag`); :meth:`Fuser.clear_flagged` lets an operator drop them.
 """
@@ -158,12 +159,14 @@ class Fuser:
             for body, tid in mapping.items():
                 tc, joints, state, centre = bodies[body]
                 if tid is None:
-                    track = self._new_person(joints, centre, t, per_track, track_centres)
+                    track = self._new_person(joints, centre, t)
                     if track is None:
                         continue
                     track_centres[track.id] = centre
                     self._assigned[sensor][body] = tid = track.id
                 per_track.setdefault(tid, []).append(_Contribution(sensor, joints, state, t - tc))
+        for track in self._admission.room(self.tracks, set(per_track)):
+            self._drop(track.id)
         people = []
         for track in list(self.tracks):
             contributions = per_track.get(track.id)
@@ -194,22 +197,13 @@ class Fuser:
                 del assigned[body]
 
     def _new_person(
-        self,
-        joints: np.ndarray,
-        centre: tuple[float, float, float],
-        t: float,
-        per_track: dict[int, list[_Contribution]],
-        track_centres: dict[int, tuple[float, ...]],
+        self, joints: np.ndarray, centre: tuple[float, float, float], t: float
     ) -> PersonTrack | None:
         """A new person for a body that fits nobody, or None if :class:`Admission` refuses
-        them (in place of the farthest person, if the cell is full)."""
-        admitted, evicted, flag = self._admission.admit(centre, t, self.tracks)
+        them (a far newcomer to a full cell, or too many too fast)."""
+        admitted, flag = self._admission.admit(centre, t, len(self.tracks))
         if not admitted:
             return None
-        if evicted is not None:
-            self._drop(evicted.id)
-            per_track.pop(evicted.id, None)
-            track_centres.pop(evicted.id, None)
         track = PersonTrack(self._next_id, joints.copy(), born_s=t, flag=flag)
         self._next_id += 1
         self.tracks.append(track)

@@ -49,17 +49,21 @@ class FusionConfig:
         stopped by their growing uncertainty until a sensor sees them again, m (1.5: the
         iiwa's 0.82 m reach plus an arm's length).
     max_people
-        At most this many people are tracked (6: a Kinect v2 tracks six bodies, and no
-        cell's table seats more). A body that would be one more is tracked only if it is
-        nearer the robot's base than someone tracked, who is dropped for it (the
-        controller acts on the nearest); otherwise it is dropped and counted
-        (``too_many_people``). A flood of forged bodies cannot grow the fusion's work.
+        New people far from the robot (beyond ``forget_beyond_m``) join only while fewer
+        than this many are tracked (6: a Kinect v2 tracks six bodies, and no cell's table
+        seats more); others are dropped and counted (``too_many_people``). A body near the
+        robot always joins: nobody near it is refused or displaced.
+    max_tracks
+        At most this many people are kept (24: four cells' worth; the fusion takes about
+        18 µs a person); beyond, those not seen now are forgotten, flagged ones first, then
+        those unseen longest (``forgotten_for_room``). Those seen now are at most six per
+        sensor, so a flood of forged bodies cannot grow the fusion's work.
     max_new_people_per_s, new_people_burst
         New people far from the robot (beyond ``forget_beyond_m``) may appear at this
         mean rate, 1/s, in bursts of at most ``new_people_burst`` (a token bucket: people
         walk in one at a time, and six cover a whole cell in view at the start); more are
         dropped and counted (``too_many_new_people``). A body near the robot is never held
-        back by the rate, only by ``max_people``.
+        back by the rate.
     phantom_grace_s
         Who appears within this time of the first frame any sensor sent is the cell's people at
         start-up, s; after it, a person who appears within ``forget_beyond_m`` of the
@@ -89,6 +93,7 @@ class FusionConfig:
     person_timeout_s: float = 2.0
     forget_beyond_m: float = 1.5
     max_people: int = 6
+    max_tracks: int = 24
     max_new_people_per_s: float = 2.0
     new_people_burst: int = 6
     phantom_grace_s: float = 1.0

@@ -181,7 +181,7 @@ class _KeyWatch:
     (a key file caught half-written, a mode made loose) keeps the keys in use."""
 
     def __init__(self, calibration: Calibration, every_s: float):
-        self.path = calibration.path
+        self.calibration, self.path = calibration, calibration.path
         self.files = [f for f in (calibration.path, *calibration.key_files.values()) if f]
         self.stamp = self._stamp()
         self.every_s = every_s
@@ -209,9 +209,22 @@ class _KeyWatch:
             return None
         self.stamp = stamp
         try:
-            return load_calibration(self.path)
+            again = load_calibration(self.path)
         except CalibrationError as exc:
             return str(exc)
+        if not _same_sensors(again, self.calibration):
+            return "only the keys are read again: a new pose, clock or sensor needs a restart"
+        return again
+
+
+def _same_sensors(a: Calibration, b: Calibration) -> bool:
+    """The same sensors, poses, clocks, weights and views (keys and cell aside)."""
+    return list(a.sensors) == list(b.sensors) and all(
+        np.array_equal(a[n].base_from_camera, b[n].base_from_camera)
+        and (a[n].time_offset_s, a[n].weight, a[n].field_of_view_deg, a[n].range_m)
+        == (b[n].time_offset_s, b[n].weight, b[n].field_of_view_deg, b[n].range_m)
+        for n in a.sensors
+    )
 
 
 def _receive(

@@ -80,6 +80,11 @@ VERSION_2 = 2
 #: PTP or NTP on a cell's network leaves between two clocks, and is far below the 0.1 s a
 #: forger once used to make every real frame of a body look out of order.
 FUTURE_TOLERANCE_S = 0.005
+#: A sender counts from its start time in microseconds and sends far fewer than a million
+#: datagrams a second, so its numbers never pass the clock in µs: one that is more than
+#: this ahead of it (clocks a second apart) is refused, or a sensor's key holder could set
+#: its window's top to 2^64 - 1 and blind it (an adversarial tester's).
+SEQUENCE_LEAD_S = 1.0
 MAGIC = b"QPAV"
 #: What the tag signs first: no message of another protocol signed with the key can pass.
 DOMAIN = b"qpavoid skeleton datagram v2\x00"
@@ -245,19 +250,23 @@ class Verifier:
         self.calibration, self.workspace, self.accept_v1 = calibration, workspace, accept_v1
         self.max_age_s, self.future_tolerance_s, self.clock = max_age_s, future_tolerance_s, clock
         self._sensors = {name.encode(): name for name in calibration.sensors}
-        self._windows = {name: ReplayWindow() for name in calibration.sensors}
+        # one window per sensor and key: a new key counts afresh, whatever an old key's
+        # holder did to its window
+        self._windows: dict[tuple[str, int], ReplayWindow] = {}
         self.rekey(calibration)
 
     def rekey(self, calibration: Calibration) -> None:
         """Take the cell's name and the keys of ``calibration`` (the same sensors, read
-        again: a key rotated), keeping each sensor's replay window."""
+        again: a key rotated); the windows of the keys kept are kept."""
         self._prefix = _tag_prefix(calibration.cell)
         self._secrets = {
             (name.encode(), kid): secret
             for name, keys in calibration.keys.items()
-            if name in self._windows
+            if name in self.calibration.sensors
             for kid, secret in keys.keys
         }
+        kept = {(n.decode(), kid) for n, kid in self._secrets}
+        self._windows = {k: w for k, w in self._windows.items() if k in kept}
 
     def decode(self, data: bytes) -> BodyFrame:
         """The :class:`BodyFrame` of a datagram, verified and checked.
@@ -291,9 +300,11 @@ class Verifier:
         body, tag = data[:-TAG_BYTES], data[-TAG_BYTES:]
         if not hmac.compare_digest(hmac.digest(secret, self._prefix + body, "sha256"), tag):
             raise WireError(f"a tag that does not verify ({name!r})", reason="bad_tag")
-        window = self._windows[name]
+        window = self._windows.setdefault((name, key_id), ReplayWindow())
         if window.seen(sequence):
             raise WireError(f"sequence number {sequence} of {name!r} seen", reason="replayed")
+        if sequence > (self.clock() + SEQUENCE_LEAD_S) * 1e6:
+            raise WireError(f"sequence number {sequence} ahead of the clock", reason="replayed")
         self._check_time(name, t)
         window.mark(sequence)  # only now: an old or future datagram moves nothing
         message = json_object(body[end + _IDS.size :]) | {"t": t}

@@ -189,6 +189,10 @@ class ViewHandler(BaseHTTPRequestHandler):
         self.rfile = io.BufferedReader(_DeadlineReader(self.connection, deadline))
 
     def do_POST(self) -> None:
+        origin = self.headers.get("Origin")
+        if origin is not None and origin.lower().split("://", 1)[-1] not in self.view.hosts:
+            self.send_error(403, explain="a request from another site's page")
+            return
         rest = self._checked_path()
         if rest == "clear":  # no body is read: the request line says it all
             self.view.clear_requested.set()

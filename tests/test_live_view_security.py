@@ -264,13 +264,15 @@ def test_only_the_operators_page_can_ask_to_clear_the_flagged_people(view):
     port, token = port_of(view), view.token
     host = f"127.0.0.1:{port}"
 
-    def post(path: str, host: str) -> int:
+    def post(path: str, host: str, origin: str | None = None) -> int:
         lines = [f"POST {path} HTTP/1.1", f"Host: {host}", "Content-Length: 0"]
+        lines += [f"Origin: {origin}"] if origin else []
         return ask(port, ("\r\n".join([*lines, "Connection: close", "", ""])).encode())[0]
 
     assert post("/clear", host) == 404 and post("/wrong/clear", host) == 404
     assert post(f"/{token}/clear", "rebind.attacker.example") == 403
+    assert post(f"/{token}/clear", host, "http://evil.example") == 403  # another site's form
     assert not view.clear_requested.is_set()
     assert post(f"/{token}/state", host) == 404  # only clear is posted
-    assert post(f"/{token}/clear", host) == 200
+    assert post(f"/{token}/clear", host, f"http://{host}") == 200  # the page's own fetch
     assert view.clear_requested.is_set()
