@@ -29,11 +29,7 @@ datagram has passed the time window: an old genuine datagram (a recording of the
 traffic) is ``late`` and moves nothing (an adversarial tester's: one week-old datagram
 per sensor had blinded both for good).
 
-HMAC-SHA256 rather than an AEAD (ChaCha20-Poly1305): Python's standard library computes
-it (no new dependency, no native code of ours), and it is what the black-channel safety
-protocols ask of an untrusted network (integrity and authenticity). It does not hide the
-skeletons, which are personal data: a cell network that must keep them confidential runs
-the sensors' traffic through an encrypted link (docs/security.md).
+HMAC-SHA256, not an AEAD, and why: docs/security.md §2.
 """
 
 from __future__ import annotations
