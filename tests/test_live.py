@@ -18,6 +18,7 @@ import pytest
 from conftest import write_calibration
 
 from qpavoid.calibration import Calibration, SensorCalibration
+from qpavoid.cli import main as cli_main
 from qpavoid.controller import ControllerConfig
 from qpavoid.frames import HumanFrame
 from qpavoid.fusion import FusionConfig
@@ -337,7 +338,7 @@ def test_the_command_line_listens_and_ctrl_c_or_sigterm_writes_the_run(tmp_path,
 
 
 @pytest.mark.parametrize("signed", [True, False])
-def test_per_sensor_files_replay_from_the_command_line(tmp_path, robot, signed):
+def test_per_sensor_files_replay_from_the_command_line(tmp_path, robot, signed, capsys):
     data = two_sensor_data([make_scenario("free", robot)], 0.3, TwoSensorConfig(seed=1))
     files = []
     for name, rec in data.recordings.items():
@@ -348,14 +349,12 @@ def test_per_sensor_files_replay_from_the_command_line(tmp_path, robot, signed):
         sink.bind(("127.0.0.1", 0))
         sink.settimeout(5.0)
         port = sink.getsockname()[1]
-        cmd = [sys.executable, "-m", "qpavoid", "replay", *files, "--to", f"127.0.0.1:{port}"]
-        cmd += ["--sensors", calib] if signed else ["--unsigned"]
-        result = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+        argv = ["replay", *files, "--to", f"127.0.0.1:{port}", "--rate", "300"]
+        argv += ["--sensors", calib] if signed else ["--unsigned"]
+        assert cli_main(argv) == 0, capsys.readouterr().err
         got = [sink.recv(65536) for _ in range(18)]
-    assert result.returncode == 0, result.stderr
-    assert f"sent 18 datagrams to 127.0.0.1:{port} ({'signed' if signed else 'unsigned'})" in (
-        result.stdout
-    )
+    kind = "signed" if signed else "unsigned"
+    assert f"sent 18 datagrams to 127.0.0.1:{port} ({kind})" in capsys.readouterr().out
     if signed:
         verifier = Verifier(data.calibration)
         assert {verifier.decode(d).sensor for d in got} == set(data.recordings)
