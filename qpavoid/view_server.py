@@ -24,6 +24,11 @@ __all__ = [
 ]
 
 
+#: What :meth:`ViewHandler._checked_path` returns for ``/TOKEN`` without its slash (no
+#: path after a slash can hold this character).
+_NO_SLASH = "\0"
+
+
 class Served(Protocol):
     """What the server serves (a :class:`~qpavoid.live_view.LiveView`)."""
 
@@ -211,13 +216,13 @@ class ViewHandler(BaseHTTPRequestHandler):
         if not hmac.compare_digest(token.encode("utf-8"), self.view.token.encode("ascii")):
             self.send_error(404)
             return None
-        return rest if slash else "\0"
+        return rest if slash else _NO_SLASH
 
     def do_GET(self) -> None:
         rest = self._checked_path()
         if rest is None:
             return
-        if rest == "\0":  # the token without its "/": the page's relative "state" needs it
+        if rest == _NO_SLASH:  # the token without its "/": the page's relative "state" needs it
             self._send(b"", "text/plain", 301, location=f"/{self.view.token}/")
         elif rest in ("", "index.html"):
             self._send(self.view.page, "text/html; charset=utf-8")
