@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import ipaddress
 import math
+import os
 import socket
+import stat
 import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -170,6 +172,45 @@ MAX_NPZ_FILE_BYTES = MAX_NPZ_BYTES + 2**20
 MAX_CSV_BYTES = 2**30
 
 
+#: Access bits that make a private file (a key) refused: any for the group or others (as
+#: ssh does).
+LOOSE_BITS = 0o077
+
+
+def read_bounded(path: str | Path, max_bytes: int, *, private: bool = False) -> bytes:
+    """The bytes of the regular file ``path``, at most ``max_bytes``, checked before reading.
+
+    The file is opened once and checked on that descriptor (no race between check and
+    read): it must be a regular file (not a device such as ``/dev/zero``, a FIFO or a
+    folder), of at most ``max_bytes``, and with ``private``, accessible to its owner only.
+
+    Raises
+    ------
+    OSError
+        If it cannot be opened or read.
+    ValueError
+        If it is not a regular file, too large, or (``private``) readable by others; the
+        message says which.
+    """
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    info = os.fstat(fd)
+    if not stat.S_ISREG(info.st_mode):  # a folder, a device, a FIFO: never read
+        os.close(fd)
+        raise ValueError("not a regular file")
+    with os.fdopen(fd, "rb") as handle:
+        if info.st_size > max_bytes:
+            raise ValueError(f"{info.st_size} bytes, more than the {max_bytes} allowed")
+        if private and info.st_mode & LOOSE_BITS:
+            raise ValueError(
+                f"its mode {stat.S_IMODE(info.st_mode):04o} lets its group or others at it "
+                f"(chmod 600 {path})"
+            )
+        data = handle.read(max_bytes + 1)
+    if len(data) > max_bytes:  # grew while we read
+        raise ValueError(f"more than the {max_bytes} bytes allowed")
+    return data
+
+
 def check_file_size(path: Path, fmt: Literal["npz", "csv"]) -> None:
     """Refuse the file at ``path`` if it is larger than its format allows, unopened.
 
@@ -189,11 +230,13 @@ def check_file_size(path: Path, fmt: Literal["npz", "csv"]) -> None:
     limit, what = (
         (MAX_CSV_BYTES, "a CSV recording") if fmt == "csv" else (MAX_NPZ_FILE_BYTES, "an NPZ file")
     )
-    size = path.stat().st_size
-    if size > limit:
+    info = os.stat(path)  # a link is followed
+    if not stat.S_ISREG(info.st_mode):  # a device such as /dev/zero, a FIFO: never read
+        raise RecordingError(f"the file is not a regular file: {what} is read from a file")
+    if info.st_size > limit:
         raise RecordingError(
-            f"the file is {size:,} bytes, more than the {limit:,} bytes {what} may have",
-            value=size,
+            f"the file is {info.st_size:,} bytes, more than the {limit:,} bytes {what} may have",
+            value=info.st_size,
         )
 
 

@@ -26,12 +26,11 @@ from __future__ import annotations
 import os
 import re
 import secrets
-import stat
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ._checks import one_line
+from ._checks import one_line, read_bounded
 from .errors import CalibrationError
 
 if sys.version_info >= (3, 11):
@@ -45,7 +44,6 @@ __all__ = [
     "SensorKeys",
     "load_key_file",
     "new_key_file",
-    "read_bounded",
     "sensor_name_error",
     "toml_string",
 ]
@@ -59,8 +57,6 @@ MAX_KEY_FILE_BYTES = 4096
 MAX_KEYS = 2
 #: Key ids are sent as 32-bit unsigned integers.
 MAX_KEY_ID = 2**32 - 1
-#: Access bits that make a key file refused: any for the group or others (as ssh does).
-LOOSE_BITS = 0o077
 _HEX = re.compile(r"[0-9a-fA-F]{64}")
 #: A sensor's name is sent in each datagram's header after a one-byte length.
 MAX_SENSOR_NAME_BYTES = 255
@@ -168,40 +164,6 @@ class SensorKeys:
         for kid, secret in self.keys:
             lines += ["", "[[key]]", f"id = {kid}", f'secret = "{secret.hex()}"']
         return "\n".join(lines) + "\n"
-
-
-def read_bounded(path: str | Path, max_bytes: int, *, private: bool = False) -> bytes:
-    """The bytes of the regular file ``path``, at most ``max_bytes``, checked before reading.
-
-    The file is opened once and checked on that descriptor (no race between check and
-    read): it must be a regular file (not a device such as ``/dev/zero``, a FIFO or a
-    folder), of at most ``max_bytes``, and with ``private``, accessible to its owner only.
-
-    Raises
-    ------
-    OSError
-        If it cannot be opened or read.
-    ValueError
-        If it is not a regular file, too large, or (``private``) readable by others; the
-        message says which.
-    """
-    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    info = os.fstat(fd)
-    if not stat.S_ISREG(info.st_mode):  # a folder, a device, a FIFO: never read
-        os.close(fd)
-        raise ValueError("not a regular file")
-    with os.fdopen(fd, "rb") as handle:
-        if info.st_size > max_bytes:
-            raise ValueError(f"{info.st_size} bytes, more than the {max_bytes} allowed")
-        if private and info.st_mode & LOOSE_BITS:
-            raise ValueError(
-                f"its mode {stat.S_IMODE(info.st_mode):04o} lets its group or others at it "
-                f"(chmod 600 {path})"
-            )
-        data = handle.read(max_bytes + 1)
-    if len(data) > max_bytes:  # grew while we read
-        raise ValueError(f"more than the {max_bytes} bytes allowed")
-    return data
 
 
 def load_key_file(path: str | Path, sensor: str) -> SensorKeys:

@@ -347,3 +347,15 @@ def test_the_command_line_refuses_a_huge_npz_and_writes_nothing(tmp_path):
     assert "big.npz" in lines[0] and "'joints'" in lines[0] and "(20000000, 25, 3)" in lines[0]
     assert "Traceback" not in r.stderr and r.stdout == ""
     assert sorted(p.name for p in tmp_path.iterdir()) == ["big.npz"]
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_a_device_named_as_a_recording_is_refused_unread(tmp_path, suffix, capsys):
+    """A review's case: a link to /dev/zero named .csv was read for ever (size 0 passed)."""
+    from qpavoid.cli import main
+
+    link = tmp_path / f"zero{suffix}"
+    link.symlink_to("/dev/zero")
+    out = tmp_path / "out"
+    assert main(["run", "--human", str(link), "--no-plots", "--no-view", "--out", str(out)]) == 2
+    assert "not a regular file" in capsys.readouterr().err and not out.exists()
