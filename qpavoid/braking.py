@@ -129,10 +129,13 @@ class ArmResponse:
     def __call__(self, command: np.ndarray) -> np.ndarray:
         """The arm's joint velocity over the coming period, given this tick's command."""
         self._pending.append(np.asarray(command, dtype=float))
-        target = self._pending.popleft()
+        return self._approach(self._pending.popleft(), self.a_dt)
+
+    def _approach(self, target: np.ndarray, max_change: np.ndarray) -> np.ndarray:
+        """Move the velocity towards ``target`` along a straight line in joint-velocity
+        space, each joint by at most ``max_change``, rad/s; the new velocity."""
         change = target - self.dq
-        need = np.abs(change) / self.a_dt
-        worst = float(need.max(initial=0.0))
+        worst = float((np.abs(change) / max_change).max(initial=0.0))
         self.dq = target.copy() if worst <= 1.0 else self.dq + change / worst
         return self.dq
 
@@ -159,10 +162,7 @@ class ArmResponse:
         self._stepped_at = t
         if elapsed <= 0.0:
             return self.dq
-        change = self._target - self.dq
-        worst = float((np.abs(change) / (self.a_max * elapsed)).max(initial=0.0))
-        self.dq = self._target.copy() if worst <= 1.0 else self.dq + change / worst
-        return self.dq
+        return self._approach(self._target, self.a_max * elapsed)
 
 
 class WallClockArm:

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ._checks import one_line, read_bounded
+from ._checks import one_line
 from .calibration import (
     MAX_TRANSLATION_M,
     RIGID_TOLERANCE,
@@ -30,6 +30,7 @@ from .calibration import (
     settings_error,
 )
 from .errors import CalibrationError
+from .file_bounds import read_bounded
 from .keys import SensorKeys, load_key_file
 
 if sys.version_info >= (3, 11):

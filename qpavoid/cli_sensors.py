@@ -11,7 +11,6 @@ Like :mod:`qpavoid.cli` they parse, call the library and print.
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +19,7 @@ from .calibration_file import load_calibration
 from .cli_args import HelpFormatter, positive_float
 from .errors import InputError
 from .fused import fuse_recordings, save_fused_npz
-from .io import check_output_dir
+from .io import check_output_dir, check_output_file
 from .keys import new_key_file, sensor_name_error
 from .live import parse_address
 from .replayer import replay
@@ -141,12 +140,6 @@ def replay_command(args: argparse.Namespace) -> str:
     check_distinct(args.files)
     calibration = load_calibration(args.sensors) if args.sensors else None
     recordings = [load_sensor_recording(f) for f in args.files]
-    if not args.unsigned and (calibration is None or not calibration.authenticated):
-        raise InputError(
-            "replay signs each datagram with its sensor's key: give --sensors with a "
-            "calibration whose sensors have key files (qpavoid keygen), or --unsigned",
-            name="--sensors",
-        )
     if calibration is not None:
         for rec in recordings:
             calibration.check_names(rec.sensors)
@@ -166,14 +159,7 @@ def keygen_command(args: argparse.Namespace) -> str:
     bad_name = sensor_name_error(name)
     if bad_name is not None:
         raise InputError(f"SENSOR {repr(name)[:80]}: {bad_name}", name="sensor", value=name)
-    if str(args.out).endswith(("/", os.sep)):
-        raise InputError(
-            f"--out {args.out!r} names a folder: give the key file's path", name="--out"
-        )
-    out = Path(args.out)
-    if out.is_dir():
-        raise InputError(f"--out {str(out)!r} is a folder, not a file", name="--out")
-    check_output_dir(out.parent if str(out.parent) else Path("."))
+    out = check_output_file(str(args.out), "--out")
     keys = new_key_file(out, name, rotate=args.rotate)
     ids = " and ".join(map(str, keys.ids))
     return (

@@ -30,8 +30,9 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ._checks import one_line, read_bounded
+from ._checks import one_line
 from .errors import CalibrationError
+from .file_bounds import read_bounded
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -182,7 +182,7 @@ class _KeyWatch:
 
     def __init__(self, calibration: Calibration, every_s: float):
         self.calibration, self.path = calibration, calibration.path
-        self.files = [f for f in (calibration.path, *calibration.key_files.values()) if f]
+        self.files = _watched(calibration)
         self.stamp = self._stamp()
         self.every_s = every_s
         self.next_s = time.monotonic() + every_s
@@ -214,7 +214,14 @@ class _KeyWatch:
             return str(exc)
         if not _same_sensors(again, self.calibration):
             return "only the keys are read again: a new pose, clock or sensor needs a restart"
+        self.files = _watched(again)  # a key_file that now names another file: that one
+        self.stamp = self._stamp()
         return again
+
+
+def _watched(calibration: Calibration) -> list[str]:
+    """The calibration file and the key files it names."""
+    return [f for f in (calibration.path, *calibration.key_files.values()) if f]
 
 
 def _same_sensors(a: Calibration, b: Calibration) -> bool:

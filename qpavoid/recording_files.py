@@ -6,8 +6,8 @@ logs with the same NPZ reader. Every problem is a :class:`~qpavoid.errors.Record
 with a one-line message saying what is wrong and what was expected; no pickled object is
 ever loaded.
 
-Sizes are bounded before anything is read (:func:`~qpavoid._checks.check_file_size`,
-:func:`~qpavoid._checks.check_npy_headers`): a file's size on disk, an NPZ's declared
+Sizes are bounded before anything is read (:func:`~qpavoid.file_bounds.check_file_size`,
+:func:`~qpavoid.file_bounds.check_npy_headers`): a file's size on disk, an NPZ's declared
 size and each array's ``.npy`` header.
 """
 
@@ -23,8 +23,9 @@ from typing import TypeVar
 import numpy as np
 from numpy.lib import format as npy_format
 
-from ._checks import check_file_size, check_npy_headers, one_line
+from ._checks import one_line
 from .errors import InputError, RecordingError
+from .file_bounds import check_file_size, check_npy_headers
 from .frames import JointType
 
 T = TypeVar("T")
@@ -145,7 +146,7 @@ def read_npz(path: Path, names: Sequence[str] | None, expected: str) -> dict[str
     """Arrays of an NPZ file by name (``names``, or all if None); no pickled objects.
 
     The file's size, the archive's declared size and every array's ``.npy`` header are
-    checked (:func:`~qpavoid._checks.check_npy_headers`) before any array is read.
+    checked (:func:`~qpavoid.file_bounds.check_npy_headers`) before any array is read.
 
     Raises
     ------

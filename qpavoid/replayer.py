@@ -48,8 +48,8 @@ def replay(
     if not unsigned:
         if calibration is None or not calibration.authenticated:
             raise InputError(
-                "replay signs each datagram with its sensor's key: give a calibration with "
-                "key files (qpavoid keygen), or send unsigned datagrams (--unsigned)",
+                "replay signs each datagram with its sensor's key: give --sensors with a "
+                "calibration whose sensors have key files (qpavoid keygen), or --unsigned",
                 name="--sensors",
             )
         signers = {name: Signer(calibration.cell, keys) for name, keys in calibration.keys.items()}

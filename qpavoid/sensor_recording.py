@@ -28,9 +28,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._checks import as_array, check_file_size
+from ._checks import as_array
 from .compiling import kernel_input
 from .errors import InputError
+from .file_bounds import check_file_size
 from .frames import N_KINECT_JOINTS, check_joints, check_states
 from .recording_files import (
     CSV_JOINT_FIELDS,
@@ -235,7 +236,7 @@ def is_sensor_recording(path: str | Path) -> bool:
 
 def _csv_first_row(path: Path) -> list[str]:
     """The stripped cells of a CSV file's first row ([] if the csv module refuses it);
-    RecordingError, unopened, if the file is over :data:`~qpavoid._checks.MAX_CSV_BYTES`
+    RecordingError, unopened, if the file is over :data:`~qpavoid.file_bounds.MAX_CSV_BYTES`
     (a line can be the whole file). Binary data is read_csv_columns' to refuse."""
     check_file_size(path, "csv")
     with path.open("r", encoding="utf-8-sig", errors="replace", newline="") as handle:

@@ -44,7 +44,8 @@ from typing import NamedTuple
 
 from .calibration import Calibration
 from .errors import InputError
-from .keys import SensorKeys
+from .keys import SensorKeys, sensor_name_error
+from .replay_window import ReplayWindow
 from .sensor_recording import BodyFrame
 from .wire import (
     MAX_DATAGRAM_BYTES,
@@ -60,10 +61,8 @@ __all__ = [
     "DOMAIN",
     "FUTURE_TOLERANCE_S",
     "MAGIC",
-    "REPLAY_WINDOW",
     "VERSION_2",
     "Fields",
-    "ReplayWindow",
     "Signer",
     "Verifier",
     "fields",
@@ -82,13 +81,10 @@ FUTURE_TOLERANCE_S = 0.005
 #: its window's top to 2^64 - 1 and blind it (an adversarial tester's).
 SEQUENCE_LEAD_S = 1.0
 MAGIC = b"QPAV"
+_SIGNED = MAGIC + bytes([VERSION_2])  # the first five bytes of a signed datagram
 #: What the tag signs first: no message of another protocol signed with the key can pass.
 DOMAIN = b"qpavoid skeleton datagram v2\x00"
 TAG_BYTES = 32
-#: Sequence numbers accepted below the highest seen (RFC 4303's default window, 64): the
-#: bodies of one frame may arrive in any order; a number seen or below the window is a
-#: replay.
-REPLAY_WINDOW = 64
 _HEAD = struct.Struct("!4sBB")  # magic, version, length of the sensor's name
 _IDS = struct.Struct("!IQd")  # key id, sequence number, capture time (s)
 #: The shortest signed datagram: a one-letter sensor, a payload of "{}", a tag.
@@ -118,8 +114,9 @@ class Signer:
     def __init__(self, cell: str, keys: SensorKeys, first_sequence: int | None = None):
         self.sensor = keys.sensor
         name = keys.sensor.encode()
-        if not 1 <= len(name) <= 255:
-            raise InputError(f"sensor name {keys.sensor!r} is not 1 to 255 bytes", name="sensor")
+        bad_name = sensor_name_error(keys.sensor)
+        if bad_name is not None:
+            raise InputError(f"sensor {keys.sensor[:80]!r}: {bad_name}", name="sensor")
         self.key_id, self._secret = keys.signing
         self._head = _HEAD.pack(MAGIC, VERSION_2, len(name)) + name
         self._prefix = _tag_prefix(cell)
@@ -167,46 +164,20 @@ def fields(datagram: bytes) -> Fields:
     WireError
         If it is not laid out as a signed datagram (``bad_header``).
     """
-    if len(datagram) < MIN_SIGNED_BYTES or datagram[:5] != MAGIC + bytes([VERSION_2]):
-        raise WireError("not a signed (version 2) datagram", reason="bad_header")
-    end = 6 + datagram[5]
-    if end + _IDS.size + TAG_BYTES > len(datagram):
-        raise WireError("a sensor name longer than the datagram", reason="bad_header")
+    end = _name_end(datagram)
     key_id, sequence, t = _IDS.unpack_from(datagram, end)
     payload = datagram[end + _IDS.size : -TAG_BYTES]
     return Fields(datagram[6:end].decode("utf-8", "replace"), key_id, sequence, t, payload)
 
 
-class ReplayWindow:
-    """Which sequence numbers of one sender were seen: the highest, and a bit for each of
-    the :data:`REPLAY_WINDOW` below it (RFC 4303, section 3.4.3). :meth:`seen` and
-    :meth:`mark` are apart so that only a datagram that passed every other check moves it."""
-
-    def __init__(self, size: int = REPLAY_WINDOW):
-        self.size, self.top, self._bits = size, -1, 0
-
-    def seen(self, sequence: int) -> bool:
-        """True if ``sequence`` was marked, or lies below the window (a replay)."""
-        offset = self.top - sequence
-        return offset >= self.size or (offset >= 0 and bool((self._bits >> offset) & 1))
-
-    def mark(self, sequence: int) -> None:
-        """Mark ``sequence`` seen (one that :meth:`seen` let through)."""
-        shift = sequence - self.top
-        if shift > 0:  # a new highest: the window slides (never by more than its size)
-            self._bits = (
-                ((self._bits << shift) | 1) & ((1 << self.size) - 1) if shift < self.size else 1
-            )
-            self.top = sequence
-        else:
-            self._bits |= 1 << -shift
-
-    def accept(self, sequence: int) -> bool:
-        """True, and ``sequence`` marked, if it was not seen; False for a replay."""
-        if self.seen(sequence):
-            return False
-        self.mark(sequence)
-        return True
+def _name_end(data: bytes) -> int:
+    """Where the sensor's name of a signed datagram ends; ``bad_header`` if not laid out so."""
+    if len(data) < MIN_SIGNED_BYTES or data[:5] != _SIGNED:
+        raise WireError("not a signed (version 2) datagram", reason="bad_header")
+    end = 6 + data[5]
+    if end + _IDS.size + TAG_BYTES > len(data):
+        raise WireError("a sensor name longer than the datagram", reason="bad_header")
+    return end
 
 
 class Verifier:
@@ -230,7 +201,8 @@ class Verifier:
     clock
         The shared clock, s.
 
-    Holds a :class:`ReplayWindow` per sensor: one verifier per receiver.
+    Holds a :class:`~qpavoid.replay_window.ReplayWindow` per sensor and key: one verifier
+    per receiver.
     """
 
     def __init__(
@@ -279,18 +251,15 @@ class Verifier:
             if not self.accept_v1 or self.calibration.authenticated:
                 raise WireError("an unsigned (version 1) datagram", reason="unauthenticated")
             frame = decode(data, self.calibration, self.workspace)
-            self._check_time(frame.sensor, frame.t)
+            self._check_time(frame.sensor, frame.t, self.clock())
             return frame
-        if n < MIN_SIGNED_BYTES or data[:5] != MAGIC + bytes([VERSION_2]):
-            raise WireError("not a signed (version 2) datagram", reason="bad_header")
-        end = 6 + data[5]
-        if end + _IDS.size + TAG_BYTES > n:
-            raise WireError("a sensor name longer than the datagram", reason="bad_header")
-        name = self._sensors.get(data[6:end])
+        end = _name_end(data)
+        raw_name = data[6:end]
+        name = self._sensors.get(raw_name)
         if name is None:
             raise WireError("unknown sensor", reason="unknown_sensor")
         key_id, sequence, t = _IDS.unpack_from(data, end)
-        secret = self._secrets.get((data[6:end], key_id))
+        secret = self._secrets.get((raw_name, key_id))
         if secret is None:
             raise WireError(f"unknown key id {key_id} of {name!r}", reason="unknown_key")
         body, tag = data[:-TAG_BYTES], data[-TAG_BYTES:]
@@ -299,20 +268,22 @@ class Verifier:
         window = self._windows.setdefault((name, key_id), ReplayWindow())
         if window.seen(sequence):
             raise WireError(f"sequence number {sequence} of {name!r} seen", reason="replayed")
-        if sequence > (self.clock() + SEQUENCE_LEAD_S) * 1e6:
+        now = self.clock()
+        if sequence > (now + SEQUENCE_LEAD_S) * 1e6:
             raise WireError(f"sequence number {sequence} ahead of the clock", reason="replayed")
-        self._check_time(name, t)
+        self._check_time(name, t, now)
         window.mark(sequence)  # only now: an old or future datagram moves nothing
-        message = json_object(body[end + _IDS.size :]) | {"t": t}
-        return skeleton(message, name, self.calibration, self.workspace)
+        message = json_object(body[end + _IDS.size :])
+        return skeleton(message, name, self.calibration, self.workspace, t)
 
-    def _check_time(self, sensor: str, t: float) -> None:
-        """:class:`WireError` ``late`` or ``from_the_future`` outside the time window."""
+    def _check_time(self, sensor: str, t: float, now: float) -> None:
+        """:class:`WireError` ``late`` or ``from_the_future`` outside the time window
+        around ``now``."""
         if self.max_age_s is None:
             return
         if not math.isfinite(t):
             raise WireError(f"t {t!r}", reason="non_finite")
-        age = self.clock() - (t + self.calibration[sensor].time_offset_s)
+        age = now - (t + self.calibration[sensor].time_offset_s)
         if age > self.max_age_s:
             raise WireError(f"captured {age:.3f} s ago", reason="late")
         if age < -self.future_tolerance_s:

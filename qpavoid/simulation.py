@@ -266,8 +266,9 @@ def simulate(
                 if pos_err < cfg.goal_tolerance_m and rot_err < cfg.goal_tolerance_rad:
                     reached = True
                     break
-            wall.hold(t, dq, cmd.time_scale)  # real time: it moves on when the next tick comes
-            if not realtime:
+            if realtime:  # the arm moves on when the next tick comes, however late
+                wall.hold(t, dq, cmd.time_scale)
+            else:
                 q = q + dq * dt
                 tau = min(tau + cmd.time_scale * dt, path.duration_s)
 

@@ -28,6 +28,7 @@ from .errors import InputError
 from .human import KinectHuman
 from .laws import AvoidanceConfig, distance_at_factor
 from .robot import Robot
+from .run_log import TEXT_KEYS
 
 __all__ = ["PAIR_STATES", "pair_states", "replay_data"]
 
@@ -80,8 +81,6 @@ _OPTIONAL: dict[str, tuple[int | None, ...]] = {
     "true_distance": (3,),
     "input_alert": (),
 }
-#: The arrays of text (one string a tick).
-_TEXT = ("stop_reason", "input_alert")
 
 
 def checked_log(log: dict[str, np.ndarray], robot: Robot) -> dict[str, np.ndarray]:
@@ -111,7 +110,7 @@ def checked_log(log: dict[str, np.ndarray], robot: Robot) -> dict[str, np.ndarra
         value = np.asarray(log[name])
         if name == "q":
             row = (robot.nq,)
-        text = name in _TEXT
+        text = name in TEXT_KEYS
         if value.shape != (len(t), *row) or (value.dtype.kind == "U") != text:
             shape = (len(t), *row)
             raise refuse(name, f"must be {'text' if text else 'numbers'} of shape {shape}")

@@ -165,11 +165,17 @@ def json_object(data: bytes) -> dict:
 
 
 def skeleton(
-    msg: dict, sensor: str, calibration: Calibration, workspace: Workspace | None
+    msg: dict,
+    sensor: str,
+    calibration: Calibration,
+    workspace: Workspace | None,
+    t: object = None,
 ) -> BodyFrame:
-    """The body frame of a message's ``body``, ``t`` and ``joints`` (``sensor``'s, camera
-    frame), checked: :class:`WireError` otherwise."""
-    body, t, joint_rows = (msg.get(k) for k in ("body", "t", "joints"))
+    """The body frame of a message's ``body``, ``t`` (or ``t`` given: a signed header's)
+    and ``joints`` (``sensor``'s, camera frame), checked: :class:`WireError` otherwise."""
+    body, joint_rows = msg.get("body"), msg.get("joints")
+    if t is None:
+        t = msg.get("t")
     if not isinstance(body, int) or isinstance(body, bool) or not 0 <= body < MAX_BODIES:
         raise WireError(f"body {body!r}", reason="bad_field")
     if not isinstance(t, (int, float)) or isinstance(t, bool):

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from numpy.lib import format as npy_format
 
-from qpavoid import _checks, recording_files
+from qpavoid import file_bounds, recording_files
 from qpavoid._checks import one_line
 from qpavoid.errors import RecordingError
 from qpavoid.fused import FusedRecording, load_people, save_fused_npz
@@ -149,7 +149,7 @@ def test_tracemalloc_sees_numpy_arrays_read(tmp_path):
 
 
 def test_a_compressed_array_over_a_lowered_row_bound_is_refused(tmp_path, monkeypatch):
-    monkeypatch.setattr(_checks, "MAX_ROWS", 1_000)
+    monkeypatch.setattr(file_bounds, "MAX_ROWS", 1_000)
     path = tmp_path / "long.npz"
     with path.open("wb") as handle:  # zeros compress ~1000 times: 600 kB in a few kB
         np.savez_compressed(handle, t=np.arange(1_001.0), joints=np.zeros((1_001, 25, 3)))
@@ -166,7 +166,7 @@ def test_a_compressed_array_over_a_lowered_row_bound_is_refused(tmp_path, monkey
 
 
 def test_each_array_is_bounded_by_its_own_columns(tmp_path, monkeypatch):
-    monkeypatch.setattr(_checks, "MAX_ROWS", 10)
+    monkeypatch.setattr(file_bounds, "MAX_ROWS", 10)
     path = _zip(tmp_path / "wide.npz", _members(10, state=_npy(np.zeros((10, 26), np.int8))))
     with pytest.raises(RecordingError) as info:
         load_recording(path)
@@ -216,7 +216,7 @@ def test_npy_version_2_loads_and_3_is_refused(tmp_path):
 
 
 def test_the_archives_declared_total_is_bounded(tmp_path, monkeypatch):
-    monkeypatch.setattr(_checks, "MAX_NPZ_BYTES", 10_000)
+    monkeypatch.setattr(file_bounds, "MAX_NPZ_BYTES", 10_000)
     path = tmp_path / "total.npz"
     save_npz(path, Recording(*_rest(100)))  # 60 kB of joints
     err, _ = _refusal(load_recording, path)
@@ -228,7 +228,7 @@ def test_the_archives_declared_total_is_bounded(tmp_path, monkeypatch):
 
 
 def test_the_file_size_is_bounded_before_it_is_opened(tmp_path, monkeypatch):
-    monkeypatch.setattr(_checks, "MAX_NPZ_FILE_BYTES", 100)
+    monkeypatch.setattr(file_bounds, "MAX_NPZ_FILE_BYTES", 100)
     path = tmp_path / "notes.npz"
     path.write_text("x" * 101)  # not an archive: the size is what is checked first
     for load, hint in LOADERS.values():
@@ -297,7 +297,7 @@ def test_valid_recordings_still_load(tmp_path):
 
 
 def test_an_oversize_csv_is_refused_unread(tmp_path, monkeypatch):
-    monkeypatch.setattr(_checks, "MAX_CSV_BYTES", 1_000)
+    monkeypatch.setattr(file_bounds, "MAX_CSV_BYTES", 1_000)
     path = tmp_path / "big.csv"
     path.write_bytes(bytes(range(256)) * 4)  # binary: refused for its size, unread
     base = tmp_path / "base.csv"

@@ -29,8 +29,9 @@ from qpavoid.fusion import Fuser, FusionConfig
 from qpavoid.keys import MAX_KEY_FILE_BYTES, SensorKeys, load_key_file, new_key_file
 from qpavoid.live import Listener, LiveSource
 from qpavoid.posture import Operator
+from qpavoid.replay_window import REPLAY_WINDOW, ReplayWindow
 from qpavoid.sensor_recording import BodyFrame
-from qpavoid.signing import REPLAY_WINDOW, ReplayWindow, Signer, Verifier, fields
+from qpavoid.signing import Signer, Verifier, fields
 from qpavoid.two_sensors import KINECT_V2_FIELD_OF_VIEW_DEG, KINECT_V2_RANGE_M, look_at
 from qpavoid.wire import WireError, encode
 
