@@ -2,7 +2,7 @@
 
 Draws ``--n`` configurations uniformly within the joint limits of ``load_robot("iiwa14")``
 (A3 locked) and, for each, a seated posture with one hand aimed at a random control point
-(:func:`qpavoid.posture.random_posture`); sample ``i`` uses the hand-target spread
+(:func:`qpavoid.human.posture.random_posture`); sample ``i`` uses the hand-target spread
 ``spreads[i % len(spreads)]`` (default: alternately 0.10 m and 0.25 m). Both 3 x 8 tables
 are compared entry by entry, per set (minimum over parts) and for the whole robot (table
 minimum). ``diff = spheres - capsules``: negative = spheres say closer (conservative),
@@ -24,8 +24,8 @@ import time
 import numpy as np
 
 import qpavoid
-from qpavoid.human import JointType
-from qpavoid.posture import random_posture
+from qpavoid.human.body import JointType
+from qpavoid.human.posture import random_posture
 
 SAFE_M, NEAR_M = 0.05, 0.20  # "safe" threshold; the interesting range (capsules below it), m
 NEAR_START_M = 0.10  # "near the capsule start" (A2 for L1, A4 for L2, A6 for EE), m

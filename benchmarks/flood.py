@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from qpavoid.keys import SensorKeys
-from qpavoid.signing import Signer
+from qpavoid.sensing.keys import SensorKeys
+from qpavoid.sensing.signing import Signer
 
 QPAVOID = [sys.executable, "-m", "qpavoid"]
 

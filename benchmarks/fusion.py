@@ -3,7 +3,8 @@
     python benchmarks/fusion.py [--seeds 5] [--seconds 10] [--json FILE]
 
 1. Error: two simulated Kinect v2 (50 mm mean error, occlusions, mirroring, a 13 ms phase
-   and a 0.25 s clock offset; :mod:`qpavoid.two_sensors`) film a known motion; the mean and
+   and a 0.25 s clock offset; :mod:`qpavoid.sensing.synthetic_pair`) film a known motion; the mean
+   and
    99th-percentile joint error of each sensor alone and of the fusion, raw (the sensors'
    weighted mean) and filtered (the default), over the fused frames.
 2. Time: ``Fuser.add`` of one frame plus ``Fuser.fuse`` at every capture time, for 1 and 6
@@ -19,12 +20,12 @@ import time
 
 import numpy as np
 
-from qpavoid.calibration import Calibration
-from qpavoid.fusion import Fuser, FusionConfig
-from qpavoid.robot import load_robot
-from qpavoid.scenarios import make_scenario
-from qpavoid.strikes import strike_case, strike_motion
-from qpavoid.two_sensors import TwoSensorConfig, two_sensor_data
+from qpavoid.arm.model import load_robot
+from qpavoid.fusion.fuser import Fuser, FusionConfig
+from qpavoid.scenarios.generated import make_scenario
+from qpavoid.scenarios.strikes import strike_case, strike_motion
+from qpavoid.sensing.calibration import Calibration
+from qpavoid.sensing.synthetic_pair import TwoSensorConfig, two_sensor_data
 
 BOTH = ("kinect_left", "kinect_right")
 

@@ -51,16 +51,16 @@ import numpy as np
 import pinocchio as pin
 
 import qpavoid
-from qpavoid.frames import JointType
-from qpavoid.geometry import point_segment_distance
-from qpavoid.people import People
-from qpavoid.perception import PerceptionConfig
-from qpavoid.qp import QPConfig, QPController
-from qpavoid.qp.backends import WARM_START_FLOOR, PersistentOSQP
-from qpavoid.qp.solver_kernels import flush_tiny
-from qpavoid.robot import load_robot
-from qpavoid.scenarios import make_scenario
-from qpavoid.task import ArcPath, inverse_kinematics
+from qpavoid.arm.model import load_robot
+from qpavoid.control.qp import QPConfig, QPController
+from qpavoid.control.qp.backends import WARM_START_FLOOR, PersistentOSQP
+from qpavoid.control.qp.solver_kernels import flush_tiny
+from qpavoid.control.task import ArcPath, inverse_kinematics
+from qpavoid.core.geometry import point_segment_distance
+from qpavoid.human.frames import JointType
+from qpavoid.human.people import People
+from qpavoid.perception.tracker import PerceptionConfig
+from qpavoid.scenarios.generated import make_scenario
 
 RATE_HZ = 100.0
 

@@ -2,7 +2,8 @@
 
     python benchmarks/safety.py [--strikes 1000] [--out benchmarks/results/safety.json]
 
-1. Strikes (:mod:`qpavoid.strike_sweep`): ``--strikes`` random cases at up to 2.0 m/s for
+1. Strikes (:mod:`qpavoid.experiments.strike_sweep`): ``--strikes`` random cases at up to 2.0 m/s
+for
    each controller with ``--safety ssm``; a fifth of that at up to 2.5 m/s (beyond the
    ISO 13855 speeds SSM is sized for); and the same first fifth with the paper's rules.
 2. Productivity: time to goal and time stopped in ``free``, ``test1``, ``test2`` and
@@ -16,8 +17,8 @@ import json
 import time
 from pathlib import Path
 
-from qpavoid.runs import RunSpec, simulate_one
-from qpavoid.strike_sweep import as_dicts, strike_sweep, summarize_strikes
+from qpavoid.experiments.runs import RunSpec, simulate_one
+from qpavoid.experiments.strike_sweep import as_dicts, strike_sweep, summarize_strikes
 
 CONTROLLERS = ("qp", "analytic")
 

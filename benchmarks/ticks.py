@@ -26,11 +26,11 @@ import numpy as np
 import qpsolvers
 
 import qpavoid
-from qpavoid.analytic import AnalyticController
-from qpavoid.controller import ControllerConfig
-from qpavoid.qp import QPConfig, QPController
-from qpavoid.scenarios import make_scenario
-from qpavoid.simulation import SimConfig, simulate
+from qpavoid.control.analytic import AnalyticController
+from qpavoid.control.qp import QPConfig, QPController
+from qpavoid.control.tick import ControllerConfig
+from qpavoid.loop.simulation import SimConfig, simulate
+from qpavoid.scenarios.generated import make_scenario
 
 
 def timed(fn, states, repeat: int) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Lag and noise of the person's velocity estimate (qpavoid.perception), on a known truth.
+"""Lag and noise of the person's velocity estimate (qpavoid.perception.tracker), on a known truth.
 
     python benchmarks/velocity.py
 
@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from qpavoid.frames import HumanFrame, JointType
-from qpavoid.perception import Tracker
-from qpavoid.posture import Operator
-from qpavoid.sensor import KINECT_V2_NOISE_M
+from qpavoid.human.frames import HumanFrame, JointType
+from qpavoid.human.posture import Operator
+from qpavoid.loop.camera import KINECT_V2_NOISE_M
+from qpavoid.perception.tracker import Tracker
 
 HAND = int(JointType.HandRight)
 RATE = 30.0

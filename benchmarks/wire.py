@@ -2,10 +2,10 @@
 
     python benchmarks/wire.py [--n 20000] [--json FILE]
 
-The receiver's own per-datagram call (:meth:`qpavoid.wire.Verifier.decode`) on one body of
+The receiver's own per-datagram call (:meth:`qpavoid.sensing.wire.Verifier.decode`) on one body of
 the seated operator (about 1 kB), median and p99 over ``--n`` calls each, after warm-up:
 
-* ``v1 decode``: an unsigned datagram parsed and checked (:func:`qpavoid.wire.decode`:
+* ``v1 decode``: an unsigned datagram parsed and checked (:func:`qpavoid.sensing.wire.decode`:
   what every datagram cost before issue 24, forged or not);
 * ``v2 valid``: a signed one verified, then parsed and checked;
 * ``v2 forged``: a signed-looking one whose tag does not verify (a forger without the
@@ -26,13 +26,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from qpavoid.calibration import Calibration, SensorCalibration
-from qpavoid.keys import SensorKeys
-from qpavoid.posture import Operator
-from qpavoid.sensor_recording import BodyFrame
-from qpavoid.signing import Signer, Verifier
-from qpavoid.two_sensors import look_at
-from qpavoid.wire import WireError, Workspace, decode, encode
+from qpavoid.human.posture import Operator
+from qpavoid.sensing.calibration import Calibration, SensorCalibration
+from qpavoid.sensing.keys import SensorKeys
+from qpavoid.sensing.per_sensor import BodyFrame
+from qpavoid.sensing.signing import Signer, Verifier
+from qpavoid.sensing.synthetic_pair import look_at
+from qpavoid.sensing.wire import WireError, Workspace, decode, encode
 
 
 def main() -> None:

@@ -1,10 +1,10 @@
 """The paper's Test 1 in closed loop with both controllers, from the library API."""
 
 from qpavoid import load_robot
-from qpavoid.analytic import AnalyticController
-from qpavoid.qp import QPController
-from qpavoid.scenarios import make_scenario
-from qpavoid.simulation import SimConfig, simulate
+from qpavoid.control.analytic import AnalyticController
+from qpavoid.control.qp import QPController
+from qpavoid.loop.simulation import SimConfig, simulate
+from qpavoid.scenarios.generated import make_scenario
 
 robot = load_robot("iiwa14")
 motion = make_scenario("test1", robot)  # the right hand comes beside the wrist

@@ -3,7 +3,7 @@
 import numpy as np
 
 import qpavoid
-from qpavoid.posture import Operator
+from qpavoid.human.posture import Operator
 
 robot = qpavoid.load_robot("iiwa14")  # A3 locked: 6 joints
 q = np.radians([60, 35.3, -82.7, 0, -58.0, 0])  # the paper's start configuration

@@ -3,10 +3,10 @@
 import numpy as np
 
 from qpavoid import load_robot
-from qpavoid.qp import QPController
-from qpavoid.recording import Recording, load_recording, save_csv, save_npz
-from qpavoid.scenarios import make_scenario
-from qpavoid.simulation import simulate
+from qpavoid.control.qp import QPController
+from qpavoid.loop.simulation import simulate
+from qpavoid.scenarios.generated import make_scenario
+from qpavoid.sensing.recording import Recording, load_recording, save_csv, save_npz
 
 robot = load_robot("iiwa14")
 motion = make_scenario("test2", robot)

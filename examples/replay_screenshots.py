@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 from playwright.sync_api import sync_playwright
 
-from qpavoid.io import load_log
-from qpavoid.runs import RunSpec, run_one
+from qpavoid.experiments.runs import RunSpec, run_one
+from qpavoid.output.run_files import load_log
 
 ARGS = [
     "--headless=new",

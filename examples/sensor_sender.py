@@ -15,11 +15,11 @@ import time
 
 import numpy as np
 
-from qpavoid.calibration_file import load_calibration
-from qpavoid.live import parse_address
-from qpavoid.posture import Operator
-from qpavoid.sensor_recording import BodyFrame
-from qpavoid.signing import Signer
+from qpavoid.human.posture import Operator
+from qpavoid.loop.live_input import parse_address
+from qpavoid.sensing.calibration_file import load_calibration
+from qpavoid.sensing.per_sensor import BodyFrame
+from qpavoid.sensing.signing import Signer
 
 calib_file, sensor, to = sys.argv[1:4]
 seconds = float(sys.argv[4]) if len(sys.argv) > 4 else 10.0

@@ -20,11 +20,11 @@ from pathlib import Path
 import numpy as np
 
 import qpavoid
-from qpavoid.fused import fuse_recordings
-from qpavoid.keys import load_key_file, new_key_file
-from qpavoid.scenarios import make_scenario
-from qpavoid.sensor_recording import save_sensor_npz
-from qpavoid.two_sensors import TwoSensorConfig, two_sensor_data
+from qpavoid.fusion.offline import fuse_recordings
+from qpavoid.scenarios.generated import make_scenario
+from qpavoid.sensing.keys import load_key_file, new_key_file
+from qpavoid.sensing.per_sensor import save_sensor_npz
+from qpavoid.sensing.synthetic_pair import TwoSensorConfig, two_sensor_data
 
 out = Path(sys.argv[1] if len(sys.argv) > 1 else "two_sensors")
 out.mkdir(parents=True, exist_ok=True)

@@ -1,33 +1,34 @@
 """qpavoid: real-time collision avoidance between a cobot arm and the person beside it.
 
-The modules follow the data flow of one control tick:
+One subpackage per stage of the data flow, each importing only the stages above it in
+this list (the contracts of ``pyproject.toml``, checked by import-linter):
 
-* :mod:`qpavoid.robot`      the arm (Pinocchio model, control points, capsules)
-* :mod:`qpavoid.human`      the Kinect v2 skeleton and the upper-body model
-* :mod:`qpavoid.distances`  robot-human distance tables (spheres, capsules)
-* :mod:`qpavoid.laws`       the paper's eqs. (2)-(9)
-* :mod:`qpavoid.task`       the planned path and its inverse kinematics
-* :mod:`qpavoid.controller` what controllers share; :mod:`qpavoid.analytic` the paper's
-  controller; :mod:`qpavoid.qp` the QP controller
-* :mod:`qpavoid.simulation`, :mod:`qpavoid.scenarios`, :mod:`qpavoid.recording`,
-  :mod:`qpavoid.io`, :mod:`qpavoid.compare`, :mod:`qpavoid.sweep`, :mod:`qpavoid.cli`
+* :mod:`qpavoid.core`         errors, argument checks, vector helpers, compiling, signals
+* :mod:`qpavoid.arm`          the arm: its description, Pinocchio model, braking
+* :mod:`qpavoid.human`        skeleton formats, frames, the body model, postures
+* :mod:`qpavoid.sensing`      calibration, keys, recordings, the wire, the UDP receiver
+* :mod:`qpavoid.fusion`       several sensors' bodies merged into people
+* :mod:`qpavoid.perception`   tracked people as inflated capsules
+* :mod:`qpavoid.distance`     robot-human distance tables (spheres, capsules)
+* :mod:`qpavoid.laws`         the paper's eqs. (2)-(9) and speed and separation
+* :mod:`qpavoid.control`      the tick's state, the paper's controller, the QP controller
+* :mod:`qpavoid.loop`         the simulated and real-time loops, camera, truth, log, metrics
+* :mod:`qpavoid.scenarios`    the people a run is about
+* :mod:`qpavoid.output`       run files, plots, the browser replay, the live view
+* :mod:`qpavoid.experiments`  runs, comparisons, campaigns, the benchmark
+* :mod:`qpavoid.cli`          the command line
 """
 
 import importlib
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the names as type checkers and editors see them
-    from .analytic import AnalyticConfig, AnalyticController
-    from .controller import Command, ControllerConfig
-    from .distances import (
-        CapsuleDistance,
-        DistanceTable,
-        SphereDistance,
-        capsule_distances,
-        distance_method,
-        sphere_distances,
-    )
-    from .errors import (
+    from .arm.model import ControlSet, Kinematics, Robot, load_robot
+    from .control.analytic import AnalyticConfig, AnalyticController
+    from .control.controller import Command, ControllerConfig
+    from .control.qp import QPConfig, QPController
+    from .control.task import ArcPath, inverse_kinematics
+    from .core.errors import (
         IKNotConvergedError,
         InputError,
         QpavoidError,
@@ -35,50 +36,55 @@ if TYPE_CHECKING:  # the names as type checkers and editors see them
         RobotDescriptionError,
         SolverError,
     )
-    from .frames import HumanFrame
-    from .human import BodyPart, HumanGeometry, JointType, KinectHuman, TrackingState
-    from .laws import AvoidanceConfig
-    from .qp import QPConfig, QPController
-    from .robot import ControlSet, Kinematics, Robot, load_robot
-    from .simulation import SimConfig, simulate
-    from .task import ArcPath, inverse_kinematics
+    from .distance.methods import (
+        CapsuleDistance,
+        DistanceTable,
+        SphereDistance,
+        capsule_distances,
+        distance_method,
+        sphere_distances,
+    )
+    from .human.body import BodyPart, HumanGeometry, JointType, KinectHuman, TrackingState
+    from .human.frames import HumanFrame
+    from .laws.avoidance import AvoidanceConfig
+    from .loop.simulation import SimConfig, simulate
 
 #: Where each public name lives: imported on first use (PEP 562), so that `import qpavoid`
 #: (and the command line's first moments, when Ctrl-C must already be handled) stays light.
 _LAZY = {
-    "AnalyticConfig": "analytic",
-    "AnalyticController": "analytic",
-    "ArcPath": "task",
-    "AvoidanceConfig": "laws",
-    "BodyPart": "human",
-    "CapsuleDistance": "distances",
-    "Command": "controller",
-    "ControlSet": "robot",
-    "ControllerConfig": "controller",
-    "DistanceTable": "distances",
-    "HumanFrame": "frames",
-    "HumanGeometry": "human",
-    "IKNotConvergedError": "errors",
-    "InputError": "errors",
-    "JointType": "human",
-    "KinectHuman": "human",
-    "Kinematics": "robot",
-    "QPConfig": "qp",
-    "QPController": "qp",
-    "QpavoidError": "errors",
-    "RecordingError": "errors",
-    "Robot": "robot",
-    "RobotDescriptionError": "errors",
-    "SimConfig": "simulation",
-    "SolverError": "errors",
-    "SphereDistance": "distances",
-    "TrackingState": "human",
-    "capsule_distances": "distances",
-    "distance_method": "distances",
-    "inverse_kinematics": "task",
-    "load_robot": "robot",
-    "simulate": "simulation",
-    "sphere_distances": "distances",
+    "AnalyticConfig": "control.analytic",
+    "AnalyticController": "control.analytic",
+    "ArcPath": "control.task",
+    "AvoidanceConfig": "laws.avoidance",
+    "BodyPart": "human.body",
+    "CapsuleDistance": "distance.methods",
+    "Command": "control.controller",
+    "ControlSet": "arm.model",
+    "ControllerConfig": "control.controller",
+    "DistanceTable": "distance.methods",
+    "HumanFrame": "human.frames",
+    "HumanGeometry": "human.body",
+    "IKNotConvergedError": "core.errors",
+    "InputError": "core.errors",
+    "JointType": "human.body",
+    "KinectHuman": "human.body",
+    "Kinematics": "arm.model",
+    "QPConfig": "control.qp",
+    "QPController": "control.qp",
+    "QpavoidError": "core.errors",
+    "RecordingError": "core.errors",
+    "Robot": "arm.model",
+    "RobotDescriptionError": "core.errors",
+    "SimConfig": "loop.simulation",
+    "SolverError": "core.errors",
+    "SphereDistance": "distance.methods",
+    "TrackingState": "human.body",
+    "capsule_distances": "distance.methods",
+    "distance_method": "distance.methods",
+    "inverse_kinematics": "control.task",
+    "load_robot": "arm.model",
+    "simulate": "loop.simulation",
+    "sphere_distances": "distance.methods",
 }
 
 

@@ -6,11 +6,15 @@ import numpy as np
 import pytest
 
 import qpavoid
-from qpavoid import distance_kernels, fusion_person, law_kernels, perception_kernels
-from qpavoid.perception import PerceptionConfig
-from qpavoid.qp import kernels as qp_kernels
-from qpavoid.qp import solver_kernels
-from qpavoid.sensor import SensorConfig
+from qpavoid.control.qp import kernels as qp_kernels
+from qpavoid.control.qp import solver_kernels
+from qpavoid.distance import _kernels as distance_kernels
+from qpavoid.fusion import person as fusion_person
+from qpavoid.human import _kernels as body_kernels
+from qpavoid.laws import _kernels as law_kernels
+from qpavoid.loop.camera import SensorConfig
+from qpavoid.perception import _kernels as perception_kernels
+from qpavoid.perception.tracker import PerceptionConfig
 
 
 def pytest_configure(config):
@@ -20,6 +24,7 @@ def pytest_configure(config):
     if not hasattr(config, "workerinput"):  # pytest-xdist's controller, or no xdist
         fusion_person.warm_up()  # and the fusion's per-joint kernels
         perception_kernels.warm_up()
+        body_kernels.warm_up()
         distance_kernels.warm_up()
         qp_kernels.warm_up()
         solver_kernels.warm_up()

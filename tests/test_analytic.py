@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 from conftest import ideal_sim, paper_config
 
-from qpavoid.analytic import AnalyticController, enforce_limits
-from qpavoid.controller import ControllerConfig
-from qpavoid.human import JointType
-from qpavoid.posture import Operator
-from qpavoid.scenarios import make_scenario, nominal_configurations, random_approach
-from qpavoid.simulation import SimConfig, simulate
-from qpavoid.sweep import check_log
-from qpavoid.task import ArcPath, inverse_kinematics
+from qpavoid.control.analytic import AnalyticController, enforce_limits
+from qpavoid.control.task import ArcPath, inverse_kinematics
+from qpavoid.control.tick import ControllerConfig
+from qpavoid.experiments.sweep import check_log
+from qpavoid.human.body import JointType
+from qpavoid.human.posture import Operator
+from qpavoid.loop.simulation import SimConfig, simulate
+from qpavoid.scenarios.generated import make_scenario, nominal_configurations, random_approach
 
 
 @pytest.fixture(scope="module")
@@ -132,7 +132,7 @@ def test_nobody_near_is_eq8(robot):
     q = inverse_kinematics(robot, path.reference(5.0)[0]) + 0.01
     cmd = ctrl.step(q, Operator().rest(), None, 5.0)
     kin = robot.kinematics(q)
-    from qpavoid.task import pose_error
+    from qpavoid.control.task import pose_error
 
     T_ref, twist = path.reference(5.0)
     target = twist + 5.0 * pose_error(T_ref, kin.ee_placement)

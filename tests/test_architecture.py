@@ -1,79 +1,72 @@
-"""The package's structure: no import cycles, nobody imports the command line, small files."""
+"""The package's structure: the stages' import contracts (import-linter), checked and shown to
+catch a violation; no function-level imports of the package."""
 
 from __future__ import annotations
 
 import ast
+import os
+import shutil
+import subprocess
+import sys
 from pathlib import Path
+
+import pytest
 
 import qpavoid
 
 PACKAGE = Path(qpavoid.__file__).resolve().parent
 
 
-def module_name(path: Path) -> str:
-    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
-    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+ROOT = PACKAGE.parent
 
 
-def imports_of(path: Path) -> set[str]:
-    """The qpavoid modules a file imports at module level (relative imports resolved)."""
-    name = module_name(path)
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    found = set()
-    for node in ast.parse(path.read_text()).body:  # module level only
-        if isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
-                target = f"{base}.{node.module}" if node.module else base
-            else:
-                target = node.module or ""
-            if target.startswith("qpavoid"):
-                found.add(target)
-                found.update(f"{target}.{a.name}" for a in node.names)
-        elif isinstance(node, ast.Import):
-            found.update(a.name for a in node.names if a.name.startswith("qpavoid"))
-    return found
-
-
-def import_graph() -> dict[str, set[str]]:
-    files = {module_name(p): p for p in PACKAGE.rglob("*.py")}
-    return {m: {t for t in imports_of(p) if t in files and t != m} for m, p in files.items()}
-
-
-def test_no_import_cycles():
-    graph = import_graph()
-    # A package's __init__ re-exports its modules; a module importing its own package's
-    # names (from . import x) goes through it. Cycles through an __init__ that only
-    # re-exports are still cycles here: none is allowed.
-    state: dict[str, int] = {}
-    stack: list[str] = []
-
-    def visit(m: str) -> None:
-        state[m] = 1
-        stack.append(m)
-        for n in sorted(graph[m]):
-            if state.get(n) == 1:
-                cycle = [*stack[stack.index(n) :], n]
-                raise AssertionError("import cycle: " + " -> ".join(cycle))
-            if n not in state:
-                visit(n)
-        stack.pop()
-        state[m] = 2
-
-    for m in sorted(graph):
-        if m not in state:
-            visit(m)
-
-
-def test_nothing_imports_the_command_line():
-    graph = import_graph()
-    users = sorted(
-        m
-        for m, deps in graph.items()
-        if {"qpavoid.cli", "qpavoid.__main__", "qpavoid.launch"} & deps
-        and m not in ("qpavoid.__main__", "qpavoid.launch")  # the entry points
+def lint_imports(root: Path) -> subprocess.CompletedProcess:
+    """import-linter on the package under ``root`` with ``root``'s pyproject contracts."""
+    return subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import sys; from importlinter.cli import lint_imports_command;"
+            " sys.exit(lint_imports_command())",
+            "--no-cache",
+        ],
+        cwd=root,
+        env={**os.environ, "PYTHONPATH": str(root)},
+        capture_output=True,
+        text=True,
     )
-    assert users == []
+
+
+def test_import_contracts_hold():
+    """The stages import only the stages before them; the QP framework knows only core."""
+    done = lint_imports(ROOT)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "2 kept, 0 broken" in done.stdout
+
+
+@pytest.mark.parametrize(
+    ("module", "line", "broken"),
+    [
+        # an upward import: the arm made to know the controllers
+        ("arm/braking.py", "from qpavoid.control import controller", "Each stage"),
+        # the QP framework made to know the controller's tick
+        ("control/qp/pieces.py", "from qpavoid.control import tick", "The QP framework"),
+        # nobody imports the command line
+        ("loop/simulation.py", "import qpavoid.cli.commands", "Each stage"),
+    ],
+)
+def test_import_contracts_catch_a_violation(tmp_path, module, line, broken):
+    """In a copy of the package, one added import breaks the contract it should."""
+    shutil.copytree(PACKAGE, tmp_path / "qpavoid", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
+    target = tmp_path / "qpavoid" / module
+    text = target.read_text()
+    head, sep, rest = text.partition("\nfrom __future__ import annotations\n")
+    assert sep, module
+    target.write_text(head + sep + line + "\n" + rest)
+    done = lint_imports(tmp_path)
+    assert done.returncode == 1, done.stdout
+    assert f"{broken}" in done.stdout and "BROKEN" in done.stdout
 
 
 def test_no_function_level_imports_of_the_package():
@@ -88,11 +81,3 @@ def test_no_function_level_imports_of_the_package():
                     ):
                         offenders.append(f"{path.name}:{inner.lineno}")
     assert offenders == []
-
-
-def test_source_files_stay_small():
-    sizes = {
-        p.relative_to(PACKAGE).as_posix(): len(p.read_text().splitlines())
-        for p in PACKAGE.rglob("*.py")
-    }
-    assert {f: n for f, n in sizes.items() if n > 320} == {}

@@ -1,10 +1,10 @@
 """An attacker on the cell's network, live on loopback (issue 24; slow suite).
 
 Each run: two simulated Kinects film a known motion and are replayed in real time over
-UDP to a listener (:class:`~qpavoid.live.Listener`), whose frames drive the QP controller
+UDP to a listener (:class:`~qpavoid.loop.live_input.Listener`), whose frames drive the QP controller
 (SSM on) and a simulated arm at 100 Hz; an attacker sends from another process at the
 same time. Safety is judged afterwards against the truth: the motion at each tick's
-wall time, against the arm's real geometry (:class:`~qpavoid.truth.TrueClearance`).
+wall time, against the arm's real geometry (:class:`~qpavoid.loop.truth.TrueClearance`).
 """
 
 from __future__ import annotations
@@ -20,22 +20,22 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from qpavoid.calibration import Calibration
-from qpavoid.controller import ControllerConfig
-from qpavoid.human import KinectHuman
-from qpavoid.keys import SensorKeys
-from qpavoid.live import Listener, LiveSource
-from qpavoid.posture import Operator
-from qpavoid.qp import QPController
-from qpavoid.replayer import replay
-from qpavoid.scenarios import nominal_configurations, reach_and_return
-from qpavoid.sensor_recording import BodyFrame
-from qpavoid.signing import Signer, fields
-from qpavoid.simulation import SimConfig, simulate
-from qpavoid.task import ArcPath
-from qpavoid.truth import TrueClearance
-from qpavoid.two_sensors import TwoSensorConfig, two_sensor_data
-from qpavoid.wire import encode
+from qpavoid.control.qp import QPController
+from qpavoid.control.task import ArcPath
+from qpavoid.control.tick import ControllerConfig
+from qpavoid.human.body import KinectHuman
+from qpavoid.human.posture import Operator
+from qpavoid.loop.live_input import Listener, LiveSource
+from qpavoid.loop.simulation import SimConfig, simulate
+from qpavoid.loop.truth import TrueClearance
+from qpavoid.scenarios.generated import nominal_configurations, reach_and_return
+from qpavoid.sensing.calibration import Calibration
+from qpavoid.sensing.keys import SensorKeys
+from qpavoid.sensing.per_sensor import BodyFrame
+from qpavoid.sensing.signing import Signer, fields
+from qpavoid.sensing.streamer import replay
+from qpavoid.sensing.synthetic_pair import TwoSensorConfig, two_sensor_data
+from qpavoid.sensing.wire import encode
 
 pytestmark = pytest.mark.slow
 

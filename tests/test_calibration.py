@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from qpavoid.calibration import SensorCalibration
-from qpavoid.calibration_file import calibration_from_dict, load_calibration
-from qpavoid.errors import CalibrationError, RecordingError
-from qpavoid.posture import Operator
-from qpavoid.sensor_recording import (
+from qpavoid.core.errors import CalibrationError, RecordingError
+from qpavoid.human.posture import Operator
+from qpavoid.sensing.calibration import SensorCalibration
+from qpavoid.sensing.calibration_file import calibration_from_dict, load_calibration
+from qpavoid.sensing.per_sensor import (
     BodyFrame,
     SensorRecording,
     is_sensor_recording,
@@ -18,7 +18,7 @@ from qpavoid.sensor_recording import (
     save_sensor_csv,
     save_sensor_npz,
 )
-from qpavoid.two_sensors import look_at
+from qpavoid.sensing.synthetic_pair import look_at
 
 
 def toml_matrix(T: np.ndarray) -> str:

@@ -10,7 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from qpavoid.campaign import (
+from qpavoid.cli.commands import build_parser
+from qpavoid.core.errors import InputError
+from qpavoid.experiments.campaign import (
     CAMPAIGN_MAX_TIME_S,
     RayExecutor,
     run_campaign,
@@ -18,11 +20,9 @@ from qpavoid.campaign import (
     worst_runs,
     write_campaign,
 )
-from qpavoid.cli import build_parser
-from qpavoid.errors import InputError
-from qpavoid.recording import load_recording
-from qpavoid.runs import RunSpec, simulate_one
-from qpavoid.strike_sweep import StrikeCheck
+from qpavoid.experiments.runs import RunSpec, simulate_one
+from qpavoid.experiments.strike_sweep import StrikeCheck
+from qpavoid.sensing.recording import load_recording
 
 SETTINGS = {
     "n": 3,

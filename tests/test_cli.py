@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 import qpavoid
-from qpavoid import plots
-from qpavoid.cli import main
-from qpavoid.io import LOG_KEYS, load_log
-from qpavoid.recording import Recording, save_csv, save_npz
-from qpavoid.scenarios import make_scenario
-from qpavoid.sensor import SensorConfig
+from qpavoid.cli.commands import main
+from qpavoid.loop.camera import SensorConfig
+from qpavoid.output import plots
+from qpavoid.output.run_files import LOG_KEYS, load_log
+from qpavoid.scenarios.generated import make_scenario
+from qpavoid.sensing.recording import Recording, save_csv, save_npz
 
 METRIC_KEYS = (
     "reached_goal",
@@ -184,12 +184,12 @@ def test_version_and_help_show_defaults(tmp_path, capsys):
 
 def test_failure_during_a_run_leaves_no_folder(tmp_path, monkeypatch, capsys):
     """An error after the simulation started: one line, exit 2, no --out folder."""
-    import qpavoid.runs
+    import qpavoid.experiments.runs
 
     def fail(*args, **kwargs):
         raise qpavoid.SolverError("the solver gave up")
 
-    monkeypatch.setattr(qpavoid.runs, "simulate", fail)
+    monkeypatch.setattr(qpavoid.experiments.runs, "simulate", fail)
     out = tmp_path / "new" / "run"
     assert main(["run", "free", "--out", str(out)]) == 2
     assert capsys.readouterr().err == "qpavoid: error: the solver gave up\n"
@@ -198,12 +198,12 @@ def test_failure_during_a_run_leaves_no_folder(tmp_path, monkeypatch, capsys):
 
 def test_failure_while_writing_leaves_no_folder(tmp_path, monkeypatch, capsys):
     """An error after some files were written: they go too, nothing else is touched."""
-    import qpavoid.runs
+    import qpavoid.experiments.runs
 
     def fail(*args, **kwargs):
         raise OSError(28, "No space left on device", "log.npz")
 
-    monkeypatch.setattr(qpavoid.runs, "write_run", fail)
+    monkeypatch.setattr(qpavoid.experiments.runs, "write_run", fail)
     out = tmp_path / "run"
     assert main(["run", "free", "--max-time", "0.5", "--rate", "100", "--out", str(out)]) == 2
     assert capsys.readouterr().err == "qpavoid: error: No space left on device: log.npz\n"
@@ -211,12 +211,12 @@ def test_failure_while_writing_leaves_no_folder(tmp_path, monkeypatch, capsys):
 
 
 def test_a_bug_is_one_line_too(tmp_path, monkeypatch, capsys):
-    import qpavoid.runs
+    import qpavoid.experiments.runs
 
     def bug(*args, **kwargs):
         raise ZeroDivisionError("division by zero")
 
-    monkeypatch.setattr(qpavoid.runs, "simulate", bug)
+    monkeypatch.setattr(qpavoid.experiments.runs, "simulate", bug)
     assert main(["run", "free", "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("qpavoid: error: internal error") and err.count("\n") == 1
@@ -229,12 +229,12 @@ def test_a_bug_is_one_line_too(tmp_path, monkeypatch, capsys):
 )
 def test_worker_errors_are_reported_in_one_line(tmp_path, monkeypatch, capsys):
     """A failure inside a worker process of `compare`: one line, exit 2, nothing written."""
-    import qpavoid.runs
+    import qpavoid.experiments.runs
 
     def fail(*args, **kwargs):
         raise qpavoid.SolverError("the solver gave up in a worker")
 
-    monkeypatch.setattr(qpavoid.runs, "simulate", fail)
+    monkeypatch.setattr(qpavoid.experiments.runs, "simulate", fail)
     out = tmp_path / "c"
     assert (
         main(

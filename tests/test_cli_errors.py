@@ -3,7 +3,7 @@ the default output folder.
 
 Each bad input must end with exit status 2 and one line ``qpavoid: error: ...`` naming the
 problem, no traceback, and nothing written (no ``runs/`` folder, no ``--out`` folder). They
-run in-process through :func:`qpavoid.cli.main`, what the console script calls (a
+run in-process through :func:`qpavoid.cli.commands.main`, what the console script calls (a
 subprocess each cost 0.8 s of start-up, 50 s of the suite); a sample of them, --version and
 the default folder go through the installed entry point in a subprocess.
 """
@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 import qpsolvers
 
-from qpavoid.cli import main
-from qpavoid.posture import Operator
-from qpavoid.sensor_recording import SensorRecording, save_sensor_npz
+from qpavoid.cli.commands import main
+from qpavoid.human.posture import Operator
+from qpavoid.sensing.per_sensor import SensorRecording, save_sensor_npz
 
 
 def qpavoid_cli(*args: str, cwd) -> subprocess.CompletedProcess:
@@ -263,7 +263,7 @@ def test_a_sweep_stopped_by_a_signal_ends_at_once_and_leaves_nothing(
 def test_output_to_a_closed_pipe_or_a_narrow_terminal_is_no_traceback(tmp_path):
     """``qpavoid ... | head`` and a terminal without µs ended in tracebacks at the final
     print."""
-    code = "import sys; from qpavoid.cli_args import run_command; "
+    code = "import sys; from qpavoid.cli.args import run_command; "
     piped = subprocess.run(
         f"{sys.executable} -c \"{code}sys.exit(run_command(lambda: 'x' * 1000000))\" | true",
         shell=True,

@@ -13,8 +13,9 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from qpavoid import fusion_person, law_kernels
-from qpavoid.compiling import kernel_input, recompile_if_stale
+from qpavoid.core.compiling import kernel_input, recompile_if_stale
+from qpavoid.fusion import person as fusion_person
+from qpavoid.laws import _kernels as law_kernels
 
 # A fresh process runs the loop's every compiled path (both distance methods, both
 # controllers, SSM, several people, two-sensor fusion with mirrors and outliers) and
@@ -23,21 +24,26 @@ from qpavoid.compiling import kernel_input, recompile_if_stale
 LOOP = """
 import json
 import numpy as np
-from qpavoid import distance_kernels, fusion_kernels, fusion_person, law_kernels, perception_kernels
-from qpavoid.qp import kernels as qp_kernels, solver_kernels
-from qpavoid.calibration import Calibration
-from qpavoid.controller import ControllerConfig
-from qpavoid.frames import HumanFrame
-from qpavoid.fusion import Fuser
-from qpavoid.people import People
-from qpavoid.qp import QPController
-from qpavoid.robot import load_robot
-from qpavoid.runs import RunSpec, simulate_one
-from qpavoid.scenarios import make_scenario
-from qpavoid.two_sensors import TwoSensorConfig, two_sensor_data
+from qpavoid.distance import _kernels as distance_kernels
+from qpavoid.fusion import _kernels as fusion_kernels
+from qpavoid.fusion import person as fusion_person
+from qpavoid.laws import _kernels as law_kernels
+from qpavoid.perception import _kernels as perception_kernels
+from qpavoid.human import _kernels as body_kernels
+from qpavoid.control.qp import kernels as qp_kernels, solver_kernels
+from qpavoid.sensing.calibration import Calibration
+from qpavoid.control.tick import ControllerConfig
+from qpavoid.human.frames import HumanFrame
+from qpavoid.fusion.fuser import Fuser
+from qpavoid.human.people import People
+from qpavoid.control.qp import QPController
+from qpavoid.arm.model import load_robot
+from qpavoid.experiments.runs import RunSpec, simulate_one
+from qpavoid.scenarios.generated import make_scenario
+from qpavoid.sensing.synthetic_pair import TwoSensorConfig, two_sensor_data
 
 modules = (distance_kernels, fusion_kernels, fusion_person, law_kernels, perception_kernels,
-           qp_kernels, solver_kernels)
+           body_kernels, qp_kernels, solver_kernels)
 kernels = {
     f"{m.__name__}.{n}": getattr(m, n)
     for m in modules
@@ -85,8 +91,8 @@ def test_the_loop_uses_only_the_kernels_warm_up_compiled():
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout.strip().splitlines()[-1])
     counts = out["signatures"]
-    assert counts["qpavoid.fusion_person.fuse_person"] == 1  # the fusion ran
-    assert counts["qpavoid.distance_kernels.sphere_table"] == 1  # the sphere table ran
+    assert counts["qpavoid.fusion.person.fuse_person"] == 1  # the fusion ran
+    assert counts["qpavoid.distance._kernels.sphere_table"] == 1  # the sphere table ran
     assert out["counters"].get("mirrored_corrected", 0) > 0  # mirrors were undone
     assert out["counters"].get("outliers_resolved", 0) > 0  # and outliers settled
     assert all(n <= 1 for n in counts.values()), counts

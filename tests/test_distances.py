@@ -12,10 +12,10 @@ import pytest
 from conftest import random_q
 
 import qpavoid
-from qpavoid.distances import CapsuleDistance, SphereDistance, axis_rotations
-from qpavoid.human import HumanGeometry, JointType, TrackingState
-from qpavoid.posture import random_posture
-from qpavoid.robot import Kinematics
+from qpavoid.arm.model import Kinematics
+from qpavoid.distance.methods import CapsuleDistance, SphereDistance, axis_rotations
+from qpavoid.human.body import HumanGeometry, JointType, TrackingState
+from qpavoid.human.posture import random_posture
 
 # ----------------------------------------------------------------------------- references
 
@@ -252,7 +252,7 @@ def test_untracked_and_nan_joints_are_left_out(robot, human, method):
 
 @pytest.mark.parametrize("method", [qpavoid.sphere_distances, qpavoid.capsule_distances])
 def test_table_shapes_and_labels(robot, human, method):
-    from qpavoid.posture import Operator
+    from qpavoid.human.posture import Operator
 
     t = method(robot, np.zeros(6), human, Operator().rest())
     assert t.distance.shape == (3, 8) and t.vector.shape == (3, 8, 3)

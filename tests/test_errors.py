@@ -15,8 +15,10 @@ import numpy as np
 import pytest
 
 import qpavoid
-from qpavoid import laws
-from qpavoid.errors import (
+from qpavoid.control.qp.backends import make_backend
+from qpavoid.control.qp.config import QPConfig
+from qpavoid.control.task import A_IN, ArcPath, inverse_kinematics, orthonormalize
+from qpavoid.core.errors import (
     IKNotConvergedError,
     InputError,
     QpavoidError,
@@ -24,13 +26,11 @@ from qpavoid.errors import (
     RobotDescriptionError,
     SolverError,
 )
-from qpavoid.io import load_log
-from qpavoid.posture import Operator
-from qpavoid.qp.backends import make_backend
-from qpavoid.qp.config import QPConfig
-from qpavoid.recording import Recording, csv_header, load_recording, save_csv
-from qpavoid.scenarios import make_scenario
-from qpavoid.task import A_IN, ArcPath, inverse_kinematics, orthonormalize
+from qpavoid.human.posture import Operator
+from qpavoid.laws import avoidance as laws
+from qpavoid.output.run_files import load_log
+from qpavoid.scenarios.generated import make_scenario
+from qpavoid.sensing.recording import Recording, csv_header, load_recording, save_csv
 
 
 def one_line(exc: BaseException) -> str:

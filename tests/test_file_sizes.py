@@ -4,7 +4,7 @@ NPZ holding a 12 GB array asks for 11.2 GiB before any check").
 Every NPZ reader (base-frame, per-sensor and fused recordings, run logs) checks the file's
 size, the archive's declared size and each array's ``.npy`` header before reading any
 array; a CSV recording's size is checked before it is read. The refusals are one-line
-:class:`~qpavoid.errors.RecordingError` naming the file and the array, and allocate
+:class:`~qpavoid.core.errors.RecordingError` naming the file and the array, and allocate
 nothing of the size declared.
 """
 
@@ -23,20 +23,21 @@ import numpy as np
 import pytest
 from numpy.lib import format as npy_format
 
-from qpavoid import file_bounds, recording_files
-from qpavoid._checks import one_line
-from qpavoid.errors import RecordingError
-from qpavoid.fused import FusedRecording, load_people, save_fused_npz
-from qpavoid.io import load_log
-from qpavoid.posture import Operator
-from qpavoid.recording import Recording, load_recording, save_csv, save_npz
-from qpavoid.sensor_recording import (
+from qpavoid.core import file_bounds
+from qpavoid.core.checks import one_line
+from qpavoid.core.errors import RecordingError
+from qpavoid.fusion.offline import FusedRecording, load_people, save_fused_npz
+from qpavoid.human.posture import Operator
+from qpavoid.output.run_files import load_log
+from qpavoid.sensing import recording_files
+from qpavoid.sensing.per_sensor import (
     SensorRecording,
     is_sensor_recording,
     load_sensor_recording,
     save_sensor_csv,
     save_sensor_npz,
 )
+from qpavoid.sensing.recording import Recording, load_recording, save_csv, save_npz
 
 #: Peak Python + numpy allocation allowed while a file is refused, bytes (numpy reports its
 #: array buffers to tracemalloc: an array of the size declared would show).
@@ -352,7 +353,7 @@ def test_the_command_line_refuses_a_huge_npz_and_writes_nothing(tmp_path):
 @pytest.mark.parametrize("suffix", [".csv", ".npz"])
 def test_a_device_named_as_a_recording_is_refused_unread(tmp_path, suffix, capsys):
     """A review's case: a link to /dev/zero named .csv was read for ever (size 0 passed)."""
-    from qpavoid.cli import main
+    from qpavoid.cli.commands import main
 
     link = tmp_path / f"zero{suffix}"
     link.symlink_to("/dev/zero")

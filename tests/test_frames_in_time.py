@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from qpavoid.analytic import AnalyticController
-from qpavoid.qp import QPController
-from qpavoid.recording import Recording
-from qpavoid.scenarios import make_scenario
-from qpavoid.sensor import SensorConfig
-from qpavoid.simulation import SimConfig, simulate
+from qpavoid.control.analytic import AnalyticController
+from qpavoid.control.qp import QPController
+from qpavoid.loop.camera import SensorConfig
+from qpavoid.loop.simulation import SimConfig, simulate
+from qpavoid.scenarios.generated import make_scenario
+from qpavoid.sensing.recording import Recording
 
 RATE = 100.0
 LATENCY = SensorConfig().latency_s
@@ -68,8 +68,8 @@ def test_generated_motions_are_always_fresh(robot):
 
 def test_a_person_holding_the_robot_off_its_goal_is_named(robot):
     """A hand resting near the goal: the run ends at the cap and says who held it."""
-    from qpavoid.posture import Operator
-    from qpavoid.task import ArcPath
+    from qpavoid.control.task import ArcPath
+    from qpavoid.human.posture import Operator
 
     goal = ArcPath().reference(ArcPath().duration_s)[0][:3, 3]
     op = Operator()

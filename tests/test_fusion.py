@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qpavoid.association import torso_centre
-from qpavoid.calibration import Calibration, SensorCalibration
-from qpavoid.errors import CalibrationError, InputError
-from qpavoid.frames import MIRROR, JointType, TrackingState
-from qpavoid.fusion import Fuser, FusionConfig
-from qpavoid.posture import Operator
-from qpavoid.scenarios import make_scenario
-from qpavoid.sensor_recording import BodyFrame
-from qpavoid.two_sensors import TwoSensorConfig, look_at, two_sensor_data
+from qpavoid.core.errors import CalibrationError, InputError
+from qpavoid.fusion.association import torso_centre
+from qpavoid.fusion.fuser import Fuser, FusionConfig
+from qpavoid.human.frames import MIRROR, JointType, TrackingState
+from qpavoid.human.posture import Operator
+from qpavoid.scenarios.generated import make_scenario
+from qpavoid.sensing.calibration import Calibration, SensorCalibration
+from qpavoid.sensing.per_sensor import BodyFrame
+from qpavoid.sensing.synthetic_pair import TwoSensorConfig, look_at, two_sensor_data
 
 J = JointType
 HAND = int(J.HandRight)
@@ -320,7 +320,7 @@ class FusedSource:
         self.next = 0
 
     def frame_at(self, t):
-        from qpavoid.people import People
+        from qpavoid.human.people import People
 
         while self.next < len(self.rows) and self.rows[self.next][0] <= t:
             self.fuser.add(self.rows[self.next][1])
@@ -336,11 +336,11 @@ def test_a_sensor_stuck_on_a_still_arm_cannot_hide_a_strike(robot, stuck):
     reporting the arm at rest as Tracked. The fusion used to believe the still arm (the
     fused hand stayed 600 mm from the real one); disputed joints are now Inferred and
     widen until the robot stands."""
-    from qpavoid.controller import ControllerConfig
-    from qpavoid.frames import JointType
-    from qpavoid.qp import QPController
-    from qpavoid.simulation import SimConfig, simulate
-    from qpavoid.strikes import StrikeCase, strike_motion
+    from qpavoid.control.qp import QPController
+    from qpavoid.control.tick import ControllerConfig
+    from qpavoid.human.frames import JointType
+    from qpavoid.loop.simulation import SimConfig, simulate
+    from qpavoid.scenarios.strikes import StrikeCase, strike_motion
 
     case = StrikeCase(5, "EE", 1.5, "right", False, 2.0, "none")
     motion = strike_motion(case, robot)

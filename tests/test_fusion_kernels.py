@@ -6,9 +6,9 @@ import signal
 import numpy as np
 import pytest
 
-from qpavoid.compiling import ctrl_c_deferred
-from qpavoid.fusion_kernels import disagreement, mean_gaps, merge, subset_mean, update_track
-from qpavoid.perception import PARENT
+from qpavoid.core.compiling import ctrl_c_deferred
+from qpavoid.fusion._kernels import disagreement, mean_gaps, merge, subset_mean, update_track
+from qpavoid.perception.tracker import PARENT
 
 
 def bodies(rng, S):

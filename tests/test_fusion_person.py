@@ -4,11 +4,11 @@ frame intake against the calibration's own transform, over many random cases."""
 import numpy as np
 import pytest
 
-from qpavoid.calibration import SensorCalibration
-from qpavoid.frames import MIRROR
-from qpavoid.fusion_kernels import believed, disagreement, ingest
-from qpavoid.fusion_person import MIRROR_CHECK_M, SIDED, fuse_person, mirror_costs
-from qpavoid.perception import PARENT
+from qpavoid.fusion._kernels import believed, disagreement, ingest
+from qpavoid.fusion.person import MIRROR_CHECK_M, SIDED, fuse_person, mirror_costs
+from qpavoid.human.frames import MIRROR
+from qpavoid.perception.tracker import PARENT
+from qpavoid.sensing.calibration import SensorCalibration
 
 STATE_WEIGHT = np.array([0.0, 0.2, 1.0])
 STATE_CONFIDENCE = np.array([0.0, 0.15, 0.5])

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from qpavoid.human import JointType as J
-from qpavoid.posture import Operator
+from qpavoid.human.body import JointType as J
+from qpavoid.human.posture import Operator
 
 
 def test_points_and_parts(human):

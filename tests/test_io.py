@@ -8,9 +8,9 @@ import re
 import numpy as np
 import pytest
 
-from qpavoid.errors import InputError
-from qpavoid.human import JointType
-from qpavoid.recording import Recording, csv_header, load_recording, save_csv, save_npz
+from qpavoid.core.errors import InputError
+from qpavoid.human.body import JointType
+from qpavoid.sensing.recording import Recording, csv_header, load_recording, save_csv, save_npz
 
 N_FRAMES = 5
 

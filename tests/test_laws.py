@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from qpavoid.errors import InputError
-from qpavoid.law_kernels import NOT_FINITE, avoidance_terms, law_constants, limit_crossed
-from qpavoid.laws import (
+from qpavoid.core.errors import InputError
+from qpavoid.laws._kernels import NOT_FINITE, avoidance_terms, law_constants, limit_crossed
+from qpavoid.laws.avoidance import (
     AvoidanceConfig,
     damped_pinv,
     distance_at_factor,
@@ -198,9 +198,9 @@ def test_limit_crossed_equals_the_numpy_check():
 
 def test_a_command_past_a_limit_or_not_finite_is_a_stop(robot):
     """The last-resort layer: the joint that would cross is named; NaN is never sent."""
-    from qpavoid.analytic import AnalyticController
-    from qpavoid.posture import Operator
-    from qpavoid.task import ArcPath, inverse_kinematics
+    from qpavoid.control.analytic import AnalyticController
+    from qpavoid.control.task import ArcPath, inverse_kinematics
+    from qpavoid.human.posture import Operator
 
     path = ArcPath()
     ctrl = AnalyticController(robot, path)

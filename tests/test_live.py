@@ -17,22 +17,22 @@ import numpy as np
 import pytest
 from conftest import write_calibration
 
-from qpavoid.calibration import Calibration, SensorCalibration
-from qpavoid.cli import main as cli_main
-from qpavoid.controller import ControllerConfig
-from qpavoid.frames import HumanFrame
-from qpavoid.fusion import FusionConfig
-from qpavoid.keys import SensorKeys
-from qpavoid.live import Listener, LiveSource, parse_address
-from qpavoid.posture import Operator
-from qpavoid.qp import QPController
-from qpavoid.replayer import replay
-from qpavoid.scenarios import make_scenario
-from qpavoid.sensor_recording import BodyFrame, save_sensor_npz
-from qpavoid.signing import Signer, Verifier, fields
-from qpavoid.simulation import SimConfig, simulate
-from qpavoid.two_sensors import TwoSensorConfig, look_at, two_sensor_data
-from qpavoid.wire import WireError, Workspace, decode, encode
+from qpavoid.cli.commands import main as cli_main
+from qpavoid.control.qp import QPController
+from qpavoid.control.tick import ControllerConfig
+from qpavoid.fusion.fuser import FusionConfig
+from qpavoid.human.frames import HumanFrame
+from qpavoid.human.posture import Operator
+from qpavoid.loop.live_input import Listener, LiveSource, parse_address
+from qpavoid.loop.simulation import SimConfig, simulate
+from qpavoid.scenarios.generated import make_scenario
+from qpavoid.sensing.calibration import Calibration, SensorCalibration
+from qpavoid.sensing.keys import SensorKeys
+from qpavoid.sensing.per_sensor import BodyFrame, save_sensor_npz
+from qpavoid.sensing.signing import Signer, Verifier, fields
+from qpavoid.sensing.streamer import replay
+from qpavoid.sensing.synthetic_pair import TwoSensorConfig, look_at, two_sensor_data
+from qpavoid.sensing.wire import WireError, Workspace, decode, encode
 
 CAL = Calibration(
     {"a": SensorCalibration("a", look_at(np.array([1.0, 2.5, 1.3]), np.zeros(3)))},

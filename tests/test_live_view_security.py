@@ -17,9 +17,9 @@ from urllib.request import urlopen
 
 import pytest
 
-from qpavoid import live_view
-from qpavoid.live_view import LiveView
-from qpavoid.view_server import MAX_CONNECTIONS
+from qpavoid.output import live_view
+from qpavoid.output.live_view import LiveView
+from qpavoid.output.view_server import MAX_CONNECTIONS
 
 pytest.importorskip("meshcat", reason="the live view's page needs the extra 'view' (meshcat)")
 

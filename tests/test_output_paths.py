@@ -7,8 +7,13 @@ import os
 
 import pytest
 
-from qpavoid.errors import InputError
-from qpavoid.io import STAGE_PREFIX, check_output_dir, check_output_file, staged_output
+from qpavoid.core.errors import InputError
+from qpavoid.output.run_files import (
+    STAGE_PREFIX,
+    check_output_dir,
+    check_output_file,
+    staged_output,
+)
 
 
 def write(stage, files: dict[str, str]) -> None:

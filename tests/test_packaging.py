@@ -41,5 +41,5 @@ def test_wheel_holds_every_module_and_robot_file(tmp_path):
     (wheel,) = tmp_path.glob("qpavoid-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
     expected = source_files()
-    assert {"qpavoid/qp/__init__.py", "qpavoid/robots/iiwa14/iiwa14.urdf"} <= expected
+    assert {"qpavoid/control/qp/tasks/ee.py", "qpavoid/robots/iiwa14/iiwa14.urdf"} <= expected
     assert expected - names == set()

@@ -5,20 +5,21 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qpavoid.controller import ControllerConfig
-from qpavoid.frames import HumanFrame
-from qpavoid.fused import fuse_recordings, load_people, save_fused_npz
-from qpavoid.fusion import Fuser
-from qpavoid.people import Crowd, People
-from qpavoid.posture import Operator
-from qpavoid.qp import QPController
-from qpavoid.recording import Recording
-from qpavoid.runs import RunSpec, simulate_one
-from qpavoid.scenarios import make_scenario
-from qpavoid.simulation import SimConfig, simulate
-from qpavoid.strikes import strike_case, strike_motion
-from qpavoid.task import ArcPath, inverse_kinematics
-from qpavoid.two_sensors import TwoSensorConfig, two_sensor_data
+from qpavoid.control.qp import QPController
+from qpavoid.control.task import ArcPath, inverse_kinematics
+from qpavoid.control.tick import ControllerConfig
+from qpavoid.experiments.runs import RunSpec, simulate_one
+from qpavoid.fusion.fuser import Fuser
+from qpavoid.fusion.offline import fuse_recordings, load_people, save_fused_npz
+from qpavoid.human.frames import HumanFrame
+from qpavoid.human.people import People
+from qpavoid.human.posture import Operator
+from qpavoid.loop.crowd import Crowd
+from qpavoid.loop.simulation import SimConfig, simulate
+from qpavoid.scenarios.generated import make_scenario
+from qpavoid.scenarios.strikes import strike_case, strike_motion
+from qpavoid.sensing.recording import Recording
+from qpavoid.sensing.synthetic_pair import TwoSensorConfig, two_sensor_data
 
 
 class Shifted:

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qpavoid.braking import ArmResponse, BrakingConfig, stop_time
-from qpavoid.frames import HumanFrame, JointType, TrackingState
-from qpavoid.human import KinectHuman
-from qpavoid.perception import MAX_BONE_M, PerceptionConfig, Tracker, part_velocities
-from qpavoid.posture import Operator
-from qpavoid.sensor import Sensor, SensorConfig, SensorFault
+from qpavoid.arm.braking import ArmResponse, BrakingConfig, stop_time
+from qpavoid.human.body import KinectHuman
+from qpavoid.human.frames import HumanFrame, JointType, TrackingState
+from qpavoid.human.posture import Operator
+from qpavoid.loop.camera import Sensor, SensorConfig, SensorFault
+from qpavoid.perception.tracker import MAX_BONE_M, PerceptionConfig, Tracker, part_velocities
 
 J = JointType
 HAND = int(J.HandRight)

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from qpavoid.frames import HumanFrame
-from qpavoid.human import KinectHuman
-from qpavoid.perception import MAX_BONE_M, PARENT, PerceptionConfig, Tracker
-from qpavoid.perception_kernels import fastest_joint, largest_per_part
+from qpavoid.human._kernels import fastest_joint, largest_per_part
+from qpavoid.human.body import KinectHuman
+from qpavoid.human.frames import HumanFrame
+from qpavoid.perception.tracker import MAX_BONE_M, PARENT, PerceptionConfig, Tracker
 
 
 def numpy_track(mem, z, state, t, cfg):

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import qpavoid
-from qpavoid import plots
-from qpavoid.scenarios import make_scenario
+from qpavoid.output import plots
+from qpavoid.scenarios.generated import make_scenario
 
 pytest.importorskip("matplotlib")
 

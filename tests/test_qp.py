@@ -11,11 +11,9 @@ import qpsolvers
 from conftest import ideal_sim, paper_config
 
 import qpavoid
-from qpavoid.analytic import AnalyticController
-from qpavoid.cli import main
-from qpavoid.controller import ControllerConfig
-from qpavoid.human import JointType
-from qpavoid.qp import (
+from qpavoid.cli.commands import main
+from qpavoid.control.analytic import AnalyticController
+from qpavoid.control.qp import (
     DirectDAQP,
     PersistentOSQP,
     QPConfig,
@@ -23,14 +21,16 @@ from qpavoid.qp import (
     QPProblem,
     QPSolversBackend,
 )
-from qpavoid.qp.elbow_task import ElbowClearanceTask
-from qpavoid.qp.velocity_limits import VelocityLimit
-from qpavoid.run_spec import CONTROLLERS, DISTANCES
-from qpavoid.runs import RunSpec, simulate_one
-from qpavoid.scenarios import make_scenario
-from qpavoid.simulation import SimConfig, simulate
-from qpavoid.sweep import check_log, safety_sweep, summarize
-from qpavoid.task import ArcPath, inverse_kinematics
+from qpavoid.control.qp.limits.velocity import VelocityLimit
+from qpavoid.control.qp.tasks.elbow import ElbowClearanceTask
+from qpavoid.control.task import ArcPath, inverse_kinematics
+from qpavoid.control.tick import ControllerConfig
+from qpavoid.experiments.run_spec import CONTROLLERS, DISTANCES
+from qpavoid.experiments.runs import RunSpec, simulate_one
+from qpavoid.experiments.sweep import check_log, safety_sweep, summarize
+from qpavoid.human.body import JointType
+from qpavoid.loop.simulation import SimConfig, simulate
+from qpavoid.scenarios.generated import make_scenario
 
 #: Documented agreement between the solve paths (docs/qp.md), rad/s.
 SOLVER_TOL = 1e-5
@@ -217,7 +217,7 @@ def _start(robot):
 def test_iteration_limit_stops_the_robot(robot):
     path, q = _start(robot)
     ctrl = QPController(robot, path, qp=QPConfig(max_iter=1))
-    from qpavoid.posture import Operator
+    from qpavoid.human.posture import Operator
 
     cmd = ctrl.step(q + 0.05, Operator().rest(), None, 1.0)
     assert cmd.stopped and cmd.reason.startswith("QP not solved")
@@ -238,7 +238,7 @@ def test_infeasible_problem_stops_the_robot(robot, monkeypatch, backend):
         path,
         qp=QPConfig(backend=backend, solver="daqp" if backend == "qpsolvers" else "osqp"),
     )
-    from qpavoid.posture import Operator
+    from qpavoid.human.posture import Operator
 
     cmd = ctrl.step(q, Operator().rest(), None, 1.0)
     assert cmd.stopped and cmd.reason.startswith("QP not solved")
@@ -460,8 +460,8 @@ def test_a_solution_the_hard_rows_cannot_judge_is_never_applied(robot, monkeypat
     """A 'found' solution whose hard-row check is NaN (Python's max would skip the NaN)."""
     path, q = _start(robot)
     ctrl = QPController(robot, path)
-    from qpavoid.posture import Operator
-    from qpavoid.qp.problem import QPSolution
+    from qpavoid.control.qp.problem import QPSolution
+    from qpavoid.human.posture import Operator
 
     x = np.zeros(ctrl.variables.n)
     x[-1] = np.nan  # a slack: the bounds on q̇ hold, the rows' check is NaN

@@ -9,15 +9,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from qpavoid.controller import ControllerConfig
-from qpavoid.errors import InputError
-from qpavoid.qp import QPConfig, QPController, QPProblem
-from qpavoid.qp.problem import Assembler
-from qpavoid.qp.separation import SeparationLimit
-from qpavoid.qp.solver_kernels import hard_excess, problem_defect
-from qpavoid.qp.velocity_damper import VelocityDamper
-from qpavoid.scenarios import make_scenario
-from qpavoid.simulation import SimConfig, simulate
+from qpavoid.control.qp import QPConfig, QPController, QPProblem
+from qpavoid.control.qp.barriers.separation import SeparationLimit
+from qpavoid.control.qp.limits.velocity_damper import VelocityDamper
+from qpavoid.control.qp.problem import Assembler
+from qpavoid.control.qp.solver_kernels import hard_excess, problem_defect
+from qpavoid.control.tick import ControllerConfig
+from qpavoid.core.errors import InputError
+from qpavoid.loop.simulation import SimConfig, simulate
+from qpavoid.scenarios.generated import make_scenario
 
 EPS = 1e-6  # central differences: error ~ EPS² · |q̈-terms|, far below the tolerance
 

@@ -15,16 +15,15 @@ from typing import Any
 
 import numpy as np
 
-from qpavoid.braking import ArmResponse, BrakingConfig, per_joint
-from qpavoid.controller import ControllerConfig
-from qpavoid.frames import HumanFrame
-from qpavoid.human import KinectHuman
-from qpavoid.posture import Operator
-from qpavoid.qp import QPController
-from qpavoid.robot import Robot
-from qpavoid.simulation import SimConfig, SimResult, simulate
-from qpavoid.tick import Command
-from qpavoid.truth import TrueClearance
+from qpavoid.arm.braking import ArmResponse, BrakingConfig, per_joint
+from qpavoid.arm.model import Robot
+from qpavoid.control.qp import QPController
+from qpavoid.control.tick import Command, ControllerConfig
+from qpavoid.human.body import KinectHuman
+from qpavoid.human.frames import HumanFrame
+from qpavoid.human.posture import Operator
+from qpavoid.loop.simulation import SimConfig, SimResult, simulate
+from qpavoid.loop.truth import TrueClearance
 
 DT = 0.01  # 100 Hz
 STALL_S = 0.3

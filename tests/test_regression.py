@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from qpavoid.runs import RunSpec, simulate_one
+from qpavoid.experiments.runs import RunSpec, simulate_one
 
 DATA = Path(__file__).parent / "data"
 #: Allowed difference from the recorded commands, rad/s.

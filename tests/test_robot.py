@@ -8,7 +8,7 @@ import pytest
 from conftest import random_q
 
 import qpavoid
-from qpavoid.errors import InputError, RobotDescriptionError
+from qpavoid.core.errors import InputError, RobotDescriptionError
 
 D = np.radians
 

@@ -19,21 +19,21 @@ import numpy as np
 import pytest
 from conftest import write_calibration
 
-from qpavoid._checks import is_loopback
-from qpavoid.association import torso_centre
-from qpavoid.calibration import Calibration, SensorCalibration
-from qpavoid.calibration_file import load_calibration
-from qpavoid.cli import main as cli_main
-from qpavoid.errors import CalibrationError, InputError
-from qpavoid.fusion import Fuser, FusionConfig
-from qpavoid.keys import MAX_KEY_FILE_BYTES, SensorKeys, load_key_file, new_key_file
-from qpavoid.live import Listener, LiveSource
-from qpavoid.posture import Operator
-from qpavoid.replay_window import REPLAY_WINDOW, ReplayWindow
-from qpavoid.sensor_recording import BodyFrame
-from qpavoid.signing import Signer, Verifier, fields
-from qpavoid.two_sensors import KINECT_V2_FIELD_OF_VIEW_DEG, KINECT_V2_RANGE_M, look_at
-from qpavoid.wire import WireError, encode
+from qpavoid.cli.commands import main as cli_main
+from qpavoid.core.checks import is_loopback
+from qpavoid.core.errors import CalibrationError, InputError
+from qpavoid.fusion.association import torso_centre
+from qpavoid.fusion.fuser import Fuser, FusionConfig
+from qpavoid.human.posture import Operator
+from qpavoid.loop.live_input import Listener, LiveSource
+from qpavoid.sensing.calibration import Calibration, SensorCalibration
+from qpavoid.sensing.calibration_file import load_calibration
+from qpavoid.sensing.keys import MAX_KEY_FILE_BYTES, SensorKeys, load_key_file, new_key_file
+from qpavoid.sensing.per_sensor import BodyFrame
+from qpavoid.sensing.replay_window import REPLAY_WINDOW, ReplayWindow
+from qpavoid.sensing.signing import Signer, Verifier, fields
+from qpavoid.sensing.synthetic_pair import KINECT_V2_FIELD_OF_VIEW_DEG, KINECT_V2_RANGE_M, look_at
+from qpavoid.sensing.wire import WireError, encode
 
 POSES = {
     "a": look_at(np.array([1.0, 2.5, 1.3]), np.zeros(3)),
@@ -308,7 +308,9 @@ def test_a_forged_datagram_is_refused_before_its_json_is_read(monkeypatch):
     cal = cell()
     verifier = Verifier(cal)
     good = Signer(cal.cell, cal.keys["a"]).encode(body("a"))
-    monkeypatch.setattr("qpavoid.signing.json_object", lambda data: pytest.fail("JSON parsed"))
+    monkeypatch.setattr(
+        "qpavoid.sensing.signing.json_object", lambda data: pytest.fail("JSON parsed")
+    )
     with pytest.raises(WireError, match="tag"):
         verifier.decode(good[:-1] + bytes([good[-1] ^ 1]))
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qpavoid.ssm import (
+from qpavoid.laws.ssm import (
     SSMConfig,
     StopTimeBudget,
     human_speed,

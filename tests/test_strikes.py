@@ -9,12 +9,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qpavoid.runs import RunSpec, build_controller
-from qpavoid.scenarios import make_scenario
-from qpavoid.sensor import SensorConfig, SensorFault
-from qpavoid.simulation import SimConfig, simulate
-from qpavoid.strike_sweep import check_strike
-from qpavoid.strikes import TARGETS, StrikeCase, strike_motion, strike_sensor
+from qpavoid.experiments.runs import RunSpec, build_controller
+from qpavoid.experiments.strike_sweep import check_strike
+from qpavoid.loop.camera import SensorConfig, SensorFault
+from qpavoid.loop.simulation import SimConfig, simulate
+from qpavoid.scenarios.generated import make_scenario
+from qpavoid.scenarios.strikes import TARGETS, StrikeCase, strike_motion, strike_sensor
 
 
 def run_case(robot, case: StrikeCase, controller: str, safety: str = "ssm"):
@@ -113,10 +113,10 @@ def test_an_arm_never_seen_that_appears_inside_the_robot_finds_it_stationary(
     """An adversarial tester's case: the right arm NotTracked from the first frame, then
     seen already inside the end effector (7 ticks in true contact before the arm was
     bounded by the reach of the tracked shoulder)."""
-    from qpavoid.frames import JointType as J
-    from qpavoid.posture import Operator
-    from qpavoid.runs import simulate_one
-    from qpavoid.task import ArcPath, inverse_kinematics
+    from qpavoid.control.task import ArcPath, inverse_kinematics
+    from qpavoid.experiments.runs import simulate_one
+    from qpavoid.human.frames import JointType as J
+    from qpavoid.human.posture import Operator
 
     t = np.arange(0.0, 3.0, 1 / 30)
     joints = np.repeat(Operator().rest()[None], len(t), 0)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qpavoid.errors import InputError
-from qpavoid.task import A_FIN, A_IN, ArcPath, inverse_kinematics, quintic
+from qpavoid.control.task import A_FIN, A_IN, ArcPath, inverse_kinematics, quintic
+from qpavoid.core.errors import InputError
 
 
 def test_path_ends_and_orientation():

@@ -1,12 +1,12 @@
-"""Clearance against where the person really is (qpavoid.truth)."""
+"""Clearance against where the person really is (qpavoid.loop.truth)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from qpavoid.recording import Recording
-from qpavoid.runs import RunSpec, simulate_one
-from qpavoid.truth import true_frame
+from qpavoid.experiments.runs import RunSpec, simulate_one
+from qpavoid.loop.truth import true_frame
+from qpavoid.sensing.recording import Recording
 
 
 def test_a_recording_is_interpolated_between_its_frames():

@@ -19,18 +19,18 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from qpavoid import view_data
-from qpavoid.calibration import Calibration, SensorCalibration
-from qpavoid.cli import main
-from qpavoid.io import load_log
-from qpavoid.laws import AvoidanceConfig
-from qpavoid.live_view import LiveView
-from qpavoid.runs import RunSpec, run_one
-from qpavoid.scenarios import nominal_configurations
-from qpavoid.task import ArcPath
-from qpavoid.two_sensors import look_at
-from qpavoid.view_data import pair_states, replay_data
-from qpavoid.view_html import replay_html, write_replay
+from qpavoid.cli.commands import main
+from qpavoid.control.task import ArcPath
+from qpavoid.experiments.runs import RunSpec, run_one
+from qpavoid.laws.avoidance import AvoidanceConfig
+from qpavoid.output import view_data
+from qpavoid.output.live_view import LiveView
+from qpavoid.output.replay_html import replay_html, write_replay
+from qpavoid.output.run_files import load_log
+from qpavoid.output.view_data import pair_states, replay_data
+from qpavoid.scenarios.generated import nominal_configurations
+from qpavoid.sensing.calibration import Calibration, SensorCalibration
+from qpavoid.sensing.synthetic_pair import look_at
 
 pytest.importorskip("meshcat", reason="the replay needs the extra 'view' (meshcat)")
 

@@ -1,0 +1,316 @@
+"""The robot: a Pinocchio model with its control points and capsules (paper Sect. 4).
+
+A robot description is a folder with a URDF and a control-point file (TOML, see
+``docs/robot.md``); :mod:`qpavoid.arm.description` reads it into a Pinocchio model with
+one operational frame per control point and capsule end (locked joints removed), so
+positions and Jacobians come from Pinocchio.
+
+Typical use::
+
+    robot = load_robot("iiwa14")            # A3 locked, robot.model.nv == 6
+    kin = robot.kinematics(q)               # positions and Jacobians at q
+    kin.points                              # (9, 3) control points, base frame, m
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike
+
+from qpavoid.arm.description import (
+    CAPSULE_KEYS,
+    CONFIG_NAME,
+    SET_KEYS,
+    ControlSet,
+    read_description,
+)
+from qpavoid.core.checks import as_array
+from qpavoid.core.errors import InputError
+
+__all__ = [
+    "CAPSULE_KEYS",
+    "CONFIG_NAME",
+    "LWA",
+    "SET_KEYS",
+    "ControlSet",
+    "Kinematics",
+    "Robot",
+    "load_robot",
+]
+
+LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """Everything the distance methods and the controllers need at one configuration.
+
+    All positions are in the base frame (m); Jacobians map joint velocities (rad/s) to
+    linear velocities (m/s) of the point, expressed in the base frame, and for the end
+    effector to its twist ``[v; omega]`` in LOCAL_WORLD_ALIGNED coordinates.
+
+    Attributes
+    ----------
+    q
+        Joint angles (nq,), rad.
+    points
+        Control points (P, 3).
+    point_jacobians
+        (P, 3, nv), or ``None`` if not computed.
+    segments
+        Capsule axes (S, 2, 3): start and end point of each set's capsule.
+    segment_jacobians
+        (S, 2, 3, nv) Jacobians of the capsule ends, or ``None``.
+    ee_placement
+        (4, 4) homogeneous pose of the end-effector frame.
+    ee_jacobian
+        (6, nv) end-effector Jacobian, or ``None``.
+    """
+
+    q: np.ndarray
+    points: np.ndarray
+    point_jacobians: np.ndarray | None
+    segments: np.ndarray
+    segment_jacobians: np.ndarray | None
+    ee_placement: np.ndarray
+    ee_jacobian: np.ndarray | None
+
+    def segment_point_jacobian(
+        self, set_index: int | np.ndarray, s: float | np.ndarray
+    ) -> np.ndarray:
+        """Jacobian (3, nv) of the point at parameter ``s`` in [0, 1] on a capsule axis.
+
+        The capsule ends lie on one rigid segment (for the iiwa the locked or spinning
+        joint between them turns about that very segment), so the velocity of the point
+        ``(1 - s) a + s b`` is exactly ``(1 - s) v_a + s v_b``. With (A,) arrays of sets
+        and parameters: (A, 3, nv).
+        """
+        if self.segment_jacobians is None:
+            raise InputError(
+                "kinematics were computed without Jacobians", name="jacobians", value=False
+            )
+        ends = self.segment_jacobians[set_index]  # (2, 3, nv) or (A, 2, 3, nv)
+        s = np.asarray(s, dtype=float)[..., None, None]
+        return (1.0 - s) * ends[..., 0, :, :] + s * ends[..., 1, :, :]
+
+
+class Robot:
+    """A serial arm as a Pinocchio model plus its control-point description.
+
+    Parameters
+    ----------
+    model
+        Pinocchio model (possibly reduced), with one operational frame per control point
+        and per capsule end.
+    sets
+        The control sets, in order (their points are consecutive).
+    point_frames
+        Frame id of every control point, set after set.
+    ee_frame
+        Frame id of the end effector.
+    name
+        Name of the description (folder name).
+    locked
+        Joints removed from the model and the angle (rad) they are locked at.
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        sets: Sequence[ControlSet],
+        point_frames: Sequence[int],
+        ee_frame: int,
+        name: str,
+        locked: Mapping[str, float],
+    ):
+        self.model = model
+        self.sets = tuple(sets)
+        self.point_frames = tuple(point_frames)
+        self.ee_frame = ee_frame
+        self.name = name
+        self.locked = dict(locked)
+        self.joint_names = tuple(model.names[i] for i in range(1, model.njoints))
+        self.q_min = np.array(model.lowerPositionLimit, dtype=float)
+        self.q_max = np.array(model.upperPositionLimit, dtype=float)
+        self.dq_max = np.array(model.velocityLimit, dtype=float)
+        self.set_names = tuple(s.name for s in self.sets)
+        self.point_set = np.concatenate([[k] * len(s.points) for k, s in enumerate(self.sets)])
+        self.sphere_radii = np.array([self.sets[k].sphere_radius_m for k in self.point_set])
+        self.capsule_radii = np.array([s.capsule_radius_m for s in self.sets])
+        # Frames whose positions/Jacobians a tick needs, each once: the control points, then
+        # any capsule end that is not a control point (for the iiwa only A2).
+        placement: dict[tuple[int, tuple[float, ...]], int] = {}
+        for f in self.point_frames:
+            placement.setdefault(self._frame_key(f), f)
+        frames = list(self.point_frames)
+        seg_idx = []
+        for s in self.sets:
+            pair = []
+            for f in s.capsule_frames:
+                key = self._frame_key(f)
+                if key not in placement:
+                    placement[key] = f
+                    frames.append(f)
+                pair.append(frames.index(placement[key]))
+            seg_idx.append(pair)
+        self._frames = tuple(frames)
+        self._segment_index = np.array(seg_idx)
+        self._n_points = len(self.point_frames)
+        self.data = model.createData()
+
+    @property
+    def data(self) -> pin.Data:
+        """The Pinocchio data that :meth:`kinematics` computes in (assignable: a thread of
+        its own gets its own)."""
+        return self._held[0]
+
+    @data.setter
+    def data(self, data: pin.Data) -> None:
+        # the placements a tick reads, held with their data as one tuple (read at once, so
+        # a data assigned meanwhile never mixes with another's placements): each
+        # ``data.oMf[f]`` is a reference that updateFramePlacements rewrites; indexing
+        # anew costs 3 µs a tick
+        self._held = (data, tuple(data.oMf[f] for f in self._frames), data.oMf[self.ee_frame])
+
+    def __getstate__(self) -> dict:
+        # copies and pickles carry the data, never references into it
+        state = {k: v for k, v in self.__dict__.items() if k != "_held"}
+        return {**state, "data": self.data}
+
+    def __setstate__(self, state: dict) -> None:
+        state = dict(state)
+        data = state.pop("data")
+        self.__dict__.update(state)
+        self.data = data
+
+    def _frame_key(self, frame_id: int) -> tuple[int, tuple[float, ...]]:
+        """Identity of a frame's origin: its parent joint and placement (rounded)."""
+        f = self.model.frames[frame_id]
+        return (f.parentJoint, tuple(np.round(f.placement.translation, 12)))
+
+    @property
+    def nq(self) -> int:
+        """Number of configuration variables."""
+        return self.model.nq
+
+    @property
+    def nv(self) -> int:
+        """Number of joint velocities (6 with A3 locked, 7 without)."""
+        return self.model.nv
+
+    def set_index(self, name: str) -> int:
+        """Index of the control set called ``name``."""
+        try:
+            return self.set_names.index(name)
+        except ValueError:
+            raise InputError(
+                f"unknown control set {name!r}; sets are {self.set_names}", name="set", value=name
+            ) from None
+
+    def check_q(self, q: ArrayLike) -> np.ndarray:
+        """Return ``q`` as a float array of shape (nq,) or raise :class:`InputError`."""
+        return as_array(q, (self.nq,), "q (joint angles, rad)")
+
+    def kinematics(self, q: ArrayLike, jacobians: bool = True) -> Kinematics:
+        """Forward kinematics (and Jacobians) of every control point, capsule and the EE.
+
+        Parameters
+        ----------
+        q
+            Joint angles (nq,), rad, in the model's joint order.
+        jacobians
+            Also compute the Jacobians (needed by the controllers, not by distances).
+        """
+        q = self.check_q(q)
+        model, (data, placements, ee_placement) = self.model, self._held
+        if jacobians:
+            pin.computeJointJacobians(model, data, q)
+        else:
+            pin.forwardKinematics(model, data, q)
+        pin.updateFramePlacements(model, data)
+        pos = np.array([m.translation for m in placements])  # (F, 3), contiguous
+        points, segments = pos[: self._n_points], pos[self._segment_index]
+        ee = ee_placement.homogeneous  # a copy
+        pj = sj = ej = None
+        if jacobians:
+            jac = np.ascontiguousarray(
+                np.array([pin.getFrameJacobian(model, data, f, LWA) for f in self._frames])[:, :3]
+            )
+            pj, sj = jac[: self._n_points], jac[self._segment_index]
+            ej = pin.getFrameJacobian(model, data, self.ee_frame, LWA)
+        return Kinematics(q, points, pj, segments, sj, ee, ej)
+
+    def control_points(self, q: ArrayLike) -> np.ndarray:
+        """Control points (P, 3) at ``q``, base frame, m; for the iiwa L1(4), L2(4), EE(1)."""
+        return self.kinematics(q, jacobians=False).points
+
+    def capsules(self, q: ArrayLike) -> np.ndarray:
+        """Capsule axes (S, 2, 3) at ``q``, one per control set, m."""
+        return self.kinematics(q, jacobians=False).segments
+
+    def end_effector(self, q: ArrayLike) -> np.ndarray:
+        """End-effector pose (4, 4) at ``q`` in the base frame."""
+        return self.kinematics(q, jacobians=False).ee_placement
+
+    def neutral(self) -> np.ndarray:
+        """The zero configuration (nq,)."""
+        return pin.neutral(self.model)
+
+    def full_configuration(self, q: ArrayLike) -> dict[str, float]:
+        """Angle of every joint of the description, locked ones included, by name (rad)."""
+        q = self.check_q(q)
+        out = dict(zip(self.joint_names, q.tolist(), strict=False))
+        out.update(self.locked)
+        return out
+
+
+def load_robot(
+    name: str | Path = "iiwa14", locked: Mapping[str, float] | Sequence[str] | None = None
+) -> Robot:
+    """Load a robot description and build its (reduced) Pinocchio model.
+
+    Parameters
+    ----------
+    name
+        A bundled description (``"iiwa14"``), a folder holding a URDF and a
+        ``control_points.toml``, or the path of such a TOML file.
+    locked
+        Joints to lock: ``None`` uses the description's default (A3 at 0 for the iiwa),
+        ``()`` locks nothing, a sequence of names locks them at the description's value
+        (or 0), a mapping gives the angles (rad).
+
+    Returns
+    -------
+    Robot
+
+    Raises
+    ------
+    RobotDescriptionError
+        For an unknown description, a malformed file or URDF, or a frame it lacks.
+    InputError
+        For a locked angle that is not a number or a joint the model does not have.
+    """
+    return Robot(*read_description(name, locked))
+
+
+def joint_columns(robot: Robot, names: tuple[str, ...], option: str) -> np.ndarray:
+    """Columns of the joints ``names`` among the robot's active joints.
+
+    Raises
+    ------
+    InputError
+        If a name is not an active joint (``option`` names the setting at fault).
+    """
+    missing = [n for n in names if n not in robot.joint_names]
+    if missing:
+        raise InputError(
+            f"{option}: joints {missing} are not active joints of {robot.joint_names}",
+            name=option,
+            value=tuple(names),
+        )
+    return np.array([robot.joint_names.index(n) for n in names])

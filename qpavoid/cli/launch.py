@@ -1,0 +1,40 @@
+"""The ``qpavoid`` program's entry point: Ctrl-C while the library loads is one line too.
+
+Loading Pinocchio, coal, OSQP and scipy takes about a second; a Ctrl-C or SIGTERM then
+would show Python's traceback or end silently. This module (the console script's target,
+light to import because ``qpavoid/__init__`` imports lazily) answers either during that
+second with the command line's own line and status 130 (SIGTERM 143), then hands both
+back (the command line turns them into the same lines, and a live run into a clean end)
+before running the command.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+from types import FrameType
+
+from qpavoid.core.signals import handled_by
+
+
+def _stopped_while_loading(signum: int, frame: FrameType | None) -> None:
+    if signum == signal.SIGTERM:
+        sys.stderr.write("qpavoid: terminated; nothing written\n")
+        raise SystemExit(143)
+    sys.stderr.write("qpavoid: interrupted; nothing written\n")
+    raise SystemExit(130)
+
+
+# Process-wide, but only for the entry point's own loading: put back right after it. A
+# program started with Ctrl-C ignored (a background job of a script, nohup) keeps it so.
+with handled_by(_stopped_while_loading, replace=lambda previous: previous is not signal.SIG_IGN):
+    from qpavoid.cli.commands import main as _main
+
+
+def main() -> int:
+    """Run the command line (:func:`qpavoid.cli.commands.main`); return the exit status."""
+    return _main()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,321 @@
+"""What every controller shares: configuration, the tick's measurements, the command.
+
+A tick (:meth:`Controller.step`) takes the joint angles, the latest human frame and the
+path time, and returns a :class:`Command`: joint velocities plus everything needed to see
+why. The shared prelude measures (kinematics, distance table, f of eq. 2, the reference
+pose and twist) and applies the paper's stop rules; the shared epilogue is the last-resort
+layer (never cross a joint position limit, never command a non-finite velocity). Between
+them each controller computes its joint velocities (:meth:`Controller.act`):
+:class:`~qpavoid.control.analytic.AnalyticController` with eqs. (3)-(9),
+:class:`~qpavoid.control.qp.controller.QPController` with one QP. A numerical failure there (a
+:class:`~qpavoid.core.errors.SolverError`, or a ``LinAlgError``) stops the robot with the
+error as the reason; it is never raised. Invalid inputs (a wrong shape, a non-finite
+joint angle or path time) raise :class:`~qpavoid.core.errors.InputError` before any of it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from qpavoid.arm.model import Robot, joint_columns
+from qpavoid.control.task import ArcPath, pose_error
+from qpavoid.control.tick import Command, ControllerConfig, Tick
+from qpavoid.core.checks import finite_number
+from qpavoid.core.compiling import kernel_input
+from qpavoid.core.errors import SolverError
+from qpavoid.distance.methods import distance_method
+from qpavoid.human.body import HumanGeometry, KinectHuman
+from qpavoid.human.frames import HumanFrame
+from qpavoid.human.people import NOBODY, People, as_people
+from qpavoid.laws._kernels import NOT_FINITE, avoidance_terms, law_constants, limit_crossed, warm_up
+from qpavoid.laws.avoidance import l1_factor, modified_ik, scaled_velocity_limits, stop_reason
+from qpavoid.laws.ssm import (
+    StopTimeBudget,
+    joint_speed_limits,
+    reaction_time,
+    separation_bounds,
+    with_stop_time,
+)
+from qpavoid.perception.perceiver import Perceiver
+from qpavoid.perception.tracker import Perceived
+
+__all__ = ["Controller"]
+
+
+class Controller:
+    """Base of the controllers: the shared prelude, stop rules and last-resort layer.
+
+    Parameters
+    ----------
+    robot
+        The arm.
+    path
+        The planned end-effector path.
+    config
+        Shared settings (:class:`ControllerConfig`).
+    human
+        The human model (default: the paper's upper body).
+    """
+
+    name = "base"
+
+    def __init__(
+        self,
+        robot: Robot,
+        path: ArcPath | None = None,
+        config: ControllerConfig | None = None,
+        human: KinectHuman | None = None,
+    ):
+        self.robot = robot
+        self.path = path or ArcPath()
+        self.config = config or ControllerConfig()
+        self.human = human or KinectHuman()
+        self.distances = distance_method(self.config.distance, robot, self.human)
+        self.K = np.r_[[self.config.gain_position] * 3, [self.config.gain_orientation] * 3]
+        self.i_L1, self.i_L2, self.i_EE = (robot.set_index(n) for n in ("L1", "L2", "EE"))
+        self.scaled_cols = joint_columns(robot, self.config.scaled_joints, "scaled_joints")
+        self.perceiver = Perceiver(self.human, self.config.perception)
+        ssm = self.config.ssm
+        self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, self.config.control_period_s))
+        self.stop_budget = StopTimeBudget(self.ssm, robot.joint_names, self.config.control_period_s)
+        self.accel = joint_speed_limits(replace(ssm, stop_time_s=1.0), robot.joint_names)  # a_j
+        # the paper's rules: no separation bound, no part's own speed (read-only, shared)
+        shape = (len(robot.sets), len(self.human.parts))
+        self._no_bound, self._no_approach = np.full(shape, np.inf), np.zeros(shape)
+        for a in (self._no_bound, self._no_approach):
+            a.setflags(write=False)
+        warm_up()  # law_kernels, before the first tick
+        self._clock_s = 0.0  # the controller's own clock: control periods since it started
+        self.closest_frame: HumanFrame | None = None  # the closest person's, last tick
+
+    def perceive(
+        self, people: People, frame_age_s: float, frame_time_s: float | None = None
+    ) -> Perceiver:
+        """Everybody as the trackers see them (:class:`~qpavoid.human.people.Perceiver`), updated
+        once per new frame; captured at ``frame_time_s`` or, without one, the
+        controller's clock minus ``frame_age_s``."""
+        captured = self._clock_s - frame_age_s if frame_time_s is None else frame_time_s
+        return self.perceiver.update(people, frame_time_s, captured)
+
+    def geometry(self, frame: HumanFrame | People) -> list[HumanGeometry]:
+        """The geometries used for ``frame`` if last perceived, else its own (raw)."""
+        return self.perceiver.geometries(frame)
+
+    def measure(
+        self,
+        q: ArrayLike,
+        joints: object,
+        state: object,
+        t: float,
+        frame_age_s: float = 0.0,
+        frame_time_s: float | None = None,
+    ) -> Tick:
+        """Shared prelude: kinematics, distances, f (eq. 2), reference, stop rules.
+
+        Raises
+        ------
+        InputError
+            If ``q``, ``joints`` or ``state`` is malformed or ``t`` is not finite.
+        """
+        t = finite_number(t, "t (path time, s)")
+        kin = self.robot.kinematics(q)
+        people = as_people(joints, state)
+        self._clock_s += self.config.control_period_s
+        age = frame_age_s
+        if age <= self.config.max_frame_age_s and people.ids:
+            seen = self.perceive(people, age, frame_time_s)
+            percs, geos, v_people = seen.perceived, seen.geometry, seen.part_velocity
+        else:  # stale or NaN: the robot stops on it; the trackers do not learn from it
+            percs = [Perceived.untracked(f) for f in people.frames or (NOBODY,)]
+            geos = self.geometry(people)
+            v_people = np.zeros((len(percs), len(self.human.parts), 3))
+        table, who = self.distances.closest(kin, geos)
+        cfg = self.config.avoidance
+        # the minima, eqs. (4)-(5) and (7) in one compiled call (law_kernels)
+        dmin, j, v_rep_L2, v_rep_EE = avoidance_terms(
+            kernel_input(table.distance, np.float64),
+            kernel_input(table.vector, np.float64),
+            self.i_L2,
+            self.i_EE,
+            *law_constants(cfg),
+        )
+        nearest = (
+            int(who.flat[np.argmin(table.distance)])
+            if len(geos) > 1 and np.isfinite(dmin).any()
+            else 0
+        )
+        perceived, geo = percs[nearest], geos[nearest]
+        frame = self.closest_frame = people.frames[nearest] if people.ids else NOBODY
+        f = float(l1_factor(dmin[self.i_L1], cfg))  # eq. (2)
+        limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)  # eq. (3)
+        if self.config.safety == "ssm":
+            ssm = with_stop_time(self.ssm, self.stop_budget.budget())
+            v_parts = v_people[who, np.arange(who.shape[1])[None, :]]  # each pair's person
+            approach_limit, human_approach = separation_bounds(table, v_parts, age, ssm)
+            limits = np.minimum(limits, self.accel * ssm.stop_time_s)  # |q̇_j| ≤ a_j T_s
+        else:
+            approach_limit, human_approach = self._no_bound, self._no_approach
+        ref_pose, ref_twist = self.path.reference(t)
+        error = pose_error(ref_pose, kin.ee_placement)
+        frozen = self.config.perception.max_identical_frames
+        if not age <= self.config.max_frame_age_s:  # NaN too
+            reason = f"human frame is stale ({age:.3f} s old, max {self.config.max_frame_age_s} s)"
+        elif frozen is not None and (repeats := min(p.identical for p in percs)) > frozen:
+            reason = f"human frame is frozen ({repeats + 1} identical skeletons in a row)"
+        elif self.config.require_human and not np.isfinite(dmin).any():
+            reason = "no body part of the operator is tracked"
+        else:
+            reason = stop_reason(f, dmin[self.i_L2], dmin[self.i_EE], cfg) or ""
+        return Tick(
+            kin.q,
+            kin,
+            frame,
+            geo,
+            table,
+            dmin,
+            f,
+            limits,
+            j,
+            v_rep_L2,
+            v_rep_EE,
+            ref_pose,
+            ref_twist,
+            error,
+            ref_twist + self.K * error,
+            reason,
+            perceived,
+            age,
+            approach_limit,
+            human_approach,
+        )
+
+    def task_joint_velocities(self, tick: Tick) -> np.ndarray:
+        """Eq. (8): ``q̇ = J⁻¹ (v_PL + K e + v_EE)``, damped near singularities, rad/s (nv,)."""
+        assert tick.kin.ee_jacobian is not None  # a tick's kinematics carry the Jacobians
+        cfg = self.config
+        return modified_ik(
+            tick.kin.ee_jacobian,
+            tick.ref_twist,
+            self.K,
+            tick.error,
+            tick.v_rep_EE,
+            cfg.sigma_min,
+            cfg.lambda_max,
+        )
+
+    def command(
+        self,
+        tick: Tick,
+        dq: np.ndarray | None,
+        time_scale: float = 1.0,
+        v_rep_L2: np.ndarray | None = None,
+        v_rep_EE: np.ndarray | None = None,
+        reason: str = "",
+        info: dict | None = None,
+    ) -> Command:
+        """Shared epilogue: the last-resort layer, then the :class:`Command`.
+
+        ``dq = None`` or a non-empty ``reason`` (or the tick's own) means stop. A command
+        that is not finite, or that would carry a joint past its position limit within one
+        control period, becomes a stop too.
+        """
+        reason = tick.reason or reason
+        if dq is not None:
+            dq = np.asarray(dq, dtype=float)
+        if not reason and dq is not None and dq.shape != tick.q.shape:  # never sent nor read
+            reason = f"joint velocity of shape {dq.shape} computed, not {tick.q.shape}"
+        elif not reason and dq is not None:
+            k = limit_crossed(  # one compiled pass (law_kernels)
+                kernel_input(tick.q, np.float64),
+                kernel_input(dq, np.float64),
+                float(self.config.control_period_s),
+                self.robot.q_min,
+                self.robot.q_max,
+            )
+            if k == NOT_FINITE:
+                reason = "non-finite joint velocity computed"
+            elif k >= 0:
+                reason = (
+                    f"joint {self.robot.joint_names[k]} would cross its position limit "
+                    f"(q = {tick.q[k]:.4f} rad)"
+                )
+        stopped = bool(reason) or dq is None
+        applied = np.zeros(self.robot.nv) if stopped or dq is None else dq
+        if self.config.safety == "ssm":
+            self.stop_budget.record(applied)
+        zero3 = np.zeros(3)
+        return Command(
+            dq=applied,
+            stopped=stopped,
+            reason=reason if stopped else "",
+            time_scale=0.0 if stopped else float(time_scale),
+            f=tick.f,
+            distance=tick.distance,
+            table=tick.table,
+            v_rep_L2=zero3 if v_rep_L2 is None else v_rep_L2,
+            v_rep_EE=zero3 if v_rep_EE is None else v_rep_EE,
+            limits=tick.limits,
+            ee_pos=tick.kin.ee_placement[:3, 3].copy(),
+            ee_ref=tick.ref_pose[:3, 3].copy(),
+            info=info or {},
+        )
+
+    def step(
+        self,
+        q: ArrayLike,
+        joints: object,
+        state: object = None,
+        t: float = 0.0,
+        frame_age_s: float = 0.0,
+        frame_time_s: float | None = None,
+    ) -> Command:
+        """One control tick: :meth:`measure`, then (unless a stop rule holds) :meth:`act`.
+
+        Parameters
+        ----------
+        q
+            (nq,) joint angles, rad.
+        joints
+            (25, 3) Kinect joints of the latest frame, m, robot base frame; NaN = lost; or
+            :class:`~qpavoid.human.people.People` (several people: every distance, rule and
+            constraint uses the closest of them).
+        state
+            (25,) tracking states (0 not tracked, 1 inferred, 2 tracked), or None.
+        t
+            Path time, s (the clock of the planned path, which waits while stopped).
+        frame_age_s
+            Age of the human frame, s (now minus its capture time); too old, or NaN, stops
+            the robot.
+        frame_time_s
+            The frame's capture time on any clock, s, if the caller has it (the tracker's
+            velocities use it); without it the controller's own clock minus the age.
+
+        Raises
+        ------
+        InputError
+            On malformed inputs (see :meth:`measure`). A numerical failure while computing
+            the command is not raised: the robot stops with it as the reason.
+        """
+        tick = self.measure(q, joints, state, t, frame_age_s, frame_time_s)
+        if tick.reason:
+            return self.command(tick, None)
+        try:
+            return self.act(tick)
+        except (SolverError, np.linalg.LinAlgError) as exc:
+            info = (
+                {"solver": exc.solver, "status": exc.status}
+                if isinstance(exc, SolverError)
+                else {"error": type(exc).__name__}
+            )
+            return self.command(tick, None, reason=f"numerical failure: {exc}", info=info)
+
+    def act(self, tick: Tick) -> Command:
+        """The command of a tick on which no stop rule holds (each controller's own part).
+
+        It ends with :meth:`command`; it may raise :class:`~qpavoid.core.errors.SolverError`
+        (or ``LinAlgError``), which :meth:`step` turns into a stop.
+        """
+        raise NotImplementedError

@@ -1,0 +1,143 @@
+"""The paper's repulsive velocities (eqs. 4-7) as soft rows with a slack.
+
+In the paper the repulsion is *added* to the motion the task asks for: eq. (8) puts v_EE
+into the end effector's target, and eq. (9) adds to the joints the velocity that moves
+the closest L2 point at v_rep,L2 on top of eq. (8)'s motion. As a QP: the point's speed
+along the repulsion direction u = v / |v| should be at least its nominal speed plus the
+law's speed,
+
+    uᵀ J_p q̇ + s ≥ uᵀ ṗ_nominal + |v|,   s ≥ 0,   cost w s²,
+
+written as the row ``−uᵀ J_p q̇ − s ≤ −(uᵀ ṗ_nominal + |v|)``. For the end effector
+(:class:`EERepulsionTask`, eq. 7) ṗ_nominal is the linear part of v_PL + K e (eq. 8
+without v_EE); for the closest L2 point (:class:`L2RepulsionTask`, eqs. 4-6) it is
+J_p q̇₈ with q̇₈ eq. (8)'s joint velocities. Moving away faster costs nothing; falling
+short costs w s². Where the task can be met the row costs nothing either, so it only acts
+against other constraints. The row is always present (fixed structure); below
+:data:`MIN_SPEED_MPS` its bound is +inf.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from qpavoid.control.qp.pieces import Bounds, Objective, QPPiece, free_bounds, readonly
+from qpavoid.control.qp.variables import Variables
+from qpavoid.control.tick import Tick
+
+#: Repulsive speeds below this are treated as none (m/s): 0.1 mm/s.
+MIN_SPEED_MPS = 1e-4
+
+
+class RepulsionTask(QPPiece[Tick]):
+    """Soft "move away at least this fast" for one robot point: cost, row and bound.
+
+    Its cost ``w s²`` and bound ``s ≥ 0`` on its slack are constant; its one row is not.
+    Subclasses say which point, how fast (:meth:`velocity`) and from what nominal motion
+    (:meth:`motion`).
+
+    Parameters
+    ----------
+    variables
+        The QP's variables (the slack is found by :attr:`name`).
+    weight
+        w, per m/s of shortfall.
+    """
+
+    rows = 1
+    constant_objective = True
+    constant_bounds = True
+
+    def __init__(self, variables: Variables, weight: float):
+        self.variables, self.weight = variables, weight
+        self.slack = variables.slack(self.name)
+        n = variables.n
+        H = np.zeros((n, n))
+        H[self.slack, self.slack] = 2.0 * weight
+        self._objective = Objective(H, np.zeros(n))
+        lb, ub = free_bounds(n)
+        lb[self.slack] = 0.0
+        self._bounds = Bounds(lb, ub)
+        readonly(H, self._objective.c, lb, ub)
+
+    def velocity(self, tick: Tick) -> np.ndarray:
+        """The law's repulsive velocity v of the point, m/s (3,)."""
+        raise NotImplementedError
+
+    def motion(self, tick: Tick) -> tuple[np.ndarray, np.ndarray]:
+        """The point's Jacobian J_p (3, nv) and its nominal velocity ṗ_nominal (3,), m/s."""
+        raise NotImplementedError
+
+    def compute_qp_objective(self, tick: Tick | None, dt: float) -> Objective:
+        """``w s²`` on the slack."""
+        return self._objective
+
+    def compute_qp_bounds(self, tick: Tick | None, dt: float) -> Bounds:
+        """``s ≥ 0``."""
+        return self._bounds
+
+    def write_qp_inequalities(self, tick: Tick, dt: float, G: np.ndarray, h: np.ndarray) -> None:
+        """One row: ``−uᵀ J_p q̇ − s ≤ −(uᵀ ṗ_nominal + |v|)``."""
+        row = G[0]
+        row[:] = 0.0
+        row[self.slack] = -1.0
+        v = self.velocity(tick)
+        speed = math.sqrt(v @ v)
+        if speed < MIN_SPEED_MPS:
+            h[0] = np.inf
+            return
+        u = v / speed
+        Jp, nominal = self.motion(tick)
+        np.matmul(u, Jp, out=row[self.variables.dq])
+        np.negative(row[self.variables.dq], out=row[self.variables.dq])
+        h[0] = -(u @ nominal + speed)
+
+
+class L2RepulsionTask(RepulsionTask):
+    """Eqs. (4)-(6): the L2 point closest to the person moves away at v_rep,L2.
+
+    Parameters
+    ----------
+    variables, weight
+        As for :class:`RepulsionTask`.
+    set_index
+        Row of L2 in the distance table.
+    task_joint_velocities
+        Eq. (8)'s joint velocities q̇₈ of a tick (the controller's), for the point's
+        nominal velocity J_p q̇₈.
+    """
+
+    name = "repulsion_L2"
+
+    def __init__(
+        self,
+        variables: Variables,
+        weight: float,
+        set_index: int,
+        task_joint_velocities: Callable[[Tick], np.ndarray],
+    ):
+        super().__init__(variables, weight)
+        self.set_index, self.task_joint_velocities = set_index, task_joint_velocities
+
+    def velocity(self, tick: Tick) -> np.ndarray:
+        return tick.v_rep_L2
+
+    def motion(self, tick: Tick) -> tuple[np.ndarray, np.ndarray]:
+        Jp = tick.table.robot_jacobian(tick.kin, self.set_index, tick.L2_part)
+        return Jp, Jp @ self.task_joint_velocities(tick)  # J_p q̇₈, eq. (8)
+
+
+class EERepulsionTask(RepulsionTask):
+    """Eq. (7): the end effector moves away at v_EE, on top of v_PL + K e."""
+
+    name = "repulsion_EE"
+
+    def velocity(self, tick: Tick) -> np.ndarray:
+        return tick.v_rep_EE
+
+    def motion(self, tick: Tick) -> tuple[np.ndarray, np.ndarray]:
+        assert tick.kin.ee_jacobian is not None
+        return tick.kin.ee_jacobian[:3], tick.task_twist[:3]

@@ -1,0 +1,164 @@
+"""The QP controller: the paper's laws as costs and constraints of one QP per tick."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from qpavoid.arm.model import Robot
+from qpavoid.control.controller import Controller
+from qpavoid.control.qp.backends import make_backend
+from qpavoid.control.qp.barriers.repulsion import EERepulsionTask, L2RepulsionTask
+from qpavoid.control.qp.barriers.separation import SeparationLimit
+from qpavoid.control.qp.config import QPConfig
+from qpavoid.control.qp.kernels import warm_up
+from qpavoid.control.qp.limits.position import PositionLimit
+from qpavoid.control.qp.limits.velocity import VelocityLimit
+from qpavoid.control.qp.limits.velocity_damper import VelocityDamper
+from qpavoid.control.qp.pieces import QPPiece
+from qpavoid.control.qp.problem import Assembler, QPProblem
+from qpavoid.control.qp.solver_kernels import hard_excess
+from qpavoid.control.qp.tasks.ee import EndEffectorTask
+from qpavoid.control.qp.tasks.elbow import ElbowClearanceTask
+from qpavoid.control.qp.tasks.regularization import Regularization
+from qpavoid.control.qp.variables import Variables
+from qpavoid.control.task import ArcPath
+from qpavoid.control.tick import Command, ControllerConfig, Tick
+from qpavoid.human.body import KinectHuman
+from qpavoid.laws.avoidance import stop_distances
+
+#: A solution may break a hard row by at most this much (m/s or rad/s) to be applied.
+FEASIBILITY_TOL = 1e-5
+
+
+class QPController(Controller):
+    """Drop-in alternative to :class:`~qpavoid.control.analytic.AnalyticController`.
+
+    Each tick, after the shared prelude (distances, f of eq. 2, the stop rules), it solves
+
+        minimise    ‖W (J q̇ − (v_PL + K e + v_EE))‖²          eq. (8), EndEffectorTask
+                  + w (s_L2² + s_EE²)                          eqs. (4)-(7), repulsion
+                  + ε ‖q̇‖²                                       Regularization
+                  [+ w_el (nᵀ J_p q̇ − v_el)²]                    ElbowClearanceTask (7 joints)
+        subject to  u_L2ᵀ J_L2 q̇ + s_L2 ≥ u_L2ᵀ J_L2 q̇₈ + |v_rep,L2|     L2RepulsionTask
+                    u_EEᵀ J_EE q̇ + s_EE ≥ u_EEᵀ (v_PL + K e) + |v_EE|  EERepulsionTask
+                    s_L2, s_EE ≥ 0
+                    −nᵀ J_p q̇ ≤ ξ (d − d_s) / (d_i − d_s) [− v_h,n] VelocityDamper, every pair
+                   [−nᵀ J_p q̇ ≤ v_max(d)                         SeparationLimit, ssm only]
+                    |q̇| ≤ q̇_max, A1 and A2 scaled by (1 − f)     VelocityLimit, eq. (3)
+                    γ (q_min − q)/dt ≤ q̇ ≤ γ (q_max − q)/dt      PositionLimit
+
+    (q̇₈: eq. (8)'s joint velocities; :mod:`qpavoid.control.qp.barriers.repulsion` explains the
+    repulsion
+    rows),
+    and commands q̇ only if the solver reports success and the solution meets the hard
+    rows; otherwise the robot stops with the solver's status as the reason.
+
+    Parameters
+    ----------
+    robot, path, config, human
+        As for :class:`~qpavoid.control.controller.Controller`.
+    qp
+        The QP's weights, gains and solver settings.
+    """
+
+    name = "qp"
+
+    def __init__(
+        self,
+        robot: Robot,
+        path: ArcPath | None = None,
+        config: ControllerConfig | None = None,
+        human: KinectHuman | None = None,
+        qp: QPConfig | None = None,
+    ):
+        super().__init__(robot, path, config, human)
+        self.qp = qp or QPConfig()
+        w, cfg = self.qp, self.config
+        self.variables = x = Variables(robot.nv)
+        ssm = cfg.safety == "ssm"
+        d_stop = np.zeros(len(robot.sets))
+        d_stop[[self.i_L1, self.i_L2, self.i_EE]] = stop_distances(cfg.avoidance)
+        self.ee_task = EndEffectorTask(x, w.weight_position, w.weight_orientation)
+        pieces: list[QPPiece[Tick]] = [
+            self.ee_task,
+            L2RepulsionTask(x, w.weight_repulsion, self.i_L2, self.task_joint_velocities),
+            EERepulsionTask(x, w.weight_repulsion),
+            Regularization(x, w.regularization),
+        ]
+        if w.elbow_weight > 0:
+            elbow = robot.sets[self.i_L1].points[-1]  # A4, where L1 meets L2
+            radii = np.where(self.human.point_part, self.human.sphere_radii, 0.0).max(axis=1)
+            pieces.append(
+                ElbowClearanceTask(
+                    x,
+                    elbow,
+                    robot.sphere_radii[elbow],
+                    radii,
+                    w.elbow_weight,
+                    w.elbow_influence_m,
+                    w.elbow_speed_mps,
+                )
+            )
+        pieces += [
+            VelocityDamper(
+                x, d_stop, w.damper_influence_m, w.damper_gain_mps, len(self.human.parts)
+            ),
+            # with the paper's rules every separation row is inactive: not in the problem
+            *([SeparationLimit(x, len(robot.sets) * len(self.human.parts))] if ssm else []),
+            VelocityLimit(x),
+            PositionLimit(x, robot.q_min, robot.q_max, w.position_limit_gain),
+        ]
+        warm_up()  # the QP's compiled pieces, before the first tick (the backend warms its own)
+        self.assembler = Assembler(x.n, pieces)
+        self.backend = make_backend(w, x.n, self.assembler.m)
+        # the rows of the hard pieces: the dampers', then the separation's (a slice: a view)
+        rows = self.assembler.rows
+        damper = rows[VelocityDamper.name]
+        separation = rows.get(SeparationLimit.name, slice(damper.stop, damper.stop))
+        assert damper.stop == separation.start  # adjacent in the pieces' order
+        self._hard = slice(damper.start, separation.stop)
+
+    def problem(self, tick: Tick) -> QPProblem:
+        """The QP of a tick (for inspection and cross-checks)."""
+        return self.assembler(tick, self.config.control_period_s)
+
+    def act(self, tick: Tick) -> Command:
+        prob = self.assembler.fill(tick, self.config.control_period_s)
+        sol = self.backend.solve(prob)
+        info = {"solver": self.backend.name, "status": sol.status, "iterations": sol.iterations}
+        if not sol.found or sol.x is None:
+            reason = f"QP not solved ({self.backend.name}: {sol.status})"
+            if (tick.approach_limit < 0.0).any():  # no command keeps the separation
+                reason = f"{tick.separation_reason()} ({reason})"
+            return self.command(tick, None, reason=reason, info=info)
+        x, dq = sol.x, self.variables.dq
+        # Hard rows, checked against the problem we meant to solve: a solution that breaks
+        # a bound or a damper by more than the solver's tolerance is never applied; within
+        # it, the bounds (joint limits) are then met exactly.
+        lb, ub, dq_x = prob.lb[dq], prob.ub[dq], x[dq]
+        excess = hard_excess(  # NaN if any is NaN
+            x,
+            self.variables.nv,
+            prob.lb,
+            prob.ub,
+            prob.G,
+            prob.h,
+            self._hard.start,
+            self._hard.stop,
+        )
+        if not excess <= FEASIBILITY_TOL:  # NaN too
+            return self.command(
+                tick,
+                None,
+                reason=f"QP solution breaks a hard constraint by "
+                f"{excess:.2e} ({self.backend.name}: {sol.status})",
+                info=info,
+            )
+        return self.command(
+            tick,
+            np.minimum(np.maximum(dq_x, lb), ub),  # np.clip: the same, 5 µs slower
+            1.0,
+            tick.v_rep_L2,
+            tick.v_rep_EE,
+            info=info,
+        )

@@ -1,0 +1,27 @@
+"""Joint velocity limits: nominal, with A1 and A2 scaled by (1 − f) (eq. 3)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from qpavoid.control.qp.pieces import QPPiece
+from qpavoid.control.qp.variables import Variables
+from qpavoid.control.tick import Tick
+
+
+class VelocityLimit(QPPiece[Tick]):
+    """Bounds ``−q̇_max,r ≤ q̇ ≤ q̇_max,r`` with ``q̇_max,r`` of eq. (3) (rad/s).
+
+    The shared prelude computed the limits (:func:`~qpavoid.laws.avoidance.scaled_velocity_limits`):
+    the L1 joints (A1, A2) scaled by (1 − f).
+    """
+
+    name = "velocity_limits"
+
+    def __init__(self, variables: Variables):
+        self.variables = variables
+
+    def tighten_qp_bounds(self, tick: Tick, dt: float, lb: np.ndarray, ub: np.ndarray) -> None:
+        lo, hi = lb[self.variables.dq], ub[self.variables.dq]
+        np.maximum(lo, -tick.limits, out=lo)
+        np.minimum(hi, tick.limits, out=hi)

@@ -1,0 +1,1 @@
+"""The QP's tasks: costs it minimises (end-effector path, elbow, regularisation)."""

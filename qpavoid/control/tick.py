@@ -1,0 +1,207 @@
+"""What flows through one control tick: the shared settings, the measurements, the command.
+
+:class:`ControllerConfig` holds what every controller shares; :class:`Tick` is what the
+shared prelude measured (:meth:`~qpavoid.control.controller.Controller.measure`) and each
+controller's own part reads; :class:`Command` is what a tick returns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from qpavoid.arm.model import Kinematics
+from qpavoid.core.errors import InputError
+from qpavoid.distance.methods import DistanceTable
+from qpavoid.human.body import HumanGeometry
+from qpavoid.human.frames import HumanFrame
+from qpavoid.laws.avoidance import AvoidanceConfig
+from qpavoid.laws.ssm import SSMConfig
+from qpavoid.perception.tracker import Perceived, PerceptionConfig
+
+#: What ``ControllerConfig.safety`` may be: the paper's rules as written, or speed and
+#: separation monitoring on top of them.
+SAFETY_MODES = ("paper", "ssm")
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Settings shared by the controllers.
+
+    Attributes
+    ----------
+    distance
+        Distance method: ``"capsules"`` (exact, coal; the default, because it covers every
+        robot surface a person can reach, the shoulder included) or ``"spheres"`` (the
+        paper's eq. 1 as published: blind at the shoulder, docs/distances.md).
+    avoidance
+        Constants of the avoidance laws (eqs. 2-7) and the stop rules.
+    gain_position, gain_orientation
+        Diagonal of K in eq. (8) for the position and orientation error, 1/s.
+    sigma_min, lambda_max
+        Damped inverse of eqs. (6) and (8): no damping while the smallest singular value
+        is above ``sigma_min``; damping up to ``lambda_max`` at a singularity.
+    control_period_s
+        Period of the control loop, s: a command that would carry a joint past its
+        position limit within one period stops the robot instead.
+    scaled_joints
+        Joints whose limits eq. (3) scales by (1 − f): the two that move L1.
+    require_human
+        Stop when no body part is tracked at all (the safe reading of "nobody seen").
+    max_frame_age_s
+        Stop when the human frame is older than this, s (default 0.1 s: the Kinect v2
+        latency and one frame period, with 6 ms to spare).
+    safety
+        ``"paper"``: the paper's laws and stop rules as written; ``"ssm"``: speed and
+        separation monitoring on top of them (:mod:`qpavoid.laws.ssm`): each robot point's
+        approach speed towards each body part bounded so that it can be stationary before
+        the person arrives, joint speeds kept within the stopping-time budget, and (QP)
+        the velocity damper reduced by the part's own approach speed.
+    ssm
+        Constants of speed and separation monitoring (used with ``safety="ssm"``).
+    perception
+        How frames are judged: lost and inferred joints, frozen frames, the person's
+        velocity (:mod:`qpavoid.perception.tracker`).
+    """
+
+    distance: str = "capsules"
+    avoidance: AvoidanceConfig = field(default_factory=AvoidanceConfig)
+    gain_position: float = 5.0
+    gain_orientation: float = 5.0
+    sigma_min: float = 0.02
+    lambda_max: float = 0.05
+    control_period_s: float = 0.002
+    scaled_joints: tuple[str, ...] = ("A1", "A2")
+    require_human: bool = True
+    max_frame_age_s: float = 0.1
+    safety: str = "paper"
+    ssm: SSMConfig = field(default_factory=SSMConfig)
+    perception: PerceptionConfig = field(default_factory=PerceptionConfig)
+
+    def __post_init__(self) -> None:
+        if self.safety not in SAFETY_MODES:
+            raise InputError(
+                f"safety must be one of {SAFETY_MODES}, got {self.safety!r}",
+                name="safety",
+                value=self.safety,
+            )
+
+
+@dataclass(frozen=True)
+class Command:
+    """One tick's output.
+
+    Attributes
+    ----------
+    dq
+        (nv,) commanded joint velocities, rad/s; exactly zero when stopped.
+    stopped
+        True if a stop rule (or the last-resort layer) holds.
+    reason
+        Why the robot stops ("" while it moves).
+    time_scale
+        Rate in [0, 1] at which the path clock should advance (0 when stopped).
+    f
+        The L1 factor of eq. (2).
+    distance
+        (S,) minimum distance per robot set (L1, L2, EE), m, of the method in use.
+    table
+        The full distance table.
+    v_rep_L2, v_rep_EE
+        (3,) repulsive velocities of eqs. (5) and (7), m/s.
+    limits
+        (nv,) joint velocity limits in force this tick (eq. 3), rad/s.
+    ee_pos, ee_ref
+        (3,) end-effector position and its reference, m.
+    info
+        Controller-specific extras (e.g. solver status and iterations).
+    """
+
+    dq: np.ndarray
+    stopped: bool
+    reason: str
+    time_scale: float
+    f: float
+    distance: np.ndarray
+    table: DistanceTable
+    v_rep_L2: np.ndarray
+    v_rep_EE: np.ndarray
+    limits: np.ndarray
+    ee_pos: np.ndarray
+    ee_ref: np.ndarray
+    info: dict = field(default_factory=dict)
+
+
+@dataclass
+class Tick:
+    """One tick's measurements (:meth:`Controller.measure`), given to :meth:`Controller.act`.
+
+    Attributes
+    ----------
+    q
+        (nq,) joint angles, rad.
+    kin
+        Kinematics at ``q`` (points, Jacobians, end-effector placement).
+    frame, human
+        The human frame as given, and the geometry of what the tracker made of it.
+    perceived
+        The tracker's view of the frame (filled-in lost joints, uncertainties, velocities).
+    frame_age_s
+        Age of the newest frame the tracker accepted, s.
+    table
+        The distance table (sets × parts) of the configured method.
+    distance
+        (S,) minimum distance per set, m.
+    f
+        The L1 factor of eq. (2).
+    limits
+        (nv,) joint velocity limits of eq. (3), rad/s.
+    L2_part
+        Column of the human part closest to L2.
+    v_rep_L2, v_rep_EE
+        (3,) repulsive velocities of eqs. (4)-(5) and (7), m/s.
+    ref_pose, ref_twist
+        The planned end-effector pose (4, 4) and twist (6,) at the path time.
+    error
+        (6,) pose error e of eq. (8).
+    task_twist
+        (6,) ``v_PL + K e``: eq. (8)'s target without the EE repulsion.
+    approach_limit
+        (S, K) speed and separation bound on each pair's robot approach speed, m/s
+        (:func:`~qpavoid.laws.ssm.max_approach_speed`; +inf with ``safety="paper"``).
+    human_approach
+        (S, K) each part's own speed towards each set, m/s (≥ 0; 0 with ``"paper"``).
+    reason
+        Why a stop rule holds ("" if none).
+    """
+
+    q: np.ndarray
+    kin: Kinematics
+    frame: HumanFrame
+    human: HumanGeometry
+    table: DistanceTable
+    distance: np.ndarray
+    f: float
+    limits: np.ndarray
+    L2_part: int
+    v_rep_L2: np.ndarray
+    v_rep_EE: np.ndarray
+    ref_pose: np.ndarray
+    ref_twist: np.ndarray
+    error: np.ndarray
+    task_twist: np.ndarray
+    reason: str
+    perceived: Perceived
+    frame_age_s: float
+    approach_limit: np.ndarray
+    human_approach: np.ndarray
+
+    def separation_reason(self) -> str:
+        """Why speed and separation monitoring stops the robot: the tightest pair."""
+        table = self.table
+        i, j = np.unravel_index(int(np.argmin(self.approach_limit)), table.distance.shape)
+        return (
+            f"speed and separation: {table.part_names[j]} {table.distance[i, j]:.3f} m "
+            f"from {table.set_names[i]}"
+        )

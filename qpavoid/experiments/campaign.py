@@ -1,0 +1,241 @@
+"""Safety campaigns: many randomized strikes, judged against the truth, on any executor.
+
+A campaign (``qpavoid sweep``) runs ``n`` adversarial cases (:mod:`qpavoid.scenarios.strikes`: a
+hand, or both, driven from rest into every robot set, the shoulder or the base at up to
+2 m/s, with lost, inferred or frozen limbs, frame gaps and jitter on a Kinect with its
+latency) from seed ``seed`` on, each along the whole path (until the goal, or a cap),
+and sums them up (:func:`summarize_campaign`). Every run depends on its seed alone, so a
+summary is the same whatever the number of workers and wherever they run: a local
+process pool, or Ray (:class:`RayExecutor`; a cluster when ``RAY_ADDRESS`` is set). Only
+the tick times (``timing``) are measured, not reproduced.
+
+:func:`write_campaign` writes ``summary.json``, ``runs.json`` and, in ``worst/``, the true
+motion of the worst runs as replayable recordings (``qpavoid run --human``) with their
+case beside them.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import signal
+import socket
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Executor
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from qpavoid.arm.model import load_robot
+from qpavoid.core.errors import InputError, Terminated
+from qpavoid.core.signals import handled_by
+from qpavoid.experiments.strike_sweep import StrikeCheck, strike_sweep
+from qpavoid.human.frames import HumanFrame
+from qpavoid.output.run_files import staged_output
+from qpavoid.scenarios.strikes import strike_case, strike_motion
+from qpavoid.sensing.recording import Recording, save_npz
+
+__all__ = [
+    "MAX_RUNS",
+    "RayExecutor",
+    "replay_command",
+    "run_campaign",
+    "summarize_campaign",
+    "write_campaign",
+]
+
+#: A run lasts until the goal or this cap, s: the 15 s path, a strike's stops and margin.
+CAMPAIGN_MAX_TIME_S = 30.0
+#: How many of the worst runs are written out.
+WORST = 5
+#: The most runs of one campaign: each run's result is held for the summary and is one
+#: row of runs.json (about 0.5 kB), and 100 000 runs are the campaign docs/performance.md
+#: prices; split a larger one by --seed.
+MAX_RUNS = 1_000_000
+
+
+class RayExecutor(Executor):
+    """``map`` on Ray: a cluster when ``RAY_ADDRESS`` is set, else a local Ray of
+    ``workers`` CPUs. Results come back in the order of the items (``pip install
+    "qpavoid[cluster]"``)."""
+
+    def __init__(self, workers: int | None = None):
+        try:
+            import ray
+        except ImportError:  # the optional dependency
+            raise InputError(
+                'the ray executor needs Ray: pip install "qpavoid[cluster]"',
+                name="--executor",
+                value="ray",
+            ) from None
+        self.ray, self.started = ray, False
+        if ray.is_initialized():
+            return
+        address = os.environ.get("RAY_ADDRESS")
+        try:
+            with handled_by(None):  # ray.init sets its own SIGTERM handler: ours comes back
+                self._init(address, workers)
+        except BaseException as exc:
+            ray.shutdown()  # whatever it started or joined
+            self.started = False
+            if isinstance(exc, SystemExit) and exc.code == signal.SIGTERM:
+                raise Terminated from None  # ray.init's own SIGTERM handler exits so
+            if not isinstance(exc, Exception):  # Ctrl-C, SIGTERM: as they are
+                raise
+            where = f"the Ray cluster at RAY_ADDRESS={address!r}" if address else "a local Ray"
+            raise InputError(  # Ray's own errors, whatever their type: not our bug
+                f"cannot start or reach {where}: {type(exc).__name__}: {exc}",
+                name="RAY_ADDRESS" if address else "--workers",
+                value=address or workers,
+            ) from None
+
+    def _init(self, address: str | None, workers: int | None) -> None:
+        if address:
+            _reachable(address)
+            self.ray.init(address=address, log_to_driver=False, logging_level=logging.ERROR)
+        else:
+            self.started = True  # from here a Ctrl-C must take a half-started Ray down
+            self.ray.init(
+                address="local",  # a new one, even beside a `ray start` cluster
+                num_cpus=workers or os.cpu_count(),
+                include_dashboard=False,
+                log_to_driver=False,
+                logging_level=logging.ERROR,
+            )
+
+    def map(self, fn: Callable[..., Any], *iterables: Iterable[Any], **_: Any) -> Iterator[Any]:
+        """``fn`` over the items as Ray tasks; results yielded in order as they complete."""
+        remote = self.ray.remote(fn)
+        refs = [remote.remote(*args) for args in zip(*iterables, strict=True)]
+        for ref in refs:
+            yield self.ray.get(ref)
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Stop the local Ray this executor started, its processes with it; leave any
+        other as it is (a cluster outlives the campaign)."""
+        if self.started:
+            self.ray.shutdown()
+            self.started = False
+
+
+def _reachable(address: str, timeout_s: float = 5.0) -> None:
+    """Raise ``ConnectionError`` unless ``address`` is ``auto``, ``ray://...`` (Ray's to
+    resolve) or a ``host:port`` where something answers within ``timeout_s`` (Ray itself
+    retries an unreachable head for minutes)."""
+    if address == "auto" or address.startswith("ray://"):
+        return
+    host, _, port = address.rpartition(":")
+    if not (host and port.isdigit()) or address != address.strip() or "://" in host:
+        raise ConnectionError(f"{address!r} is not host:port, auto or ray://host:port")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except (OSError, ValueError) as exc:
+        raise ConnectionError(f"nothing answers at {address} ({exc})") from None
+
+
+def run_campaign(
+    n: int,
+    controller: str,
+    distance: str = "capsules",
+    safety: str = "ssm",
+    seed: int = 0,
+    workers: int | None = None,
+    executor: Executor | None = None,
+    progress: bool = False,
+    rate_hz: float = 100.0,
+    max_speed_mps: float = 2.0,
+    max_time_s: float = CAMPAIGN_MAX_TIME_S,
+) -> list[StrikeCheck]:
+    """``n`` strikes from seed ``seed`` on, each until the goal (or ``max_time_s``), in
+    seed order."""
+    if not 1 <= n <= MAX_RUNS:
+        raise InputError(f"--n must be from 1 to {MAX_RUNS}, got {n}", name="--n", value=n)
+    return strike_sweep(
+        range(seed, seed + n),
+        controller,
+        safety,
+        rate_hz=rate_hz,
+        max_speed_mps=max_speed_mps,
+        workers=workers,
+        executor=executor,
+        progress=progress,
+        distance=distance,
+        max_time_s=max_time_s,
+    )
+
+
+def summarize_campaign(runs: list[StrikeCheck]) -> dict[str, Any]:
+    """The campaign's totals: everything but ``timing`` is reproducible from the seeds."""
+    clear = np.array([r.min_true_clearance_moving_m for r in runs])
+    moved = np.isfinite(clear)
+
+    def mm(x: float) -> float:
+        return round(float(x) * 1e3, 3)
+
+    return {
+        "runs": len(runs),
+        "runs_moving_in_true_contact": sum(r.ticks_moving_in_true_contact > 0 for r in runs),
+        "runs_moving_below_stop_distance": sum(
+            r.ticks_moving_below_stop_distance > 0 for r in runs
+        ),
+        "true_clearance_moving_mm": {
+            "min": mm(clear[moved].min()) if moved.any() else None,
+            "p01": mm(np.percentile(clear[moved], 1)) if moved.any() else None,
+            "median": mm(np.median(clear[moved])) if moved.any() else None,
+        },
+        "fraction_reaching_goal": sum(r.reached_goal for r in runs) / len(runs),
+        "mean_time_stopped_s": round(float(np.mean([r.stopped_s for r in runs])), 6),
+        "mean_duration_s": round(float(np.mean([r.duration_s for r in runs])), 6),
+        "runs_with_limit_violations": sum(r.limit_violations > 0 for r in runs),
+        "timing": {
+            "tick_us_median": float(np.median([r.tick_us_median for r in runs])),
+            "tick_us_p99": float(np.percentile([r.tick_us_p99 for r in runs], 99)),
+        },
+    }
+
+
+def worst_runs(runs: list[StrikeCheck], count: int = WORST) -> list[StrikeCheck]:
+    """The ``count`` runs that came closest to the person while moving (contact first)."""
+    return sorted(
+        runs, key=lambda r: (-r.ticks_moving_in_true_contact, r.min_true_clearance_moving_m)
+    )[:count]
+
+
+def true_recording(run: StrikeCheck, max_speed_mps: float, rate_hz: float = 30.0) -> Recording:
+    """The true motion of ``run``'s strike (drawn with ``max_speed_mps``), sampled at
+    ``rate_hz`` for the run's duration."""
+    motion = strike_motion(strike_case(run.seed, max_speed_mps), load_robot("iiwa14"))
+    times = np.arange(0.0, run.duration_s + 1.0 / rate_hz, 1.0 / rate_hz)
+    frames = [HumanFrame.check(*motion.frame_at(t)) for t in times]
+    return Recording(
+        times, np.array([f.joints for f in frames]), np.array([f.state for f in frames])
+    )
+
+
+def replay_command(run: StrikeCheck, settings: dict[str, Any]) -> str:
+    """The ``qpavoid run`` line that drives the campaign's controller with ``run``'s true
+    motion (from inside ``worst/``). Its sensor faults are not in the recording: the
+    replay sees the person through ``run``'s ordinary Kinect (``--bench real``)."""
+    return (
+        f"qpavoid run --human seed{run.seed}.npz --controller {settings['controller']} "
+        f"--distance {settings['distance']} --safety {settings['safety']} --bench real "
+        f"--rate {settings['rate_hz']:g} --max-time {CAMPAIGN_MAX_TIME_S:g}"
+    )
+
+
+def write_campaign(out: str | Path, settings: dict[str, Any], runs: list[StrikeCheck]) -> dict:
+    """Write ``summary.json``, ``runs.json`` and ``worst/`` into ``out``; return the summary."""
+    summary = {"settings": settings, **summarize_campaign(runs)}
+    with staged_output(out) as stage:
+        (stage / "summary.json").write_text(json.dumps(summary, indent=1))
+        (stage / "runs.json").write_text(json.dumps([asdict(r) for r in runs], indent=1))
+        worst = stage / "worst"
+        worst.mkdir()
+        for r in worst_runs(runs):
+            save_npz(worst / f"seed{r.seed}.npz", true_recording(r, settings["max_speed_mps"]))
+            case = {**asdict(r), "replay": replay_command(r, settings)}
+            (worst / f"seed{r.seed}.json").write_text(json.dumps(case, indent=1))
+    return summary

@@ -1,0 +1,181 @@
+"""What one run is: :class:`RunSpec`, checked when it is made, and the names it may use.
+
+The names a run can take live in one registry each: :data:`CONTROLLERS`,
+:data:`DISTANCES`, :data:`BENCHES`, the limit modes of the analytic controller and the
+scenarios of :mod:`qpavoid.scenarios.generated`. :mod:`qpavoid.experiments.runs` turns a spec into
+a run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from qpavoid.control.analytic import LIMIT_MODES
+from qpavoid.control.qp.backends import check_solver
+from qpavoid.control.tick import SAFETY_MODES
+from qpavoid.core.checks import check_choice, check_range
+from qpavoid.core.errors import InputError
+from qpavoid.loop.camera import KINECT_V2_LATENCY_S
+from qpavoid.loop.live_input import parse_address
+from qpavoid.scenarios import motions
+from qpavoid.scenarios.generated import check_scenario_name
+
+__all__ = ["BENCHES", "CONTROLLERS", "DISTANCES", "LIMIT_MODES", "RunSpec"]
+
+#: Controllers by name.
+CONTROLLERS = ("analytic", "qp")
+#: Distance methods by name: exact capsules (coal, the default) and the paper's spheres (eq. 1).
+DISTANCES = ("capsules", "spheres")
+#: Benches: ``real`` (Kinect v2, the iiwa's reaction and braking) or ``ideal`` (the paper's).
+BENCHES = ("real", "ideal")
+#: A frame is stale once older than the latency plus this, s: a frame (33 ms) and 7 ms.
+STALE_AFTER_LATENCY_S = 0.04
+
+#: Accepted ranges: control rate (Hz) from the camera's 30 Hz to 10 kHz; a run's cap (s)
+#: from a few frames to an hour (an hour at 500 Hz logs 1.8 M ticks, about 1.5 GB).
+RATE_RANGE_HZ, MAX_TIME_RANGE_S = (30.0, 10_000.0), (0.1, 3600.0)
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """Everything that defines one run.
+
+    Attributes
+    ----------
+    scenario
+        A generated scenario (``test1``, ``test2``, ``free``, ``random:SEED``); or None
+        with ``human_file``.
+    human_file
+        A recording to replay (NPZ or CSV, docs/formats.md) instead of a scenario.
+    controller
+        ``"analytic"`` (the paper's) or ``"qp"``.
+    distance
+        ``"capsules"`` (exact, coal; covers the shoulder) or ``"spheres"`` (the paper's eq. 1,
+        as published: use it to reproduce the paper's figures).
+    safety
+        ``"paper"`` (the paper's rules as written) or ``"ssm"`` (speed and separation
+        monitoring on top of them, :mod:`qpavoid.laws.ssm`).
+    bench
+        ``"real"``: the controller sees a Kinect v2 (latency, noise; :mod:`qpavoid.loop.camera`)
+        and the arm reacts and brakes like an iiwa (:mod:`qpavoid.arm.braking`); ``"ideal"``:
+        the paper's bench, the true skeleton every frame and an arm that follows its
+        command at once (the frozen-frame check is off: a perfect sensor films a still
+        person bit for bit).
+    latency_s
+        The real bench's sensor latency, s (default: the Kinect v2's, docs/safety.md); a
+        frame older than the latency plus 40 ms (one frame and 7 ms) is stale.
+    max_time_s
+        Cap on the run, s (default 40: the 15 s path plus room for stops).
+    rate_hz
+        Control rate, Hz (default 500: a typical cobot interface rate).
+    limit_mode
+        Analytic controller only: how eq. (3)'s limits are enforced (``scale``, ``clip``).
+    robot
+        A bundled robot description or the folder of one.
+    solver
+        QP only: a qpsolvers solver (a new problem each tick); None for the persistent
+        OSQP problem.
+    redundant
+        QP only: free A3 (7 joints) and keep the elbow away from the person.
+    goal_tolerance_m
+        The goal counts as reached within this end-effector position error, m (default
+        1 mm). A run that ends short of it says why (``end_reason``, ``held_by_person``).
+    measure_truth
+        Measure every tick's clearance to where the person really is (``true_*`` metrics,
+        :mod:`qpavoid.loop.truth`); on by default, it doubles the simulation's time.
+    sensor_files, sensors
+        Per-sensor recordings and their calibration file (docs/sensors.md): fused, and
+        the fusion replayed as the truth (``human_file`` is then the first of them).
+    listen
+        ``HOST:PORT``: drive the controller in real time from live frames on UDP
+        (:mod:`qpavoid.loop.live_input`, with ``sensors``), the robot simulated; no truth.
+    allow_unauthenticated
+        With ``listen`` on a loopback address: also accept unsigned (version 1)
+        datagrams (docs/security.md).
+    """
+
+    scenario: str | None = None
+    human_file: str | None = None
+    controller: str = "analytic"
+    distance: str = "capsules"
+    safety: str = "paper"
+    bench: str = "real"
+    latency_s: float = KINECT_V2_LATENCY_S
+    max_time_s: float = 40.0
+    rate_hz: float = 500.0
+    limit_mode: str = "scale"
+    robot: str = "iiwa14"
+    solver: str | None = None
+    redundant: bool = False
+    goal_tolerance_m: float = 1e-3
+    measure_truth: bool = True
+    sensor_files: tuple[str, ...] = ()
+    sensors: str | None = None
+    listen: str | None = None
+    allow_unauthenticated: bool = False
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sensor_files", tuple(str(f) for f in self.sensor_files))
+        if self.sensor_files and self.human_file is None:
+            object.__setattr__(self, "human_file", self.sensor_files[0])
+        if self.listen is not None:
+            parse_address(self.listen)
+            if self.scenario is not None or self.human_file is not None or not self.sensors:
+                raise InputError(
+                    "--listen takes live frames: give --sensors CALIBRATION.toml and no "
+                    "SCENARIO or --human",
+                    name="--listen",
+                    value=self.listen,
+                )
+            object.__setattr__(self, "measure_truth", False)  # live: no truth to measure
+        elif self.allow_unauthenticated:
+            raise InputError(
+                "--allow-unauthenticated is for --listen",
+                name="--allow-unauthenticated",
+                value=True,
+            )
+        elif self.scenario is None and self.human_file is None:
+            raise InputError(
+                "give a SCENARIO (test1, test2, free, random:SEED) or --human FILE",
+                name="scenario",
+                value=None,
+            )
+        if self.scenario is not None and self.human_file is not None:
+            raise InputError(
+                "give either SCENARIO or --human FILE, not both",
+                name="scenario",
+                value=self.scenario,
+            )
+        if self.scenario is not None:
+            check_scenario_name(self.scenario)
+        check_choice("controller", self.controller, CONTROLLERS)
+        check_choice("distance method", self.distance, DISTANCES)
+        check_choice("safety mode (--safety)", self.safety, SAFETY_MODES)
+        check_choice("bench (--bench)", self.bench, BENCHES)
+        check_range("the sensor latency (--latency)", self.latency_s, 0.0, 1.0, "s")
+        check_choice("limit mode", self.limit_mode, LIMIT_MODES)
+        check_range("the run's cap (--max-time)", self.max_time_s, *MAX_TIME_RANGE_S, "s")
+        check_range("the control rate (--rate)", self.rate_hz, *RATE_RANGE_HZ, "Hz")
+        check_range("the goal tolerance (--goal-tolerance)", self.goal_tolerance_m, 1e-6, 1.0, "m")
+        if self.controller != "qp":
+            for flag, given in (("--solver", self.solver), ("--redundant", self.redundant)):
+                if given:
+                    raise InputError(f"{flag} needs --controller qp", name=flag, value=given)
+        elif self.limit_mode != "scale":
+            raise InputError(
+                "--limit-mode needs --controller analytic (the QP enforces eq. (3) as bounds)",
+                name="--limit-mode",
+                value=self.limit_mode,
+            )
+        if self.solver is not None:
+            check_solver(self.solver)
+        if self.listen is None:
+            motions.check_human_files(self.sensor_files, self.sensors)
+
+    @property
+    def label(self) -> str:
+        """The run's name: the scenario, or the recording's file stem."""
+        if self.listen is not None:
+            return "live"
+        return self.scenario if self.scenario is not None else Path(str(self.human_file)).stem

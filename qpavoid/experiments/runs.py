@@ -1,0 +1,249 @@
+"""One run, from its description to its files: what the command line, ``compare`` and sweeps share.
+
+A run is described by a :class:`RunSpec` (a frozen dataclass, checked when it is made, so a
+bad value fails before any work starts). :func:`simulate_one` builds the robot, the
+controller and the human motion it names and simulates them; :func:`run_one` does the same
+and writes ``metrics.json``, ``log.npz`` and the figures into a folder.
+
+The names a run can take live in :mod:`qpavoid.experiments.run_spec`, with :class:`RunSpec`. A
+``--listen`` run takes its frames live (:func:`live_source`) and ticks in real time.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from qpavoid.arm.braking import BrakingConfig
+from qpavoid.arm.model import Robot, load_robot
+from qpavoid.control.analytic import AnalyticConfig, AnalyticController
+from qpavoid.control.controller import Controller
+from qpavoid.control.qp import QPConfig, QPController
+from qpavoid.control.tick import ControllerConfig
+from qpavoid.experiments.run_spec import (
+    STALE_AFTER_LATENCY_S,
+    RunSpec,
+)
+from qpavoid.loop.camera import SensorConfig
+from qpavoid.loop.live_input import Listener, LiveSource, parse_address
+from qpavoid.loop.simulation import HumanMotion, SimConfig, SimResult, simulate
+from qpavoid.output import plots as plotting
+from qpavoid.output import replay_html as view_html
+from qpavoid.output.live_view import LiveView
+from qpavoid.output.run_files import staged_output, write_run
+from qpavoid.output.view_data import replay_data
+from qpavoid.perception.tracker import PerceptionConfig
+from qpavoid.scenarios import motions
+from qpavoid.sensing.calibration_file import load_calibration
+
+#: Redundancy mode (docs/qp.md): weight of the elbow-clearance cost, and a regularisation
+#: large enough to give the end effector's null-space direction curvature (with 1e-7
+#: OSQP cannot reach its tolerance there).
+REDUNDANT_ELBOW_WEIGHT = 0.05
+REDUNDANT_REGULARIZATION = 1e-4
+
+
+@dataclass
+class RunResult:
+    """A simulated run and what produced it."""
+
+    spec: RunSpec
+    sim: SimResult
+    robot: Robot
+    controller: Controller
+    metrics: dict = field(default_factory=dict)
+
+    @property
+    def config(self) -> ControllerConfig:
+        """The controller's shared configuration."""
+        return self.controller.config
+
+
+def build_controller(spec: RunSpec, robot: Robot) -> Controller:
+    """The controller ``spec`` names, on ``robot``, at the spec's control rate."""
+    config = ControllerConfig(
+        distance=spec.distance,
+        control_period_s=1.0 / spec.rate_hz,
+        max_frame_age_s=spec.latency_s + STALE_AFTER_LATENCY_S,
+        safety=spec.safety,
+        perception=PerceptionConfig(max_identical_frames=None)
+        if spec.bench == "ideal"
+        else PerceptionConfig(),
+    )
+    if spec.controller == "analytic":
+        return AnalyticController(
+            robot, config=config, analytic=AnalyticConfig(limit_mode=spec.limit_mode)
+        )
+    qp = QPConfig(
+        backend="qpsolvers" if spec.solver else "persistent", solver=spec.solver or "osqp"
+    )
+    if spec.redundant:
+        qp = QPConfig(
+            backend=qp.backend,
+            solver=qp.solver,
+            elbow_weight=REDUNDANT_ELBOW_WEIGHT,
+            regularization=REDUNDANT_REGULARIZATION,
+        )
+    return QPController(robot, config=config, qp=qp)
+
+
+@contextmanager
+def live_source(spec: RunSpec, clear: threading.Event | None = None) -> Iterator[LiveSource | None]:
+    """The live source of a ``--listen`` run (listening while the run lasts), else None;
+    ``clear``: the live view's request to clear flagged people (:class:`LiveSource`)."""
+    if spec.listen is None:
+        yield None
+        return
+    calibration = load_calibration(str(spec.sensors))
+    address = parse_address(spec.listen)
+    with Listener(
+        address, calibration, accept_unauthenticated=spec.allow_unauthenticated
+    ) as listener:
+        yield LiveSource(listener, clear=clear)
+
+
+def spec_robot(spec: RunSpec) -> Robot:
+    """The robot ``spec`` names (A3 free with ``redundant``)."""
+    return load_robot(spec.robot, locked=() if spec.redundant else None)
+
+
+@contextmanager
+def live_view(spec: RunSpec, address: str) -> Iterator[LiveView]:
+    """A browser view of ``spec``'s run, served at ``address`` (HOST:PORT) while it lasts."""
+    title = f"qpavoid live: {spec.label}, {spec.controller} controller, {spec.distance}"
+    where = parse_address(address, "--view", any_port=True)
+    with LiveView(where, spec_robot(spec), spec.distance, title) as v:
+        yield v
+
+
+def load_motion(spec: RunSpec, robot: Robot) -> HumanMotion:
+    """The human motion ``spec`` names (:func:`qpavoid.scenarios.motions.load_motion`)."""
+    files = spec.sensor_files or ((spec.human_file,) if spec.human_file else ())
+    return motions.load_motion(robot, spec.scenario, files, spec.sensors)
+
+
+def simulate_one(
+    spec: RunSpec,
+    motion: HumanMotion | None = None,
+    progress: Callable[[float], None] | None = None,
+    watch: Callable[[dict[str, Any]], None] | None = None,
+    clear: threading.Event | None = None,
+) -> RunResult:
+    """Build the robot, controller and motion of ``spec`` and simulate them.
+
+    Parameters
+    ----------
+    spec
+        The run.
+    motion
+        The human motion if already loaded (else :func:`load_motion`).
+    progress
+        Called with the simulated time, s, at every human frame.
+    watch
+        Called with ticks as they are logged (:func:`~qpavoid.loop.simulation.simulate`), e.g.
+        :meth:`LiveView.update <qpavoid.output.live_view.LiveView.update>`.
+    clear
+        A live run's request to clear the people flagged as suspect
+        (:attr:`LiveView.clear_requested <qpavoid.output.live_view.LiveView.clear_requested>`).
+    """
+    robot = spec_robot(spec)
+    controller = build_controller(spec, robot)
+    live = spec.listen is not None
+    if motion is None and not live:
+        motion = load_motion(spec, robot)
+    with live_source(spec, clear) as source:
+        sim = simulate(
+            controller,
+            motion,
+            SimConfig(
+                control_rate_hz=spec.rate_hz,
+                sensor=SensorConfig.ideal()
+                if spec.bench == "ideal"
+                else SensorConfig(latency_s=spec.latency_s),
+                braking=None if spec.bench == "ideal" else BrakingConfig(),
+                max_time_s=spec.max_time_s,
+                goal_tolerance_m=spec.goal_tolerance_m,
+                measure_truth=spec.measure_truth,
+            ),
+            progress=progress,
+            source=source,
+            realtime=live,
+            watch=watch,
+        )
+        metrics = dict(sim.metrics)
+        if source is not None:
+            metrics["input"] = source.report()
+    metrics.update(
+        scenario=spec.label,
+        safety=spec.safety,
+        bench=spec.bench,
+        latency_s=spec.latency_s if spec.bench == "real" and not live else 0.0,
+        redundant=bool(spec.redundant),
+        robot=spec.robot,
+        solver=getattr(getattr(controller, "backend", None), "name", None),
+    )
+    return RunResult(spec, sim, robot, controller, metrics)
+
+
+def write_outputs(run: RunResult, out: str | Path, plots: bool = True, view: bool = True) -> dict:
+    """Write ``metrics.json``, ``log.npz``, (with ``plots``) the figures and (with
+    ``view``) the browser replay ``replay.html`` of ``run``.
+
+    The files are written into a staging folder first and moved into ``out`` only when
+    all of them are written, so a failure leaves no half-written ``out``.
+
+    Returns
+    -------
+    dict
+        The metrics written, with ``plots`` (figure file names), ``view`` (the replay's file
+        name, or None) and, when figures or the replay were not made, ``plots_skipped``
+        and ``view_skipped`` (why).
+    """
+    extra: dict = {"plots": [], "view": None}
+    if not plots:
+        extra["plots_skipped"] = "disabled by --no-plots"
+    elif not plotting.available():
+        extra["plots_skipped"] = "matplotlib is not installed (pip install 'qpavoid[plot]')"
+    if not view:
+        extra["view_skipped"] = "disabled by --no-view"
+    elif not view_html.available():
+        extra["view_skipped"] = "meshcat is not installed (pip install 'qpavoid[view]')"
+    else:
+        extra["view"] = "replay.html"
+    with staged_output(out) as stage:
+        if plots and plotting.available():
+            figures = plotting.write_figures(
+                stage,
+                run.sim.log,
+                run.robot,
+                run.config.avoidance,
+                run.spec.distance,
+                scenario=run.spec.label,
+                controller=run.spec.controller,
+            )
+            extra["plots"] = [p.name for p in figures]
+        write_run(stage, run.sim, {**run.metrics, **extra})
+        if extra["view"]:
+            data = replay_data(run.sim.log, run.metrics, run.robot)
+            title = view_html.replay_title(run.metrics, Path(out).name)
+            view_html.write_html(stage / "replay.html", view_html.replay_html(data, title))
+    return {**run.metrics, **extra}
+
+
+def run_one(
+    spec: RunSpec,
+    out: str | Path,
+    plots: bool = True,
+    progress: Callable[[float], None] | None = None,
+    view: bool = True,
+    watch: Callable[[dict[str, Any]], None] | None = None,
+    clear: threading.Event | None = None,
+) -> dict:
+    """Simulate ``spec`` and write its files into ``out``; return its metrics (``watch``,
+    ``clear``: :func:`simulate_one`)."""
+    run = simulate_one(spec, progress=progress, watch=watch, clear=clear)
+    return write_outputs(run, out, plots, view)

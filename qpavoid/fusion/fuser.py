@@ -1,0 +1,319 @@
+"""Skeleton fusion: several sensors' bodies → one skeleton per person in the base frame.
+
+:class:`Fuser` takes time-stamped :class:`~qpavoid.sensing.per_sensor.BodyFrame` s of any
+number of calibrated sensors, in any interleaving; at a fusion time ``t`` it returns
+every person it knows (:class:`FusedFrame`). docs/sensors.md details and measures it:
+
+1. each frame into the base frame and onto one clock (the sensor's calibration);
+2. per sensor, its newest frame captured at or before ``t`` (never from the future) and
+   no older than ``max_age_s``;
+3. bodies matched to people, left/right swaps undone (:mod:`qpavoid.fusion.association`);
+4. per joint, the sensors that see it averaged by ``state weight × sensor weight ×
+   freshness``; where they disagree by more than ``outlier_threshold_m`` one is believed,
+   the others dropped (recorded); a joint no sensor sees stays missing, never invented;
+5. the result filtered (α-β) and given a per-joint confidence in [0, 1] (0.5 per fresh
+   sensor tracking it, 0.15 per one inferring it, capped at 1); a joint on which sensors
+   disagreed is Inferred, whoever was believed, so the controller widens it.
+
+A person no sensor sees any more is reported with every joint missing for
+``person_timeout_s`` (the controller's tracker bounds them meanwhile), then dropped, unless
+they were last seen within ``forget_beyond_m`` of the robot: those are kept until seen.
+
+One sender cannot hold the cell: nobody seen near the robot is ever refused, new people
+far from it appear only in a cell of fewer than ``max_people`` and at a bounded rate, at
+most ``max_tracks`` are kept (those seen now first), and a person who appears near
+the robot out of nowhere, or whom only one sensor sees where another looks, is flagged
+(:attr:`FusedPerson.flag`); :meth:`Fuser.clear_flagged` lets an operator drop them.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from typing import NamedTuple
+
+import numpy as np
+
+from qpavoid.core.checks import finite_number
+from qpavoid.fusion._kernels import ingest
+from qpavoid.fusion.admission import Admission
+from qpavoid.fusion.association import (
+    PersonTrack,
+    associate,
+    faces_robot,
+    reference_rank,
+    torso_centre,
+)
+from qpavoid.fusion.config import FusionConfig
+from qpavoid.fusion.frame import FusedFrame, FusedPerson, OutlierChoice
+from qpavoid.fusion.person import fuse_person, mirror_costs, warm_up
+from qpavoid.human.frames import N_KINECT_JOINTS, HumanFrame, TrackingState
+from qpavoid.human.people import NOBODY
+from qpavoid.sensing.calibration import Calibration
+from qpavoid.sensing.per_sensor import BodyFrame, checked_arrays
+
+__all__ = ["Fuser", "FusionConfig"]
+
+
+HISTORY = 4  #: frames kept per (sensor, body)
+#: Tracking states as plain ints (comparing an array with an IntEnum member is 6× slower).
+NOT_TRACKED, INFERRED, TRACKED = (int(s) for s in TrackingState)
+
+
+class _Frame(NamedTuple):
+    t: float  # capture time, controller clock, s
+    joints: np.ndarray  # (25, 3) base frame, NaN where not usable
+    state: np.ndarray  # (25,) NotTracked where not usable
+    centre: tuple[float, float, float]  # torso centre, m (NaN: no joint usable)
+
+
+class _Contribution(NamedTuple):
+    sensor: str
+    joints: np.ndarray  # (25, 3) base frame
+    state: np.ndarray
+    age: float
+
+
+class Fuser:
+    """Streaming fusion of calibrated sensors (module docstring).
+
+    Parameters
+    ----------
+    calibration
+        The sensors; a frame from any other sensor is refused by :meth:`add`.
+    config
+        Fusion settings.
+    """
+
+    def __init__(self, calibration: Calibration, config: FusionConfig | None = None):
+        self.calibration = calibration
+        self.cfg = config or FusionConfig()
+        self.tracks: list[PersonTrack] = []
+        self.counters: Counter[str] = Counter()
+        # each body's newest frames (a few, so that a fusion time just before the newest
+        # frame still finds the one before it), oldest first
+        self._latest: dict[str, dict[int, list[_Frame]]] = {s: {} for s in calibration.names}
+        self._assigned: dict[str, dict[int, int]] = {s: {} for s in calibration.names}
+        self._next_id = 0
+        self._admission = Admission(calibration, self.cfg, self.counters)
+        self._sensor_weight = {n: calibration[n].weight for n in calibration.names}
+        # each camera's rotation and translation as contiguous arrays: the types the
+        # compiled intake was warmed up for (a view would compile anew at the first frame)
+        self._pose = {
+            n: (
+                np.ascontiguousarray(calibration[n].base_from_camera[:3, :3]),
+                np.ascontiguousarray(calibration[n].base_from_camera[:3, 3]),
+            )
+            for n in calibration.names
+        }
+        warm_up()
+        # averaging weight and confidence by tracking state (NotTracked, Inferred, Tracked)
+        self._weight = np.array([0.0, self.cfg.weight_inferred, self.cfg.weight_tracked])
+        self._confidence = np.array(
+            [0.0, self.cfg.confidence_inferred, self.cfg.confidence_tracked]
+        )
+
+    def add(self, frame: BodyFrame) -> bool:
+        """Take one body frame; False if it is not newer than that body's last (dropped).
+
+        Raises
+        ------
+        CalibrationError
+            If the frame's sensor is not in the calibration.
+        InputError
+            If its time is not finite, its joints are not (25, 3) numbers (NaN: not
+            usable) or its states not (25,) values in {0, 1, 2} (recordings and datagrams
+            are checked so already; a frame made by hand is checked here).
+        """
+        cal = self.calibration[frame.sensor]
+        t = finite_number(frame.t, "t (capture time, s)") + cal.time_offset_s
+        joints_in, state_in = checked_arrays(frame)
+        history = self._latest[frame.sensor].setdefault(int(frame.body), [])
+        if history and t <= history[-1].t:
+            self.counters["out_of_order_or_duplicate"] += 1
+            return False
+        rotation, translation = self._pose[frame.sensor]
+        joints, state = ingest(joints_in, state_in, rotation, translation)
+        history.append(_Frame(t, joints, state, tuple(torso_centre(joints).tolist())))
+        del history[:-HISTORY]
+        self._admission.heard(frame.sensor, t)
+        return True
+
+    def fuse(self, t: float) -> FusedFrame:
+        """Every known person at time ``t`` (s, controller clock), from frames captured by ``t``."""
+        cfg = self.cfg
+        self._admission.tick(t)
+        per_track: dict[int, list[_Contribution]] = {}
+        track_centres = {tr.id: tuple(tr.centre().tolist()) for tr in self.tracks}
+        for sensor in self.calibration.names:
+            newest: dict[int, _Frame] = {}  # each body's newest frame captured by t
+            for body, history in self._latest[sensor].items():
+                c = next((c for c in reversed(history) if c.t <= t), None)
+                if c is not None:
+                    newest[body] = c
+            bodies = {
+                body: c
+                for body, c in newest.items()
+                if t - cfg.max_age_s <= c.t and not math.isnan(c.centre[0])
+            }
+            self._renumbered(sensor, bodies)
+            centres = {body: c.centre for body, c in bodies.items()}
+            mapping = associate(
+                centres, track_centres, self._assigned[sensor], cfg.association_gate_m
+            )
+            self._assigned[sensor] = {b: tid for b, tid in mapping.items() if tid is not None}
+            for body, tid in mapping.items():
+                tc, joints, state, centre = bodies[body]
+                if tid is None:
+                    track = self._new_person(joints, centre, t)
+                    if track is None:
+                        continue
+                    track_centres[track.id] = centre
+                    self._assigned[sensor][body] = tid = track.id
+                per_track.setdefault(tid, []).append(_Contribution(sensor, joints, state, t - tc))
+        for track in self._admission.room(self.tracks, set(per_track)):
+            self._drop(track.id)
+        people = []
+        for track in list(self.tracks):
+            contributions = per_track.get(track.id)
+            if contributions:
+                people.append(self._fuse_person(track, contributions, t))
+            elif t - track.seen_s > cfg.person_timeout_s and self._far(track):
+                self.tracks.remove(track)
+            else:
+                nobody = np.zeros(N_KINECT_JOINTS)
+                people.append(FusedPerson(track.id, NOBODY, nobody, (), (), (), track.flag))
+        ages = [c.age for cs in per_track.values() for c in cs]
+        return FusedFrame(float(t), tuple(people), float(t - min(ages)) if ages else -np.inf)
+
+    def clear_flagged(self) -> tuple[int, ...]:
+        """Drop every flagged person (an operator who has looked and found nobody there);
+        their ids. A flagged body still sent comes back as a new person, flagged again."""
+        cleared = tuple(tr.id for tr in self.tracks if tr.flag)
+        for tid in cleared:
+            self._drop(tid)
+        self.counters["flagged_cleared"] += len(cleared)
+        return cleared
+
+    def _drop(self, tid: int) -> None:
+        """Forget person ``tid``: the track and every body assigned to it."""
+        self.tracks = [tr for tr in self.tracks if tr.id != tid]
+        for assigned in self._assigned.values():
+            for body in [b for b, i in assigned.items() if i == tid]:
+                del assigned[body]
+
+    def _new_person(
+        self, joints: np.ndarray, centre: tuple[float, float, float], t: float
+    ) -> PersonTrack | None:
+        """A new person for a body that fits nobody, or None if :class:`Admission` refuses
+        them (a far newcomer to a full cell, or too many too fast)."""
+        admitted, flag = self._admission.admit(centre, t, len(self.tracks))
+        if not admitted:
+            return None
+        track = PersonTrack(self._next_id, joints.copy(), born_s=t, flag=flag)
+        self._next_id += 1
+        self.tracks.append(track)
+        return track
+
+    def _renumbered(self, sensor: str, bodies: dict[int, _Frame]) -> None:
+        """Drop from ``sensor``'s ``bodies`` those it has renumbered: a camera frame
+        reports every body it tracks with its time stamp, so a body missing from the
+        sensor's newest frame is that person re-acquired under a new id (Kinect does so)
+        if a body of that frame lies within the association gate of it and neither is
+        known as someone else. Left in for its last ``max_age_s``, it would keep the
+        person and the new id would become a second one."""
+        if len(bodies) < 2:
+            return
+        now = max(c.t for c in bodies.values()) - self.cfg.same_frame_s
+        assigned, gate = self._assigned[sensor], self.cfg.association_gate_m
+        current = [(assigned.get(b), c.centre) for b, c in bodies.items() if c.t >= now]
+        for body in [b for b, c in bodies.items() if c.t < now]:
+            person, centre = assigned.get(body), bodies[body].centre
+            for other, c in current:
+                nobody_else = other in (None, person) or person is None
+                if nobody_else and math.dist(centre, c) <= gate:
+                    del bodies[body]
+                    break
+
+    def _fuse_person(
+        self, track: PersonTrack, contributions: list[_Contribution], t: float
+    ) -> FusedPerson:
+        cfg = self.cfg
+        recent = t - track.seen_s <= 0.5
+        settling = t - track.born_s <= cfg.settle_s
+        if not recent or settling:  # a new person: the best body is the others' reference
+            contributions.sort(key=lambda c: reference_rank(c.joints, c.state))
+        P = np.array([c.joints for c in contributions])  # (S, 25, 3), NaN not usable
+        S = np.array([c.state for c in contributions])  # (S, 25), NotTracked not usable
+        names = [c.sensor for c in contributions]
+        if recent and settling and self._mirrored_track(track, P[0]):
+            track.mirror()  # its first frames came from a sensor behind the person
+        joints, state, confidence, mirrored, disputed, keep = fuse_person(
+            P,
+            S,
+            np.array([c.age for c in contributions]),
+            np.array([self._sensor_weight[n] for n in names]),
+            recent,
+            track.joints,
+            track.velocity,
+            track.last_seen,
+            track.bone,
+            float(t),
+            self._weight,
+            self._confidence,
+            cfg.max_age_s,
+            cfg.max_extrapolation_s,
+            cfg.outlier_threshold_m,
+            cfg.mirror_margin_m,
+            cfg.velocity_alpha,
+            cfg.velocity_beta,
+            cfg.smooth,
+        )
+        track.seen_s = t
+        if settling:
+            track.seen_by.update(names)
+        elif track.seen_by:  # settled: judged once, on who saw them meanwhile
+            track.flag = self._admission.coverage_flag(track, t)
+            track.seen_by = set()
+        outliers = self._outliers(names, S, disputed, keep) if disputed.size else ()
+        flipped: tuple[str, ...] = ()
+        if mirrored.any():
+            flipped = tuple(n for n, m in zip(names, mirrored, strict=True) if m)
+            self.counters["mirrored_corrected"] += len(flipped)
+        return FusedPerson(
+            track.id,
+            HumanFrame(joints, state),
+            confidence,
+            tuple(n for n in self.calibration.names if n in names),
+            outliers,
+            flipped,
+            track.flag,
+        )
+
+    def _far(self, track: PersonTrack) -> bool:
+        """Last seen farther than ``forget_beyond_m`` from the robot's base (or nowhere)."""
+        distance = float(np.linalg.norm(track.centre()))
+        return not distance <= self.cfg.forget_beyond_m  # NaN (never placed): far
+
+    def _mirrored_track(self, track: PersonTrack, reference: np.ndarray) -> bool:
+        """The track faces away from the robot while the reference body (25, 3) faces it,
+        and fits it better with left and right swapped: it started from a sensor behind
+        the person (operators face their robot)."""
+        if not faces_robot(reference) or faces_robot(track.joints):
+            return False
+        as_is, swapped = mirror_costs(track.joints, reference)
+        return bool(swapped + self.cfg.mirror_margin_m < as_is)
+
+    def _outliers(
+        self, names: list[str], S: np.ndarray, disputed: np.ndarray, keep: np.ndarray
+    ) -> tuple[OutlierChoice, ...]:
+        """The record of whom :func:`~qpavoid.fusion.person.fuse_person` believed on each
+        ``disputed`` joint (``keep``: (S, len(disputed)))."""
+        dropped = (S[:, disputed] != NOT_TRACKED) & ~keep  # seen, not believed
+        chosen = np.argmax(keep, axis=0).tolist()
+        by_joint = zip(disputed.tolist(), chosen, dropped.T.tolist(), strict=True)
+        self.counters["outliers_resolved"] += len(disputed)
+        return tuple(
+            OutlierChoice(j, names[c], tuple(n for n, d in zip(names, ds, strict=True) if d))
+            for j, c, ds in by_joint
+        )

@@ -1,0 +1,56 @@
+"""Several people at once: one frame of everybody in view.
+
+Fusion (:mod:`qpavoid.fusion.fuser`) reports every person it knows; the controllers take them
+all as one :class:`People` and measure every distance, rule and constraint against the
+closest of them, per robot set and body part
+(:func:`~qpavoid.distance.table.closest_of`). A single
+:class:`~qpavoid.human.frames.HumanFrame` is one person with id 0. Their true motion is
+:class:`~qpavoid.loop.crowd.Crowd`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from qpavoid.core.errors import InputError
+from qpavoid.human.frames import HumanFrame
+
+__all__ = ["NOBODY", "People", "as_people", "same_frames"]
+
+#: Nobody in view: a frame with no usable joint (every distance +inf).
+NOBODY = HumanFrame(np.full((25, 3), np.nan), np.zeros(25, dtype=np.int8))
+
+
+class People(NamedTuple):
+    """Everybody in one frame: stable ids and each person's frame (base frame, m)."""
+
+    ids: tuple[int, ...]
+    frames: tuple[HumanFrame, ...]
+
+    @classmethod
+    def check(cls, ids: Sequence[int], frames: Sequence[object]) -> People:
+        """People from ids and raw frames (each checked by :meth:`HumanFrame.check`)."""
+        ids = tuple(int(i) for i in ids)
+        if len(ids) != len(frames) or len(set(ids)) != len(ids):
+            raise InputError(
+                f"people need one unique id per frame, got ids {ids} for {len(frames)} frames",
+                name="ids",
+                value=ids,
+            )
+        return cls(ids, tuple(HumanFrame.check(f) for f in frames))
+
+
+def as_people(joints: object, state: object = None) -> People:
+    """``joints`` as :class:`People`: itself, or one checked frame with id 0."""
+    if isinstance(joints, People):
+        return joints
+    return People((0,), (HumanFrame.check(joints, state),))
+
+
+def same_frames(a: People, b: People) -> bool:
+    """The same people in the same frame objects: a frame wrapped anew (a single
+    :class:`HumanFrame` made :class:`People` every tick) is not a new frame."""
+    return a.ids == b.ids and all(x is y for x, y in zip(a.frames, b.frames, strict=True))

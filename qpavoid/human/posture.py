@@ -1,0 +1,169 @@
+"""Synthetic Kinect skeletons: a seated operator and arm reaches.
+
+The generated scenarios (``test1``, ``test2``, ``free``, random approaches), the tests
+and the benchmarks need plausible (25, 3) Kinect skeletons in the robot base frame. The
+operator sits at the table facing the robot (the paper's layout, Sect. 2): the robot base
+is on the table top (z = 0), the operator's chest is ``Operator.distance_m`` in front of
+it along +y, and the arms reach with a two-link inverse kinematics so segment lengths
+stay those of the skeleton.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from qpavoid.core.geometry import unit
+from qpavoid.human.body import JointType as J
+
+#: Per-side joint chains (shoulder, elbow, wrist, hand, hand tip, thumb).
+ARM = {
+    "left": (J.ShoulderLeft, J.ElbowLeft, J.WristLeft, J.HandLeft, J.HandTipLeft, J.ThumbLeft),
+    "right": (
+        J.ShoulderRight,
+        J.ElbowRight,
+        J.WristRight,
+        J.HandRight,
+        J.HandTipRight,
+        J.ThumbRight,
+    ),
+}
+#: Per-side leg chains (hip, knee, ankle, foot).
+LEG = {
+    "left": (J.HipLeft, J.KneeLeft, J.AnkleLeft, J.FootLeft),
+    "right": (J.HipRight, J.KneeRight, J.AnkleRight, J.FootRight),
+}
+
+#: Joints that move with the upper body when the operator leans.
+UPPER = (J.SpineShoulder, J.Neck, J.Head, *ARM["left"], *ARM["right"])
+
+
+@dataclass(frozen=True)
+class Operator:
+    """A seated adult operator facing the robot (all lengths in m).
+
+    Attributes
+    ----------
+    x_m, distance_m
+        Position of the spine along x and in front of the robot base along +y.
+    upper_arm_m, forearm_m, hand_m
+        Segment lengths shoulder-elbow, elbow-wrist, wrist-hand.
+    shoulder_half_width_m
+        Half the distance between the shoulders.
+    max_lean_m
+        How far the upper body may lean towards an out-of-reach target.
+    """
+
+    x_m: float = 0.15
+    distance_m: float = 1.05
+    upper_arm_m: float = 0.28
+    forearm_m: float = 0.25
+    hand_m: float = 0.08
+    shoulder_half_width_m: float = 0.18
+    max_lean_m: float = 0.35
+
+    def rest(self) -> np.ndarray:
+        """(25, 3) skeleton at rest: seated upright, forearms on the table, hands in front."""
+        x, y = self.x_m, self.distance_m
+        j = np.zeros((25, 3))
+        j[J.SpineBase] = (x, y + 0.05, -0.20)
+        j[J.SpineMid] = (x, y + 0.02, 0.08)
+        j[J.SpineShoulder] = (x, y, 0.32)
+        j[J.Neck] = (x, y, 0.40)
+        j[J.Head] = (x, y - 0.02, 0.52)
+        for side, sign in (("left", 1.0), ("right", -1.0)):
+            # Facing -y, the operator's left is +x. Hands rest on the table 0.3 m in
+            # front of the chest, a little inside the shoulders.
+            sh = np.array([x + sign * self.shoulder_half_width_m, y, 0.30])
+            hand = np.array([sh[0] - sign * 0.08, y - 0.30, 0.06])
+            j[ARM[side][0]] = sh
+            self._place_arm(j, side, hand)
+            # Seated: thighs forward along -y, shins down, hips 0.1 m either side.
+            hx = x + sign * 0.1
+            hip, knee, ankle, foot = LEG[side]
+            j[hip] = (hx, y + 0.05, -0.25)
+            j[knee] = (hx, y - 0.35, -0.25)
+            j[ankle] = (hx, y - 0.35, -0.70)
+            j[foot] = (hx, y - 0.45, -0.72)
+        return j
+
+    def reach(self, joints: np.ndarray, side: str, target: ArrayLike) -> np.ndarray:
+        """Copy of ``joints`` with the ``side`` hand (Hand joint) moved to ``target`` (3,).
+
+        The elbow hangs below the shoulder-wrist line. A target beyond the arm's reach
+        makes the operator lean: the upper body (from SpineShoulder up, both arms) shifts
+        horizontally towards it by the missing length, at most ``max_lean_m`` (SpineMid
+        by half as much, SpineBase not at all). What is still out of reach is approached
+        as far as the arm goes along the shoulder-target line.
+        """
+        out = np.array(joints, dtype=float, copy=True)
+        target = np.asarray(target, dtype=float)
+        shoulder = out[ARM[side][0]]
+        missing = np.linalg.norm(target - shoulder) - 0.98 * (
+            self.upper_arm_m + self.forearm_m + self.hand_m
+        )
+        horizontal = (target - shoulder) * [1.0, 1.0, 0.0]
+        if missing > 0 and np.linalg.norm(horizontal) > 1e-9:
+            lean = min(missing, self.max_lean_m) * horizontal / np.linalg.norm(horizontal)
+            out[list(UPPER)] += lean
+            out[J.SpineMid] += 0.5 * lean
+        self._place_arm(out, side, target)
+        return out
+
+    def _place_arm(self, j: np.ndarray, side: str, hand: np.ndarray) -> None:
+        s_id, e_id, w_id, h_id, tip_id, th_id = ARM[side]
+        a, b, c = self.upper_arm_m, self.forearm_m, self.hand_m
+        s = j[s_id]
+        to_hand = hand - s
+        dist = float(np.linalg.norm(to_hand))
+        u = to_hand / dist if dist > 1e-9 else np.array([0.0, -1.0, 0.0])
+        dist = min(dist, a + b + c - 1e-6)
+        hand = s + dist * u
+        wrist = hand - c * u
+        sw = wrist - s
+        L = np.clip(np.linalg.norm(sw), abs(a - b) + 1e-6, a + b - 1e-6)
+        n = unit(sw, floor=1e-9)
+        down = np.array([0.0, 0.0, -1.0])
+        m = down - (down @ n) * n
+        if np.linalg.norm(m) < 1e-6:
+            m = np.array([1.0, 0.0, 0.0]) - n[0] * n
+        m = unit(m)
+        cos_t = (a * a + L * L - b * b) / (2 * a * L)
+        t = np.arccos(np.clip(cos_t, -1.0, 1.0))
+        j[e_id] = s + a * (np.cos(t) * n + np.sin(t) * m)
+        j[w_id] = s + L * n
+        j[h_id] = j[w_id] + c * u
+        j[tip_id] = j[h_id] + 0.05 * u
+        j[th_id] = j[h_id] + 0.03 * u + 0.02 * m
+
+
+def random_posture(
+    rng: np.random.Generator,
+    robot_points: np.ndarray,
+    operator: Operator | None = None,
+    spread_m: float = 0.25,
+) -> np.ndarray:
+    """A random seated posture with one hand near the robot.
+
+    Parameters
+    ----------
+    rng
+        Random generator.
+    robot_points
+        (P, 3) points on the robot; the hand goes near a random one of them.
+    operator
+        The operator (default :class:`Operator`), shifted by up to 0.15 m in x and y.
+    spread_m
+        Standard deviation of the hand target around the robot point, m.
+    """
+    op = operator or Operator()
+    op = Operator(
+        x_m=op.x_m + rng.uniform(-0.15, 0.15), distance_m=op.distance_m + rng.uniform(-0.15, 0.1)
+    )
+    joints = op.rest()
+    side = "right" if rng.random() < 0.5 else "left"
+    target = robot_points[rng.integers(len(robot_points))] + rng.normal(0.0, spread_m, 3)
+    joints = op.reach(joints, side, target)
+    return joints + rng.normal(0.0, 0.005, joints.shape)

@@ -1,0 +1,275 @@
+"""Speed and separation monitoring (ISO/TS 15066 §5.5.4, ISO 10218-2): each term one function.
+
+The protective separation distance at time t₀ (ISO/TS 15066, eq. 1):
+
+    S_p(t₀) = S_h + S_r + S_s + C + Z_d + Z_r
+
+* S_h: how far the person moves from the moment the frame was captured until the robot
+  is stationary, v_h · (T_f + T_r + T_s), where T_f is the frame's age (sensor latency
+  and sample-and-hold: the person moved while the frame travelled);
+* S_r: how far the robot moves during its reaction time, v_r · T_r;
+* S_s: the robot's stopping distance. A stop is a path-keeping ramp that takes
+  ``T_s = max_j |q̇_j| / a_j`` (:mod:`qpavoid.arm.braking`); the controllers keep every joint
+  within ``a_j T_s`` for a budget T_s (:func:`joint_speed_limits`), so a point moving at
+  v_r travels at most v_r · T_s / 2 while braking;
+* C: the intrusion distance, how far a body part reaches past what the model covers;
+* Z_d: the sensing uncertainty of the person's position (a tracked joint's; lost and
+  inferred joints add their own radius, :mod:`qpavoid.perception.tracker`);
+* Z_r: the uncertainty of the robot's position.
+
+``S_p ≤ d`` is then linear in the robot point's approach speed v_r and
+:func:`max_approach_speed` is its bound: the fastest the robot may approach a person at
+separation d and still be stationary before contact. Where even a robot at rest is too
+close, the bound is negative: the robot must move away at least that fast, or stop. The
+human speed is ISO 13855's: 2.0 m/s within 0.5 m, 1.6 m/s beyond (:func:`human_speed`).
+
+Every function is pure and works element-wise on arrays (every set × part pair at once).
+Units: m, s, m/s, rad/s².
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+import math
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from qpavoid.arm.braking import (
+    IIWA14_MAX_ACCELERATION_RADPS2,
+    IIWA14_REACTION_TIME_S,
+    per_joint,
+    stop_time,
+)
+from qpavoid.distance.table import DistanceTable
+
+#: A bound on an approach speed above this cannot bind (no iiwa point moves so fast), m/s.
+BOUND_INACTIVE_MPS = 3.0
+
+
+@dataclass(frozen=True)
+class SSMConfig:
+    """Constants of speed and separation monitoring (sources: docs/safety.md).
+
+    Attributes
+    ----------
+    human_speed_near_mps, human_speed_far_mps, human_speed_zone_m
+        ISO 13855 approach speed of a hand or arm: 2.0 m/s when the separation is at most
+        0.5 m, 1.6 m/s beyond.
+    body_parts, body_speed_mps
+        Parts that move with the body, not the arm (the head and trunk of a seated person),
+        and their speed: ISO 13855's approach speed of the body, 1.6 m/s.
+    reaction_time_s
+        T_r: from the controller's tick to the arm starting to brake: one control period
+        and the arm's reaction (:data:`~qpavoid.arm.braking.IIWA14_REACTION_TIME_S`), s.
+    stop_time_s
+        T_s,max: the longest stop the controllers allow, s; each tick's budget is shorter
+        while the robot moves slowly (:class:`StopTimeBudget`), and every joint is kept
+        within ``a_j T_s``.
+    max_acceleration_radps2
+        a_j: the arm's joint deceleration limits, ``(joint name, rad/s²)`` pairs (as in
+        :class:`~qpavoid.arm.braking.BrakingConfig`).
+    intrusion_m
+        C: how far a hand reaches past its modelled capsule (the fingers beyond HandTip).
+    sensing_uncertainty_m
+        Z_d: the position error of a tracked Kinect v2 joint, m.
+    robot_uncertainty_m
+        Z_r: the robot's position error (repeatability and the capsules' fit), m.
+    """
+
+    human_speed_near_mps: float = 2.0
+    human_speed_far_mps: float = 1.6
+    human_speed_zone_m: float = 0.5
+    body_parts: tuple[str, ...] = ("head", "trunk")
+    body_speed_mps: float = 1.6
+    reaction_time_s: float = IIWA14_REACTION_TIME_S
+    stop_time_s: float = 0.06
+    max_acceleration_radps2: tuple[tuple[str, float], ...] = IIWA14_MAX_ACCELERATION_RADPS2
+    intrusion_m: float = 0.02
+    sensing_uncertainty_m: float = 0.03
+    robot_uncertainty_m: float = 0.005
+
+
+def human_speed(separation_m: ArrayLike, cfg: SSMConfig, body: ArrayLike = False) -> np.ndarray:
+    """v_h (ISO 13855): a hand or arm 2.0 m/s within 0.5 m, 1.6 m/s beyond; ``body`` parts
+    (head, trunk; broadcast against ``separation_m``) 1.6 m/s."""
+    d = np.asarray(separation_m, dtype=float)
+    arm = np.where(d <= cfg.human_speed_zone_m, cfg.human_speed_near_mps, cfg.human_speed_far_mps)
+    return np.where(body, cfg.body_speed_mps, arm)
+
+
+def human_distance(
+    human_speed_mps: ArrayLike, frame_age_s: ArrayLike, cfg: SSMConfig
+) -> np.ndarray:
+    """S_h = v_h (T_f + T_r + T_s): the person's travel from capture until the robot stands."""
+    return np.asarray(human_speed_mps, dtype=float) * (
+        np.asarray(frame_age_s, dtype=float) + cfg.reaction_time_s + cfg.stop_time_s
+    )
+
+
+def reaction_distance(robot_speed_mps: ArrayLike, cfg: SSMConfig) -> np.ndarray:
+    """S_r = v_r T_r: the robot's travel during its reaction time."""
+    return np.asarray(robot_speed_mps, dtype=float) * cfg.reaction_time_s
+
+
+def stopping_distance(robot_speed_mps: ArrayLike, cfg: SSMConfig) -> np.ndarray:
+    """S_s = v_r T_s / 2: the robot's travel during a linear ramp to rest lasting T_s."""
+    return np.asarray(robot_speed_mps, dtype=float) * cfg.stop_time_s / 2.0
+
+
+def fixed_terms(cfg: SSMConfig) -> float:
+    """C + Z_d + Z_r, m."""
+    return cfg.intrusion_m + cfg.sensing_uncertainty_m + cfg.robot_uncertainty_m
+
+
+def protective_distance(
+    robot_speed_mps: ArrayLike,
+    separation_m: ArrayLike,
+    frame_age_s: ArrayLike,
+    cfg: SSMConfig,
+    body: ArrayLike = False,
+) -> np.ndarray:
+    """S_p = S_h + S_r + S_s + C + Z_d + Z_r (ISO/TS 15066 eq. 1), m.
+
+    Parameters
+    ----------
+    robot_speed_mps
+        v_r: the robot point's speed towards the person (negative: moving away).
+    separation_m
+        The current separation d (it selects the human speed's zone).
+    frame_age_s
+        T_f: the age of the frame d was measured on.
+    cfg
+        The constants.
+    body
+        True for a part that moves with the body (:func:`human_speed`).
+    """
+    return (
+        human_distance(human_speed(separation_m, cfg, body), frame_age_s, cfg)
+        + reaction_distance(robot_speed_mps, cfg)
+        + stopping_distance(robot_speed_mps, cfg)
+        + fixed_terms(cfg)
+    )
+
+
+def max_approach_speed(
+    separation_m: ArrayLike, frame_age_s: ArrayLike, cfg: SSMConfig, body: ArrayLike = False
+) -> np.ndarray:
+    """The largest v_r with ``S_p(v_r) ≤ d``: ``(d − S_h − C − Z_d − Z_r) / (T_r + T_s/2)``.
+
+    Negative where even a robot at rest is too close (it must move away at least that fast,
+    or stop); −inf stays −inf and +inf (a part not seen) gives +inf. A frame of infinite
+    or unknown age allows no approach at all (−inf; the controller stops on it anyway).
+    """
+    d = np.asarray(separation_m, dtype=float)
+    if not np.all(np.isfinite(frame_age_s)):
+        return np.full(d.shape, -np.inf)
+    room = d - human_distance(human_speed(d, cfg, body), frame_age_s, cfg) - fixed_terms(cfg)
+    return room / (cfg.reaction_time_s + cfg.stop_time_s / 2.0)
+
+
+def with_stop_time(cfg: SSMConfig, stop_time_s: float) -> SSMConfig:
+    """``cfg`` with this tick's T_s: a shallow copy, ten times cheaper than
+    ``dataclasses.replace`` (which runs the checks again), for a value that changes
+    every tick."""
+    out = copy.copy(cfg)
+    object.__setattr__(out, "stop_time_s", float(stop_time_s))
+    return out
+
+
+def joint_speed_limits(cfg: SSMConfig, joint_names: Sequence[str]) -> np.ndarray:
+    """|q̇_j| ≤ a_j T_s: the joint speeds from which a stop takes at most T_s, rad/s."""
+    return per_joint(cfg.max_acceleration_radps2, joint_names) * cfg.stop_time_s
+
+
+def speed_scale(approach_mps: np.ndarray, limit_mps: np.ndarray) -> float | None:
+    """The largest s in [0, 1] with ``s · v_r ≤ limit`` for every pair, or None if none.
+
+    Speed scaling: the whole command is multiplied by s, so each pair's approach speed
+    v_r scales with it. A pair with a negative limit needs a retreat at least that fast,
+    which scaling can only keep (v_r < 0) and never create: None (the robot stops).
+    """
+    v, b = np.asarray(approach_mps, dtype=float), np.asarray(limit_mps, dtype=float)
+    if np.any(b[v == 0.0] < 0.0):
+        return None
+    up, down = v > 0.0, v < 0.0
+    high = float(np.min(b[up] / v[up], initial=1.0))
+    low = float(np.max(b[down] / v[down], initial=0.0))
+    return min(high, 1.0) if min(high, 1.0) >= max(low, 0.0) else None
+
+
+def separation_bounds(
+    table: DistanceTable, part_velocity: np.ndarray, frame_age_s: float, cfg: SSMConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every set × part pair's bound and the part's own speed towards the set, (S, K) m/s.
+
+    The bound is :func:`max_approach_speed` of the pair's distance; the part's speed is its
+    velocity (``part_velocity`` (K, 3), m/s) along the direction from the part to the set,
+    where positive (approaching). With several people, ``part_velocity`` may be (S, K, 3):
+    the velocity of the part of the person closest to each set.
+    """
+    body = _body_mask(tuple(table.part_names), tuple(cfg.body_parts))
+    limit = max_approach_speed(table.distance, frame_age_s, cfg, body)
+    v = np.broadcast_to(part_velocity, table.vector.shape)  # (K, 3) or per pair (S, K, 3)
+    towards = np.einsum("skx,skx->sk", table.vector, v)  # vector: human -> robot
+    return limit, np.maximum(towards, 0.0)
+
+
+@functools.lru_cache(maxsize=8)
+def _body_mask(part_names: tuple[str, ...], body_parts: tuple[str, ...]) -> np.ndarray:
+    """(1, K) True for the parts moving at the body's speed (``np.isin`` on strings costs
+    tens of µs: done once per model, not per tick)."""
+    mask = np.isin(part_names, body_parts)[None, :]
+    mask.setflags(write=False)
+    return mask
+
+
+def reaction_time(cfg: SSMConfig, control_period_s: float) -> float:
+    """T_r of a controller ticking every ``control_period_s``: a decision waits up to one
+    period to be revised, then the arm's reaction, in whole periods (as the simulation's
+    arm, :class:`~qpavoid.arm.braking.ArmResponse`), s."""
+    periods = math.ceil(cfg.reaction_time_s / control_period_s - 1e-9)
+    return control_period_s * (1 + periods)
+
+
+class StopTimeBudget:
+    """T_s of each tick: as short as the arm's recent commands allow (build once per controller).
+
+    The arm may still be following any command of the last few ticks (its reaction, then a
+    ramp of at most 2 T_s,max), so its stop takes at most the longest stop time of those
+    commands; a new command may lengthen it by one control period (the arm cannot speed up
+    faster anyway). The tick's budget is therefore
+
+        T_s = min(T_s,max, max_recent T_s(q̇) + Δt)
+
+    and the controllers keep every joint within ``a_j T_s`` (:func:`joint_speed_limits`), so
+    the budget holds for the command they send. A robot at rest needs no braking time:
+    the protective distance shrinks to ``v_h (T_f + T_r + Δt) + C + Z_d + Z_r``.
+
+    Parameters
+    ----------
+    cfg
+        The constants (``stop_time_s`` is T_s,max; ``reaction_time_s`` the full T_r).
+    joint_names
+        The arm's active joints.
+    control_period_s
+        Δt, s.
+    """
+
+    def __init__(self, cfg: SSMConfig, joint_names: Sequence[str], control_period_s: float):
+        self.a = per_joint(cfg.max_acceleration_radps2, joint_names)
+        self.cap, self.dt = cfg.stop_time_s, control_period_s
+        ticks = math.ceil((cfg.reaction_time_s + 2.0 * cfg.stop_time_s) / control_period_s) + 2
+        self.history: deque[float] = deque([0.0], maxlen=ticks)
+
+    def budget(self) -> float:
+        """This tick's T_s, s."""
+        return min(self.cap, max(self.history) + self.dt)
+
+    def record(self, dq: np.ndarray) -> None:
+        """Remember the command sent (rad/s)."""
+        self.history.append(stop_time(dq, self.a))

@@ -1,0 +1,248 @@
+"""The sensor between the true person and the controller: frame rate, latency, noise, faults.
+
+The true motion (a scenario, or a recording taken as ground truth) is what the person
+does; :class:`Sensor` is what a Kinect v2 pipeline makes of it. Frame k is *captured* at
+``c_k`` (every ``1 / frame_rate_hz`` for a generated motion; the recording's own frame
+times for a recording) and *delivered* ``latency_s`` (plus a random ``jitter_s``) later;
+it may be dropped (``dropout_probability``). At run time t the controller holds the
+newest delivered frame, and its age is ``t − c_k``.
+
+Every usable joint of a delivered frame carries Gaussian noise of ``noise_m`` per axis:
+a depth sensor never repeats a skeleton bit for bit, which is what lets the controller
+tell a hung pipeline (frozen frames) from a person holding still.
+
+:class:`SensorFault` injects what goes wrong in practice: a ``"freeze"`` (the same
+skeleton repeated with advancing time stamps), joints ``"lost"`` (NaN, NotTracked) or
+``"inferred"`` (held where they were, flagged Inferred), and ``"gap"`` (no frame).
+
+Frames are deterministic: the noise and the dropouts of frame k come from a generator
+seeded with ``(seed, k)``, whatever the order in which frames are asked for.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from qpavoid.core.errors import InputError
+from qpavoid.human.frames import HumanFrame, HumanMotion, TrackingState
+from qpavoid.human.people import People
+from qpavoid.sensing.recording import Recording
+
+#: Kinect v2 latency, s: "~60 ms with processing" in Microsoft's sensor specification (as
+#: published by VGLeaks, 2013); an end-to-end measurement including the display found
+#: about 0.12 s. docs/safety.md ("Sensor") and both runs.
+KINECT_V2_LATENCY_S = 0.06
+
+#: Joint noise, standard deviation per axis, m: our assumption (no published value found),
+#: small on purpose; a real sensor is never noiseless, which the frozen-frame check needs.
+KINECT_V2_NOISE_M = 0.002
+
+#: The kinds of :class:`SensorFault`.
+FAULT_KINDS = ("freeze", "lost", "inferred", "gap")
+
+
+@dataclass(frozen=True)
+class SensorFault:
+    """Something going wrong between ``start_s`` and ``end_s`` (run clock, s).
+
+    Attributes
+    ----------
+    kind
+        ``"freeze"``: frames captured in the window repeat the last frame captured before
+        it (time stamps advance: a hung sensor PC); ``"lost"``: ``joints`` become NaN and
+        NotTracked; ``"inferred"``: ``joints`` keep the position they had at ``start_s``
+        and are flagged Inferred; ``"gap"``: no frame captured in the window is delivered.
+    start_s, end_s
+        The window, s.
+    joints
+        Kinect joint indices (``lost`` and ``inferred``).
+    """
+
+    kind: str
+    start_s: float
+    end_s: float
+    joints: tuple[int, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.kind not in FAULT_KINDS:
+            raise InputError(
+                f"unknown sensor fault {self.kind!r}; choose from {FAULT_KINDS}",
+                name="kind",
+                value=self.kind,
+            )
+
+    def active(self, t: float) -> bool:
+        """True while the fault is on at capture time ``t``."""
+        return self.start_s <= t < self.end_s
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """A skeleton sensor's timing and errors.
+
+    Attributes
+    ----------
+    frame_rate_hz
+        Frames per second of a generated motion (Kinect v2: 30 Hz); a recording keeps its
+        own frame times.
+    latency_s
+        From capture to the frame reaching the controller, s (default: the Kinect v2
+        measurement in docs/safety.md).
+    noise_m
+        Standard deviation of the Gaussian noise on each coordinate of a usable joint, m
+        (default: the Kinect v2 jitter in docs/safety.md).
+    jitter_s
+        Each frame is delayed by a further uniform random time in [0, jitter_s], s.
+    dropout_probability
+        Chance that a frame is lost on the way.
+    faults
+        Faults to inject (:class:`SensorFault`).
+    seed
+        Seed of the noise, jitter and dropouts.
+    """
+
+    frame_rate_hz: float = 30.0
+    latency_s: float = KINECT_V2_LATENCY_S
+    noise_m: float = KINECT_V2_NOISE_M
+    jitter_s: float = 0.0
+    dropout_probability: float = 0.0
+    faults: tuple[SensorFault, ...] = field(default=())
+    seed: int = 0
+
+    @classmethod
+    def ideal(cls, frame_rate_hz: float = 30.0) -> SensorConfig:
+        """A perfect sensor: the true skeleton at every frame, no latency, no noise."""
+        return cls(frame_rate_hz, latency_s=0.0, noise_m=0.0)
+
+
+class Sensor:
+    """What the controller receives from a true motion (build once per run).
+
+    Parameters
+    ----------
+    motion
+        The true motion (a scenario, or a recording taken as the truth).
+    cfg
+        Timing and errors.
+    """
+
+    def __init__(self, motion: HumanMotion, cfg: SensorConfig):
+        self.motion, self.cfg = motion, cfg
+        self.recording = motion if isinstance(motion, Recording) else None
+        self.t0 = float(self.recording.t[0]) if self.recording is not None else 0.0
+        # a crowd of recordings ends with its last frame: after it, frames grow old
+        self.end_s = float(getattr(motion, "duration_s", math.inf))
+        self._cache: dict[int, tuple[HumanFrame | People, float, float, bool]] = {}
+        self._held: tuple[int, HumanFrame | People, float] | None = None
+
+    def _capture_time(self, k: int) -> float:
+        """Capture time of frame k on the run clock, s."""
+        if self.recording is not None:
+            return float(self.recording.t[min(max(k, 0), self.recording.n_frames - 1)]) - self.t0
+        return k / self.cfg.frame_rate_hz
+
+    def _last_index_before(self, t: float) -> int:
+        """The last frame captured at or before run time t."""
+        if self.recording is not None:
+            return self.recording.index_at(self.t0 + t) if t >= 0.0 else -1
+        return math.floor(min(t, self.end_s) * self.cfg.frame_rate_hz + 1e-9)
+
+    def _true(self, k: int, captured: float) -> HumanFrame | People:
+        if self.recording is not None:
+            return self.recording.frame_at(self.t0 + max(captured, 0.0))
+        frame = self.motion.frame_at(max(captured, 0.0))
+        return frame if isinstance(frame, (HumanFrame, People)) else HumanFrame.check(*frame)
+
+    def _frame(self, k: int) -> tuple[HumanFrame | People, float, float, bool]:
+        """Frame k: (content, capture time, delivery time, dropped)."""
+        if k in self._cache:
+            return self._cache[k]
+        cfg = self.cfg
+        captured = self._capture_time(k)
+        rng = np.random.default_rng([cfg.seed, k + 2**20])
+        delay = cfg.latency_s + cfg.jitter_s * rng.random()
+        dropped = bool(rng.random() < cfg.dropout_probability)
+        source, source_k = captured, k
+        for fault in cfg.faults:
+            if fault.kind == "gap" and fault.active(captured):
+                dropped = True
+            if fault.kind == "freeze" and fault.active(captured):
+                source_k = self._last_index_before(fault.start_s - 1e-9)
+                source = self._capture_time(source_k)
+        content: HumanFrame | People
+        if source_k != k:
+            content = self._frame(source_k)[0]  # bit for bit the frame before the freeze
+        else:
+            truth = self._true(k, source)
+            if isinstance(truth, People):
+                content = People(
+                    truth.ids,
+                    tuple(
+                        self._degrade(f, captured, rng, pid)
+                        for pid, f in zip(truth.ids, truth.frames, strict=True)
+                    ),
+                )
+            else:
+                content = self._degrade(truth, captured, rng, None)
+        out = (content, captured, captured + delay, dropped)
+        self._cache[k] = out
+        if len(self._cache) > 256:
+            self._cache.pop(next(iter(self._cache)))
+        return out
+
+    def _degrade(
+        self, frame: HumanFrame, captured: float, rng: np.random.Generator, pid: int | None
+    ) -> HumanFrame:
+        """One person's frame as the sensor reports it: lost and inferred faults, noise."""
+        joints, state = frame.joints.copy(), frame.state.copy()
+        for fault in self.cfg.faults:
+            if fault.kind in ("lost", "inferred") and fault.active(captured):
+                idx = list(fault.joints)
+                if fault.kind == "lost":
+                    joints[idx] = np.nan
+                    state[idx] = TrackingState.NotTracked
+                else:
+                    at_start = self._true(-1, fault.start_s)
+                    if isinstance(at_start, People):
+                        if pid not in at_start.ids:
+                            continue
+                        at_start = at_start.frames[at_start.ids.index(pid)]
+                    joints[idx] = at_start.joints[idx]
+                    state[idx] = TrackingState.Inferred
+        if self.cfg.noise_m > 0.0:
+            joints = joints + rng.normal(0.0, self.cfg.noise_m, joints.shape)
+        return HumanFrame(joints, state)
+
+    def frame_at(self, t: float) -> tuple[HumanFrame | People, float]:
+        """The frame the controller holds at run time ``t`` and its capture time (run clock).
+
+        The newest frame delivered by ``t`` (never a frame older than the one in hand). A
+        generated motion has been filmed since before the run; a recording's first frame
+        arrives ``latency_s`` into the run, and until then the controller holds that frame
+        as captured at ``−latency_s`` (so a run on a recording starts with the robot
+        waiting for fresh frames).
+        """
+        cfg = self.cfg
+        k = self._last_index_before(t - cfg.latency_s)
+        held = self._held
+        # A generated motion has been filmed since before the run (frames k < 0 show the
+        # person as at t = 0); a recording starts with its first frame.
+        first = 0 if self.recording is not None else k - 16
+        oldest = first if held is None else held[0] + 1
+        best: tuple[int, HumanFrame | People, float] | None = None
+        while k >= oldest:  # the newest frame delivered by now (jitter may hold some back)
+            content, captured, delivered, dropped = self._frame(k)
+            if not dropped and delivered <= t:
+                best = (k, content, captured)
+                break
+            k -= 1
+        if best is not None:
+            self._held = best
+        elif held is None:
+            content = self._frame(0)[0]
+            self._held = (-1, content, -cfg.latency_s)
+        assert self._held is not None
+        return self._held[1], self._held[2]

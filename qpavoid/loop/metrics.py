@@ -1,0 +1,213 @@
+"""The summary of a simulated run: the keys of ``metrics.json``.
+
+:func:`run_metrics` condenses a run's log (path error, distances, stops, limits, tick
+times); :func:`describe` puts them in a few lines of words; :func:`end_of_run` says why the
+run ended: the goal was reached, a person held the
+robot off its goal (``held_by_person``), the robot was stopped for another reason, or the
+time cap came first.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from qpavoid.arm.model import Robot
+from qpavoid.control.tick import Command
+from qpavoid.laws.avoidance import AvoidanceConfig, stop_distances
+
+
+def end_of_run(
+    reached: bool,
+    last: Command,
+    robot: Robot,
+    avoidance: AvoidanceConfig,
+    log: dict[str, np.ndarray],
+    goal: np.ndarray,
+) -> dict[str, Any]:
+    """Why the run ended: ``end_reason`` and, if a person kept the robot off its goal,
+    ``held_by_person``.
+
+    A run that did not reach its goal was held by a person when, at its last tick, the
+    robot was stopped by one of the paper's rules or a robot set was within the repulsion's
+    reach of a body part (``rho_rep_m``): then ``held_by_person`` names the closest set and
+    part, their distance (m) and the remaining end-effector error (m). Otherwise it is None.
+    """
+    remaining = float(np.linalg.norm(log["ee_pos"][-1] - goal[:3, 3]))
+    if reached:
+        return {"end_reason": "goal reached", "held_by_person": None}
+    table = last.table
+    s, k = np.unravel_index(int(np.argmin(table.distance)), table.distance.shape)
+    closest = float(table.distance[s, k])
+    by_rule = last.stopped and last.reason.startswith(
+        ("f = ", "d_L2", "d_EE", "speed and separation")
+    )
+    if by_rule or closest < avoidance.rho_rep_m:
+        held = {
+            "set": robot.set_names[s],
+            "part": table.part_names[k],
+            "distance_m": closest,
+            "remaining_error_m": remaining,
+            "stopped": bool(last.stopped),
+        }
+        return {"end_reason": "held by person", "held_by_person": held}
+    reason = f"stopped: {last.reason}" if last.stopped else "time cap"
+    return {"end_reason": reason, "held_by_person": None}
+
+
+def truth_metrics(
+    log: dict[str, np.ndarray],
+    robot: Robot,
+    avoidance: AvoidanceConfig,
+    stop_events: list[dict[str, Any]],
+    dt: float,
+) -> dict[str, Any]:
+    """Safety judged against where the person really is (``log["true_distance"]``).
+
+    Returns ``min_true_clearance_moving_m`` (smallest true capsule distance over the ticks
+    with a non-zero command, m; None if never measured or never moving),
+    ``ticks_moving_in_true_contact`` (moving while a true distance is <= 0),
+    ``ticks_moving_below_stop_distance`` (moving while a set is closer than its stop
+    distance, :func:`~qpavoid.laws.avoidance.stop_distances`), and adds to each stop event the
+    robot's speed when it began (``robot_speed_mps``: the fastest control point over the
+    tick before it).
+    """
+    true = log["true_distance"]
+    moving = np.any(log["dq"] != 0.0, axis=1)
+    for event in stop_events:
+        k = int(np.searchsorted(log["t"], event["t"] - 1e-9))
+        if k > 0:
+            step = robot.control_points(log["q"][k]) - robot.control_points(log["q"][k - 1])
+            event["robot_speed_mps"] = float(np.linalg.norm(step, axis=1).max() / dt)
+        else:
+            event["robot_speed_mps"] = 0.0
+    if np.isnan(true).all():
+        return {
+            "min_true_clearance_moving_m": None,
+            "ticks_moving_in_true_contact": None,
+            "ticks_moving_below_stop_distance": None,
+        }
+    sets = [robot.set_index(name) for name in ("L1", "L2", "EE")]
+    below = np.any(true[:, sets] < stop_distances(avoidance), axis=1)
+    closest = true.min(axis=1)
+    return {
+        "min_true_clearance_moving_m": float(closest[moving].min()) if moving.any() else None,
+        "ticks_moving_in_true_contact": int((moving & (closest <= 0.0)).sum()),
+        "ticks_moving_below_stop_distance": int((moving & below).sum()),
+    }
+
+
+def run_metrics(
+    log: dict[str, np.ndarray],
+    robot: Robot,
+    goal: np.ndarray,
+    reached: bool,
+    stop_events: list[dict[str, Any]],
+    vel_violations: int,
+    pos_violations: int,
+    controller: str,
+    method: str,
+    control_rate_hz: float,
+) -> dict[str, Any]:
+    """The summary of a run (the keys of ``metrics.json``).
+
+    ``controller`` and ``method`` name the controller and its distance method;
+    ``control_rate_hz`` is the simulation's control rate.
+    """
+    dt = 1.0 / control_rate_hz
+    path_err = np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)
+    other = "capsules" if method == "spheres" else "spheres"
+    dmin = {method: float(np.min(log["distance"])), other: float(np.min(log["distance_other"]))}
+    tick = log["tick_us"]
+    final_err = float(np.linalg.norm(log["ee_pos"][-1] - goal[:3, 3]))
+    return {
+        "reached_goal": bool(reached),
+        "final_position_error_m": final_err,
+        "rms_path_error_m": float(np.sqrt(np.mean(path_err**2))),
+        "max_path_error_m": float(np.max(path_err)),
+        "duration_s": float(log["t"][-1]),
+        "stopped_s": float(np.count_nonzero(log["stopped"]) * dt),
+        "stop_events": stop_events,
+        "max_f": float(np.max(log["f"])),
+        "min_distance_m": {"spheres": dmin["spheres"], "capsules": dmin["capsules"]},
+        "min_distance_per_set_m": {
+            method: dict(
+                zip(robot.set_names, np.min(log["distance"], axis=0).tolist(), strict=True)
+            ),
+            other: dict(
+                zip(robot.set_names, np.min(log["distance_other"], axis=0).tolist(), strict=True)
+            ),
+        },
+        "joint_velocity_limit_violations": int(vel_violations),
+        "joint_position_limit_violations": int(pos_violations),
+        "tick_us": {"median": float(np.median(tick)), "p99": float(np.percentile(tick, 99))},
+        "controller": controller,
+        "distance_method": method,
+        "control_rate_hz": control_rate_hz,
+        "ticks": len(tick),
+    }
+
+
+def _ending(m: dict[str, Any]) -> str:
+    """How a run ended, in words."""
+    held = m.get("held_by_person")
+    if held:
+        return (
+            f"held by person: {held['part']} {held['distance_m']:.3f} m from {held['set']}, "
+            f"{held['remaining_error_m'] * 1e3:.1f} mm from the goal"
+        )
+    return str(m.get("end_reason", "goal reached" if m["reached_goal"] else "time cap"))
+
+
+#: Stop events :func:`describe` lists (the rest are counted).
+STOPS_SHOWN = 4
+
+
+def describe(m: dict[str, Any]) -> str:
+    """A run's metrics as a few readable lines."""
+    events = m["stop_events"]
+    stops = "; ".join(f"{e['t']:.2f} s: {e['reason']}" for e in events[:STOPS_SHOWN]) or "none"
+    if len(events) > STOPS_SHOWN:
+        stops += f"; and {len(events) - STOPS_SHOWN} more (metrics.json: stop_events)"
+    md = m["min_distance_m"]
+    return (
+        f"{m['scenario']}: controller {m['controller']}, distances {m['distance_method']}\n"
+        f"  reached goal {m['reached_goal']} in {m['duration_s']:.2f} s: {_ending(m)} "
+        f"(final error {m['final_position_error_m'] * 1e3:.3f} mm)\n"
+        f"  path error rms {m['rms_path_error_m'] * 1e3:.3f} mm, "
+        f"max {m['max_path_error_m'] * 1e3:.3f} mm\n"
+        f"  min distance spheres {md['spheres']:.4f} m, capsules {md['capsules']:.4f} m, "
+        f"max f {m['max_f']:.3f}\n"
+        f"  stopped {m['stopped_s']:.2f} s, stops: {stops}\n"
+        f"  tick {m['tick_us']['median']:.0f} us median, {m['tick_us']['p99']:.0f} us p99; "
+        f"limit violations: velocity {m['joint_velocity_limit_violations']}, "
+        f"position {m['joint_position_limit_violations']}"
+    ) + (_input_line(m["input"]) if "input" in m else "")
+
+
+#: What a live run's drops most likely mean, for the one that dominates.
+_DROP_HINTS = {
+    "dropped_bad_tag": "not signed by this cell's keys: check the key files and the cell name",
+    "dropped_unknown_key": "signed with a key id this calibration does not hold",
+    "dropped_unauthenticated": "unsigned: sign them (replay --sensors) or, without keys, "
+    "--allow-unauthenticated on loopback",
+    "dropped_unknown_sensor": "from a sensor the calibration does not name",
+    "from_the_future": "stamped ahead of this clock: check the sensors' time_offset_s",
+    "late": "older than the age limit when they arrived: check the clocks and the network",
+}
+
+
+def _input_line(counts: dict[str, int]) -> str:
+    """A live run's datagrams: how many came, how many were taken, the drops, and what the
+    largest drop most likely means (docs/security.md)."""
+    drops = sorted(
+        ((n, k) for k, n in counts.items() if k.startswith("dropped_") or k in _DROP_HINTS),
+        reverse=True,
+    )
+    line = f"\n  input: {counts.get('received', 0)} datagrams, {counts.get('accepted', 0)} taken"
+    if drops:
+        line += "; " + ", ".join(f"{k} {n}" for n, k in drops[:4])
+        if drops[0][1] in _DROP_HINTS and drops[0][0] > counts.get("accepted", 0):
+            line += f" ({_DROP_HINTS[drops[0][1]]})"
+    return line

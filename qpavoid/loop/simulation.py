@@ -1,0 +1,307 @@
+"""Closed-loop kinematic simulation: a controller, the planned path and a moving person.
+
+Truth and perception are kept apart. The motion (a scenario, or a recording taken as
+ground truth) is where the person really is; the controller sees it only through a
+:class:`~qpavoid.loop.camera.Sensor` (30 Hz frames, a latency, noise, dropouts and faults,
+``SimConfig.sensor``), each frame with its true age: now minus its capture time. A
+recording keeps its own frame times, so during a gap in the recording, and once it has
+ended, the frame in hand grows old and the controller stops on it (it resumes only on a
+fresh frame).
+
+The control loop runs at ``control_rate_hz`` (default 500 Hz). The arm follows the
+commanded joint velocities after a reaction time and with bounded acceleration
+(``SimConfig.braking``, :class:`~qpavoid.arm.braking.ArmResponse`: a stop is a ramp, not a
+jump); the joint angles integrate the arm's velocity (explicit Euler:
+``q[k+1] = q[k] + dq[k] · dt``). ``braking=None`` makes the arm follow its command exactly.
+In real time a late tick does not stop the arm: it and the path clock τ advance by the real
+time between ticks, the last command held (:class:`~qpavoid.arm.braking.WallClockArm`).
+
+The path has its own clock τ. It advances at the rate the controller returns
+(``Command.time_scale``): 0 while stopped, so resuming causes no jump, and the factor by
+which the velocity limits shrank the command, so that a slowed robot is not left behind by
+its reference. A deflection does not stop the clock: while the repulsion pushes the end
+effector off the path the reference runs on, and when the person withdraws the K·e term
+of eq. (8) pulls it back to where the reference is by then (the delay is absorbed as path
+error, never as a jump of the reference).
+
+As a last guard the simulation saturates each joint velocity at its nominal limit (and
+counts the ticks where that was needed: ``joint_velocity_limit_violations``, which a
+correct controller keeps at 0).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+import pinocchio as pin
+
+from qpavoid.arm.braking import ArmResponse, BrakingConfig, WallClockArm
+from qpavoid.control.controller import Controller
+from qpavoid.control.task import inverse_kinematics
+from qpavoid.core.errors import InputError
+from qpavoid.core.interruption import Interruption
+from qpavoid.distance.methods import distance_method
+from qpavoid.human.frames import HumanFrame, HumanMotion
+from qpavoid.human.people import People
+from qpavoid.loop.camera import Sensor, SensorConfig
+from qpavoid.loop.metrics import end_of_run, run_metrics, truth_metrics
+from qpavoid.loop.run_log import TEXT_KEYS, finished, new_log
+from qpavoid.loop.truth import TrueClearance
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Simulation settings.
+
+    Attributes
+    ----------
+    control_rate_hz
+        Control loop rate, Hz.
+    sensor
+        What the controller sees of the true motion (default: a Kinect v2, docs/safety.md);
+        ``SensorConfig.ideal()`` for the true skeleton at 30 Hz with no latency or noise.
+    braking
+        How the arm follows its command (default: the iiwa 14's reaction time and
+        acceleration limits, docs/safety.md); None: exactly and at once.
+    max_time_s
+        Cap on the run's duration, s.
+    goal_tolerance_m, goal_tolerance_rad
+        The goal counts as reached when the path clock is over and the end effector is
+        this close to the final pose (position, m; orientation, rad).
+    measure_truth
+        Measure, every tick, the exact capsule distance from each robot set to where the
+        person really is (:mod:`qpavoid.loop.truth`): ``true_distance`` in the log and the
+        ``true_*`` metrics. Off by default here because it doubles a simulation's time
+        (the true person and a capsule table every tick, about 1.5 ms); runs made through
+        :mod:`qpavoid.experiments.runs` (the command line, ``compare``) turn it on.
+    """
+
+    control_rate_hz: float = 500.0
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    braking: BrakingConfig | None = field(default_factory=BrakingConfig)
+    max_time_s: float = 40.0
+    goal_tolerance_m: float = 1e-3
+    goal_tolerance_rad: float = 1e-2
+    measure_truth: bool = False
+
+
+@dataclass
+class SimResult:
+    """A run: per-tick ``log`` arrays (see :func:`simulate`) and summary ``metrics``."""
+
+    log: dict[str, np.ndarray]
+    metrics: dict = field(default_factory=dict)
+
+
+class FrameSource(Protocol):
+    """What the controller is shown: ``frame_at(t)`` → (frame or people, capture time), s.
+    A source may also say, in an ``alert`` attribute, why its input is suspect (logged
+    every tick as ``input_alert``: :class:`~qpavoid.loop.live_input.LiveSource`)."""
+
+    def frame_at(self, t: float) -> tuple[HumanFrame | People, float]: ...
+
+
+def simulate(
+    controller: Controller,
+    motion: HumanMotion | None,
+    config: SimConfig | None = None,
+    q0: np.ndarray | None = None,
+    progress: Callable[[float], None] | None = None,
+    source: FrameSource | None = None,
+    realtime: bool = False,
+    watch: Callable[[dict[str, Any]], None] | None = None,
+) -> SimResult:
+    """Run the controller in closed loop against ``motion`` along ``controller.path``.
+
+    Parameters
+    ----------
+    controller
+        Analytic or QP controller (its ``control_period_s`` should equal 1/control rate).
+    motion
+        The person (see :class:`HumanMotion`).
+    config
+        Simulation settings.
+    q0
+        Start configuration (default: inverse kinematics of the path's start pose).
+    progress
+        Called with the simulated time (s) at every new human frame, e.g. to move a
+        progress bar; ``None`` for none.
+    source
+        Where the controller's frames come from instead of a sensor filming ``motion``
+        (a live source, :class:`~qpavoid.loop.live_input.LiveSource`, or fused sensors); ``motion``,
+        if given, is then only the truth the run is judged against.
+    watch
+        Called with the tick just logged (its row of every log key, copied, and its
+        ``stop_reason``), at most 30 times a second of run time (a live view).
+    realtime
+        Tick on the wall clock (a live run): a tick that comes late is stamped with the
+        wall time, so frame ages stay true when the loop falls behind, and the arm keeps
+        executing its last command until the next tick, however late; τ advances by
+        ``time_scale ×`` that real time too, so the reference keeps up with the arm; Ctrl-C
+        ends the run, which is summed up as usual with ``end_reason`` "interrupted".
+
+    Returns
+    -------
+    SimResult
+        ``log`` keys (row k = state at t[k] and the command computed from it, so that
+        ``q[k+1] = q[k] + dq[k] · (t[k+1] − t[k])``): ``t``, ``q`` (T, nq), ``dq`` (T, nv),
+        ``joints`` (T, 25, 3), ``state`` (T, 25), ``stopped`` (T,), ``f`` (T,),
+        ``distance`` (T, 3) per set of the method in use, ``distance_other`` (T, 3) of the
+        other method, ``v_rep_L2`` and ``v_rep_EE`` (T, 3), ``ee_pos`` and ``ee_ref`` (T, 3),
+        ``tau`` (T,) path clock, ``tick_us`` (T,) controller time per tick,
+        ``dq_command`` (T, nv) the controller's command (``dq`` is what the arm did),
+        ``frame_age_s`` (T,) the age of the frame the controller was given (now minus its
+        capture time), ``true_distance`` (T, 3) exact capsule distance per set to where the
+        person really is (NaN without ``measure_truth``), ``robot_point`` and
+        ``human_point`` (T, 3, 3) the witness points of each set's closest pair (NaN if no
+        part is seen), ``stop_reason`` (T,) str why the robot stops ("" while it moves),
+        ``input_alert`` (T,) str why the source's input is suspect ("" while it is not).
+        In real time the metrics add ``realtime_overruns``, ``min_true_clearance_in_gaps_m``.
+    """
+    cfg = config or SimConfig()
+    robot, path = controller.robot, controller.path
+    dt = 1.0 / cfg.control_rate_hz
+    q = (
+        inverse_kinematics(robot, path.reference(0.0)[0])
+        if q0 is None
+        else robot.check_q(q0).astype(float).copy()
+    )
+    n_max = math.floor(cfg.max_time_s * cfg.control_rate_hz + 1e-9) + 1
+    other_name = "capsules" if controller.config.distance == "spheres" else "spheres"
+    other = distance_method(other_name, robot, controller.human)
+    sensor: FrameSource
+    if source is not None:
+        sensor = source
+    elif motion is not None:
+        sensor = Sensor(motion, cfg.sensor)
+    else:
+        raise InputError("simulate needs a motion or a frame source", name="motion")
+    arm = None if cfg.braking is None else ArmResponse(cfg.braking, robot.joint_names, dt)
+    truth = (
+        TrueClearance(robot, controller.human, motion)
+        if cfg.measure_truth and motion is not None
+        else None
+    )
+    goal = path.reference(path.duration_s)[0]
+    wall = WallClockArm(arm, dt, robot, record=truth is not None)  # real time only
+
+    log = new_log(n_max, robot)
+    texts: dict[str, list[str]] = {key: [] for key in TEXT_KEYS}
+    stop_events = []
+    vel_violations = pos_violations = 0
+    tau, was_stopped, last_progress, last_watch = 0.0, False, -1.0, -1.0
+    reached, overruns, n = False, 0, 0
+    interrupt = Interruption(realtime)
+    wall0 = time.perf_counter()
+    try:
+        for k in range(n_max):
+            t = k * dt
+            if realtime:
+                if interrupt.requested and k > 0:
+                    break
+                wait = wall0 + t - time.perf_counter()
+                if wait > 0:
+                    time.sleep(wait)
+                else:
+                    overruns += wait < -dt
+                # the run clock is the wall clock: a late tick sees the time it really is,
+                # so the frames it holds are as old as they really are
+                t = max(t, time.perf_counter() - wall0)
+            human, captured_s = sensor.frame_at(t)
+            alert = getattr(sensor, "alert", "")  # a live source's suspect input, if any
+            if realtime:  # getting the frame took time too: the age is judged now
+                t = max(t, time.perf_counter() - wall0)
+                q, moved_tau = wall.advance(q, t)  # the arm kept moving until now
+                tau = min(tau + moved_tau, path.duration_s)
+            if progress is not None and t - last_progress >= 1.0 / 30.0:
+                progress(t)
+                last_progress = t
+            t0 = time.perf_counter_ns()
+            cmd = controller.step(q, human, None, tau, t - captured_s, captured_s)
+            tick_us = (time.perf_counter_ns() - t0) / 1e3
+            kin = robot.kinematics(q, jacobians=False)
+            other_table = other.closest(kin, controller.geometry(human))[0]
+            if truth is not None:
+                log["true_distance"][k] = truth(kin, t)
+
+            dq = wall.command(cmd.dq, t) if realtime else cmd.dq if arm is None else arm(cmd.dq)
+            if np.any(np.abs(dq) > robot.dq_max * (1 + 1e-9)):
+                vel_violations += 1
+                dq = np.clip(dq, -robot.dq_max, robot.dq_max)
+            if np.any(q > robot.q_max + 1e-12) or np.any(q < robot.q_min - 1e-12):
+                pos_violations += 1
+            if cmd.stopped and not was_stopped:
+                stop_events.append({"t": round(t, 6), "reason": cmd.reason})
+            was_stopped = cmd.stopped
+
+            log["t"][k], log["q"][k], log["dq"][k], log["dq_command"][k] = t, q, dq, cmd.dq
+            log["joints"][k], log["state"][k] = controller.closest_frame or human
+            log["stopped"][k], log["f"][k] = cmd.stopped, cmd.f
+            log["distance"][k], log["distance_other"][k] = cmd.distance, other_table.min_per_set()
+            log["v_rep_L2"][k], log["v_rep_EE"][k] = cmd.v_rep_L2, cmd.v_rep_EE
+            log["ee_pos"][k], log["ee_ref"][k] = cmd.ee_pos, cmd.ee_ref
+            log["tau"][k], log["tick_us"][k], log["frame_age_s"][k] = tau, tick_us, t - captured_s
+            closest = np.argmin(cmd.table.distance, axis=1)  # each set's closest pair
+            sets = np.arange(len(closest))
+            log["robot_point"][k] = cmd.table.robot_point[sets, closest]
+            log["human_point"][k] = cmd.table.human_point[sets, closest]
+            texts["stop_reason"].append(cmd.reason if cmd.stopped else "")
+            texts["input_alert"].append(alert)
+            if watch is not None and t - last_watch >= 1.0 / 30.0:
+                watch(
+                    {key: v[k].copy() for key, v in log.items()} | {x: texts[x][k] for x in texts}
+                )
+                last_watch = t
+            n = k + 1
+
+            if tau >= path.duration_s and not cmd.stopped:
+                T = robot.end_effector(q)
+                pos_err = np.linalg.norm(T[:3, 3] - goal[:3, 3])
+                rot_err = _rot_err(goal, T)
+                if pos_err < cfg.goal_tolerance_m and rot_err < cfg.goal_tolerance_rad:
+                    reached = True
+                    break
+            if realtime:  # the arm moves on when the next tick comes, however late
+                wall.hold(t, dq, cmd.time_scale)
+            else:
+                q = q + dq * dt
+                tau = min(tau + cmd.time_scale * dt, path.duration_s)
+
+    finally:
+        interrupt.restore()
+    log = finished(log, n, texts)
+    if watch is not None and n:  # the last tick too, whenever it came
+        watch({key: v[n - 1].copy() for key, v in log.items()})
+    avoidance = controller.config.avoidance
+    ending = end_of_run(reached, cmd, robot, avoidance, log, goal)
+    if interrupt.requested:
+        ending["end_reason"] = "interrupted"
+    if realtime:
+        ending["realtime_overruns"] = int(overruns)
+        ending["min_true_clearance_in_gaps_m"] = wall.least_clearance(truth)
+    ending |= truth_metrics(log, robot, avoidance, stop_events, dt)
+    return SimResult(
+        log,
+        run_metrics(
+            log,
+            robot,
+            goal,
+            reached,
+            stop_events,
+            vel_violations + wall.vel_violations,
+            pos_violations + wall.pos_violations,
+            controller.name,
+            controller.config.distance,
+            cfg.control_rate_hz,
+        )
+        | ending,
+    )
+
+
+def _rot_err(A: np.ndarray, B: np.ndarray) -> float:
+    return float(np.linalg.norm(pin.log3(A[:3, :3] @ B[:3, :3].T)))

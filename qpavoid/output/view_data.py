@@ -1,0 +1,226 @@
+"""What a replay shows of a run: its geometry frame by frame and its numbers tick by tick.
+
+:func:`replay_data` turns a run's ``log.npz`` and ``metrics.json`` into the arrays the
+browser replay (:mod:`qpavoid.output.replay_html`) draws and prints:
+
+* **scene frames**, at most ``fps`` a second of run time: the arm's links (Pinocchio's
+  joint placements), the robot's safety shapes of the run's distance method (the three
+  set capsules, or the nine control-point spheres), the person's (eight part capsules, or
+  21 spheres), each robot set's closest pair (``robot_point``, ``human_point`` of the log)
+  and the end effector;
+* **ticks**, every one: time, f (eq. 2), the distance per set and its state (free,
+  repulsion active, within the stop distance), the stop reason while stopped, the frame
+  age and, where measured, the true clearance (docs/safety.md);
+* the planned path and the end-effector trace, once.
+
+Everything is plain numbers (float32, m and s) so that the HTML stays small: a 30 s run
+at 500 Hz is about 2 MB with the viewer.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from qpavoid.arm.model import Robot
+from qpavoid.core.errors import InputError
+from qpavoid.human.body import KinectHuman
+from qpavoid.laws.avoidance import AvoidanceConfig, distance_at_factor
+from qpavoid.loop.run_log import TEXT_KEYS
+
+__all__ = ["PAIR_STATES", "pair_states", "replay_data"]
+
+#: A robot set's closest pair is in one of these states (the colours of its line).
+PAIR_STATES = ("free", "repulsion active", "within the stop distance")
+#: Most ticks a replay keeps (every tick up to this; beyond, evenly spaced ones): 40 s at
+#: 500 Hz, about 3 MB of numbers. A run at 10 kHz would otherwise need 27 MB for 30 s.
+MAX_TICKS = 20_000
+#: Repulsion counts as active where the logistic of eqs. (2) and (4) exceeds this share of
+#: its maximum (1 %: where it starts to move the robot visibly).
+ACTIVE_SHARE = 0.01
+
+
+def pair_states(distance: np.ndarray, cfg: AvoidanceConfig) -> np.ndarray:
+    """(T, 3) state of each set's closest pair (index into :data:`PAIR_STATES`).
+
+    Within the stop distance: L1 at or below the distance where f reaches ``f_stop``
+    (eq. 2 inverted), L2 and EE at or below 0.05 m (the paper's rules). Repulsion active:
+    where eq. (2) (L1) or eq. (4) (L2, EE) is above :data:`ACTIVE_SHARE` of its maximum.
+    """
+    stop = np.array([cfg.d_stop_L1_m(), cfg.d_stop_L2_m, cfg.d_stop_EE_m])
+    active = np.array(
+        [
+            distance_at_factor(ACTIVE_SHARE, cfg.rho_L1_m, cfg.alpha_L1),
+            distance_at_factor(ACTIVE_SHARE, cfg.rho_rep_m, cfg.alpha_rep),
+            distance_at_factor(ACTIVE_SHARE, cfg.rho_rep_m, cfg.alpha_rep),
+        ]
+    )
+    d = np.asarray(distance, dtype=float)
+    return np.where(d <= stop, 2, np.where(d < active, 1, 0)).astype(np.int8)
+
+
+#: The log arrays a replay needs, with the shape of one tick's row (None: any).
+_ROWS: dict[str, tuple[int | None, ...]] = {
+    "q": (None,),
+    "joints": (25, 3),
+    "state": (25,),
+    "stopped": (),
+    "f": (),
+    "distance": (3,),
+    "ee_pos": (3,),
+    "ee_ref": (3,),
+}
+#: Optional arrays (older logs lack them), with their row shapes.
+_OPTIONAL: dict[str, tuple[int | None, ...]] = {
+    "stop_reason": (),
+    "robot_point": (3, 3),
+    "human_point": (3, 3),
+    "frame_age_s": (),
+    "true_distance": (3,),
+    "input_alert": (),
+}
+
+
+def checked_log(log: dict[str, np.ndarray], robot: Robot) -> dict[str, np.ndarray]:
+    """The arrays of ``log`` a replay uses, checked: ``t`` finite and increasing, every
+    other array one row per tick of the right shape and kind.
+
+    Raises
+    ------
+    InputError
+        Naming the first array at fault.
+    """
+
+    def refuse(name: str, why: str) -> InputError:
+        return InputError(f"log.npz: {name} {why}", name=name, value=why)
+
+    t = np.asarray(log.get("t", np.zeros(0)))
+    if t.ndim != 1 or len(t) == 0 or t.dtype.kind not in "fiu":
+        raise refuse("t", "must be a non-empty 1-D array of times, s")
+    if not np.isfinite(t).all() or np.any(np.diff(t) <= 0):
+        raise refuse("t", "must be finite and strictly increasing")
+    out = {"t": t.astype(float)}
+    for name, row in (_ROWS | _OPTIONAL).items():
+        if name not in log:
+            if name in _ROWS:
+                raise refuse(name, "is missing")
+            continue
+        value = np.asarray(log[name])
+        if name == "q":
+            row = (robot.nq,)
+        text = name in TEXT_KEYS
+        if value.shape != (len(t), *row) or (value.dtype.kind == "U") != text:
+            shape = (len(t), *row)
+            raise refuse(name, f"must be {'text' if text else 'numbers'} of shape {shape}")
+        if not text and value.dtype.kind not in "fiub":
+            raise refuse(name, "must be numbers")
+        out[name] = value
+    return out
+
+
+def _links(robot: Robot, q: np.ndarray) -> np.ndarray:
+    """(J + 2, 3) the base, every joint's origin and the end effector, m (Pinocchio)."""
+    model, data = robot.model, robot.data
+    pin.forwardKinematics(model, data, q)
+    pin.updateFramePlacement(model, data, robot.ee_frame)
+    joints = [data.oMi[i].translation for i in range(1, model.njoints)]
+    return np.array([np.zeros(3), *joints, data.oMf[robot.ee_frame].translation])
+
+
+def replay_data(
+    log: dict[str, np.ndarray],
+    metrics: dict[str, Any],
+    robot: Robot,
+    cfg: AvoidanceConfig | None = None,
+    fps: float = 30.0,
+) -> dict[str, Any]:
+    """The replay of one run (module docstring): a dict of numbers, lists and arrays.
+
+    Parameters
+    ----------
+    log, metrics
+        The run's ``log.npz`` arrays and ``metrics.json``.
+    robot
+        The run's robot.
+    cfg
+        The avoidance constants the run used (the states of the closest pairs).
+    fps
+        Most scene frames per second of run time.
+    """
+    cfg = cfg or AvoidanceConfig()
+    log = checked_log(log, robot)
+    n_all = len(log["t"])
+    keep = np.arange(0, n_all, -(-n_all // MAX_TICKS))  # every tick, up to MAX_TICKS
+    log = {key: value[keep] for key, value in log.items()}
+    t = log["t"]
+    n = len(t)
+    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+    stride = max(1, round(1.0 / (fps * dt)))
+    frames = np.arange(0, n, stride)
+    method = str(metrics.get("distance_method", "capsules"))
+    human = KinectHuman()
+    links, robot_shapes, human_shapes = [], [], []
+    for k in frames:
+        kin = robot.kinematics(log["q"][k], jacobians=False)
+        links.append(_links(robot, log["q"][k]))
+        geo = human.geometry(log["joints"][k], log["state"][k])
+        if method == "spheres":
+            robot_shapes.append(kin.points)
+            human_shapes.append(np.where(geo.point_valid[:, None], geo.points, np.nan))
+        else:
+            robot_shapes.append(kin.segments)
+            segments = np.where(geo.segment_valid[:, None, None], geo.segments, np.nan)
+            human_shapes.append(segments)
+    if method == "spheres":
+        robot_radii = robot.sphere_radii
+        part_of_point = np.argmax(human.point_part, axis=1)
+        human_radii = human.sphere_radii[part_of_point]
+    else:
+        robot_radii, human_radii = robot.capsule_radii, human.capsule_radii
+    stopped = np.asarray(log["stopped"], dtype=bool)
+    reason_text = log.get("stop_reason", np.full(n, "(reason not logged)"))
+    reasons = sorted({str(r) for r in reason_text[stopped]})
+    code = {r: i for i, r in enumerate(reasons)}
+    alert_text = np.asarray(log.get("input_alert", np.full(n, "")), dtype=str)
+    alerts = sorted({str(a) for a in alert_text if a})
+    alert_code = {a: i for i, a in enumerate(alerts)}
+    true = np.asarray(log.get("true_distance", np.full((n, 3), np.nan)), dtype=float)
+    f32 = np.float32
+    if "robot_point" in log and "human_point" in log:  # older logs have no closest pairs
+        pairs = np.stack([log["robot_point"][frames], log["human_point"][frames]], axis=2)
+    else:
+        pairs = np.full((len(frames), 3, 2, 3), np.nan)
+    return {
+        "method": method,
+        "controller": metrics.get("controller"),
+        "scenario": metrics.get("scenario"),
+        "safety": metrics.get("safety"),
+        "set_names": list(robot.set_names),
+        "part_names": list(human.part_names),
+        "pair_states": list(PAIR_STATES),
+        "robot_radii": robot_radii.astype(f32),
+        "human_radii": human_radii.astype(f32),
+        "frame_tick": frames.astype(np.int32),
+        "links": np.array(links, dtype=f32),
+        "robot": np.array(robot_shapes, dtype=f32),
+        "human": np.array(human_shapes, dtype=f32),
+        "pairs": pairs.astype(f32),
+        "t": t.astype(np.float64),
+        "f": np.asarray(log["f"], dtype=f32),
+        "distance": np.asarray(log["distance"], dtype=f32),
+        "state": pair_states(log["distance"], cfg),
+        "stopped": stopped.astype(np.int8),
+        "reasons": reasons,
+        "reason": np.array(
+            [code[str(r)] if s else -1 for r, s in zip(reason_text, stopped, strict=True)],
+            dtype=np.int32,
+        ),
+        "alerts": alerts,
+        "alert": np.array([alert_code.get(str(a), -1) for a in alert_text], dtype=np.int32),
+        "frame_age": np.asarray(log.get("frame_age_s", np.zeros(n)), dtype=f32),
+        "true_distance": true.astype(f32),
+        "path": np.asarray(log["ee_ref"], dtype=f32)[:: max(1, stride // 2)],
+        "trace": np.asarray(log["ee_pos"], dtype=f32)[:: max(1, stride // 2)],
+    }

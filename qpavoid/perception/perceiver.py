@@ -1,0 +1,53 @@
+"""Everybody as the controller may trust them: each person tracked, their body widened by
+the uncertainty of lost joints, kept until the frame changes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from qpavoid.human.body import HumanGeometry, KinectHuman
+from qpavoid.human.frames import HumanFrame
+from qpavoid.human.people import NOBODY, People, as_people, same_frames
+from qpavoid.perception.tracker import PeopleTracker, Perceived, PerceptionConfig
+
+__all__ = ["Perceiver"]
+
+
+class Perceiver:
+    """Everybody as the controller may trust them, updated once per new frame.
+
+    One :class:`~qpavoid.perception.tracker.Tracker` per person id
+    (:class:`~qpavoid.perception.tracker.PeopleTracker`), each person's geometry (widened by the
+    uncertainty of lost joints) and part velocities (K, 3), kept until the frame changes:
+    new frame objects (:func:`same_frames`) or a new capture time.
+    """
+
+    def __init__(self, human: KinectHuman, cfg: PerceptionConfig | None = None):
+        self.human = human
+        self.trackers = PeopleTracker(cfg)
+        self.perceived: list[Perceived] = []
+        self.geometry: list[HumanGeometry] = []
+        self.part_velocity = np.zeros((0, len(human.parts), 3))
+        self._frame: tuple[People, float | None] | None = None
+
+    def update(self, people: People, frame_time_s: float | None, captured_s: float) -> Perceiver:
+        """Take ``people`` (captured at ``captured_s``) unless it is the frame in hand."""
+        last = self._frame
+        if last is None or not same_frames(people, last[0]) or frame_time_s != last[1]:
+            self.perceived = self.trackers.update(people.ids, people.frames, captured_s)
+            bodies = [
+                self.human.tracked_geometry(p.frame, p.joint_radius, p.joint_velocity)
+                for p in self.perceived
+            ]
+            self.geometry = [geometry for geometry, _ in bodies]
+            self.part_velocity = np.array([velocity for _, velocity in bodies])
+            self._frame = (people, frame_time_s)
+        return self
+
+    def geometries(self, frame: HumanFrame | People) -> list[HumanGeometry]:
+        """The geometries perceived for ``frame`` if it is the frame in hand, else its own
+        (nothing filled in, no uncertainty; :data:`NOBODY`'s for nobody)."""
+        people = frame if isinstance(frame, People) else as_people(frame)
+        if self._frame is not None and same_frames(people, self._frame[0]) and self.geometry:
+            return self.geometry
+        return [self.human.geometry(f) for f in people.frames] or [self.human.geometry(NOBODY)]

@@ -1,0 +1,202 @@
+"""Frames judged by what they are: lost and inferred joints, frozen frames, the person's speed.
+
+The controller sees the person only through camera frames. :class:`Tracker` turns the
+stream of frames into what the distances may trust (:class:`Perceived`):
+
+* **A joint that stops being tracked does not vanish.** It stays at its last known
+  position with an uncertainty radius growing at the largest human speed
+  (``max_human_speed_mps``, ISO 13855's 2.0 m/s) since it was last seen.
+* **Inferred joints** (the SDK's guesses for occluded joints) carry
+  ``inferred_uncertainty_m`` plus the same growth since the joint was last Tracked: an
+  Inferred joint that has not moved for a second is a second old.
+* **Every joint not tracked now, lost, Inferred or never seen at all, is within the reach
+  of its nearest tracked ancestor**: the bones between, each at the longest it has been
+  seen or :data:`MAX_BONE_M`, whichever is larger (a Kinect folds a forearm onto the elbow
+  just before losing the hand; that frame must not shrink the reach). Where that bound is
+  the tighter one the joint is placed at the ancestor with the reach as its radius (a
+  hand never seen, under a tracked shoulder, is a ball of an arm's length there). The
+  distances widen each part by the largest radius of its joints, so a hidden limb pushes
+  the robot away or stops it instead of disappearing; an Inferred hand is bounded too,
+  so it cannot stop the robot for good. A joint with nothing tracked above it and never
+  seen stays missing (nothing to bound it by).
+* **Frozen frames**: a real depth sensor never repeats a skeleton bit for bit;
+  ``identical`` counts consecutive bit-identical skeletons and the controller treats more
+  than ``max_identical_frames`` as stale.
+* **Out-of-order frames** (a capture time not after the last one) are ignored.
+* **The person's velocity**, per joint, from an α-β filter on the frames' positions and
+  capture times (docs/safety.md measures its lag and noise), and per part as the velocity
+  of its fastest joint.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from qpavoid.core.compiling import kernel_input
+from qpavoid.human._kernels import fastest_joint
+from qpavoid.human.frames import MAX_BONE_M, N_KINECT_JOINTS, PARENT, HumanFrame, TrackingState
+from qpavoid.perception._kernels import track, warm_up
+
+#: Tracking state Tracked as a plain int (comparing an array with the IntEnum is 6× slower).
+TRACKED = int(TrackingState.Tracked)
+
+
+@dataclass(frozen=True)
+class PerceptionConfig:
+    """How much the controller trusts a frame.
+
+    Attributes
+    ----------
+    max_human_speed_mps
+        How fast a lost joint's uncertainty grows, m/s (ISO 13855: 2.0 m/s for hands and
+        arms within 0.5 m).
+    inferred_uncertainty_m
+        Uncertainty of an Inferred joint, m, on top of its growth since last Tracked
+        (docs/safety.md: the error of inferred joints is several times that of tracked ones).
+    max_identical_frames
+        More consecutive bit-identical skeletons than this are a frozen sensor (stale);
+        None switches the check off (for a perfect simulated sensor, whose still person
+        is bit-identical). Default 3: 0.1 s at 30 Hz.
+    velocity_alpha, velocity_beta
+        Gains of the α-β velocity filter (position and velocity correction).
+    """
+
+    max_human_speed_mps: float = 2.0
+    inferred_uncertainty_m: float = 0.10
+    max_identical_frames: int | None = 3
+    velocity_alpha: float = 0.5
+    velocity_beta: float = 0.3
+
+
+class Perceived(NamedTuple):
+    """What the controller may trust of the latest frame.
+
+    Attributes
+    ----------
+    frame
+        The frame with every joint ever seen at its best known position (lost joints
+        filled in and flagged Inferred).
+    joint_radius
+        (25,) uncertainty of each joint, m (0 for a tracked joint).
+    joint_velocity
+        (25, 3) filtered velocity of each joint, m/s (0 where unknown).
+    identical
+        How many frames in a row repeated the previous skeleton bit for bit.
+    capture_time_s
+        Capture time of the newest frame accepted, s (the caller's clock).
+    """
+
+    frame: HumanFrame
+    joint_radius: np.ndarray
+    joint_velocity: np.ndarray
+    identical: int
+    capture_time_s: float
+
+    @classmethod
+    def untracked(cls, frame: HumanFrame) -> Perceived:
+        """A frame taken as it is (no memory, no uncertainty, no velocity)."""
+        n = N_KINECT_JOINTS
+        return cls(frame, np.zeros(n), np.zeros((n, 3)), 0, float("nan"))
+
+
+class Tracker:
+    """Memory of the person across frames (one per controller; :meth:`update` per frame)."""
+
+    def __init__(self, cfg: PerceptionConfig | None = None):
+        self.cfg = cfg or PerceptionConfig()
+        n = N_KINECT_JOINTS
+        self.position = np.full((n, 3), np.nan)
+        self.velocity = np.zeros((n, 3))
+        self.last_seen = np.full(n, -np.inf)
+        self.last_tracked = np.full(n, -np.inf)
+        self.bone = MAX_BONE_M.copy()  # longest bone to the parent: seen, or the bound
+        self._last: HumanFrame | None = None
+        self._perceived: Perceived | None = None
+        warm_up()
+
+    def update(self, frame: HumanFrame, capture_time_s: float) -> Perceived:
+        """Take a new frame captured at ``capture_time_s`` (s) and return what to trust."""
+        cfg = self.cfg
+        if self._perceived is not None and capture_time_s <= self._perceived.capture_time_s:
+            return self._perceived  # out of order or repeated: keep the newer one
+        last = self._last
+        identical = 0
+        if last is not None and self._perceived is not None:
+            # bit for bit (a repeated frame is a copy; NaN equals NaN): 20 µs less than
+            # np.array_equal(..., equal_nan=True)
+            same = (
+                frame.joints.tobytes() == last.joints.tobytes()
+                and frame.state.tobytes() == last.state.tobytes()
+            )
+            identical = self._perceived.identical + 1 if same else 0
+        # the α-β filter, the bones, each joint's uncertainty and the lost joints placed
+        # within reach of their nearest tracked ancestor (_kernels.track)
+        joints, state, radius, velocity = track(
+            self.position,
+            self.velocity,
+            self.last_seen,
+            self.last_tracked,
+            self.bone,
+            PARENT,
+            kernel_input(frame.joints, np.float64),
+            kernel_input(frame.state, np.int8),
+            float(capture_time_s),
+            float(cfg.velocity_alpha),
+            float(cfg.velocity_beta),
+            float(cfg.inferred_uncertainty_m),
+            float(cfg.max_human_speed_mps),
+        )
+        self._last = frame
+        self._perceived = Perceived(
+            HumanFrame(joints, state),
+            radius,
+            velocity,
+            identical,
+            float(capture_time_s),
+        )
+        return self._perceived
+
+
+class PeopleTracker:
+    """One :class:`Tracker` per person id; a person no longer reported is forgotten."""
+
+    def __init__(self, cfg: PerceptionConfig | None = None):
+        self.cfg = cfg or PerceptionConfig()
+        self.trackers: dict[int, Tracker] = {}
+
+    def person(self, pid: int) -> Tracker:
+        """Person ``pid``'s tracker (made on first use)."""
+        tracker = self.trackers.get(pid)
+        if tracker is None:  # (setdefault would build, and drop, one every frame)
+            tracker = self.trackers[pid] = Tracker(self.cfg)
+        return tracker
+
+    def update(
+        self, ids: tuple[int, ...], frames: tuple[HumanFrame, ...], capture_time_s: float
+    ) -> list[Perceived]:
+        """Each person's :meth:`Tracker.update`, in the order of ``ids``."""
+        self.trackers = {i: self.person(i) for i in ids}
+        return [
+            self.trackers[i].update(f, capture_time_s) for i, f in zip(ids, frames, strict=True)
+        ]
+
+
+def part_velocities(
+    velocity: list[np.ndarray], part_joints: np.ndarray, who: np.ndarray | None = None
+) -> np.ndarray:
+    """Velocity of each body part, m/s: that of its fastest joint.
+
+    ``velocity`` holds each person's (25, 3) joint velocities; ``part_joints`` (K, 25)
+    bool membership. Without ``who``, (K, 3) of the first person; with ``who`` (S, K) (the
+    person closest to each robot set and part, :func:`~qpavoid.human.people.closest_of`),
+    (S, K, 3): the velocity of each pair's own person's part.
+    """
+    if who is None:
+        return fastest_joint(part_joints, np.asarray(velocity[0], dtype=np.float64))
+    parts = np.array(
+        [fastest_joint(part_joints, np.asarray(v, dtype=np.float64)) for v in velocity]
+    )
+    return parts[who, np.arange(who.shape[1])[None, :]]  # (S, K, 3)

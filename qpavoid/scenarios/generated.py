@@ -1,0 +1,271 @@
+"""Human motions for the paper's tests, generated in code, and random approaches.
+
+A motion is anything with ``frame_at(t) -> (joints (25, 3), state (25,))``: these
+scripted reaches, or a :class:`~qpavoid.sensing.recording.Recording`. The simulation samples it
+at the camera rate (sample and hold).
+
+* ``free``  the operator works at the table (hands circling 5 cm around their rest) and
+  never comes near the robot;
+* ``test1`` (paper Sect. 6.1) the right hand reaches to just beside the end effector's
+  planned path, ahead of the robot, stays while the robot passes, and withdraws;
+* ``test2`` (paper Sect. 6.2) the right hand comes close to L1 (near A3) until f
+  exceeds 0.8 and the robot stops; it holds there, then withdraws;
+* ``random:SEED`` (:func:`random_approach`) a hand moving at up to 1.6 m/s towards a
+  random point of a random robot set, from a random direction, at a random time.
+
+Targets are placed against the robot's *nominal* motion (the path tracked with nobody
+near, :func:`nominal_configurations`), so they stay right if the path or radii change.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import pairwise
+
+import numpy as np
+
+from qpavoid.arm.model import Robot
+from qpavoid.control.task import ArcPath, inverse_kinematics, smoothstep
+from qpavoid.core.errors import InputError
+from qpavoid.core.geometry import unit
+from qpavoid.distance.methods import distance_method
+from qpavoid.human.body import KinectHuman
+from qpavoid.human.posture import ARM, Operator
+
+
+@dataclass(frozen=True)
+class ScriptedReach:
+    """The seated operator, one hand moving through keyframes, the rest still.
+
+    Parameters
+    ----------
+    operator
+        The operator's body.
+    side
+        ``"left"`` or ``"right"`` hand.
+    keyframes
+        ``(t_s, target)`` pairs in increasing time; ``target`` (3,) m is where the hand
+        is at that time (``None`` = its rest position). Between keyframes the hand moves
+        on a straight line with the quintic time law (:func:`~qpavoid.control.task.quintic`);
+        before the first and after the last it holds.
+    """
+
+    operator: Operator
+    side: str
+    keyframes: tuple[tuple[float, np.ndarray | None], ...]
+
+    def hand_position(self, t: float) -> np.ndarray:
+        """The hand target at time ``t`` (s)."""
+        rest = self.operator.rest()[_hand_joint(self.side)]
+        pts = [(tk, rest if p is None else np.asarray(p, dtype=float)) for tk, p in self.keyframes]
+        if t <= pts[0][0]:
+            return pts[0][1]
+        for (t0, p0), (t1, p1) in pairwise(pts):
+            if t <= t1:
+                return p0 + smoothstep((t - t0) / (t1 - t0)) * (p1 - p0)
+        return pts[-1][1]
+
+    def frame_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Kinect joints (25, 3) and states (25,) (all tracked) at time ``t``."""
+        joints = self.operator.reach(self.operator.rest(), self.side, self.hand_position(t))
+        return joints, np.full(25, 2, dtype=np.int8)
+
+
+@dataclass(frozen=True)
+class Working:
+    """The ``free`` scenario: both hands circle ``radius_m`` around their rest position."""
+
+    operator: Operator
+    radius_m: float = 0.05
+    period_s: float = 4.0
+
+    def frame_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        joints = self.operator.rest()
+        for side, phase in (("right", 0.0), ("left", np.pi)):
+            w = 2 * np.pi * t / self.period_s + phase
+            target = joints[_hand_joint(side)] + self.radius_m * np.array([np.cos(w), np.sin(w), 0])
+            joints = self.operator.reach(joints, side, target)
+        return joints, np.full(25, 2, dtype=np.int8)
+
+
+def reach_and_return(
+    operator: Operator, side: str, target: np.ndarray, times: tuple[float, float, float, float]
+) -> ScriptedReach:
+    """The ``side`` hand leaves its rest at ``times[0]``, is at ``target`` at ``times[1]``,
+    holds it until ``times[2]`` and is back at rest at ``times[3]`` (s)."""
+    leave, arrive, hold_until, back = times
+    return ScriptedReach(
+        operator, side, ((leave, None), (arrive, target), (hold_until, target), (back, None))
+    )
+
+
+def _hand_joint(side: str) -> int:
+    """Kinect index of the ``side`` hand."""
+    return int(ARM[side][3])
+
+
+def nominal_configurations(robot: Robot, path: ArcPath, times: np.ndarray) -> np.ndarray:
+    """Joint angles (len(times), nq) tracking the path exactly, by IK from the start."""
+    q = inverse_kinematics(robot, path.reference(0.0)[0])
+    out = []
+    for t in times:
+        q = inverse_kinematics(robot, path.reference(float(t))[0], q0=q)
+        out.append(q)
+    return np.array(out)
+
+
+def _clearance_target(
+    robot: Robot,
+    human: KinectHuman,
+    path: ArcPath,
+    operator: Operator,
+    side: str,
+    anchor: np.ndarray,
+    direction: np.ndarray,
+    clearance_m: float,
+    sets: tuple[str, ...],
+    methods: tuple[str, ...] = ("spheres",),
+) -> np.ndarray:
+    """Hand target ``anchor + s·direction`` whose distance to ``sets`` over the nominal
+    motion is ``clearance_m`` at its closest, by every one of the distance ``methods``
+    (the largest of them; bisection on s)."""
+    times = np.linspace(0, path.duration_s, 61)
+    kins = [
+        robot.kinematics(q, jacobians=False) for q in nominal_configurations(robot, path, times)
+    ]
+    tables = [distance_method(m, robot, human) for m in methods]
+    rows = [robot.set_index(n) for n in sets]
+    hand = human.part_names.index(f"{side}_hand")
+
+    def closest(s: float) -> float:
+        joints = operator.reach(operator.rest(), side, anchor + s * direction)
+        geo = human.geometry(joints)
+        return max(min(m(k, geo).distance[rows, hand].min() for k in kins) for m in tables)
+
+    lo, hi = 0.0, 0.5
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if closest(mid) < clearance_m else (lo, mid)
+    return anchor + hi * direction
+
+
+def make_scenario(
+    name: str,
+    robot: Robot,
+    path: ArcPath | None = None,
+    human: KinectHuman | None = None,
+    operator: Operator | None = None,
+) -> ScriptedReach | Working:
+    """The generated motion called ``name`` (``free``, ``test1``, ``test2``, ``random:SEED``)."""
+    path = path or ArcPath()
+    human = human or KinectHuman()
+    op = operator or Operator()
+    if name == "free":
+        return Working(op)
+    if name == "test1":
+        # Beside the wrist of the nominal motion at 60 % of the path: from the point half-way
+        # between the wrist centre A6 (the last L2 point) and the flange (the EE point),
+        # square to that axis, towards the operator, so that L2 and EE come equally close: the
+        # nominal motion's closest approach to them is 0.04 m, and the repulsion has to
+        # deflect the robot to keep it beyond the 0.05 m stop distance.
+        tc = 0.6 * path.duration_s
+        P = robot.control_points(nominal_configurations(robot, path, np.array([tc]))[0])
+        wrist = P[robot.sets[robot.set_index("L2")].points[-1]]
+        flange = P[robot.sets[robot.set_index("EE")].points[-1]]
+        axis = unit(flange - wrist)
+        towards = np.array([0.0, 1.0, 0.3])  # the operator's side, above
+        target = _clearance_target(
+            robot,
+            human,
+            path,
+            op,
+            "right",
+            0.5 * (wrist + flange),
+            unit(towards - (towards @ axis) * axis),
+            0.04,
+            ("L2", "EE"),
+        )
+        return reach_and_return(op, "right", target, (2.0, 5.0, 11.0, 14.0))
+    if name == "test2":
+        # Towards A3 (the lower half of L1) of the robot's start configuration, from the
+        # operator's right and below L2 (which lies between the operator and L1), to
+        # 0.02 m by spheres and by capsules (f = 0.96): the robot must stop, whichever
+        # distance method it uses.
+        # The operator sits 0.4 m further to -x, so that leaning in keeps the head clear of
+        # the end effector.
+        op = operator or Operator(x_m=-0.25)
+        q0 = inverse_kinematics(robot, path.reference(0.0)[0])
+        anchor = robot.control_points(q0)[1]
+        target = _clearance_target(
+            robot,
+            human,
+            ArcPath(path.start, path.start, 1.0, 0.0),
+            op,
+            "right",
+            anchor,
+            unit([-1.0, 0.5, -0.2]),
+            0.02,
+            ("L1",),
+            ("spheres", "capsules"),
+        )
+        return reach_and_return(op, "right", target, (1.0, 4.0, 9.0, 11.0))
+    return random_approach(np.random.default_rng(check_scenario_name(name)), robot, path)
+
+
+def check_scenario_name(name: str) -> int | None:
+    """Check that ``name`` is a scenario; return the seed of ``random:SEED`` (else None).
+
+    Raises
+    ------
+    InputError
+        For any other name, or a seed that is not a whole number >= 0.
+    """
+    if name in SCENARIOS:
+        return None
+    seed = name[len("random:") :] if name.startswith("random:") else None
+    if seed is not None and seed.isdigit() and seed.isascii():
+        return int(seed)
+    raise InputError(
+        f"unknown scenario {name!r}; choose from {', '.join(SCENARIOS)} or "
+        "random:SEED (SEED a whole number >= 0)",
+        name="scenario",
+        value=name,
+    )
+
+
+SCENARIOS = ("test1", "test2", "free")
+
+
+def random_approach(
+    rng: np.random.Generator,
+    robot: Robot,
+    path: ArcPath | None = None,
+    operator: Operator | None = None,
+    max_speed_mps: float = 1.6,
+    nominal: np.ndarray | None = None,
+) -> ScriptedReach:
+    """A hand approaching a random robot set from a random direction at a random time.
+
+    The target is a random control point of the robot's nominal configuration at a random
+    path time, shifted 0-0.1 m along a random direction on the operator's side; the hand
+    travels there at a random peak speed up to ``max_speed_mps`` (the quintic law peaks at
+    1.875 times the mean speed), holds 1-4 s, and withdraws.
+    """
+    path = path or ArcPath()
+    op = operator or Operator(x_m=0.15 + rng.uniform(-0.2, 0.2))
+    times = np.linspace(0, path.duration_s, 31)
+    if nominal is None:
+        nominal = nominal_configurations(robot, path, times)
+    k = rng.integers(len(times))
+    P = robot.control_points(nominal[k])
+    side = "right" if rng.random() < 0.7 else "left"
+    direction = unit(rng.normal(size=3) + np.array([0.0, 1.5, 0.3]))
+    target = P[rng.integers(len(P))] + rng.uniform(0.0, 0.1) * direction
+    rest = op.rest()[_hand_joint(side)]
+    peak = rng.uniform(0.3, max_speed_mps)
+    travel = np.linalg.norm(target - rest) * 1.875 / peak
+    start = max(0.0, times[k] - travel + rng.uniform(-3.0, 2.0))
+    hold = rng.uniform(1.0, 4.0)
+    return reach_and_return(
+        op, side, target, (start, start + travel, start + travel + hold, start + 2 * travel + hold)
+    )

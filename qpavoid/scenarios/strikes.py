@@ -1,0 +1,155 @@
+"""Adversarial strikes: hands driven into the robot at a chosen speed, with sensor faults.
+
+A :class:`StrikeCase` is one randomized attack on the controller: one or both hands move
+from rest straight *into* a robot set (the target is on the set's capsule axis, so a robot
+that does not get out of the way is hit), arriving at a random path time with a chosen
+peak speed, holding there, then withdrawing. The targets are the three sets (``L1``,
+``L2``, ``EE``), the ``shoulder`` (A2, where L1 starts) and the ``base`` column under it.
+A fault can be laid on top (:class:`~qpavoid.loop.camera.SensorFault`): the striking hand
+``lost`` or ``inferred`` as it arrives, a ``frozen`` sensor, a ``gap`` in the frames, or
+``jitter`` (delayed and dropped frames all run long).
+
+:func:`strike_case` draws a case from a seed; :func:`strike_motion` and
+:func:`strike_sensor` turn it into the true motion and the sensor the controller sees.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from qpavoid.arm.model import Robot
+from qpavoid.control.task import ArcPath
+from qpavoid.human.posture import ARM, Operator
+from qpavoid.loop.camera import SensorConfig, SensorFault
+from qpavoid.scenarios.generated import ScriptedReach, nominal_configurations, reach_and_return
+
+#: Where a strike aims.
+TARGETS = ("L1", "L2", "EE", "shoulder", "base")
+#: Faults a case may carry ("none" for a clean sensor).
+FAULTS = ("none", "lost", "inferred", "frozen", "gap", "jitter")
+
+
+@dataclass(frozen=True)
+class StrikeCase:
+    """One randomized strike (all times on the run clock, s).
+
+    Attributes
+    ----------
+    seed
+        The seed it was drawn from.
+    target
+        One of :data:`TARGETS`.
+    speed_mps
+        Peak speed of the hand, m/s (the quintic time law peaks at 1.875 × the mean).
+    side
+        The striking hand, ``"right"`` or ``"left"``.
+    both_hands
+        The other hand strikes the next target at the same time.
+    arrival_s
+        When the hand reaches its target.
+    fault
+        One of :data:`FAULTS`.
+    """
+
+    seed: int
+    target: str
+    speed_mps: float
+    side: str
+    both_hands: bool
+    arrival_s: float
+    fault: str
+
+    @property
+    def duration_s(self) -> float:
+        """How long to simulate: the approach, 1.5 s of holding, and 0.5 s more."""
+        return self.arrival_s + 2.0
+
+
+def strike_case(seed: int, max_speed_mps: float = 2.0) -> StrikeCase:
+    """The strike of ``seed``: target, speed (0.5 to ``max_speed_mps``), fault, timing."""
+    rng = np.random.default_rng([seed, 9])
+    return StrikeCase(
+        seed,
+        TARGETS[int(rng.integers(len(TARGETS)))],
+        float(rng.uniform(0.5, max_speed_mps)),
+        "right" if rng.random() < 0.7 else "left",
+        bool(rng.random() < 0.25),
+        float(rng.uniform(1.0, 6.0)),
+        FAULTS[int(rng.integers(len(FAULTS)))],
+    )
+
+
+def _aim(robot: Robot, q: np.ndarray, target: str, rng: np.random.Generator) -> np.ndarray:
+    """A point inside the robot at joint angles ``q``: on the named capsule's axis."""
+    seg = robot.capsules(q)
+    if target == "shoulder":
+        return seg[robot.set_index("L1"), 0].copy()
+    if target == "base":
+        return seg[robot.set_index("L1"), 0] - np.array([0.0, 0.0, 0.1])
+    a, b = seg[robot.set_index(target)]
+    return a + rng.uniform(0.2, 1.0) * (b - a)
+
+
+class TwoHands:
+    """Both hands scripted at once (the right hand's motion, then the left's on top)."""
+
+    def __init__(self, right: ScriptedReach, left: ScriptedReach):
+        self.right, self.left = right, left
+
+    def frame_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        joints, state = self.right.frame_at(t)
+        op = self.left.operator
+        return op.reach(joints, "left", self.left.hand_position(t)), state
+
+
+def strike_motion(
+    case: StrikeCase, robot: Robot, path: ArcPath | None = None
+) -> ScriptedReach | TwoHands:
+    """The true motion of ``case``: hands from rest into their targets, held 1.5 s, back."""
+    path = path or ArcPath()
+    rng = np.random.default_rng([case.seed, 11])
+    (q,) = nominal_configurations(robot, path, np.array([min(case.arrival_s, path.duration_s)]))
+    op = Operator(x_m=0.15 + rng.uniform(-0.15, 0.15))
+    reaches = {}
+    sides = ("right", "left") if case.both_hands else (case.side,)
+    for n, side in enumerate(sides):
+        target = TARGETS[(TARGETS.index(case.target) + n) % len(TARGETS)]
+        aim = _aim(robot, q, target, rng)
+        start = op.reach(op.rest(), side, aim)[ARM[side][3]]  # where the hand can get to
+        rest = op.rest()[ARM[side][3]]
+        travel = float(np.linalg.norm(start - rest)) * 1.875 / case.speed_mps
+        t0 = max(case.arrival_s - travel, 0.0)
+        times = (t0, case.arrival_s, case.arrival_s + 1.5, case.arrival_s + 1.5 + travel)
+        reaches[side] = reach_and_return(op, side, aim, times)
+    if case.both_hands:
+        return TwoHands(reaches["right"], reaches["left"])
+    return reaches[case.side]
+
+
+def strike_sensor(case: StrikeCase, base: SensorConfig | None = None) -> SensorConfig:
+    """The sensor of ``case``: ``base`` (a Kinect v2) with the case's fault laid on."""
+    base = base or SensorConfig(seed=case.seed)
+    hand = [int(j) for j in ARM[case.side][2:]]  # wrist, hand, fingers
+    window = (case.arrival_s - 0.3, case.arrival_s + 0.6)
+    if case.fault in ("lost", "inferred"):
+        return replace(base, faults=(SensorFault(case.fault, *window, tuple(hand)),))
+    if case.fault == "frozen":
+        return replace(base, faults=(SensorFault("freeze", *window),))
+    if case.fault == "gap":
+        return replace(base, faults=(SensorFault("gap", *window),))
+    if case.fault == "jitter":
+        return replace(base, jitter_s=0.03, dropout_probability=0.1)
+    return base
+
+
+__all__ = [
+    "FAULTS",
+    "TARGETS",
+    "StrikeCase",
+    "TwoHands",
+    "strike_case",
+    "strike_motion",
+    "strike_sensor",
+]

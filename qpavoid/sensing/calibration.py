@@ -1,0 +1,278 @@
+"""Sensor calibration: where each camera is, as a rigid transform into the robot base frame.
+
+A calibration file (TOML) names any number of sensors, each with the 4×4 rigid transform
+from its camera frame to the robot base frame, m (docs/sensors.md)::
+
+    [sensors.kinect_left]
+    base_from_camera = [[r11, r12, r13, tx],
+                        [r21, r22, r23, ty],
+                        [r31, r32, r33, tz],
+                        [0, 0, 0, 1]]
+    time_offset_s = 0.0     # optional: added to the sensor's time stamps (its clock -> ours)
+    weight = 1.0            # optional: trust in this sensor relative to the others
+    key_file = "kinect_left.key"   # its datagrams' key (sensing.keys), relative to this file
+    key_ids = [2, 1]        # optional: the key ids accepted, the first signing (default: all)
+    field_of_view_deg = [70.6, 60.0]  # optional: what it sees, horizontal and vertical ...
+    range_m = [0.5, 4.5]              # ... between these depths (a Kinect v2's): a person
+                                      # in its view that it does not see is suspect
+
+with, when the sensors have keys, the cell's name at the top (``cell = "cell-1"``): it is
+signed into every datagram, so that one cell's datagrams are refused by another's. Either
+every sensor has a ``key_file`` or none does (docs/security.md).
+
+:func:`qpavoid.sensing.calibration_file.load_calibration` reads and checks one.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from qpavoid.core.errors import CalibrationError
+from qpavoid.sensing.keys import SensorKeys, sensor_name_error, toml_string
+
+__all__ = ["Calibration", "SensorCalibration", "pair_within", "settings_error"]
+
+#: How far a printed rotation may be from orthonormal: ``max |RᵀR − I|`` and ``|det R − 1|``.
+#: 1e-4 admits a matrix written with five or six decimals, and refuses a scale or a shear.
+RIGID_TOLERANCE = 1e-4
+#: Bounds on a sensor's settings: a camera within 100 m of the robot (a Kinect sees 4.5 m;
+#: more is a unit error), a clock offset within a day, a weight within 1e-3 to 1e3 of the
+#: others' (beyond, float arithmetic, not trust, would decide).
+MAX_TRANSLATION_M = 100.0
+MAX_TIME_OFFSET_S = 86_400.0
+MIN_WEIGHT, MAX_WEIGHT = 1e-3, 1e3
+#: A cell's name: a short printable label, signed into every datagram.
+_CELL_NAME = re.compile(r"[A-Za-z0-9._:-]{1,64}")
+
+
+@dataclass(frozen=True)
+class SensorCalibration:
+    """One sensor's place and clock.
+
+    Attributes
+    ----------
+    name
+        The sensor's name (as in the data: a recording's ``sensor``, a datagram's ``sensor``).
+    base_from_camera
+        (4, 4) rigid transform from the camera frame to the robot base frame, m.
+    time_offset_s
+        Added to the sensor's time stamps to put them on the controller's clock, s
+        (default 0: the sensors' clocks are already synchronised, e.g. by PTP).
+    weight
+        Trust in this sensor's joints relative to the others' (default 1).
+    field_of_view_deg, range_m
+        What the sensor sees: its full horizontal and vertical angles of view, deg, and
+        the nearest and farthest depth it measures, m (None: not known; then
+        :meth:`sees` is False everywhere). The camera frame looks along +z, y up.
+    """
+
+    name: str
+    base_from_camera: np.ndarray
+    time_offset_s: float = 0.0
+    weight: float = 1.0
+    field_of_view_deg: tuple[float, float] | None = None
+    range_m: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        """The same limits as a calibration file's (a weight of 0 made seen joints
+        missing with a positive confidence: adversarial tester)."""
+        bad_name = sensor_name_error(self.name)
+        if bad_name is not None:
+            shown = repr(self.name)[:80]
+            raise CalibrationError(
+                f"sensor {shown}: {bad_name}", sensor=str(self.name)[:80], name="sensor"
+            )
+        T = np.asarray(self.base_from_camera, dtype=float)
+        if T.shape != (4, 4) or not np.isfinite(T).all():
+            raise CalibrationError(
+                f"sensor {self.name!r}: base_from_camera must be a finite 4x4 transform",
+                sensor=self.name,
+                name="base_from_camera",
+                value=self.base_from_camera,
+            )
+        object.__setattr__(self, "base_from_camera", T)
+        for key, pair, low, high, what in (
+            ("field_of_view_deg", self.field_of_view_deg, 0.0, 180.0, "(horizontal, vertical)"),
+            ("range_m", self.range_m, 0.0, MAX_TRANSLATION_M, "(nearest, farthest)"),
+        ):
+            if pair is not None and not pair_within(pair, low, high, key == "range_m"):
+                raise CalibrationError(
+                    f"sensor {self.name!r}: {key} must be two numbers above {low:g}, at most "
+                    f"{high:g} {what}",
+                    sensor=self.name,
+                    name=key,
+                    value=pair,
+                )
+        bad = settings_error(self.time_offset_s, self.weight)
+        if bad is not None:
+            key, message, value = bad
+            raise CalibrationError(
+                f"sensor {self.name!r}: {message}", sensor=self.name, name=key, value=value
+            )
+
+    def to_base(self, joints: np.ndarray) -> np.ndarray:
+        """Joint positions (..., 3) in the camera frame → the robot base frame, m."""
+        T = self.base_from_camera
+        return np.asarray(joints, dtype=float) @ T[:3, :3].T + T[:3, 3]
+
+    def sees(self, point: np.ndarray) -> bool:
+        """True if ``point`` (3,), base frame, m, is inside the sensor's view (its angles
+        and depths; False if they are not known)."""
+        if self.field_of_view_deg is None or self.range_m is None:
+            return False
+        T = self.base_from_camera
+        x, y, z = (np.asarray(point, dtype=float) - T[:3, 3]) @ T[:3, :3]
+        half_h, half_v = (math.radians(a) / 2 for a in self.field_of_view_deg)
+        return bool(
+            self.range_m[0] <= z <= self.range_m[1]
+            and abs(math.atan2(x, z)) <= half_h
+            and abs(math.atan2(y, z)) <= half_v
+        )
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The sensors of a cell, by name (:func:`load_calibration`).
+
+    Attributes
+    ----------
+    sensors
+        Each sensor's place and clock, by name.
+    path
+        The file read, if any.
+    cell
+        The cell's name, signed into every datagram ("" without keys).
+    keys
+        Each sensor's keys (:mod:`qpavoid.sensing.keys`), by name: every sensor or none.
+    key_files
+        The key files they were read from, by sensor (absolute paths; a listener reads
+        them again when they change: a key rotated without a stop).
+    """
+
+    sensors: Mapping[str, SensorCalibration]
+    path: str | None = None
+    cell: str = ""
+    keys: Mapping[str, SensorKeys] = field(default_factory=dict)
+    key_files: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        """Keys for every sensor or for none, and a cell name with them."""
+        where = self._where()
+        if self.keys:
+            missing = [name for name in self.sensors if name not in self.keys]
+            extra = [name for name in self.keys if name not in self.sensors]
+            if missing or extra:
+                which = sorted(set(self.keys) & set(self.sensors)) or sorted(self.keys)
+                raise CalibrationError(
+                    f"{where}names a key for {', '.join(which)} only: every sensor needs a "
+                    f"key_file, or none does",
+                    path=self.path,
+                    sensor=(missing or extra)[0],
+                    name="key_file",
+                )
+            if not _CELL_NAME.fullmatch(self.cell):
+                raise CalibrationError(
+                    f"{where}with keys, cell must be the cell's name (1 to 64 letters, digits, "
+                    f"'.', '_', ':' or '-'), got {repr(self.cell)[:80]}",
+                    path=self.path,
+                    name="cell",
+                    value=self.cell,
+                )
+
+    @property
+    def authenticated(self) -> bool:
+        """True if the sensors have keys (their datagrams are signed: wire format v2)."""
+        return bool(self.keys)
+
+    def __getitem__(self, name: str) -> SensorCalibration:
+        try:
+            return self.sensors[name]
+        except KeyError:
+            raise CalibrationError(
+                f"{self._where()}has no sensor {str(name)!r} (sensors: "
+                f"{', '.join(sorted(self.sensors)) or 'none'})",
+                path=self.path,
+                sensor=name,
+                name="sensor",
+                value=name,
+            ) from None
+
+    def check_names(self, names: Iterable[str]) -> None:
+        """Raise :class:`CalibrationError` for the first name that is not a sensor here."""
+        for name in names:
+            self[name]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The sensors' names, in the file's order."""
+        return tuple(self.sensors)
+
+    def to_toml(self, key_files: Mapping[str, str] | None = None) -> str:
+        """The calibration as the text of a calibration file (:func:`load_calibration`);
+        ``key_files`` names each sensor's key file (relative to the calibration file)."""
+        lines = [f"cell = {toml_string(self.cell)}", ""] if key_files else []
+        for cal in self.sensors.values():
+            rows = ",\n                    ".join(
+                "[" + ", ".join(repr(float(v)) for v in row) + "]" for row in cal.base_from_camera
+            )
+            lines += [
+                f"[sensors.{toml_string(cal.name)}]",
+                f"base_from_camera = [{rows}]",
+                f"time_offset_s = {cal.time_offset_s!r}",
+                f"weight = {cal.weight!r}",
+            ]
+            if key_files:
+                lines.append(f"key_file = {toml_string(key_files[cal.name])}")
+            for key in ("field_of_view_deg", "range_m"):
+                value = getattr(cal, key)
+                if value is not None:
+                    lines.append(f"{key} = [{float(value[0])!r}, {float(value[1])!r}]")
+            lines.append("")
+        return "\n".join(lines)
+
+    def _where(self) -> str:
+        return f"calibration {self.path}: " if self.path else "calibration "
+
+
+def pair_within(value: object, low: float, high: float, increasing: bool) -> bool:
+    """True if ``value`` is two finite numbers in (low, high] (``increasing``: the first
+    smaller, and from ``low`` on)."""
+    if not (
+        isinstance(value, (list, tuple))
+        and len(value) == 2
+        and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            for v in value
+        )
+    ):
+        return False
+    a, b = value
+    if increasing:
+        return bool(low <= a < b <= high)
+    return bool(low < a <= high and low < b <= high)
+
+
+def settings_error(offset: object, weight: object) -> tuple[str, str, object] | None:
+    """(key, message, value) of the first setting out of its limits, or None."""
+    for key, value, low, high, kind in (
+        ("time_offset_s", offset, -MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S, "s"),
+        ("weight", weight, MIN_WEIGHT, MAX_WEIGHT, "relative"),
+    ):
+        if (
+            not isinstance(value, (int, float, np.floating, np.integer))
+            or isinstance(value, bool)
+            or not math.isfinite(value)
+            or not low <= value <= high
+        ):
+            shown = float(value) if isinstance(value, (np.floating, np.integer)) else value
+            return (
+                key,
+                f"{key} must be a number from {low:g} to {high:g} ({kind}), got {shown!r}",
+                value,
+            )
+    return None

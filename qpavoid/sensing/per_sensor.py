@@ -1,0 +1,317 @@
+"""Per-sensor recordings: skeletons as each camera reported them, before fusion.
+
+Where :class:`~qpavoid.sensing.recording.Recording` holds one person in the robot base frame, a
+:class:`SensorRecording` holds what one or more sensors reported: one row per body per
+camera frame, joints in **the sensor's own camera frame**, each row with its ``sensor``
+name and ``body`` id (Kinect v2 tracks up to six bodies) and the time stamp on the
+sensor's clock. :mod:`qpavoid.sensing.calibration` puts the rows in the base frame and
+:mod:`qpavoid.fusion.fuser` merges them. The file formats (docs/formats.md, "Per-sensor
+recordings") extend the base-frame ones:
+
+* **NPZ**: ``t`` (N,), ``joints`` (N, 25, 3), ``state`` (N, 25) as before, plus ``sensor``
+  (a string, or (N,) strings) and optionally ``body`` (N,) integers (default 0).
+* **CSV**: the header ``t,sensor,body,SpineBase_x,...,ThumbRight_state`` (``body`` may be
+  left out), one row per body per frame.
+
+Within one (sensor, body) the times must increase strictly; rows of different bodies or
+sensors may share a time.
+"""
+
+from __future__ import annotations
+
+import csv
+import zipfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from qpavoid.core.checks import as_array
+from qpavoid.core.compiling import kernel_input
+from qpavoid.core.errors import InputError
+from qpavoid.core.file_bounds import check_file_size
+from qpavoid.human.frames import N_KINECT_JOINTS, check_joints, check_states
+from qpavoid.sensing.recording_files import (
+    CSV_JOINT_FIELDS,
+    csv_header,
+    read_by_suffix,
+    read_csv_columns,
+    read_npz,
+)
+
+__all__ = [
+    "BodyFrame",
+    "SensorRecording",
+    "load_sensor_recording",
+    "save_sensor_csv",
+    "save_sensor_npz",
+]
+
+#: Most bodies a Kinect v2 tracks at once (body ids 0-5).
+MAX_BODIES = 6
+
+SENSOR_NPZ_EXPECTED = (
+    "expected a per-sensor NPZ recording: arrays t (N,), joints (N, 25, 3) in the camera "
+    "frame, state (N, 25), sensor (a name, or N names) and optionally body (N,)"
+)
+SENSOR_CSV_EXPECTED = (
+    "expected a per-sensor CSV recording: the header t,sensor,body,SpineBase_x,...,"
+    "ThumbRight_state (body optional), one row per body per frame"
+)
+
+
+class BodyFrame(NamedTuple):
+    """One body in one camera frame, as the sensor reported it.
+
+    Attributes
+    ----------
+    sensor
+        The sensor's name (a key of the calibration file).
+    body
+        The sensor's body id (0-5 on a Kinect v2; stable while the sensor tracks the body).
+    t
+        Capture time on the sensor's clock, s.
+    joints
+        (25, 3) joint positions in the sensor's camera frame, m; NaN = not usable.
+    state
+        (25,) tracking states (0 not tracked, 1 inferred, 2 tracked).
+    """
+
+    sensor: str
+    body: int
+    t: float
+    joints: np.ndarray
+    state: np.ndarray
+
+
+def checked_arrays(frame: BodyFrame) -> tuple[np.ndarray, np.ndarray]:
+    """A frame's joints as (25, 3) float64 and states as (25,) int8, writeable and
+    contiguous (the compiled fusion's input types: :func:`~qpavoid.core.compiling.kernel_input`).
+
+    Raises
+    ------
+    InputError
+        For joints that are not (25, 3) numbers (NaN: not usable) or states that are not
+        (25,) values in {0, 1, 2}. Recordings and datagrams are checked so already; a
+        frame made by hand is checked here, in a few microseconds.
+    """
+    joints, state = frame.joints, frame.state
+    if not (
+        isinstance(joints, np.ndarray)
+        and joints.shape == (N_KINECT_JOINTS, 3)
+        and joints.dtype.kind == "f"
+    ):
+        joints = check_joints(joints)
+    if not (
+        isinstance(state, np.ndarray)
+        and state.dtype == np.int8
+        and state.shape == (N_KINECT_JOINTS,)
+        and ((state >= 0) & (state <= 2)).all()
+    ):
+        state = check_states(state)
+    return kernel_input(joints, np.float64), kernel_input(state, np.int8)
+
+
+@dataclass(frozen=True, eq=False)
+class SensorRecording:
+    """Rows of (sensor, body, t, joints, state), checked and read-only (module docstring).
+
+    Raises
+    ------
+    InputError
+        On wrong shapes, a non-finite time, an empty sensor name, a body id outside
+        0-5, or times that do not increase within one (sensor, body).
+    """
+
+    sensor: np.ndarray
+    t: np.ndarray
+    body: np.ndarray
+    joints: np.ndarray
+    state: np.ndarray
+
+    def __post_init__(self) -> None:
+        t = as_array(self.t, (None,), "t (capture times, s)")
+        n = t.shape[0]
+        if n == 0:
+            raise InputError("the recording has no frame: t is empty", name="t", value=t)
+        sensor = np.asarray(self.sensor, dtype=str)
+        sensor = np.full(n, str(sensor)) if sensor.ndim == 0 else sensor
+        if sensor.shape != (n,) or any(not s.strip() for s in sensor):
+            raise InputError(
+                f"sensor must be one non-empty name or {n} of them, got {sensor!r:.80}",
+                name="sensor",
+                value=self.sensor,
+            )
+        body = as_array(self.body, (n,), "body (body ids)")
+        wrong = (body != np.round(body)) | (body < 0) | (body >= MAX_BODIES)
+        if np.any(wrong):
+            bad = int(np.flatnonzero(wrong)[0])
+            raise InputError(
+                f"body[{bad}] is {body[bad].item()!r}; a Kinect v2 body id is 0 to "
+                f"{MAX_BODIES - 1}",
+                name="body",
+                value=body,
+            )
+        body = body.astype(np.int64)
+        for key in zip(*np.unique(np.stack([sensor, body.astype(str)]), axis=1), strict=True):
+            rows = np.flatnonzero((sensor == key[0]) & (body == int(key[1])))
+            steps = np.diff(t[rows])
+            if np.any(steps <= 0):
+                i = rows[int(np.flatnonzero(steps <= 0)[0]) + 1]
+                raise InputError(
+                    f"times of sensor {str(key[0])!r}, body {key[1]} must increase strictly: "
+                    f"row {i} (t={float(t[i])!r} s) is not after the one before",
+                    name="t",
+                    value=t,
+                )
+        joints = check_joints(self.joints, t)
+        state = check_states(self.state, t)
+        for name, arr in (
+            ("sensor", sensor),
+            ("t", t),
+            ("body", body),
+            ("joints", joints),
+            ("state", state),
+        ):
+            arr = np.array(arr, copy=True)
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+
+    @property
+    def n_rows(self) -> int:
+        """Number of rows (bodies × frames)."""
+        return int(self.t.shape[0])
+
+    @property
+    def sensors(self) -> tuple[str, ...]:
+        """The sensors named, in order of first appearance."""
+        return tuple(dict.fromkeys(self.sensor.tolist()))
+
+    def frames(self) -> Iterator[BodyFrame]:
+        """The rows as :class:`BodyFrame`, in time order (stable for equal times)."""
+        for i in np.argsort(self.t, kind="stable"):
+            yield BodyFrame(
+                str(self.sensor[i]),
+                int(self.body[i]),
+                float(self.t[i]),
+                self.joints[i],
+                self.state[i],
+            )
+
+    @classmethod
+    def from_frames(cls, frames: list[BodyFrame]) -> SensorRecording:
+        """A recording of ``frames`` (any order; kept as given)."""
+        return cls(
+            sensor=np.array([f.sensor for f in frames], dtype=str),
+            t=np.array([f.t for f in frames]),
+            body=np.array([f.body for f in frames]),
+            joints=np.array([f.joints for f in frames]).reshape(-1, N_KINECT_JOINTS, 3),
+            state=np.array([f.state for f in frames]).reshape(-1, N_KINECT_JOINTS),
+        )
+
+
+def _names(with_body: bool) -> list[str]:
+    head = ["t", "sensor", "body"] if with_body else ["t", "sensor"]
+    return head + csv_header()[1:]
+
+
+def is_sensor_recording(path: str | Path) -> bool:
+    """True if the file at ``path`` names its sensor (a per-sensor recording); reads no
+    array, and opens no file over its size bound (False: the loader says why)."""
+    p = Path(path)
+    try:
+        if p.suffix.lower() == ".npz":
+            check_file_size(p, "npz")
+            with zipfile.ZipFile(p) as archive:  # numpy's NpzFile.files: names less .npy
+                return any(m in ("sensor", "sensor.npy") for m in archive.namelist())
+        if p.suffix.lower() == ".csv":
+            header = _csv_first_row(p)
+            return len(header) > 1 and header[1] == "sensor"
+    except Exception:  # unreadable or too large: the loader that runs next says why
+        return False
+    return False
+
+
+def _csv_first_row(path: Path) -> list[str]:
+    """The stripped cells of a CSV file's first row ([] if the csv module refuses it);
+    RecordingError, unopened, if the file is over :data:`~qpavoid.core.file_bounds.MAX_CSV_BYTES`
+    (a line can be the whole file). Binary data is read_csv_columns' to refuse."""
+    check_file_size(path, "csv")
+    with path.open("r", encoding="utf-8-sig", errors="replace", newline="") as handle:
+        try:
+            return [cell.strip() for cell in next(csv.reader(handle), [])]
+        except csv.Error:  # a field over the csv module's limit...
+            return []
+
+
+def load_sensor_recording(path: str | Path) -> SensorRecording:
+    """Read a per-sensor recording (NPZ or CSV, by suffix; module docstring).
+
+    Raises
+    ------
+    RecordingError
+        On a missing or unreadable file, a file without ``sensor`` (a base-frame
+        recording), or invalid content; one line naming the file and the problem.
+    """
+    return read_by_suffix(path, {".npz": _load_npz, ".csv": _load_csv}, "per-sensor recording")
+
+
+def _load_npz(path: Path) -> SensorRecording:
+    arrays = read_npz(path, None, SENSOR_NPZ_EXPECTED)
+    missing = [k for k in ("t", "joints", "state", "sensor") if k not in arrays]
+    if missing:
+        hint = (
+            " (a base-frame recording, not one sensor's: it needs no calibration)"
+            if missing == ["sensor"]
+            else ""
+        )
+        raise InputError(
+            f"NPZ file has no array {missing[0]!r}{hint}; {SENSOR_NPZ_EXPECTED}",
+            name=missing[0],
+        )
+    t = arrays["t"]
+    body = arrays.get("body", np.zeros(np.shape(t)))
+    return SensorRecording(arrays["sensor"], t, body, arrays["joints"], arrays["state"])
+
+
+def _load_csv(path: Path) -> SensorRecording:
+    header = _csv_first_row(path)
+    names = _names(with_body=len(header) > 2 and header[2] == "body")
+    data, words = read_csv_columns(path, names, SENSOR_CSV_EXPECTED, text=("sensor",))
+    first = names.index("SpineBase_x")
+    per_joint = data[:, first:].reshape(-1, N_KINECT_JOINTS, len(CSV_JOINT_FIELDS))
+    body = data[:, 2] if "body" in names else np.zeros(len(data))
+    return SensorRecording(
+        np.array(words["sensor"], dtype=str),
+        data[:, 0],
+        body,
+        per_joint[:, :, :3],
+        per_joint[:, :, 3],
+    )
+
+
+def save_sensor_npz(path: str | Path, rec: SensorRecording) -> None:
+    """Write ``rec`` as a per-sensor NPZ (``sensor`` as a string array, ``body`` as int)."""
+    with Path(path).open("wb") as handle:
+        np.savez(
+            handle,
+            t=rec.t,
+            sensor=rec.sensor,
+            body=rec.body,
+            joints=rec.joints,
+            state=rec.state,
+        )
+
+
+def save_sensor_csv(path: str | Path, rec: SensorRecording) -> None:
+    """Write ``rec`` as a per-sensor CSV (``t,sensor,body,...``; exact float round trip)."""
+    with Path(path).open("w", encoding="utf-8", newline="") as handle:
+        writer = csv.writer(handle, lineterminator="\n")
+        writer.writerow(_names(with_body=True))
+        for k in range(rec.n_rows):
+            cells = [repr(float(rec.t[k])), str(rec.sensor[k]), str(int(rec.body[k]))]
+            for xyz, s in zip(rec.joints[k], rec.state[k], strict=True):
+                cells += [repr(float(v)) for v in xyz] + [str(int(s))]
+            writer.writerow(cells)

@@ -1,0 +1,283 @@
+"""The receiving side of a live listener, in a process of its own: datagrams in, the newest
+frame of each body out, in shared memory.
+
+A flood of datagrams must not delay the control loop. In a thread, receiving and
+checking them competes with the loop for Python's interpreter lock (measured in
+docs/sensors.md: 73 overruns in 6 s under a flood of valid datagrams). So :func:`serve`
+runs in a child process (``multiprocessing``, spawn), at a lower priority than the loop
+(``nice`` +10), and does all the work per datagram: receive, check
+(:func:`~qpavoid.sensing.wire.decode`, drops counted by reason), and keep each body's newest frame
+in a :class:`SlotTable`, one fixed slot per (sensor, body).
+
+Each datagram is verified first (:class:`~qpavoid.sensing.wire.Verifier`: length, header, key,
+the tag in constant time before any JSON, the sequence number against a replay window,
+then the skeleton); then, its time stamp now authenticated, a frame captured more than the
+fusion's ``max_age_s`` before now is dropped (``late``), one captured more than
+``future_tolerance_s`` after now too (``from_the_future``: a sensor stamps its capture
+before it sends, so a clock ahead of ours must not poison the order), and one not newer
+than its body's last (``out_of_order_or_duplicate``); the others are
+``accepted``, and one replaced before the loop took it is counted ``superseded``:
+``received`` is ``accepted`` plus every drop. The loop's side (:meth:`SlotTable.take`)
+costs the same whatever arrives: one lock, one copy of at most sensors × 6 slots.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import socket
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from multiprocessing.context import SpawnContext
+from typing import Any
+
+import numpy as np
+
+from qpavoid.core.errors import CalibrationError
+from qpavoid.human.frames import N_KINECT_JOINTS
+from qpavoid.sensing.calibration import Calibration
+from qpavoid.sensing.calibration_file import load_calibration
+from qpavoid.sensing.per_sensor import MAX_BODIES, BodyFrame
+from qpavoid.sensing.signing import FUTURE_TOLERANCE_S, Verifier
+from qpavoid.sensing.wire import REASONS, WireError, Workspace
+
+__all__ = ["COUNTERS", "SlotTable", "serve"]
+
+#: The time window's drops, counted under their own names (not ``dropped_...``).
+TIME_REASONS = ("late", "from_the_future")
+
+#: What the receiver counts, in this order in shared memory.
+COUNTERS = (
+    "received",
+    "accepted",
+    "superseded",
+    "late",
+    "from_the_future",
+    "out_of_order_or_duplicate",
+    *(f"dropped_{reason}" for reason in REASONS if reason not in TIME_REASONS),
+    "dropped_unreadable",
+    "keys_reloaded",
+    "keys_reload_failed",
+)
+#: How often the receiver looks whether the calibration or a key file changed, s (a
+#: rotation is taken within a second, without a stop; a stat of three files costs µs).
+KEY_CHECK_S = 1.0
+_J = N_KINECT_JOINTS
+#: A slot: sequence number written, sequence number taken, t, joints (25 × 3), states (25).
+SLOT = 3 + 4 * _J
+#: Priority the receiver drops to, so that the control loop gets the CPU first.
+NICE = 10
+
+
+@dataclass
+class SlotTable:
+    """Each (sensor, body)'s newest frame, in memory shared by the receiver and the loop.
+
+    Parameters
+    ----------
+    context
+        The multiprocessing context that makes the shared arrays and the lock.
+    sensors
+        The sensors' names, in slot order.
+    """
+
+    sensors: tuple[str, ...]
+    values: Any  # multiprocessing Array of doubles, len(sensors) × MAX_BODIES × SLOT
+    counts: Any  # multiprocessing Array of int64, len(COUNTERS)
+    lock: Any
+
+    @classmethod
+    def create(cls, context: SpawnContext, sensors: Sequence[str]) -> SlotTable:
+        """Zeroed slots and counters for ``sensors``."""
+        n = len(sensors) * MAX_BODIES * SLOT
+        values = context.Array("d", n, lock=False)
+        counts = context.Array("q", len(COUNTERS), lock=False)
+        return cls(tuple(sensors), values, counts, context.Lock())
+
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        rows = np.frombuffer(self.values, dtype=np.float64).reshape(-1, SLOT)
+        return rows, np.frombuffer(self.counts, dtype=np.int64)
+
+    def counters(self) -> dict[str, int]:
+        """Every counter, by name."""
+        counts = self._arrays()[1]
+        with self.lock:
+            values = counts.tolist()
+        return dict(zip(COUNTERS, values, strict=True))
+
+    def take(self) -> list[BodyFrame]:
+        """The frames written since the last call, oldest first (the loop's side)."""
+        rows, _ = self._arrays()
+        with self.lock:
+            new = np.flatnonzero(rows[:, 0] > rows[:, 1])
+            picked = rows[new].copy()
+            rows[new, 1] = rows[new, 0]
+        frames = [
+            BodyFrame(
+                self.sensors[slot // MAX_BODIES],
+                int(slot % MAX_BODIES),
+                float(row[2]),
+                row[3 : 3 + 3 * _J].reshape(_J, 3),
+                row[3 + 3 * _J :].astype(np.int8),
+            )
+            for slot, row in zip(new, picked, strict=True)
+        ]
+        return sorted(frames, key=lambda f: f.t)
+
+
+def serve(
+    address: tuple[str, int],
+    calibration: Calibration,
+    workspace: Workspace,
+    table: SlotTable,
+    status: Connection,
+    stop: Any,
+    max_age_s: float,
+    parent_pid: int,
+    accept_v1: bool = False,
+    future_tolerance_s: float = FUTURE_TOLERANCE_S,
+    key_check_s: float = KEY_CHECK_S,
+) -> None:
+    """The receiver process: bind ``address``, tell ``status`` ``("ok", address)`` or
+    ``("error", why)``, then receive until ``stop`` (an Event) is set or the parent
+    process ``parent_pid`` is gone (killed: the port must not stay taken).
+
+    Ctrl-C is the parent's to handle (it stops this process): ignored here. Datagrams are
+    verified (unsigned ones taken only with ``accept_v1``); a frame captured more than
+    ``max_age_s`` before now (``late``) or more than ``future_tolerance_s`` after now
+    (``from_the_future``, a clock ahead of ours) is dropped before it can count as its
+    body's newest. The calibration and key files are looked at every ``key_check_s`` and
+    read again when one changed (a rotated key).
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked by the parent
+    with contextlib.suppress(OSError):  # not allowed here: it runs at the loop's priority
+        os.nice(NICE)
+    family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
+    with socket.socket(family, socket.SOCK_DGRAM) as sock:
+        try:
+            sock.bind(address)
+        except OSError as exc:
+            status.send(("error", exc.strerror or str(exc)))
+            return
+        status.send(("ok", sock.getsockname()[:2]))
+        sock.settimeout(0.05)
+        verifier = Verifier(
+            calibration,
+            workspace,
+            accept_v1=accept_v1,
+            max_age_s=max_age_s,
+            future_tolerance_s=future_tolerance_s,
+        )
+        _receive(sock, verifier, _KeyWatch(calibration, key_check_s), table, stop, parent_pid)
+
+
+class _KeyWatch:
+    """The calibration file and its key files, read again when one of them changes, so
+    that a rotated key is taken without a stop (docs/security.md §6). A reading that fails
+    (a key file caught half-written, a mode made loose) keeps the keys in use."""
+
+    def __init__(self, calibration: Calibration, every_s: float):
+        self.calibration, self.path = calibration, calibration.path
+        self.files = _watched(calibration)
+        self.stamp = self._stamp()
+        self.every_s = every_s
+        self.next_s = time.monotonic() + every_s
+
+    def _stamp(self) -> tuple:
+        stamps: list[tuple[int, int, int, int] | None] = []
+        for f in self.files:
+            try:
+                info = os.stat(f)
+                stamps.append((info.st_mtime_ns, info.st_size, info.st_ino, info.st_mode))
+            except OSError:
+                stamps.append(None)
+        return tuple(stamps)
+
+    def changed(self) -> Calibration | str | None:
+        """A calibration read again if a file changed, why not if reading it failed (a
+        string), None if nothing changed (or it is not time to look)."""
+        now = time.monotonic()
+        if self.path is None or now < self.next_s:
+            return None
+        self.next_s = now + self.every_s
+        stamp = self._stamp()
+        if stamp == self.stamp:
+            return None
+        self.stamp = stamp
+        try:
+            again = load_calibration(self.path)
+        except CalibrationError as exc:
+            return str(exc)
+        if not _same_sensors(again, self.calibration):
+            return "only the keys are read again: a new pose, clock or sensor needs a restart"
+        self.files = _watched(again)  # a key_file that now names another file: that one
+        self.stamp = self._stamp()
+        return again
+
+
+def _watched(calibration: Calibration) -> list[str]:
+    """The calibration file and the key files it names."""
+    return [f for f in (calibration.path, *calibration.key_files.values()) if f]
+
+
+def _same_sensors(a: Calibration, b: Calibration) -> bool:
+    """The same sensors, poses, clocks, weights and views (keys and cell aside)."""
+    return list(a.sensors) == list(b.sensors) and all(
+        np.array_equal(a[n].base_from_camera, b[n].base_from_camera)
+        and (a[n].time_offset_s, a[n].weight, a[n].field_of_view_deg, a[n].range_m)
+        == (b[n].time_offset_s, b[n].weight, b[n].field_of_view_deg, b[n].range_m)
+        for n in a.sensors
+    )
+
+
+def _receive(
+    sock: socket.socket,
+    verifier: Verifier,
+    watch: _KeyWatch,
+    table: SlotTable,
+    stop: Any,
+    parent_pid: int,
+) -> None:
+    rows, counts = table._arrays()
+    index = {name: i for i, name in enumerate(table.sensors)}
+    code = {name: i for i, name in enumerate(COUNTERS)}
+    newest = np.full(len(rows), -np.inf)
+    while not stop.is_set() and os.getppid() == parent_pid:
+        reread = watch.changed()
+        if reread is not None:
+            if isinstance(reread, Calibration):
+                verifier.rekey(reread)
+            failed = isinstance(reread, str)
+            with table.lock:
+                counts[code["keys_reload_failed" if failed else "keys_reloaded"]] += 1
+        try:
+            data = sock.recv(65536)
+        except TimeoutError:
+            continue
+        except OSError:  # closed under us
+            return
+        try:
+            frame = verifier.decode(data)
+            slot = index[frame.sensor] * MAX_BODIES + int(frame.body)
+            reason = "out_of_order_or_duplicate" if frame.t <= newest[slot] else None
+        except WireError as exc:
+            reason = exc.reason if exc.reason in TIME_REASONS else f"dropped_{exc.reason}"
+        except Exception:  # a datagram must never end the receiver: dropped, counted
+            reason = "dropped_unreadable"
+        with table.lock:
+            counts[0] += 1
+            if reason is not None:
+                counts[code[reason]] += 1
+                continue
+            row = rows[slot]
+            counts[code["accepted"]] += 1
+            counts[code["superseded"]] += row[0] > row[1]  # the last one was never taken
+            row[0] += 1.0
+            row[2] = frame.t
+            row[3 : 3 + 3 * _J] = np.ravel(frame.joints)
+            row[3 + 3 * _J :] = frame.state
+        newest[slot] = frame.t

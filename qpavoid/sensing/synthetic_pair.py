@@ -1,0 +1,191 @@
+"""Two Kinect v2 watching a known motion: synthetic per-sensor data for fusion, without hardware.
+
+:func:`two_sensor_data` films one or more true motions (base frame; a scenario or a
+recording) with two simulated sensors and returns what each reported, in its own camera
+frame and on its own clock, with the calibration that undoes both:
+
+* **poses**: each sensor ``distance_m`` from the person, ``height_m`` up, on either side
+  (``azimuth_deg``), looking at the person's chest (a Kinect's camera frame: x to its
+  left, y up, z forward);
+* **noise**: Gaussian, scaled so that the mean 3D joint error is ``noise_mean_m`` (50 mm:
+  the upper-body error the paper cites for the Kinect v2);
+* **time**: each sensor captures at 30 Hz, the second ``phase_s`` after the first
+  (unsynchronised), and stamps frames on its own clock, ``clock_offset_s`` behind
+  (the calibration's ``time_offset_s`` puts it back);
+* **occlusions**: random windows in which the arm on the far side of a sensor is lost
+  (NaN, NotTracked) or guessed (Inferred, 0.1 m off);
+* **mirroring**: random windows in which one sensor swaps left and right (the person
+  turned away from it), its joints then mostly Inferred.
+
+Several motions become several bodies (ids 0, 1, ...) in each sensor.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from qpavoid.human.frames import MIRROR, HumanFrame, HumanMotion, JointType, TrackingState
+from qpavoid.human.posture import ARM
+from qpavoid.sensing.calibration import Calibration, SensorCalibration
+from qpavoid.sensing.keys import SensorKeys
+from qpavoid.sensing.per_sensor import BodyFrame, SensorRecording
+
+__all__ = ["TwoSensorConfig", "TwoSensorData", "look_at", "two_sensor_data"]
+
+#: A Kinect v2's depth camera: 70.6 × 60 degrees, 0.5 to 4.5 m (Microsoft's specification);
+#: written into the simulated sensors' calibration so that the fusion knows where each looks.
+KINECT_V2_FIELD_OF_VIEW_DEG = (70.6, 60.0)
+KINECT_V2_RANGE_M = (0.5, 4.5)
+#: The mean norm of a 3D isotropic Gaussian of unit σ per axis: √(8/π).
+_MEAN_NORM = float(np.sqrt(8.0 / np.pi))
+
+
+@dataclass(frozen=True)
+class TwoSensorConfig:
+    """How the two sensors see the person (module docstring).
+
+    Attributes
+    ----------
+    names
+        The two sensors' names.
+    azimuth_deg
+        Each sensor's direction from the person, degrees about the vertical from the
+        person's facing direction (+y towards the robot is 0).
+    distance_m, height_m
+        Each sensor's horizontal distance from the person's chest and height, m.
+    noise_mean_m
+        Mean 3D joint error, m.
+    frame_rate_hz
+        Frames per second of each sensor.
+    phase_s
+        The second sensor captures this long after the first, s.
+    clock_offset_s
+        The second sensor's time stamps are this far behind the run clock, s.
+    occlusions_per_s, occlusion_s
+        Rate (per sensor) and length of occlusion windows, 1/s and s.
+    mirror_per_s, mirror_s
+        Rate (per sensor) and length of left/right swap windows, 1/s and s.
+    inferred_error_m
+        How far an Inferred joint is off, m.
+    seed
+        Seed of everything random.
+    cell
+        The cell's name in the calibration (each sensor gets a new random key).
+    """
+
+    names: tuple[str, str] = ("kinect_left", "kinect_right")
+    cell: str = "two-sensors"
+    azimuth_deg: tuple[float, float] = (50.0, -50.0)
+    distance_m: float = 1.6
+    height_m: float = 1.3
+    noise_mean_m: float = 0.05
+    frame_rate_hz: float = 30.0
+    phase_s: float = 0.013
+    clock_offset_s: float = 0.25
+    occlusions_per_s: float = 0.3
+    occlusion_s: float = 0.6
+    mirror_per_s: float = 0.05
+    mirror_s: float = 0.8
+    inferred_error_m: float = 0.1
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class TwoSensorData:
+    """What :func:`two_sensor_data` returns.
+
+    Attributes
+    ----------
+    recordings
+        Each sensor's :class:`SensorRecording`, by name.
+    calibration
+        The sensors' true poses and clock offsets.
+    """
+
+    recordings: dict[str, SensorRecording]
+    calibration: Calibration
+
+
+def look_at(position: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """(4, 4) base_from_camera of a Kinect at ``position`` looking at ``target`` (y up)."""
+    z = np.asarray(target, float) - np.asarray(position, float)
+    z /= np.linalg.norm(z)
+    x = np.cross([0.0, 0.0, 1.0], z)
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    T[:3, 3] = position
+    return T
+
+
+def two_sensor_data(
+    motions: Sequence[HumanMotion], duration_s: float, cfg: TwoSensorConfig | None = None
+) -> TwoSensorData:
+    """Film ``motions`` (one per body) for ``duration_s`` with two sensors (module docstring)."""
+    cfg = cfg or TwoSensorConfig()
+    rng = np.random.default_rng([cfg.seed, 10])
+    first = _frame(motions[0], 0.0)
+    chest = first.joints[JointType.SpineShoulder]
+    facing = np.array([0.0, -1.0, 0.0])  # the seated operator faces the robot (-y)
+    sensors = {}
+    for k, (name, az) in enumerate(zip(cfg.names, cfg.azimuth_deg, strict=True)):
+        where = chest + cfg.distance_m * Rotation.from_euler("z", az, degrees=True).apply(facing)
+        where[2] = cfg.height_m
+        sensors[name] = SensorCalibration(
+            name,
+            look_at(where, chest),
+            time_offset_s=cfg.clock_offset_s * k,
+            field_of_view_deg=KINECT_V2_FIELD_OF_VIEW_DEG,
+            range_m=KINECT_V2_RANGE_M,
+        )
+    # each simulated sensor signs its datagrams with a key of its own (docs/security.md)
+    keys = {name: SensorKeys.generate(name) for name in sensors}
+    calibration = Calibration(sensors, cell=cfg.cell, keys=keys)
+    sigma = cfg.noise_mean_m / _MEAN_NORM
+    recordings = {}
+    for k, name in enumerate(cfg.names):
+        cal = sensors[name]
+        far_arm = ARM["right" if cfg.azimuth_deg[k] > 0 else "left"]
+        occluded = _windows(rng, duration_s, cfg.occlusions_per_s, cfg.occlusion_s)
+        mirrored = _windows(rng, duration_s, cfg.mirror_per_s, cfg.mirror_s)
+        camera_from_base = np.linalg.inv(cal.base_from_camera)
+        frames = []
+        for i in range(int(duration_s * cfg.frame_rate_hz)):
+            t = i / cfg.frame_rate_hz + cfg.phase_s * k
+            for body, motion in enumerate(motions):
+                truth = _frame(motion, t)
+                joints = truth.joints + rng.normal(0.0, sigma, truth.joints.shape)
+                state = truth.state.copy()
+                for start, end, kind in occluded:
+                    if start <= t < end:
+                        idx = list(far_arm)
+                        if kind < 0.5:
+                            joints[idx], state[idx] = np.nan, TrackingState.NotTracked
+                        else:
+                            joints[idx] += rng.normal(0.0, cfg.inferred_error_m / _MEAN_NORM, 3)
+                            state[idx] = TrackingState.Inferred
+                if any(s <= t < e for s, e, _ in mirrored):
+                    joints, state = joints[MIRROR], state[MIRROR]
+                    state[state == TrackingState.Tracked] = TrackingState.Inferred
+                camera = joints @ camera_from_base[:3, :3].T + camera_from_base[:3, 3]
+                frames.append(BodyFrame(name, body, t - cal.time_offset_s, camera, state))
+        recordings[name] = SensorRecording.from_frames(frames)
+    return TwoSensorData(recordings, calibration)
+
+
+def _frame(motion: HumanMotion, t: float) -> HumanFrame:
+    frame = motion.frame_at(t)
+    return frame if isinstance(frame, HumanFrame) else HumanFrame.check(*frame)
+
+
+def _windows(
+    rng: np.random.Generator, duration_s: float, rate: float, length_s: float
+) -> list[tuple[float, float, float]]:
+    """Random (start, end, kind ∈ [0, 1)) windows, about ``rate`` per second."""
+    n = rng.poisson(rate * duration_s)
+    starts = rng.uniform(0.0, duration_s, n)
+    return [(float(s), float(s) + length_s, float(rng.random())) for s in starts]

@@ -1,0 +1,225 @@
+"""The wire format of live skeletons: one UDP datagram per body per sensor frame.
+
+A datagram is signed (version 2, the default: :mod:`qpavoid.sensing.signing` wraps the skeleton
+below in a header and a tag, docs/security.md) or, only by an explicit opt-in on
+loopback, unsigned (version 1). The skeleton itself is JSON in both.
+
+**Version 1, unsigned** (only with an explicit opt-in, on loopback): one UTF-8 JSON
+object::
+
+    {"v": 1, "sensor": "kinect_left", "body": 0, "t": 1763864400.0333,
+     "joints": [[x, y, z, state], ... 25 rows in Kinect JointType order]}
+
+In both (in a signed datagram the sensor's name is in the header, and the payload is
+``{"body", "t", "joints"}``):
+
+* ``sensor``: the sensor's name, as in the calibration file.
+* ``body``: the sensor's body id, 0-5.
+* ``t``: capture time, s, on a clock shared with the controller (UNIX time from PTP or
+  NTP; the calibration's ``time_offset_s`` corrects a known offset).
+* ``joints``: 25 rows ``[x, y, z, state]`` in the sensor's camera frame, m (six
+  decimals); ``state`` 0
+  (not tracked: the coordinates are ignored), 1 (inferred) or 2 (tracked).
+
+JSON is chosen over a binary layout for the skeleton because every language and tool
+reads it and a datagram of one body (about 1 kB) is parsed in tens of microseconds
+(docs/sensors.md); a forged one is refused by its tag in a few (docs/security.md).
+:func:`decode` and :meth:`qpavoid.sensing.signing.Verifier.decode` refuse anything else with a
+:class:`WireError` whose ``reason`` is one of :data:`REASONS`: the listener counts the
+drops by reason and carries on.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from qpavoid.core.errors import InputError
+from qpavoid.human.frames import N_KINECT_JOINTS
+from qpavoid.sensing.calibration import Calibration
+from qpavoid.sensing.per_sensor import MAX_BODIES, BodyFrame
+
+__all__ = [
+    "MAX_DATAGRAM_BYTES",
+    "REASONS",
+    "VERSION",
+    "WireError",
+    "Workspace",
+    "decode",
+    "encode",
+    "json_object",
+    "rows",
+    "skeleton",
+]
+
+#: The unsigned JSON version (:func:`encode`, :func:`decode`).
+VERSION = 1
+#: Longest datagram accepted, bytes (a body is about 1 kB; 8 kB leaves room, refuses junk).
+MAX_DATAGRAM_BYTES = 8192
+#: Coordinates are sent to the micrometre (a Kinect measures to the millimetre), which keeps
+#: a body's datagram near 1 kB, inside one Ethernet frame.
+COORDINATE_DECIMALS = 6
+#: Why a datagram is dropped, in the order they are checked.
+REASONS = (
+    "too_long",
+    "unauthenticated",
+    "bad_header",
+    "unknown_sensor",
+    "unknown_key",
+    "bad_tag",
+    "replayed",
+    "late",
+    "from_the_future",
+    "bad_json",
+    "bad_version",
+    "bad_field",
+    "non_finite",
+    "outside_workspace",
+)
+
+
+class WireError(InputError):
+    """A datagram that is not a valid skeleton; ``reason`` is one of :data:`REASONS`."""
+
+    def __init__(self, message: str, *, reason: str):
+        super().__init__(message, name="datagram", value=reason)
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """Where a person's joint may be, in the robot base frame, m (a box).
+
+    The defaults hold a Kinect v2's 4.5 m range around a robot at the origin, with the
+    floor a metre below its base; a joint outside is a calibration or sensor error.
+    """
+
+    lower_m: tuple[float, float, float] = (-6.0, -6.0, -1.5)
+    upper_m: tuple[float, float, float] = (6.0, 6.0, 3.0)
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """(N,) True where a point (N, 3) is inside."""
+        return np.all((points >= self.lower_m) & (points <= self.upper_m), axis=1)
+
+
+def rows(frame: BodyFrame) -> list[list[float]]:
+    """The joints as sent: camera frame, to the micrometre, NaN joints as state 0."""
+    joints = np.asarray(frame.joints, dtype=float)
+    state = np.asarray(frame.state, dtype=int)
+    out = []
+    for xyz, s in zip(joints, state, strict=True):
+        if not np.isfinite(xyz).all():
+            out.append([0.0, 0.0, 0.0, 0])
+        else:
+            out.append([*(round(float(v), COORDINATE_DECIMALS) for v in xyz), int(s)])
+    return out
+
+
+def encode(frame: BodyFrame) -> bytes:
+    """One unsigned version-1 datagram of ``frame`` (joints in its camera frame, to the
+    micrometre; joints that are NaN are sent as state 0)."""
+    message = {"v": VERSION, "sensor": frame.sensor, "body": int(frame.body), "t": frame.t}
+    message["joints"] = rows(frame)
+    return json.dumps(message, separators=(",", ":")).encode()
+
+
+def decode(data: bytes, calibration: Calibration, workspace: Workspace | None = None) -> BodyFrame:
+    """The :class:`BodyFrame` of an unsigned version-1 datagram, checked; joints stay in
+    the camera frame.
+
+    Raises
+    ------
+    WireError
+        With the reason (:data:`REASONS`) for anything that is not a valid version-1
+        skeleton of a calibrated sensor whose tracked joints lie in ``workspace``.
+    """
+    if len(data) > MAX_DATAGRAM_BYTES:
+        raise WireError(f"datagram of {len(data)} bytes", reason="too_long")
+    msg = json_object(data)
+    if (
+        msg.get("v") != VERSION
+        or not isinstance(msg.get("v"), int)
+        or isinstance(msg.get("v"), bool)
+    ):
+        raise WireError(f"version {msg.get('v')!r}, expected {VERSION}", reason="bad_version")
+    sensor = msg.get("sensor")
+    if not isinstance(sensor, str) or not sensor:
+        raise WireError(f"sensor {sensor!r}", reason="bad_field")
+    return skeleton(msg, sensor, calibration, workspace)
+
+
+def json_object(data: bytes) -> dict:
+    """The JSON object of ``data``, or :class:`WireError`."""
+    try:
+        msg = json.loads(data.decode("utf-8"), parse_constant=_refuse_constant)
+    except _NonFiniteError as exc:
+        raise WireError(f"non-finite number {exc}", reason="non_finite") from None
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise WireError(f"not JSON: {exc}", reason="bad_json") from None
+    if not isinstance(msg, dict):
+        raise WireError("not a JSON object", reason="bad_json")
+    return msg
+
+
+def skeleton(
+    msg: dict,
+    sensor: str,
+    calibration: Calibration,
+    workspace: Workspace | None,
+    t: object = None,
+) -> BodyFrame:
+    """The body frame of a message's ``body``, ``t`` (or ``t`` given: a signed header's)
+    and ``joints`` (``sensor``'s, camera frame), checked: :class:`WireError` otherwise."""
+    body, joint_rows = msg.get("body"), msg.get("joints")
+    if t is None:
+        t = msg.get("t")
+    if not isinstance(body, int) or isinstance(body, bool) or not 0 <= body < MAX_BODIES:
+        raise WireError(f"body {body!r}", reason="bad_field")
+    if not isinstance(t, (int, float)) or isinstance(t, bool):
+        raise WireError(f"t {str(t)[:40]}", reason="bad_field")
+    try:
+        t = float(t)  # a JSON integer may be too large for a float
+        arr = np.array(joint_rows, dtype=float)
+    except OverflowError:
+        raise WireError("a number too large for a float", reason="non_finite") from None
+    except (TypeError, ValueError):
+        raise WireError("joints are not 25 rows of 4 numbers", reason="bad_field") from None
+    if not math.isfinite(t):
+        raise WireError(f"t {t!r}", reason="non_finite")
+    if arr.shape != (N_KINECT_JOINTS, 4) or not _all_numbers(joint_rows):
+        raise WireError(f"joints of shape {arr.shape}, expected (25, 4)", reason="bad_field")
+    if not np.isfinite(arr).all():
+        raise WireError("a non-finite coordinate", reason="non_finite")
+    state = arr[:, 3]
+    if not np.isin(state, (0, 1, 2)).all():
+        raise WireError(f"states {sorted(set(state.tolist()))}", reason="bad_field")
+    if sensor not in calibration.sensors:
+        raise WireError(f"unknown sensor {sensor!r}", reason="unknown_sensor")
+    joints = arr[:, :3].copy()
+    used = state > 0
+    joints[~used] = np.nan
+    if workspace is not None and used.any():
+        in_base = calibration[sensor].to_base(joints[used])
+        if not workspace.contains(in_base).all():
+            raise WireError("a joint outside the workspace", reason="outside_workspace")
+    return BodyFrame(sensor, body, float(t), joints, state.astype(np.int8))
+
+
+class _NonFiniteError(ValueError):
+    pass
+
+
+def _refuse_constant(name: str) -> float:
+    raise _NonFiniteError(name)
+
+
+def _all_numbers(rows: object) -> bool:
+    """True if ``rows`` is a list of lists of JSON numbers (no strings, no booleans)."""
+    return isinstance(rows, list) and all(
+        isinstance(r, list)
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in r)
+        for r in rows
+    )
