@@ -11,6 +11,7 @@ from qpavoid.control.qp import solver_kernels
 from qpavoid.distance import _kernels as distance_kernels
 from qpavoid.fusion import person as fusion_person
 from qpavoid.human import _kernels as body_kernels
+from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.laws import _kernels as law_kernels
 from qpavoid.loop.camera import SensorConfig
 from qpavoid.perception import _kernels as perception_kernels
@@ -22,9 +23,9 @@ def pytest_configure(config):
     command-line subprocesses need them (a fresh install compiles for about 5 s; every
     process after that loads them from the disk cache)."""
     if not hasattr(config, "workerinput"):  # pytest-xdist's controller, or no xdist
-        fusion_person.warm_up()  # and the fusion's per-joint kernels
-        perception_kernels.warm_up()
-        body_kernels.warm_up()
+        fusion_person.warm_up(KINECT_V2)  # and the fusion's per-joint kernels
+        perception_kernels.warm_up(KINECT_V2)
+        body_kernels.warm_up(KINECT_V2)
         distance_kernels.warm_up()
         qp_kernels.warm_up()
         solver_kernels.warm_up()

@@ -136,8 +136,9 @@ def test_nobody_near_is_eq8(robot):
 
     T_ref, twist = path.reference(5.0)
     target = twist + 5.0 * pose_error(T_ref, kin.ee_placement)
-    assert 0 < np.linalg.norm(cmd.v_rep_EE) < 1e-6 and np.linalg.norm(cmd.v_rep_L2) < 1e-8
-    target[:3] += cmd.v_rep_EE
+    assert 0 < np.linalg.norm(cmd.v_end_effector) < 1e-6
+    assert np.linalg.norm(cmd.v_repelled) < 1e-8
+    target[:3] += cmd.v_end_effector
     np.testing.assert_allclose(kin.ee_jacobian @ cmd.dq, target, atol=1e-8)
 
 

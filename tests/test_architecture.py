@@ -58,7 +58,9 @@ def test_import_contracts_hold():
 )
 def test_import_contracts_catch_a_violation(tmp_path, module, line, broken):
     """In a copy of the package, one added import breaks the contract it should."""
-    shutil.copytree(ROOT / "qpavoid", tmp_path / "qpavoid", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(
+        ROOT / "qpavoid", tmp_path / "qpavoid", ignore=shutil.ignore_patterns("__pycache__")
+    )
     shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
     target = tmp_path / "qpavoid" / module
     text = target.read_text()

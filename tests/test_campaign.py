@@ -15,24 +15,14 @@ from qpavoid.core.errors import InputError
 from qpavoid.experiments.campaign import (
     CAMPAIGN_MAX_TIME_S,
     RayExecutor,
+    campaign_spec,
     run_campaign,
-    summarize_campaign,
     worst_runs,
     write_campaign,
 )
 from qpavoid.experiments.runs import RunSpec, simulate_one
-from qpavoid.experiments.strike_sweep import StrikeCheck
+from qpavoid.experiments.sweep import StrikeCheck, summarize
 from qpavoid.sensing.recording import load_recording
-
-SETTINGS = {
-    "n": 3,
-    "controller": "qp",
-    "distance": "spheres",
-    "safety": "ssm",
-    "seed": 11,
-    "max_speed_mps": 2.0,
-    "rate_hz": 100.0,
-}
 
 
 def check(seed, contact=0, clearance=0.1, goal=True, **kw) -> StrikeCheck:
@@ -64,7 +54,7 @@ def test_the_summary_counts_what_it_says():
         check(2, clearance=float("inf"), ticks_moving_below_stop_distance=4),
         check(3, clearance=0.10, limit_violations=1),
     ]
-    s = summarize_campaign(runs)
+    s = summarize(runs)
     assert s["runs"] == 4 and s["runs_moving_in_true_contact"] == 1
     assert s["runs_moving_below_stop_distance"] == 1 and s["runs_with_limit_violations"] == 1
     assert s["fraction_reaching_goal"] == 0.75
@@ -79,12 +69,21 @@ def strip(summary: dict) -> dict:
 
 
 def test_a_campaign_is_the_same_on_one_or_two_workers_and_its_worst_runs_replay(tmp_path):
-    kw = dict(n=3, controller="qp", seed=11, max_time_s=2.5)
-    one = run_campaign(**kw, workers=1)
-    two = run_campaign(**kw, workers=2)
+    spec = campaign_spec("qp", "spheres", max_time_s=2.5)
+    one = run_campaign(spec, 3, seed=11, workers=1)
+    two = run_campaign(spec, 3, seed=11, workers=2)
     assert [r.seed for r in one] == [11, 12, 13]
-    assert strip(summarize_campaign(one)) == strip(summarize_campaign(two))
-    summary = write_campaign(tmp_path / "c", SETTINGS, one)
+    assert strip(summarize(one)) == strip(summarize(two))
+    summary = write_campaign(tmp_path / "c", spec, 3, 11, one)
+    assert summary["settings"] == {
+        "n": 3,
+        "controller": "qp",
+        "distance": "spheres",
+        "safety": "ssm",
+        "seed": 11,
+        "max_speed_mps": 2.0,
+        "rate_hz": 100.0,
+    }
     on_disk = json.loads((tmp_path / "c" / "summary.json").read_text())
     assert strip(on_disk) == strip(json.loads(json.dumps(summary)))
     worst = sorted((tmp_path / "c" / "worst").glob("*.npz"))
@@ -110,11 +109,11 @@ def test_a_campaign_is_the_same_on_one_or_two_workers_and_its_worst_runs_replay(
 @pytest.mark.slow
 @pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason='needs "qpavoid[cluster]"')
 def test_ray_gives_the_same_summary_as_local_processes():
-    kw = dict(n=4, controller="analytic", seed=3, max_time_s=3.0)
-    local = run_campaign(**kw, workers=2)
+    spec = campaign_spec("analytic", max_time_s=3.0)
+    local = run_campaign(spec, 4, seed=3, workers=2)
     executor = RayExecutor(2)
-    on_ray = run_campaign(**kw, executor=executor)
-    assert strip(summarize_campaign(local)) == strip(summarize_campaign(on_ray))
+    on_ray = run_campaign(spec, 4, seed=3, executor=executor)
+    assert strip(summarize(local)) == strip(summarize(on_ray))
     executor.shutdown()  # the local Ray it started goes (a Ctrl-C left its agents running)
     assert not executor.ray.is_initialized()
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from qpavoid.core.compiling import kernel_input, recompile_if_stale
 from qpavoid.fusion import person as fusion_person
+from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.laws import _kernels as law_kernels
 
 # A fresh process runs the loop's every compiled path (both distance methods, both
@@ -30,6 +31,7 @@ from qpavoid.fusion import person as fusion_person
 from qpavoid.laws import _kernels as law_kernels
 from qpavoid.perception import _kernels as perception_kernels
 from qpavoid.human import _kernels as body_kernels
+from qpavoid.human import alpha_beta
 from qpavoid.control.qp import kernels as qp_kernels, solver_kernels
 from qpavoid.sensing.calibration import Calibration
 from qpavoid.control.tick import ControllerConfig
@@ -43,7 +45,7 @@ from qpavoid.scenarios.generated import make_scenario
 from qpavoid.sensing.synthetic_pair import TwoSensorConfig, two_sensor_data
 
 modules = (distance_kernels, fusion_kernels, fusion_person, law_kernels, perception_kernels,
-           body_kernels, qp_kernels, solver_kernels)
+           body_kernels, alpha_beta, qp_kernels, solver_kernels)
 kernels = {
     f"{m.__name__}.{n}": getattr(m, n)
     for m in modules
@@ -127,7 +129,7 @@ def test_a_kernel_cached_before_an_edit_of_what_it_calls_is_recompiled(tmp_path)
 def test_numba_still_keeps_a_cache_index_where_recompile_if_stale_looks():
     """A numba that moved it would silently switch the check off."""
     law_kernels.warm_up()
-    fusion_person.warm_up()
+    fusion_person.warm_up(KINECT_V2)
     for kernel in (law_kernels.avoidance_terms, fusion_person.fuse_person):
         assert os.path.exists(kernel._cache._cache_file._index_path)
 

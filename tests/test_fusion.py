@@ -8,7 +8,8 @@ import pytest
 from qpavoid.core.errors import CalibrationError, InputError
 from qpavoid.fusion.association import torso_centre
 from qpavoid.fusion.fuser import Fuser, FusionConfig
-from qpavoid.human.frames import MIRROR, JointType, TrackingState
+from qpavoid.human.frames import JointType, TrackingState
+from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.posture import Operator
 from qpavoid.scenarios.generated import make_scenario
 from qpavoid.sensing.calibration import Calibration, SensorCalibration
@@ -19,6 +20,8 @@ J = JointType
 HAND = int(J.HandRight)
 TRACKED = np.full(25, TrackingState.Tracked, dtype=np.int8)
 RAW = FusionConfig(smooth=False)  # the sensors' weighted mean, exact where they agree
+
+MIRROR = KINECT_V2.mirror
 
 
 def calibration(*names: str) -> Calibration:

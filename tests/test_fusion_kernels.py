@@ -7,8 +7,32 @@ import numpy as np
 import pytest
 
 from qpavoid.core.compiling import ctrl_c_deferred
-from qpavoid.fusion._kernels import disagreement, mean_gaps, merge, subset_mean, update_track
-from qpavoid.perception.tracker import PARENT
+from qpavoid.fusion._kernels import disagreement, mean_gaps, merge, subset_mean
+from qpavoid.fusion.person import BONE_GAIN
+from qpavoid.human.alpha_beta import alpha_beta_step
+from qpavoid.human.kinect_v2 import KINECT_V2
+
+PARENT = KINECT_V2.parent
+
+
+def update_track(positions, velocity, last_seen, bone, parent, z, state, t, alpha, beta, gap):
+    """One step of a fusion track: the α-β filter with the fusion's parameters."""
+    alpha_beta_step(
+        positions,
+        velocity,
+        last_seen,
+        bone,
+        parent,
+        z,
+        state,
+        t,
+        alpha,
+        beta,
+        gap,
+        2,
+        BONE_GAIN,
+        BONE_GAIN,
+    )
 
 
 def bodies(rng, S):
@@ -56,7 +80,7 @@ def test_disagreement_and_gaps_are_brute_force_distances(seed):
         np.testing.assert_allclose(centre, P[0, ok].mean(axis=0))
 
 
-def test_update_track_filters_and_learns_bones_by_hand():
+def test_a_fusion_track_filters_and_learns_bones_by_hand():
     positions, velocity = np.zeros((25, 3)), np.zeros((25, 3))
     last_seen, bone = np.full(25, -np.inf), np.zeros(25)
     z = np.arange(75.0).reshape(25, 3) * 0.01

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from qpavoid.fusion._kernels import believed, disagreement, ingest
-from qpavoid.fusion.person import MIRROR_CHECK_M, SIDED, fuse_person, mirror_costs
-from qpavoid.human.frames import MIRROR
-from qpavoid.perception.tracker import PARENT
+from qpavoid.fusion.person import MIRROR_CHECK_M, fuse_person, mirror_costs
+from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.sensing.calibration import SensorCalibration
 
+PARENT, MIRROR, SIDED = KINECT_V2.parent, KINECT_V2.mirror, KINECT_V2.sided
 STATE_WEIGHT = np.array([0.0, 0.2, 1.0])
 STATE_CONFIDENCE = np.array([0.0, 0.15, 0.5])
 
@@ -56,11 +56,11 @@ def test_mirror_costs_are_the_medians_as_labelled_and_swapped(seed):
     joints[rng.uniform(size=25) < rng.uniform(0, 1)] = np.nan
     reference[rng.uniform(size=25) < 0.3] = np.nan
     np.testing.assert_allclose(
-        mirror_costs(joints, reference), mirror_costs_numpy(joints, reference)
+        mirror_costs(joints, reference, SIDED, MIRROR), mirror_costs_numpy(joints, reference)
     )
     # a body that is the reference with left and right swapped: swapped cost 0
     swapped = reference[MIRROR]
-    as_is, mirrored = mirror_costs(swapped, reference)
+    as_is, mirrored = mirror_costs(swapped, reference, SIDED, MIRROR)
     assert mirrored == 0.0 and as_is > 0.0
 
 
@@ -139,6 +139,9 @@ def test_the_compiled_person_step_is_the_numpy_one(seed):
         sensor_weight,
         recent,
         *mine,
+        PARENT,
+        MIRROR,
+        SIDED,
         1.0,
         STATE_WEIGHT,
         STATE_CONFIDENCE,

@@ -7,19 +7,24 @@ import math
 import numpy as np
 import pytest
 
+from qpavoid.arm.description import Roles
 from qpavoid.core.errors import InputError
-from qpavoid.laws._kernels import NOT_FINITE, avoidance_terms, law_constants, limit_crossed
+from qpavoid.laws._kernels import NOT_FINITE, limit_crossed
 from qpavoid.laws.avoidance import (
     AvoidanceConfig,
+    avoidance_terms,
     damped_pinv,
     distance_at_factor,
     ee_repulsive_velocity,
     l1_factor,
-    l2_joint_velocity,
+    law_constants,
     modified_ik,
+    repelled_joint_velocity,
     repulsive_speed,
     repulsive_velocity,
     scaled_velocity_limits,
+    set_stop_distances,
+    stop_distances,
     stop_reason,
 )
 
@@ -59,15 +64,16 @@ def test_repulsive_speed_eq4_and_velocity_eq5():
     cfg = AvoidanceConfig(v_max_mps=0.3, rho_rep_m=0.2, alpha_rep=9)
     assert repulsive_speed(0.1, cfg) == pytest.approx(0.15)  # V_max / 2 at rho/2
     assert repulsive_speed(0.2, cfg) == pytest.approx(0.3 / (1 + math.exp(9)))
-    v = repulsive_velocity(0.1, np.array([0, 0.6, 0.8]), cfg)
+    v = repulsive_velocity(0.1, np.array([0, 0.6, 0.8]), *law_constants(cfg))
     np.testing.assert_allclose(v, [0, 0.09, 0.12])
-    np.testing.assert_array_equal(repulsive_velocity(np.inf, np.array([1.0, 0, 0]), cfg), 0.0)
+    unseen = repulsive_velocity(np.inf, np.array([1.0, 0, 0]), *law_constants(cfg))
+    np.testing.assert_array_equal(unseen, 0.0)
 
 
 def test_ee_sum_eq7_ignores_unseen_parts():
     d = np.array([0.1, 0.1, np.inf, 0.5])
     dirs = np.array([[1.0, 0, 0], [0, 1.0, 0], [np.nan, np.nan, np.nan], [0, 0, 1.0]])
-    v = ee_repulsive_velocity(d, dirs, CFG)
+    v = ee_repulsive_velocity(d, dirs, *law_constants(CFG))
     half = CFG.v_max_mps / 2
     np.testing.assert_allclose(v, [half, half, repulsive_speed(0.5, CFG)])
 
@@ -88,7 +94,7 @@ def test_damped_pinv_stays_bounded_at_a_singularity():
 def test_l2_velocity_eq6_moves_the_point_as_asked():
     J = np.array([[0.2, 0.0, 0.1], [0.0, 0.3, 0.0], [0.1, 0.0, 0.4]])
     v = np.array([0.01, -0.02, 0.03])
-    np.testing.assert_allclose(J @ l2_joint_velocity(J, v, 0.02, 0.05), v, atol=1e-12)
+    np.testing.assert_allclose(J @ repelled_joint_velocity(J, v, 0.02, 0.05), v, atol=1e-12)
 
 
 def test_modified_ik_eq8():
@@ -106,23 +112,39 @@ def test_modified_ik_eq8():
     [
         (0.8, 1.0, 1.0, None),  # f must exceed 0.8
         (0.8000001, 1.0, 1.0, "f = "),
-        (0.0, 0.05, 1.0, "d_L2"),  # <= 0.05 m stops
+        (0.0, 0.05, 1.0, "d_forearm = 0.050 m"),  # <= 0.05 m stops
         (0.0, 0.0500001, 1.0, None),
-        (0.0, 1.0, 0.05, "d_EE"),
+        (0.0, 1.0, 0.05, "d_tool = 0.050 m"),
         (0.0, np.inf, np.inf, None),
     ],
 )
-def test_stop_rules(f, d_l2, d_ee, expect):
-    reason = stop_reason(f, d_l2, d_ee, CFG)
+def test_stop_rules_quote_the_sets_by_the_part_they_play(f, d_l2, d_ee, expect):
+    reason = stop_reason(f, d_l2, d_ee, CFG, ("upper_arm", "forearm", "tool"))
     if expect is None:
         assert reason is None
     else:
         assert reason.startswith(expect)
+        assert expect != "f = " or reason.endswith("(upper_arm)")
+
+
+def test_stop_distances_go_to_the_sets_playing_each_part():
+    """Each set's stop distance is its part's (Roles), 0 for a set that plays none, the
+    largest for a set that plays two."""
+    by_role = stop_distances(CFG)  # scaled, repelled, end effector
+    assert by_role[0] == pytest.approx(CFG.d_stop_L1_m()) and by_role[0] < 0.05
+    roles = Roles(scaled=2, scaled_joints=(), repelled=0, repelled_joints=(), end_effector=3)
+    np.testing.assert_array_equal(
+        set_stop_distances(CFG, roles, 5), [CFG.d_stop_L2_m, 0.0, by_role[0], 0.05, 0.0]
+    )
+    shared = Roles(scaled=0, scaled_joints=(), repelled=0, repelled_joints=(), end_effector=1)
+    np.testing.assert_array_equal(set_stop_distances(CFG, shared, 2), [0.05, 0.05])
 
 
 def test_the_compiled_avoidance_terms_are_the_laws():
-    """law_kernels.avoidance_terms against the laws it composes (and the table's minima),
-    on random tables with unseen parts (+inf, NaN directions), ties, contact and NaN."""
+    """avoidance_terms against eq. (4) in numpy (repulsive_speed, the logistic numba does
+    not compile), eqs. (5) and (7) written out, and the table's minima, on random tables
+    with unseen parts (+inf, NaN directions), ties, contact and NaN; the repelled and
+    end-effector rows anywhere in the table."""
     rng = np.random.default_rng(3)
     for n in range(500):
         cfg = AvoidanceConfig(
@@ -132,24 +154,29 @@ def test_the_compiled_avoidance_terms_are_the_laws():
             alpha_rep=rng.uniform(3.0, 12.0),
             v_max_mps=rng.uniform(0.1, 1.0),
         )
-        d = rng.uniform(-0.02, 0.4, (3, 8))
-        v = rng.normal(size=(3, 8, 3))
+        n_sets = 3 + n % 3
+        rep, ee = rng.choice(n_sets, 2, replace=False)
+        d = rng.uniform(-0.02, 0.4, (n_sets, 8))
+        v = rng.normal(size=(n_sets, 8, 3))
         v /= np.linalg.norm(v, axis=2, keepdims=True)
-        unseen = rng.random((3, 8)) < 0.3
+        unseen = rng.random((n_sets, 8)) < 0.3
         d[unseen], v[unseen] = np.inf, np.nan
         if n % 50 == 0:
-            d[1] = np.inf  # L2 sees nobody
-        if n % 50 == 2:  # a NaN distance (never from our tables): NaN where laws.py's is
-            d[rng.integers(3), rng.integers(8)] = np.nan
-        if n % 50 == 1:
-            d[1, 2:4], v[1, 2:4] = d[1].min(), [0.0, 0.0, 1.0]  # a tie: the first, as argmin
-        dmin, j, v_l2, v_ee = avoidance_terms(d, v, 1, 2, *law_constants(cfg))
+            d[rep] = np.inf  # the repelled set sees nobody
+        if n % 50 == 2:  # a NaN distance (never from our tables): NaN spoils the sum
+            d[rng.integers(n_sets), rng.integers(8)] = np.nan
+        if n % 50 == 1:  # a tie: the first, as argmin
+            d[rep, 2:4], v[rep, 2:4] = d[rep].min(), [0.0, 0.0, 1.0]
+        dmin, j, v_rep, v_ee = avoidance_terms(d, v, rep, ee, *law_constants(cfg))
         np.testing.assert_array_equal(dmin, d.min(axis=1))  # exact: the stop rules read it
-        assert j == int(np.argmin(d[1]))
-        np.testing.assert_allclose(v_l2, repulsive_velocity(d[1, j], v[1, j], cfg), atol=1e-15)
-        np.testing.assert_allclose(v_ee, ee_repulsive_velocity(d[2], v[2], cfg), atol=1e-15)
+        assert j == int(np.argmin(d[rep]))
+        expect_rep = repulsive_speed(d[rep, j], cfg) * v[rep, j] if np.isfinite(d[rep, j]) else 0
+        np.testing.assert_allclose(v_rep, expect_rep, atol=1e-15)
+        speed = repulsive_speed(d[ee], cfg)  # eq. (7): 0 for a part not seen, NaN spoils
+        expect_ee = speed @ np.where((speed > 0.0)[:, None] | np.isnan(speed)[:, None], v[ee], 0.0)
+        np.testing.assert_allclose(v_ee, expect_ee, atol=1e-15)
         if not np.isnan(d).any():
-            assert np.isfinite(v_l2).all() and np.isfinite(v_ee).all()
+            assert np.isfinite(v_rep).all() and np.isfinite(v_ee).all()
 
 
 @pytest.mark.parametrize(

@@ -8,11 +8,13 @@ import pytest
 from qpavoid.arm.braking import ArmResponse, BrakingConfig, stop_time
 from qpavoid.human.body import KinectHuman
 from qpavoid.human.frames import HumanFrame, JointType, TrackingState
+from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.posture import Operator
 from qpavoid.loop.camera import Sensor, SensorConfig, SensorFault
-from qpavoid.perception.tracker import MAX_BONE_M, PerceptionConfig, Tracker, part_velocities
+from qpavoid.perception.tracker import PerceptionConfig, Tracker, part_velocities
 
 J = JointType
+MAX_BONE_M = KINECT_V2.max_bone_m
 HAND = int(J.HandRight)
 WRIST = int(J.WristRight)
 

@@ -6,7 +6,10 @@ import pytest
 from qpavoid.human._kernels import fastest_joint, largest_per_part
 from qpavoid.human.body import KinectHuman
 from qpavoid.human.frames import HumanFrame
-from qpavoid.perception.tracker import MAX_BONE_M, PARENT, PerceptionConfig, Tracker
+from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.perception.tracker import PerceptionConfig, Tracker
+
+PARENT, MAX_BONE_M = KINECT_V2.parent, KINECT_V2.max_bone_m
 
 
 def numpy_track(mem, z, state, t, cfg):
@@ -89,13 +92,16 @@ def test_capsules_are_first_and_last_usable_joints_and_fingers_stick_out():
         geo = human.geometry(z, state)
         usable = np.isfinite(z).all(axis=1) & (state != 0)
         for k, part in enumerate(human.parts):
-            chain = [int(j) for j in part.chain if usable[int(j)]]
+            ids = [human.skeleton.index(j) for j in part.chain]
+            chain = [j for j in ids if usable[j]]
             assert geo.segment_valid[k] == bool(chain)
             if chain:
                 np.testing.assert_array_equal(geo.segments[k], z[[chain[0], chain[-1]]])
                 a, b = geo.segments[k]
                 out = 0.0
-                for j in (int(j) for j in part.reach if usable[int(j)]):
+                for j in (human.skeleton.index(j) for j in part.reach):
+                    if not usable[j]:
+                        continue
                     s = np.clip(np.dot(z[j] - a, b - a) / max(np.dot(b - a, b - a), 1e-12), 0, 1)
                     gap = np.linalg.norm(z[j] - (a + s * (b - a))) - part.capsule_radius_m
                     out = max(out, gap)

@@ -55,7 +55,7 @@ def test_each_scenario_writes_its_figures(tmp_path, log, robot, scenario, kind):
         tmp_path, log, robot, None, "spheres", scenario=scenario, controller="analytic"
     )
     assert {p.name for p in paths} == EXPECTED[kind] and len(paths) == len(EXPECTED[kind])
-    assert paths == [tmp_path / n for n in plots.figures_for(scenario)]
+    assert paths == [tmp_path / n for n in plots.figures_for(scenario, robot)]
     assert {p.name for p in tmp_path.iterdir()} == EXPECTED[kind]
     assert all(p.stat().st_size > 10_000 for p in paths)
 

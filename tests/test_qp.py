@@ -25,6 +25,7 @@ from qpavoid.control.qp.limits.velocity import VelocityLimit
 from qpavoid.control.qp.tasks.elbow import ElbowClearanceTask
 from qpavoid.control.task import ArcPath, inverse_kinematics
 from qpavoid.control.tick import ControllerConfig
+from qpavoid.distance.methods import PointDistance
 from qpavoid.experiments.run_spec import CONTROLLERS, DISTANCES
 from qpavoid.experiments.runs import RunSpec, simulate_one
 from qpavoid.experiments.sweep import check_log, safety_sweep, summarize
@@ -294,10 +295,9 @@ def test_redundancy_moves_the_elbow_away_keeping_the_end_effector(robot7):
             tick = ctrl.measure(q, joints, None, 5.0)
             cmd = ctrl.step(q, joints, None, 5.0)
             assert not cmd.stopped
-            radii = np.where(ctrl.human.point_part, ctrl.human.sphere_radii, 0).max(axis=1)
-            _, n = ElbowClearanceTask(
-                ctrl.variables, 3, robot7.sphere_radii[3], radii, 1, 0.4, 0.1
-            ).clearance(tick)
+            assert robot7.roles.elbow == 3  # the description's elbow: A4
+            clearance = PointDistance(3, len(P), robot7.sphere_radii[3], ctrl.human)
+            _, n = ElbowClearanceTask(ctrl.variables, 3, clearance, 1, 0.4, 0.1).clearance(tick)
             speeds.append(n @ tick.kin.point_jacobians[3] @ cmd.dq)
             residual = tick.kin.ee_jacobian @ cmd.dq - ctrl.ee_task.target(tick)
             assert np.abs(residual).max() < 1e-3  # the end effector keeps its path

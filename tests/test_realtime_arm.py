@@ -113,7 +113,7 @@ def test_a_command_sent_just_before_a_stall_is_followed_through_it(robot: Robot)
     np.testing.assert_array_equal(log["dq"][k], 0.0)  # the reaction time: still at rest
     # the ramp happened during the gap (one period's worth would be a_max·dt, below V)
     np.testing.assert_array_equal(log["dq"][k + 1], V)
-    cfg = BrakingConfig()
+    cfg = BrakingConfig().resolve(robot.arm)  # the description's reaction and accelerations
     reaction = np.ceil(cfg.reaction_time_s / DT - 1e-9) * DT
     ramp = float(np.max(np.abs(V) / per_joint(cfg.max_acceleration_radps2, robot.joint_names)))
     moved = log["q"][k + 1] - log["q"][k]
@@ -138,7 +138,7 @@ def test_without_realtime_a_stall_changes_nothing(robot: Robot) -> None:
 
 def test_on_regular_ticks_the_wall_clock_arm_is_the_periodic_arm(robot: Robot) -> None:
     rng = np.random.default_rng(3)
-    cfg = BrakingConfig()
+    cfg = BrakingConfig().resolve(robot.arm)  # the description's reaction and accelerations
     periodic = ArmResponse(cfg, robot.joint_names, DT)
     wall = ArmResponse(cfg, robot.joint_names, DT)
     for k in range(300):
@@ -149,7 +149,7 @@ def test_on_regular_ticks_the_wall_clock_arm_is_the_periodic_arm(robot: Robot) -
 def test_a_held_stop_brakes_at_the_acceleration_limits_over_the_real_time(robot: Robot) -> None:
     """A stop sent, then no command for 0.1 s: the arm steps on the held stop every period
     and is at rest after the reaction time and T_s = max |q̇_j| / a_j, whatever the gap."""
-    cfg = BrakingConfig()
+    cfg = BrakingConfig().resolve(robot.arm)  # the description's reaction and accelerations
     a_max = per_joint(cfg.max_acceleration_radps2, robot.joint_names)
     arm = ArmResponse(cfg, robot.joint_names, DT)
     for k in range(20):

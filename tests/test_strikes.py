@@ -9,12 +9,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from qpavoid.arm.model import load_robot
+from qpavoid.experiments import sweep
 from qpavoid.experiments.runs import RunSpec, build_controller
-from qpavoid.experiments.strike_sweep import check_strike
 from qpavoid.loop.camera import SensorConfig, SensorFault
 from qpavoid.loop.simulation import SimConfig, simulate
 from qpavoid.scenarios.generated import make_scenario
-from qpavoid.scenarios.strikes import TARGETS, StrikeCase, strike_motion, strike_sensor
+from qpavoid.scenarios.strikes import StrikeCase, strike_motion, strike_sensor, strike_targets
 
 
 def run_case(robot, case: StrikeCase, controller: str, safety: str = "ssm"):
@@ -38,7 +39,7 @@ def stationary_before_contact(log) -> bool:
 
 
 @pytest.mark.parametrize("controller", ["qp", "analytic"])
-@pytest.mark.parametrize("target", TARGETS)
+@pytest.mark.parametrize("target", strike_targets(load_robot()))
 def test_a_hand_at_2_mps_aimed_at_each_set_finds_the_robot_stationary(robot, controller, target):
     case = StrikeCase(0, target, 2.0, "right", False, 2.0, "none")
     sim = run_case(robot, case, controller)
@@ -102,7 +103,7 @@ def test_frozen_and_stale_frames_stop_the_robot_until_fresh_frames(robot):
 def test_strike_sweep_200_cases_no_contact_while_moving():
     for controller in ("qp", "analytic"):
         for seed in range(100):
-            check = check_strike(seed, controller, "ssm")
+            check = sweep.run_case(sweep.SweepSpec("strike", controller, safety="ssm"), seed)
             assert check.ticks_moving_in_true_contact == 0, check
 
 

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from qpavoid.arm.description import Roles
 from qpavoid.cli.commands import main
 from qpavoid.control.task import ArcPath
 from qpavoid.experiments.runs import RunSpec, run_one
@@ -59,7 +60,7 @@ def test2_run(tmp_path_factory):
     return out
 
 
-def test_pair_states_follow_the_paper_thresholds_by_hand():
+def test_pair_states_follow_the_paper_thresholds_by_hand(robot):
     cfg = AvoidanceConfig()
     # L1 stops where f = 0.8: d = ρ/2 (1 + ln(1/0.8 − 1)/α) = 0.05 (1 − 0.154) = 0.0423 m;
     # L2/EE stop at 0.05 m; repulsion is active below d(1 %) = ρ/2 (1 + ln 99 / 9)
@@ -71,7 +72,12 @@ def test_pair_states_follow_the_paper_thresholds_by_hand():
             [0.0760, 0.1520, 0.3000],  # free
         ]
     )
-    assert pair_states(d, cfg).tolist() == [[2, 2, 2], [1, 1, 1], [0, 0, 0]]
+    assert pair_states(d, cfg, robot.roles).tolist() == [[2, 2, 2], [1, 1, 1], [0, 0, 0]]
+    # the same by role on a robot whose sets come in another order, with a fourth that
+    # plays no part (it stops at contact and is repelled by nobody's law: eq. 4's shape)
+    roles = Roles(scaled=2, scaled_joints=(), repelled=0, repelled_joints=(), end_effector=1)
+    d4 = np.c_[d[:, [1, 2, 0]], [-0.001, 0.1, 0.16]]
+    assert pair_states(d4, cfg, roles).tolist() == [[2, 2, 2, 2], [1, 1, 1, 1], [0, 0, 0, 0]]
 
 
 def test_replay_data_is_the_log_tick_by_tick(test2_run, robot):

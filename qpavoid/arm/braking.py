@@ -22,7 +22,9 @@ the newest target it has (a command is held until a newer one is sent); each ste
 the velocity by at most ``a_j ×`` the real time since the previous step. On ticks exactly
 one period apart both modes agree. :class:`WallClockArm` moves the arm between such ticks.
 
-The iiwa 14 defaults are in docs/safety.md ("Robot") with their sources.
+The values are the robot description's (``[arm]`` of its control-point file) unless a
+:class:`BrakingConfig` says otherwise; the bundled iiwa 14's, with their sources, are in
+docs/safety.md ("Robot").
 """
 
 from __future__ import annotations
@@ -34,29 +36,19 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from qpavoid.arm.description import ArmDynamics
 from qpavoid.arm.model import Kinematics, Robot
 from qpavoid.core.errors import InputError
-
-#: KUKA LBR iiwa 14 R820 joint acceleration limits, rad/s², by joint: the average measured
-#: accelerations of Larsen (2019), Table 4, as Drake's iiwa model uses them (docs/safety.md).
-IIWA14_MAX_ACCELERATION_RADPS2 = (
-    ("A1", 8.57),
-    ("A2", 8.57),
-    ("A3", 8.74),
-    ("A4", 11.36),
-    ("A5", 12.23),
-    ("A6", 15.72),
-    ("A7", 15.72),
-)
-
-#: From a command to the arm starting to follow it, s: one period of the iiwa's FRI link as
-#: Drake configures it (5 ms); docs/safety.md.
-IIWA14_REACTION_TIME_S = 0.005
 
 
 @dataclass(frozen=True)
 class BrakingConfig:
     """The arm's response to a velocity command.
+
+    Each value left at None is the robot description's (``[arm]`` of its control-point
+    file, :class:`~qpavoid.arm.description.ArmDynamics`: for the bundled iiwa 14 the FRI
+    period and the accelerations measured by Larsen (2019), sources in docs/safety.md);
+    :meth:`resolve` fills them in.
 
     Attributes
     ----------
@@ -68,18 +60,39 @@ class BrakingConfig:
         rad/s².
     """
 
-    reaction_time_s: float = IIWA14_REACTION_TIME_S
-    max_acceleration_radps2: tuple[tuple[str, float], ...] = IIWA14_MAX_ACCELERATION_RADPS2
+    reaction_time_s: float | None = None
+    max_acceleration_radps2: tuple[tuple[str, float], ...] | None = None
+
+    def resolve(self, arm: ArmDynamics) -> BrakingConfig:
+        """This config with every value left at None taken from the description's ``arm``."""
+        return BrakingConfig(
+            arm.reaction_time_s if self.reaction_time_s is None else self.reaction_time_s,
+            (
+                arm.max_acceleration_radps2
+                if self.max_acceleration_radps2 is None
+                else self.max_acceleration_radps2
+            ),
+        )
 
 
-def per_joint(values: tuple[tuple[str, float], ...], joint_names: Sequence[str]) -> np.ndarray:
+def per_joint(
+    values: tuple[tuple[str, float], ...] | None, joint_names: Sequence[str]
+) -> np.ndarray:
     """The values of ``(name, value)`` pairs for ``joint_names``, in that order.
 
     Raises
     ------
     InputError
-        If a joint has no value.
+        If a joint has no value, or there are no values at all (a config not yet resolved
+        against the robot description: :meth:`BrakingConfig.resolve`).
     """
+    if values is None:
+        raise InputError(
+            "no acceleration limits: take them from the robot description first "
+            "(BrakingConfig.resolve(robot.arm))",
+            name="max_acceleration_radps2",
+            value=None,
+        )
     table = dict(values)
     missing = [n for n in joint_names if n not in table]
     if missing:
@@ -105,15 +118,28 @@ class ArmResponse:
     Parameters
     ----------
     cfg
-        Reaction time and acceleration limits.
+        Reaction time and acceleration limits (resolved: :meth:`BrakingConfig.resolve`).
     joint_names
         The arm's active joints.
     dt
         Control period, s.
+
+    Raises
+    ------
+    InputError
+        If ``cfg`` leaves a value to the robot description (not resolved) or lacks a
+        joint's acceleration limit.
     """
 
     def __init__(self, cfg: BrakingConfig, joint_names: Sequence[str], dt: float):
         self.a_max = per_joint(cfg.max_acceleration_radps2, joint_names)
+        if cfg.reaction_time_s is None:
+            raise InputError(
+                "no reaction time: take it from the robot description first "
+                "(BrakingConfig.resolve(robot.arm))",
+                name="reaction_time_s",
+                value=None,
+            )
         self.a_dt = self.a_max * dt
         self.dt = dt
         nv = len(joint_names)

@@ -3,7 +3,14 @@
 A robot description is a folder with a URDF and a control-point file (TOML, see
 ``docs/robot.md``). Every control point and capsule end becomes an operational frame of
 the Pinocchio model, so positions and Jacobians come from Pinocchio; locking joints (the
-paper locks A3) is Pinocchio's ``buildReducedModel``, which carries the frames over.
+paper locks its third joint) is Pinocchio's ``buildReducedModel``, which carries the
+frames over.
+
+Besides the geometry the file says everything about the arm that the controllers need and
+that differs from arm to arm: which set plays which part in the paper's laws and on which
+joints (:class:`Roles`), how fast the arm reacts and brakes (:class:`ArmDynamics`) and
+where its inverse kinematics starts (:class:`IKSeed`). No code holds a joint name, length
+or limit of a particular arm.
 
 :func:`read_description` returns the pieces a :class:`~qpavoid.arm.model.Robot` is made of;
 :func:`qpavoid.arm.model.load_robot` makes the robot from them.
@@ -30,6 +37,8 @@ else:  # Python 3.10: the same parser, as a package
     import tomli as tomllib
 
 CONFIG_NAME = "control_points.toml"
+#: Pinocchio's frame for every Jacobian of the arm: the point's velocity in base-frame axes.
+LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 #: Keys of a ``[[sets]]`` entry of the control-point file and of its ``capsule`` table.
 SET_KEYS = ("name", "sphere_radius_m", "points", "capsule")
 CAPSULE_KEYS = ("from", "to", "capsule_radius_m")
@@ -60,6 +69,111 @@ class ControlSet:
     capsule_radius_m: float
 
 
+#: The parts a control set plays in the paper's laws (``[roles]`` of the control-point
+#: file, :class:`Roles`), in the order of :attr:`Roles.rows`.
+ROLE_NAMES = ("scaled", "repelled", "end_effector")
+#: Keys of the ``[roles]`` table: a set per part, and the elbow point.
+ROLE_KEYS = (*ROLE_NAMES, "elbow")
+#: Keys of the ``[arm]`` table (``sources`` is optional).
+ARM_KEYS = ("reaction_time_s", "max_acceleration_radps2", "max_point_speed_mps")
+
+
+@dataclass(frozen=True)
+class Roles:
+    """Which control set plays which part in the paper's laws, and on which joints.
+
+    The paper names its sets after the iiwa's links (L1, L2, EE); the controllers address
+    them by the part they play, so that any arm's sets, named as its description likes,
+    can play them. The parts are given by the ``[roles]`` table of the control-point file
+    (``docs/robot.md``).
+
+    Attributes
+    ----------
+    scaled
+        Row (set index) of the set whose distance gives the factor f of eq. (2) (the
+        paper's L1).
+    scaled_joints
+        Joints whose velocity limits eq. (3) scales by (1 − f): the joints that move the
+        scaled set (the paper's A1 and A2).
+    repelled
+        Row of the set whose closest point is pushed away from the person at v_rep of
+        eqs. (4)-(5), through eq. (6)'s square Jacobian and eq. (9) (the paper's L2).
+    repelled_joints
+        Joints of eq. (6)'s square Jacobian and of eq. (9)'s sum, as many as the three
+        components of v_rep (the paper's A1, A2 and A4).
+    end_effector
+        Row of the set that carries the task of eq. (8) and the repulsion of eq. (7)
+        (the paper's EE).
+    elbow
+        Index of the elbow among the control points (the redundancy mode keeps it away
+        from the person, :class:`~qpavoid.control.qp.tasks.elbow.ElbowClearanceTask`), or
+        None if the description names none.
+    """
+
+    scaled: int
+    scaled_joints: tuple[str, ...]
+    repelled: int
+    repelled_joints: tuple[str, ...]
+    end_effector: int
+    elbow: int | None = None
+
+    @property
+    def rows(self) -> tuple[int, int, int]:
+        """The rows of the scaled, repelled and end-effector sets (:data:`ROLE_NAMES`)."""
+        return (self.scaled, self.repelled, self.end_effector)
+
+
+@dataclass(frozen=True)
+class ArmDynamics:
+    """How the real arm follows a velocity command and how fast it can move (``[arm]``).
+
+    Used by the simulated arm (:class:`~qpavoid.arm.braking.ArmResponse`) and by speed and
+    separation monitoring (:mod:`qpavoid.laws.ssm`) unless their settings say otherwise.
+
+    Attributes
+    ----------
+    reaction_time_s
+        From a command to the arm starting to follow it, s.
+    max_acceleration_radps2
+        ``(joint name, limit)`` pairs: each joint's acceleration (and deceleration)
+        limit, rad/s², every joint of the URDF.
+    max_point_speed_mps
+        No point of the arm moves faster than this, m/s: a speed and separation bound
+        above it cannot bind, so its row is left out.
+    sources
+        ``(fact, source)`` pairs: where each value comes from (the file's ``[arm.sources]``).
+    """
+
+    reaction_time_s: float
+    max_acceleration_radps2: tuple[tuple[str, float], ...]
+    max_point_speed_mps: float
+    sources: tuple[tuple[str, str], ...] = ()
+
+
+@dataclass(frozen=True)
+class IKSeed:
+    """Where the inverse kinematics of a pose starts (``[ik_seed]``, optional).
+
+    The seed picks the solution's branch: every joint at 0 except ``angles``, and the
+    ``aim`` joint (a base joint turning about the vertical) turned to face the wrist
+    centre, which lies ``wrist_to_tool_m`` behind the end-effector frame along its z axis.
+
+    Attributes
+    ----------
+    aim
+        The base joint turned to face the wrist centre (``atan2(y, x)``), or None.
+    angles
+        ``(joint name, angle)`` pairs, rad.
+    wrist_to_tool_m
+        From the wrist centre to the end-effector frame along the frame's z axis, m (the
+        seed only needs it roughly).
+    """
+
+    aim: str | None = None
+    angles: tuple[tuple[str, float], ...] = ()
+    wrist_to_tool_m: float = 0.0
+
+
 class Description(NamedTuple):
     """A read robot description: the arguments of :class:`~qpavoid.arm.model.Robot`, in order."""
 
@@ -69,6 +183,9 @@ class Description(NamedTuple):
     ee_frame: int
     name: str
     locked: dict[str, float]
+    roles: Roles
+    arm: ArmDynamics
+    ik_seed: IKSeed
 
 
 def _bundled_root() -> Path:
@@ -77,7 +194,7 @@ def _bundled_root() -> Path:
     try:
         return Path(str(resources.files("qpavoid.robots")))
     except ModuleNotFoundError:
-        return Path(__file__).resolve().parent.parent / "robots"
+        return Path(__file__).resolve().parents[2] / "robots"  # qpavoid/arm/ -> the checkout
 
 
 def _description_dir(name: str | Path) -> Path:
@@ -253,6 +370,286 @@ def _control_sets(model: pin.Model, set_cfgs: list) -> tuple[list[ControlSet], l
     return sets, point_frames
 
 
+def _number(value: object, where: str, path: Path, low: float, strict: bool) -> float:
+    """``value`` as a finite float above ``low`` (at or above unless ``strict``), or a
+    :class:`RobotDescriptionError` naming ``where``."""
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    number = float(value) if ok else float("nan")  # type: ignore[arg-type]
+    if not (np.isfinite(number) and (number > low if strict else number >= low)):
+        bound = f"{'above' if strict else 'at least'} {low:g}"
+        raise RobotDescriptionError(
+            f"{path}: {where} must be a number {bound}, got {value!r}",
+            path=path,
+            name=where,
+            value=value,
+        )
+    return number
+
+
+def _table(cfg: Mapping[str, Any], key: str, path: Path, example: str) -> dict:
+    """The table ``[key]`` of the file, or a :class:`RobotDescriptionError` showing one."""
+    table = cfg.get(key)
+    if not isinstance(table, dict):
+        raise RobotDescriptionError(
+            f"{path}: no [{key}] table; add one, e.g. {example} (docs/robot.md)",
+            path=path,
+            name=key,
+            value=table,
+        )
+    return table
+
+
+def _joint_list(value: object, where: str, path: Path, joints: Sequence[str]) -> tuple[str, ...]:
+    """``value`` as a tuple of joint names of the URDF, or a :class:`RobotDescriptionError`."""
+    if not isinstance(value, list) or not all(isinstance(n, str) for n in value):
+        raise RobotDescriptionError(
+            f"{path}: {where} must be a list of joint names, got {value!r}",
+            path=path,
+            name=where,
+            value=value,
+        )
+    missing = [n for n in value if n not in joints]
+    if missing:
+        raise RobotDescriptionError(
+            f"{path}: {where}: {missing} are not joints of the URDF; its joints are {list(joints)}",
+            path=path,
+            name=where,
+            value=missing,
+        )
+    return tuple(value)
+
+
+def _unknown_keys(table: Mapping[str, Any], known: Sequence[str], where: str, path: Path) -> None:
+    """Refuse keys a table does not have (a misspelt key would otherwise be ignored)."""
+    unknown = sorted(set(table) - set(known))
+    if unknown:
+        raise RobotDescriptionError(
+            f"{path}: [{where}] has unknown key(s) {unknown}; its keys are {list(known)}",
+            path=path,
+            name=where,
+            value=unknown,
+        )
+
+
+def _roles(cfg: Mapping[str, Any], path: Path, set_cfgs: list, joints: Sequence[str]) -> Roles:
+    """The ``[roles]`` table: which set plays which part, and the elbow point."""
+    table = _table(cfg, "roles", path, 'scaled = { set = "<set>", joints = ["<joint>", ...] }')
+    _unknown_keys(table, ROLE_KEYS, "roles", path)
+    names = [sc["name"] for sc in set_cfgs]
+    rows: dict[str, int] = {}
+    role_joints: dict[str, tuple[str, ...]] = {}
+    for role in ROLE_NAMES:
+        entry = table.get(role)
+        keys = ("set",) if role == "end_effector" else ("set", "joints")
+        if not isinstance(entry, dict) or any(k not in entry for k in keys):
+            shape = ", ".join(f"{k} = ..." for k in keys)
+            raise RobotDescriptionError(
+                f"{path}: [roles] needs {role} = {{ {shape} }} (docs/robot.md: Roles)",
+                path=path,
+                name=f"roles.{role}",
+                value=entry,
+            )
+        _unknown_keys(entry, keys, f"roles.{role}", path)
+        if entry["set"] not in names:
+            raise RobotDescriptionError(
+                f"{path}: [roles] {role}: no set named {entry['set']!r}; the sets are {names}",
+                path=path,
+                name=f"roles.{role}.set",
+                value=entry["set"],
+            )
+        rows[role] = names.index(entry["set"])
+        if "joints" in keys:
+            role_joints[role] = _joint_list(entry["joints"], f"roles.{role}.joints", path, joints)
+    return Roles(
+        scaled=rows["scaled"],
+        scaled_joints=role_joints["scaled"],
+        repelled=rows["repelled"],
+        repelled_joints=role_joints["repelled"],
+        end_effector=rows["end_effector"],
+        elbow=_elbow(table.get("elbow"), path, set_cfgs),
+    )
+
+
+def _elbow(frames: object, path: Path, set_cfgs: list) -> int | None:
+    """Index of the control point listing the frames ``frames`` (``[roles] elbow``)."""
+    if frames is None:
+        return None
+    points = [sorted(names) for sc in set_cfgs for names in sc["points"]]
+    if isinstance(frames, list) and sorted(frames) in points:
+        return points.index(sorted(frames))
+    raise RobotDescriptionError(
+        f"{path}: [roles] elbow must list the frames of one control point, as in its set's "
+        f"points; {frames!r} is none of {points}",
+        path=path,
+        name="roles.elbow",
+        value=frames,
+    )
+
+
+def _arm(cfg: Mapping[str, Any], path: Path, joints: Sequence[str]) -> ArmDynamics:
+    """The ``[arm]`` table: reaction time, acceleration limits, fastest point speed."""
+    table = _table(
+        cfg,
+        "arm",
+        path,
+        "reaction_time_s = 0.005, max_acceleration_radps2 = { <joint> = 10.0, ... }, "
+        "max_point_speed_mps = 3.0",
+    )
+    _unknown_keys(table, (*ARM_KEYS, "sources"), "arm", path)
+    missing = [k for k in ARM_KEYS if k not in table]
+    if missing:
+        raise RobotDescriptionError(
+            f"{path}: [arm] is missing key(s) {', '.join(missing)} (docs/robot.md: Arm)",
+            path=path,
+            name="arm",
+            value=missing,
+        )
+    accel = table["max_acceleration_radps2"]
+    if not isinstance(accel, dict) or sorted(accel) != sorted(joints):
+        given = sorted(accel) if isinstance(accel, dict) else accel
+        raise RobotDescriptionError(
+            f"{path}: [arm] max_acceleration_radps2 must give one limit (rad/s²) for each "
+            f"joint of the URDF, {list(joints)}; it gives {given!r}",
+            path=path,
+            name="arm.max_acceleration_radps2",
+            value=given,
+        )
+    sources = table.get("sources", {})
+    if not isinstance(sources, dict) or not all(isinstance(v, str) for v in sources.values()):
+        raise RobotDescriptionError(
+            f"{path}: [arm.sources] must map each fact to the text of its source",
+            path=path,
+            name="arm.sources",
+            value=sources,
+        )
+    return ArmDynamics(
+        reaction_time_s=_number(table["reaction_time_s"], "arm.reaction_time_s", path, 0.0, False),
+        max_acceleration_radps2=tuple(
+            (n, _number(accel[n], f"arm.max_acceleration_radps2.{n}", path, 0.0, True))
+            for n in joints
+        ),
+        max_point_speed_mps=_number(
+            table["max_point_speed_mps"], "arm.max_point_speed_mps", path, 0.0, True
+        ),
+        sources=tuple((str(k), v) for k, v in sources.items()),
+    )
+
+
+def _ik_seed(cfg: Mapping[str, Any], path: Path, joints: Sequence[str]) -> IKSeed:
+    """The ``[ik_seed]`` table, or the zero configuration's seed without one."""
+    if "ik_seed" not in cfg:
+        return IKSeed()
+    table = _table(cfg, "ik_seed", path, 'aim = "<joint>", angles = { <joint> = 0.5 }')
+    _unknown_keys(table, ("aim", "angles", "wrist_to_tool_m"), "ik_seed", path)
+    aim = table.get("aim")
+    if aim is not None:
+        (aim,) = _joint_list([aim], "ik_seed.aim", path, joints)
+    angles = table.get("angles", {})
+    if not isinstance(angles, dict):
+        raise RobotDescriptionError(
+            f"{path}: [ik_seed] angles must map joint names to angles (rad), got {angles!r}",
+            path=path,
+            name="ik_seed.angles",
+            value=angles,
+        )
+    _joint_list(list(angles), "ik_seed.angles", path, joints)
+    return IKSeed(
+        aim=aim,
+        angles=tuple(
+            (n, _number(a, f"ik_seed.angles.{n}", path, -np.inf, True)) for n, a in angles.items()
+        ),
+        wrist_to_tool_m=_number(
+            table.get("wrist_to_tool_m", 0.0), "ik_seed.wrist_to_tool_m", path, 0.0, False
+        ),
+    )
+
+
+#: Where along a capsule's axis, and at how many configurations, the check of
+#: :func:`_check_capsules` compares Jacobians (beyond the zero configuration); its
+#: tolerance, m/s per rad/s (far above rounding, far below any joint's lever arm).
+CHECK_PARAMETERS = (0.2, 0.5, 0.8)
+CHECK_CONFIGURATIONS = 3
+CHECK_TOLERANCE = 1e-9
+
+
+def _check_capsules(model: pin.Model, sets: Sequence[ControlSet], path: Path) -> None:
+    """Refuse a capsule whose axis does not move with one rigid body.
+
+    The controllers take the Jacobian of a capsule's witness point as the interpolation
+    ``(1 − s) J_a + s J_b`` of its ends' Jacobians
+    (:meth:`~qpavoid.arm.model.Kinematics.segment_point_jacobian`). That is the Jacobian of
+    the point on the body that carries it exactly when some body carries the whole axis:
+    both ends on one link, or ends on the axis of every joint between them (the iiwa's
+    roll joints turn about their capsules' axes). Checked here with Pinocchio: some body's
+    Jacobian, taken at points along the axis, must equal the interpolation at the zero
+    configuration and at a few others.
+
+    Raises
+    ------
+    RobotDescriptionError
+        For the first capsule carried by no single body, naming the joints that bend it
+        and how to fix the file.
+    """
+    data = model.createData()
+    rng = np.random.default_rng(0)  # the same configurations every time
+    configurations = [pin.neutral(model)] + [
+        pin.integrate(model, pin.neutral(model), rng.uniform(-1.0, 1.0, model.nv))
+        for _ in range(CHECK_CONFIGURATIONS)
+    ]
+    carried = {k: set(range(model.njoints)) for k in range(len(sets))}  # bodies left
+    for q in configurations:
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        for k, cs in enumerate(sets):
+            a_id, b_id = cs.capsule_frames
+            a, b = data.oMf[a_id].translation, data.oMf[b_id].translation
+            Ja = pin.getFrameJacobian(model, data, a_id, LWA)[:3]
+            Jb = pin.getFrameJacobian(model, data, b_id, LWA)[:3]
+            for s in CHECK_PARAMETERS:
+                point = pin.SE3(np.eye(3), (1.0 - s) * a + s * b)
+                interpolated = (1.0 - s) * Ja + s * Jb
+                carried[k] = {
+                    j
+                    for j in carried[k]
+                    if np.allclose(
+                        pin.getFrameJacobian(model, data, j, data.oMi[j].actInv(point), LWA)[:3],
+                        interpolated,
+                        rtol=0.0,
+                        atol=CHECK_TOLERANCE,
+                    )
+                }
+    for k, cs in enumerate(sets):
+        if carried[k]:
+            continue
+        # the joints bending it: where the velocity of its mid-point on the body carrying
+        # its first end differs from the interpolation (at the last configuration)
+        a_id, b_id = cs.capsule_frames
+        a, b = data.oMf[a_id].translation, data.oMf[b_id].translation
+        interpolated = 0.5 * (
+            pin.getFrameJacobian(model, data, a_id, LWA)[:3]
+            + pin.getFrameJacobian(model, data, b_id, LWA)[:3]
+        )
+        body = model.frames[a_id].parentJoint
+        mid = data.oMi[body].actInv(pin.SE3(np.eye(3), 0.5 * (a + b)))
+        J = pin.getFrameJacobian(model, data, body, mid, LWA)[:3]
+        columns = [
+            str(model.names[j]) for j in range(1, model.njoints) for _ in range(model.joints[j].nv)
+        ]
+        bent = np.abs(J - interpolated).max(axis=0) > CHECK_TOLERANCE
+        between = [columns[v] for v in np.flatnonzero(bent)]
+        raise RobotDescriptionError(
+            f"{path}: the capsule of set {cs.name!r} is carried by no single body: joint(s) "
+            f"{between} between its ends turn one end about an axis that is not the "
+            "capsule's, so a point on it does not move as the interpolation of its ends. "
+            "Fix the file: give the set a capsule whose two ends lie on one link (split it "
+            "at the joint into two sets), or whose ends lie on the axis of every joint "
+            "between them",
+            path=path,
+            name=f"sets.{cs.name}.capsule",
+            value=between,
+        )
+
+
 def read_description(
     name: str | Path = "iiwa14", locked: Mapping[str, float] | Sequence[str] | None = None
 ) -> Description:
@@ -263,7 +660,12 @@ def read_description(
     """
     folder = _description_dir(name)
     cfg, urdf, set_cfgs, ee_name = _read_config(folder)
+    path = folder / CONFIG_NAME
     model = _build_model(urdf)
+    joints = tuple(str(n) for n in model.names)[1:]
+    roles = _roles(cfg, path, set_cfgs, joints)
+    arm = _arm(cfg, path, joints)
+    ik_seed = _ik_seed(cfg, path, joints)
     locked = _locked_angles(locked, cfg.get("locked", {}))
     _add_frames(model, set_cfgs)
     if not model.existFrame(ee_name):
@@ -275,4 +677,15 @@ def read_description(
         )
     model = _lock(model, locked)
     sets, point_frames = _control_sets(model, set_cfgs)
-    return Description(model, sets, point_frames, model.getFrameId(ee_name), folder.name, locked)
+    _check_capsules(model, sets, path)
+    return Description(
+        model,
+        sets,
+        point_frames,
+        model.getFrameId(ee_name),
+        folder.name,
+        locked,
+        roles,
+        arm,
+        ik_seed,
+    )

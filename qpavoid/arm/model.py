@@ -25,8 +25,13 @@ from numpy.typing import ArrayLike
 from qpavoid.arm.description import (
     CAPSULE_KEYS,
     CONFIG_NAME,
+    LWA,
+    ROLE_NAMES,
     SET_KEYS,
+    ArmDynamics,
     ControlSet,
+    IKSeed,
+    Roles,
     read_description,
 )
 from qpavoid.core.checks import as_array
@@ -36,14 +41,17 @@ __all__ = [
     "CAPSULE_KEYS",
     "CONFIG_NAME",
     "LWA",
+    "ROLE_NAMES",
     "SET_KEYS",
+    "ArmDynamics",
     "ControlSet",
+    "IKSeed",
     "Kinematics",
     "Robot",
+    "Roles",
+    "joint_columns",
     "load_robot",
 ]
-
-LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
 @dataclass(frozen=True)
@@ -85,10 +93,10 @@ class Kinematics:
     ) -> np.ndarray:
         """Jacobian (3, nv) of the point at parameter ``s`` in [0, 1] on a capsule axis.
 
-        The capsule ends lie on one rigid segment (for the iiwa the locked or spinning
-        joint between them turns about that very segment), so the velocity of the point
-        ``(1 - s) a + s b`` is exactly ``(1 - s) v_a + s v_b``. With (A,) arrays of sets
-        and parameters: (A, 3, nv).
+        One rigid body carries each capsule's axis (checked when the description is read:
+        both ends on one link, or on the axis of every joint between them), so the
+        velocity of the point ``(1 - s) a + s b`` on that body is exactly
+        ``(1 - s) v_a + s v_b``. With (A,) arrays of sets and parameters: (A, 3, nv).
         """
         if self.segment_jacobians is None:
             raise InputError(
@@ -117,6 +125,12 @@ class Robot:
         Name of the description (folder name).
     locked
         Joints removed from the model and the angle (rad) they are locked at.
+    roles
+        Which set plays which part in the paper's laws, and on which joints.
+    arm
+        The arm's reaction time, acceleration limits and fastest point speed.
+    ik_seed
+        Where the inverse kinematics starts.
     """
 
     def __init__(
@@ -127,8 +141,12 @@ class Robot:
         ee_frame: int,
         name: str,
         locked: Mapping[str, float],
+        roles: Roles,
+        arm: ArmDynamics,
+        ik_seed: IKSeed,
     ):
         self.model = model
+        self.roles, self.arm, self.ik_seed = roles, arm, ik_seed
         self.sets = tuple(sets)
         self.point_frames = tuple(point_frames)
         self.ee_frame = ee_frame
@@ -143,7 +161,7 @@ class Robot:
         self.sphere_radii = np.array([self.sets[k].sphere_radius_m for k in self.point_set])
         self.capsule_radii = np.array([s.capsule_radius_m for s in self.sets])
         # Frames whose positions/Jacobians a tick needs, each once: the control points, then
-        # any capsule end that is not a control point (for the iiwa only A2).
+        # any capsule end that is not a control point (for the iiwa only the shoulder).
         placement: dict[tuple[int, tuple[float, ...]], int] = {}
         for f in self.point_frames:
             placement.setdefault(self._frame_key(f), f)
@@ -200,8 +218,22 @@ class Robot:
 
     @property
     def nv(self) -> int:
-        """Number of joint velocities (6 with A3 locked, 7 without)."""
+        """Number of joint velocities (6 for the iiwa with A3 locked, 7 without)."""
         return self.model.nv
+
+    def role_name(self, role: str) -> str:
+        """Name of the set playing ``role`` (one of :data:`ROLE_NAMES`), e.g. ``"L2"``."""
+        if role not in ROLE_NAMES:
+            raise InputError(
+                f"unknown role {role!r}; roles are {ROLE_NAMES}", name="role", value=role
+            )
+        return self.set_names[getattr(self.roles, role)]
+
+    @property
+    def role_names(self) -> tuple[str, str, str]:
+        """Names of the scaled, repelled and end-effector sets (the iiwa's L1, L2, EE)."""
+        scaled, repelled, end_effector = (self.set_names[r] for r in self.roles.rows)
+        return scaled, repelled, end_effector
 
     def set_index(self, name: str) -> int:
         """Index of the control set called ``name``."""
@@ -298,14 +330,27 @@ def load_robot(
     return Robot(*read_description(name, locked))
 
 
-def joint_columns(robot: Robot, names: tuple[str, ...], option: str) -> np.ndarray:
+def joint_columns(robot: Robot, names: tuple[str, ...] | None, option: str) -> np.ndarray:
     """Columns of the joints ``names`` among the robot's active joints.
+
+    ``option`` names the setting the joints come from; ``names=None`` takes the robot
+    description's joints of that setting, the attribute ``option`` of :attr:`Robot.roles`
+    (``"scaled_joints"`` or ``"repelled_joints"``).
 
     Raises
     ------
     InputError
-        If a name is not an active joint (``option`` names the setting at fault).
+        If a name is not an active joint (``option`` names the setting at fault), or
+        ``names`` is None and the description has no joints for ``option``.
     """
+    if names is None:
+        names = getattr(robot.roles, option, None)
+        if names is None:
+            raise InputError(
+                f"{option}: the robot description gives no such joints; name them",
+                name=option,
+                value=None,
+            )
     missing = [n for n in names if n not in robot.joint_names]
     if missing:
         raise InputError(

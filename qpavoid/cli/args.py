@@ -10,14 +10,13 @@ import io
 import os
 import signal
 import sys
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any, NoReturn
 
 from qpavoid import __version__
 from qpavoid.core.errors import QpavoidError, Terminated
-from qpavoid.core.signals import handled_by
+from qpavoid.core.signals import stops_raise
 
 
 class Parser(argparse.ArgumentParser):
@@ -88,30 +87,15 @@ def package_version() -> str:
         return __version__
 
 
-@contextmanager
-def sigterm_raises() -> Iterator[list[int]]:
-    """Inside, SIGTERM raises :class:`~qpavoid.core.errors.Terminated` (in the main thread,
-    unless the program already handles or ignores SIGTERM). Yields the signals received:
-    a library's blocking call (Ray's ``get``) may hand the exception on as a plain
-    ``KeyboardInterrupt``."""
-    received: list[int] = []
-
-    def terminated(signum: int, frame: object) -> None:
-        received.append(signum)
-        raise Terminated
-
-    unset = lambda previous: previous is signal.SIG_DFL  # noqa: E731
-    with handled_by(terminated, (signal.SIGTERM,), replace=unset):
-        yield received
-
-
 def run_command(command: Callable[[], str]) -> int:
     """Run a command and print its text: status 0. Anything else is one line on standard
     error: bad input or a file error 2, a bug 2 (``QPAVOID_DEBUG=1`` raises it), Ctrl-C
-    130, SIGTERM 143, standard output closed (``| head`` done) 1."""
+    130, SIGTERM 143 (the first of them ends the command, and the process: later ones
+    are ignored, :func:`~qpavoid.core.signals.stops_raise`), standard output closed
+    (``| head`` done) 1."""
     received: list[int] = []
     try:
-        with sigterm_raises() as received:
+        with stops_raise() as received:
             text = command()
     except QpavoidError as exc:
         return _fail(f"qpavoid: error: {exc}", 2)

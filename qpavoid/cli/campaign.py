@@ -14,7 +14,13 @@ from concurrent.futures import Executor
 
 from qpavoid.cli.args import HelpFormatter, count, folder, whole_number, workers
 from qpavoid.control.tick import SAFETY_MODES
-from qpavoid.experiments.campaign import MAX_RUNS, RayExecutor, run_campaign, write_campaign
+from qpavoid.experiments.campaign import (
+    MAX_RUNS,
+    RayExecutor,
+    campaign_spec,
+    run_campaign,
+    write_campaign,
+)
 from qpavoid.experiments.run_spec import CONTROLLERS, DISTANCES
 from qpavoid.output.run_files import check_output_dir
 
@@ -50,13 +56,12 @@ def add_campaign_command(sub: argparse._SubParsersAction) -> None:
 def sweep_command(args: argparse.Namespace) -> str:
     """``qpavoid sweep``: check, run, write, print the summary."""
     out = check_output_dir(args.out)
+    spec = campaign_spec(args.controller, args.distance, args.safety)
     executor: Executor | None = RayExecutor(args.workers) if args.executor == "ray" else None
     try:
         runs = run_campaign(
+            spec,
             args.n,
-            args.controller,
-            args.distance,
-            args.safety,
             args.seed,
             workers=args.workers,
             executor=executor,
@@ -65,15 +70,6 @@ def sweep_command(args: argparse.Namespace) -> str:
     finally:  # a local Ray goes with the campaign, however it ends
         if executor is not None:
             executor.shutdown()
-    settings = {
-        "n": args.n,
-        "controller": args.controller,
-        "distance": args.distance,
-        "safety": args.safety,
-        "seed": args.seed,
-        "max_speed_mps": 2.0,
-        "rate_hz": 100.0,
-    }
-    summary = write_campaign(out, settings, runs)
+    summary = write_campaign(out, spec, args.n, args.seed, runs)
     shown = {k: v for k, v in summary.items() if k != "settings"}
     return f"{json.dumps(shown, indent=1)}\nwrote summary.json, runs.json and worst/ to {out}/"

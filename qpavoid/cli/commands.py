@@ -109,7 +109,11 @@ def build_parser() -> Parser:
         ("--controller", CONTROLLERS, "the paper's controller or its QP variant"),
         ("--distance", DISTANCES, "exact capsules (cover the shoulder) or the paper's spheres"),
         ("--safety", SAFETY_MODES, "the paper's rules, or ISO/TS 15066 SSM on top of them"),
-        ("--bench", BENCHES, "real: Kinect latency and noise, iiwa braking; ideal: the paper's"),
+        (
+            "--bench",
+            BENCHES,
+            "real: camera latency and noise, the arm's braking; ideal: the paper's",
+        ),
         ("--limit-mode", LIMIT_MODES, "analytic only: enforce eq. (3) by scaling or clipping"),
     ):
         run.add_argument(flag, choices=choices, default=choices[0], help=help_text)
@@ -124,7 +128,8 @@ def build_parser() -> Parser:
     run.add_argument(
         "--redundant",
         action="store_true",
-        help="QP only: free A3 (7 joints) and keep the elbow away from the person",
+        help="QP only: free the joints the robot description locks and keep the elbow away "
+        "from the person",
     )
     run.add_argument("--out", type=folder, metavar="DIR", help="output folder (default: runs/NAME)")
     run.add_argument(

@@ -5,7 +5,9 @@ would show Python's traceback or end silently. This module (the console script's
 light to import because ``qpavoid/__init__`` imports lazily) answers either during that
 second with the command line's own line and status 130 (SIGTERM 143), then hands both
 back (the command line turns them into the same lines, and a live run into a clean end)
-before running the command.
+before running the command. Once the command has answered (its line printed, its status
+decided) the process only exits, and a further Ctrl-C or SIGTERM no longer changes that
+(:func:`~qpavoid.core.signals.ignore_until_exit`).
 """
 
 from __future__ import annotations
@@ -14,10 +16,11 @@ import signal
 import sys
 from types import FrameType
 
-from qpavoid.core.signals import handled_by
+from qpavoid.core.signals import handled_by, ignore_until_exit
 
 
 def _stopped_while_loading(signum: int, frame: FrameType | None) -> None:
+    ignore_until_exit()  # the process is ending: a second one must not cut it short
     if signum == signal.SIGTERM:
         sys.stderr.write("qpavoid: terminated; nothing written\n")
         raise SystemExit(143)
@@ -33,7 +36,9 @@ with handled_by(_stopped_while_loading, replace=lambda previous: previous is not
 
 def main() -> int:
     """Run the command line (:func:`qpavoid.cli.commands.main`); return the exit status."""
-    return _main()
+    status = _main()
+    ignore_until_exit()  # the command has answered: its status stands
+    return status
 
 
 if __name__ == "__main__":

@@ -12,8 +12,8 @@ from qpavoid.control.task import ArcPath
 from qpavoid.control.tick import Command, ControllerConfig, Tick
 from qpavoid.core.errors import InputError
 from qpavoid.human.body import KinectHuman
-from qpavoid.laws.avoidance import l2_joint_velocity
-from qpavoid.laws.ssm import BOUND_INACTIVE_MPS, speed_scale
+from qpavoid.laws.avoidance import repelled_joint_velocity
+from qpavoid.laws.ssm import speed_scale
 
 #: How eq. (3)'s scaled limits can be enforced (:func:`enforce_limits`).
 LIMIT_MODES = ("scale", "clip")
@@ -30,13 +30,14 @@ class AnalyticConfig:
         joint velocity vector (the direction, hence the path, is kept and the path clock
         slows by the same factor; the default, because it keeps the path), ``"clip"``
         saturates each joint on its own (the clock runs on; the direction changes).
-    l2_joints
-        Joints of the 3×3 Jacobian of eq. (6) and of ``q̇(1:3)`` in eq. (9): the
-        paper's A1, A2 and A4 (A3 is locked).
+    repelled_joints
+        Joints of the 3×3 Jacobian of eq. (6) and of ``q̇(1:3)`` in eq. (9); None (the
+        default): the robot description's (``Roles.repelled_joints``: the paper's A1, A2
+        and A4 for the iiwa, A3 locked).
     """
 
     limit_mode: str = "scale"
-    l2_joints: tuple[str, ...] = ("A1", "A2", "A4")
+    repelled_joints: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.limit_mode not in LIMIT_MODES:
@@ -66,16 +67,19 @@ def enforce_limits(dq: np.ndarray, limits: np.ndarray, mode: str) -> tuple[np.nd
 class AnalyticController(Controller):
     """The paper's controller: modified inverse kinematics with repulsive velocities.
 
-    Each tick (after the shared prelude, which computes f by eq. (2) and applies the stop
-    rules f > 0.8, d_L2 <= 0.05 m, d_EE <= 0.05 m):
+    The sets and joints are the robot description's by role (the paper's, for the iiwa,
+    in brackets). Each tick (after the shared prelude, which computes f by eq. (2) from
+    the scaled set (L1) and applies the stop rules f > 0.8, d ≤ 0.05 m for the repelled
+    (L2) and end-effector (EE) sets):
 
-    1. eqs. (4)-(6): repulsive velocity of the L2 point closest to the operator, mapped
-       to (A1, A2, A4) through its 3×3 position Jacobian (damped inverse);
-    2. eq. (7): the sum of the EE repulsive velocities from all eight parts;
+    1. eqs. (4)-(6): repulsive velocity of the repelled set's point closest to the
+       operator, mapped to the repelled joints (A1, A2, A4) through its position Jacobian
+       (damped inverse);
+    2. eq. (7): the sum of the end effector's repulsive velocities from all the parts;
     3. eq. (8): ``q̇ = J⁻¹ (v_PL + K e + v_EE)`` (damped inverse near singularities);
-    4. eq. (9): ``q̇(A1, A2, A4) += q̇_L2``;
-    5. eq. (3): the limits of A1 and A2 scaled by (1 − f), enforced as configured
-       (:func:`enforce_limits`);
+    4. eq. (9): ``q̇(repelled joints) += q̇_L2``;
+    5. eq. (3): the limits of the scaled joints (A1, A2) scaled by (1 − f), enforced as
+       configured (:func:`enforce_limits`);
     6. with ``safety="ssm"``, speed scaling: the command is scaled down until every robot
        point approaches every body part no faster than the speed and separation bound
        (:func:`~qpavoid.laws.ssm.speed_scale`); where no scaling can meet it, the robot stops.
@@ -100,18 +104,24 @@ class AnalyticController(Controller):
     ):
         super().__init__(robot, path, config, human)
         self.analytic = analytic or AnalyticConfig()
-        self.l2_cols = joint_columns(robot, self.analytic.l2_joints, "l2_joints")
+        self.repelled_cols = joint_columns(robot, self.analytic.repelled_joints, "repelled_joints")
+        #: A speed and separation bound above this cannot bind (no point of the arm moves
+        #: so fast: the description's ``max_point_speed_mps``), m/s.
+        self.inactive_above_mps = robot.arm.max_point_speed_mps
 
     def act(self, tick: Tick) -> Command:
         cfg = self.config
-        dq_L2 = np.zeros(3)
-        if tick.v_rep_L2.any():
-            J_L2 = tick.table.robot_jacobian(tick.kin, self.i_L2, tick.L2_part)[:, self.l2_cols]
-            dq_L2 = l2_joint_velocity(J_L2, tick.v_rep_L2, cfg.sigma_min, cfg.lambda_max)  # (6)
+        cols = self.repelled_cols
+        dq_rep = np.zeros(len(cols))
+        if tick.v_repelled.any():
+            Jp = tick.table.robot_jacobian(tick.kin, tick.roles.repelled, tick.repelled_part)
+            dq_rep = repelled_joint_velocity(  # eq. (6)
+                Jp[:, cols], tick.v_repelled, cfg.sigma_min, cfg.lambda_max
+            )
         dq = self.task_joint_velocities(tick)  # eq. (8)
-        dq[self.l2_cols] += dq_L2  # eq. (9)
+        dq[cols] += dq_rep  # eq. (9)
         dq, scale = enforce_limits(dq, tick.limits, self.analytic.limit_mode)  # eq. (3)
-        active = np.flatnonzero(tick.approach_limit.ravel() < BOUND_INACTIVE_MPS)
+        active = np.flatnonzero(tick.approach_limit.ravel() < self.inactive_above_mps)
         if len(active):  # speed and separation monitoring (safety="ssm")
             table = tick.table
             sets, parts = np.divmod(active, table.distance.shape[1])
@@ -121,4 +131,4 @@ class AnalyticController(Controller):
             if s is None:
                 return self.command(tick, None, reason=tick.separation_reason())
             dq, scale = dq * s, scale * s
-        return self.command(tick, dq, scale, tick.v_rep_L2, tick.v_rep_EE)
+        return self.command(tick, dq, scale, tick.v_repelled, tick.v_end_effector)

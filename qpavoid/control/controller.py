@@ -30,8 +30,15 @@ from qpavoid.distance.methods import distance_method
 from qpavoid.human.body import HumanGeometry, KinectHuman
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.people import NOBODY, People, as_people
-from qpavoid.laws._kernels import NOT_FINITE, avoidance_terms, law_constants, limit_crossed, warm_up
-from qpavoid.laws.avoidance import l1_factor, modified_ik, scaled_velocity_limits, stop_reason
+from qpavoid.laws._kernels import NOT_FINITE, limit_crossed, warm_up
+from qpavoid.laws.avoidance import (
+    avoidance_terms,
+    l1_factor,
+    law_constants,
+    modified_ik,
+    scaled_velocity_limits,
+    stop_reason,
+)
 from qpavoid.laws.ssm import (
     StopTimeBudget,
     joint_speed_limits,
@@ -75,10 +82,12 @@ class Controller:
         self.human = human or KinectHuman()
         self.distances = distance_method(self.config.distance, robot, self.human)
         self.K = np.r_[[self.config.gain_position] * 3, [self.config.gain_orientation] * 3]
-        self.i_L1, self.i_L2, self.i_EE = (robot.set_index(n) for n in ("L1", "L2", "EE"))
+        #: Which set plays which part (the robot description's), and their names in order.
+        self.roles = robot.roles
+        self.role_names = robot.role_names
         self.scaled_cols = joint_columns(robot, self.config.scaled_joints, "scaled_joints")
         self.perceiver = Perceiver(self.human, self.config.perception)
-        ssm = self.config.ssm
+        ssm = self.config.ssm.resolve(robot.arm)  # the arm's reaction and accelerations
         self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, self.config.control_period_s))
         self.stop_budget = StopTimeBudget(self.ssm, robot.joint_names, self.config.control_period_s)
         self.accel = joint_speed_limits(replace(ssm, stop_time_s=1.0), robot.joint_names)  # a_j
@@ -134,12 +143,13 @@ class Controller:
             v_people = np.zeros((len(percs), len(self.human.parts), 3))
         table, who = self.distances.closest(kin, geos)
         cfg = self.config.avoidance
-        # the minima, eqs. (4)-(5) and (7) in one compiled call (law_kernels)
-        dmin, j, v_rep_L2, v_rep_EE = avoidance_terms(
+        # the minima, eqs. (4)-(5) and (7) in one compiled call (laws.avoidance)
+        roles = self.roles
+        dmin, j, v_repelled, v_end_effector = avoidance_terms(
             kernel_input(table.distance, np.float64),
             kernel_input(table.vector, np.float64),
-            self.i_L2,
-            self.i_EE,
+            roles.repelled,
+            roles.end_effector,
             *law_constants(cfg),
         )
         nearest = (
@@ -149,7 +159,7 @@ class Controller:
         )
         perceived, geo = percs[nearest], geos[nearest]
         frame = self.closest_frame = people.frames[nearest] if people.ids else NOBODY
-        f = float(l1_factor(dmin[self.i_L1], cfg))  # eq. (2)
+        f = float(l1_factor(dmin[roles.scaled], cfg))  # eq. (2)
         limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)  # eq. (3)
         if self.config.safety == "ssm":
             ssm = with_stop_time(self.ssm, self.stop_budget.budget())
@@ -168,7 +178,8 @@ class Controller:
         elif self.config.require_human and not np.isfinite(dmin).any():
             reason = "no body part of the operator is tracked"
         else:
-            reason = stop_reason(f, dmin[self.i_L2], dmin[self.i_EE], cfg) or ""
+            d_rep, d_ee = dmin[roles.repelled], dmin[roles.end_effector]
+            reason = stop_reason(f, d_rep, d_ee, cfg, self.role_names) or ""
         return Tick(
             kin.q,
             kin,
@@ -178,9 +189,10 @@ class Controller:
             dmin,
             f,
             limits,
+            roles,
             j,
-            v_rep_L2,
-            v_rep_EE,
+            v_repelled,
+            v_end_effector,
             ref_pose,
             ref_twist,
             error,
@@ -201,7 +213,7 @@ class Controller:
             tick.ref_twist,
             self.K,
             tick.error,
-            tick.v_rep_EE,
+            tick.v_end_effector,
             cfg.sigma_min,
             cfg.lambda_max,
         )
@@ -211,8 +223,8 @@ class Controller:
         tick: Tick,
         dq: np.ndarray | None,
         time_scale: float = 1.0,
-        v_rep_L2: np.ndarray | None = None,
-        v_rep_EE: np.ndarray | None = None,
+        v_repelled: np.ndarray | None = None,
+        v_end_effector: np.ndarray | None = None,
         reason: str = "",
         info: dict | None = None,
     ) -> Command:
@@ -255,8 +267,8 @@ class Controller:
             f=tick.f,
             distance=tick.distance,
             table=tick.table,
-            v_rep_L2=zero3 if v_rep_L2 is None else v_rep_L2,
-            v_rep_EE=zero3 if v_rep_EE is None else v_rep_EE,
+            v_repelled=zero3 if v_repelled is None else v_repelled,
+            v_end_effector=zero3 if v_end_effector is None else v_end_effector,
             limits=tick.limits,
             ee_pos=tick.kin.ee_placement[:3, 3].copy(),
             ee_ref=tick.ref_pose[:3, 3].copy(),

@@ -171,20 +171,21 @@ def pose_error(T_desired: np.ndarray, T: np.ndarray) -> np.ndarray:
     return e
 
 
-#: iiwa 14: distance from the wrist centre (A6 axis) to the flange along the tool's z, m
-#: (the URDF's A7 and flange offsets); the seed only needs it roughly.
-WRIST_TO_FLANGE_M = 0.126
-
-
 def ik_seed(robot: Robot, target: np.ndarray) -> np.ndarray:
-    """Seed on the elbow-up, non-flipped-wrist branch facing the target.
+    """The robot description's seed for reaching ``target`` (``[ik_seed]``, docs/robot.md).
 
-    A1 points the arm at the wrist centre, A2 > 0 leans it forward, the elbow joint A4
-    bends back (< 0), A5 = 0 and A6 < 0 (the branch of the reading notes' solution).
+    Every joint at 0 but the description's ``angles``, and its ``aim`` joint turned to face
+    the wrist centre, ``wrist_to_tool_m`` behind the target along the target's z axis (for
+    the iiwa: A1 points the arm at the wrist centre, A2 > 0 leans it forward, the elbow
+    joint A4 bends back (< 0), A5 = 0 and A6 < 0: the branch of the reading notes'
+    solution). Joints the model lacks (locked) are skipped.
     """
-    wrist = target[:3, 3] - WRIST_TO_FLANGE_M * target[:3, 2]
+    seed = robot.ik_seed
+    wrist = target[:3, 3] - seed.wrist_to_tool_m * target[:3, 2]
     q = np.zeros(robot.nq)
-    guess = {"A1": np.arctan2(wrist[1], wrist[0]), "A2": 0.5, "A4": -1.5, "A6": -1.0}
+    guess = dict(seed.angles)
+    if seed.aim is not None:
+        guess[seed.aim] = float(np.arctan2(wrist[1], wrist[0]))
     for name, value in guess.items():
         if name in robot.joint_names:
             q[robot.joint_names.index(name)] = value

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from qpavoid.arm.model import Kinematics
+from qpavoid.arm.model import Kinematics, Roles
 from qpavoid.core.errors import InputError
 from qpavoid.distance.methods import DistanceTable
 from qpavoid.human.body import HumanGeometry
@@ -46,7 +46,8 @@ class ControllerConfig:
         Period of the control loop, s: a command that would carry a joint past its
         position limit within one period stops the robot instead.
     scaled_joints
-        Joints whose limits eq. (3) scales by (1 − f): the two that move L1.
+        Joints whose limits eq. (3) scales by (1 − f); None (the default): the robot
+        description's, the joints that move its scaled set (``Roles.scaled_joints``).
     require_human
         Stop when no body part is tracked at all (the safe reading of "nobody seen").
     max_frame_age_s
@@ -72,7 +73,7 @@ class ControllerConfig:
     sigma_min: float = 0.02
     lambda_max: float = 0.05
     control_period_s: float = 0.002
-    scaled_joints: tuple[str, ...] = ("A1", "A2")
+    scaled_joints: tuple[str, ...] | None = None
     require_human: bool = True
     max_frame_age_s: float = 0.1
     safety: str = "paper"
@@ -103,13 +104,15 @@ class Command:
     time_scale
         Rate in [0, 1] at which the path clock should advance (0 when stopped).
     f
-        The L1 factor of eq. (2).
+        The factor of eq. (2), from the scaled set's distance.
     distance
-        (S,) minimum distance per robot set (L1, L2, EE), m, of the method in use.
+        (S,) minimum distance per robot set (in the description's order), m, of the method
+        in use.
     table
         The full distance table.
-    v_rep_L2, v_rep_EE
-        (3,) repulsive velocities of eqs. (5) and (7), m/s.
+    v_repelled, v_end_effector
+        (3,) repulsive velocities of the repelled set (eq. 5) and of the end effector
+        (eq. 7), m/s.
     limits
         (nv,) joint velocity limits in force this tick (eq. 3), rad/s.
     ee_pos, ee_ref
@@ -125,8 +128,8 @@ class Command:
     f: float
     distance: np.ndarray
     table: DistanceTable
-    v_rep_L2: np.ndarray
-    v_rep_EE: np.ndarray
+    v_repelled: np.ndarray
+    v_end_effector: np.ndarray
     limits: np.ndarray
     ee_pos: np.ndarray
     ee_ref: np.ndarray
@@ -136,6 +139,9 @@ class Command:
 @dataclass
 class Tick:
     """One tick's measurements (:meth:`Controller.measure`), given to :meth:`Controller.act`.
+
+    The state every piece of the QP reads, as mink's ``Configuration``: the robot sets are
+    rows of the distance table, found by the part they play (``roles``), never by name.
 
     Attributes
     ----------
@@ -154,13 +160,16 @@ class Tick:
     distance
         (S,) minimum distance per set, m.
     f
-        The L1 factor of eq. (2).
+        The factor of eq. (2), from the scaled set's distance.
     limits
         (nv,) joint velocity limits of eq. (3), rad/s.
-    L2_part
-        Column of the human part closest to L2.
-    v_rep_L2, v_rep_EE
-        (3,) repulsive velocities of eqs. (4)-(5) and (7), m/s.
+    roles
+        Which row of ``table`` plays which part (the robot description's).
+    repelled_part
+        Column of the human part closest to the repelled set.
+    v_repelled, v_end_effector
+        (3,) repulsive velocities of the repelled set (eqs. 4-5) and of the end effector
+        (eq. 7), m/s.
     ref_pose, ref_twist
         The planned end-effector pose (4, 4) and twist (6,) at the path time.
     error
@@ -184,9 +193,10 @@ class Tick:
     distance: np.ndarray
     f: float
     limits: np.ndarray
-    L2_part: int
-    v_rep_L2: np.ndarray
-    v_rep_EE: np.ndarray
+    roles: Roles
+    repelled_part: int
+    v_repelled: np.ndarray
+    v_end_effector: np.ndarray
     ref_pose: np.ndarray
     ref_twist: np.ndarray
     error: np.ndarray

@@ -4,48 +4,28 @@ argument types they were compiled for.
 The first use of a kernel after an install compiles it (a few seconds; later processes
 load it from the disk cache in milliseconds). Numba's compiler calls back into Python
 through ctypes, and a ``KeyboardInterrupt`` raised there is printed and dropped: a Ctrl-C
-during the compile was lost and the run went on (seen in CI). Blocking the signal is not
-enough: the process's other threads (a BLAS pool) still receive it and Python then runs
-its handler in the main thread, inside the callback. :func:`ctrl_c_deferred` swaps in a
-handler that only notes the Ctrl-C, and calls the previous one right after the block.
+during the compile was lost and the run went on (seen in CI). :func:`ctrl_c_deferred`
+holds Ctrl-C and SIGTERM back until the compile ends (:func:`qpavoid.core.signals.held`).
 """
 
 from __future__ import annotations
 
 import os
-import signal
-import threading
-from collections.abc import Iterator
-from contextlib import contextmanager
-from types import FrameType, ModuleType
+from contextlib import AbstractContextManager
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 
+from qpavoid.core.signals import held
+
 __all__ = ["ctrl_c_deferred", "kernel_input", "recompile_if_stale"]
 
 
-@contextmanager
-def ctrl_c_deferred() -> Iterator[None]:
-    """Note a Ctrl-C during the block and deliver it to the previous handler after (in the
-    main thread only: Python runs signal handlers there and nowhere else)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    noted: list[FrameType | None] = []
-
-    def note(signum: int, frame: FrameType | None) -> None:
-        noted.append(frame)
-
-    previous = signal.signal(signal.SIGINT, note)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        if noted and callable(previous):  # Python's KeyboardInterrupt, or ours
-            previous(signal.SIGINT, noted[0])
-        elif noted and previous == signal.SIG_DFL:
-            raise KeyboardInterrupt
+def ctrl_c_deferred() -> AbstractContextManager[None]:
+    """Ctrl-C and SIGTERM during the block (a compile) handled right after it
+    (:func:`qpavoid.core.signals.held`)."""
+    return held()
 
 
 def kernel_input(array: object, dtype: type) -> np.ndarray:

@@ -21,11 +21,13 @@ from pathlib import Path
 
 __all__ = [
     "CalibrationError",
+    "DataFileError",
     "IKNotConvergedError",
     "InputError",
     "QpavoidError",
     "RecordingError",
     "RobotDescriptionError",
+    "SkeletonFormatError",
     "SolverError",
     "Terminated",
 ]
@@ -77,16 +79,16 @@ class InputError(QpavoidError, ValueError):
         self.name, self.value = name, value
 
 
-class RecordingError(InputError):
-    """A recording (or run log) file is missing, unreadable or not in the expected format.
+class DataFileError(InputError):
+    """A data file (or the object read from one) is missing, unreadable or inconsistent.
 
     Attributes
     ----------
     path
-        The file at fault.
+        The file at fault, if known.
     name, value
-        The array or column at fault and its value, when the file could be read but its
-        content is invalid (as for :class:`InputError`).
+        The key, array or column at fault and its offending value (as for
+        :class:`InputError`).
     """
 
     def __init__(
@@ -99,6 +101,24 @@ class RecordingError(InputError):
     ):
         super().__init__(message, name=name, value=value)
         self.path = path
+
+
+class RecordingError(DataFileError):
+    """A recording (or run log) file is missing, unreadable or not in the expected format.
+
+    Attributes
+    ----------
+    path
+        The file at fault.
+    name, value
+        The array or column at fault and its value, when the file could be read but its
+        content is invalid (as for :class:`InputError`).
+    """
+
+
+class SkeletonFormatError(DataFileError):
+    """A skeleton format or body model (file or object) that is missing or inconsistent
+    (:mod:`qpavoid.human.skeleton`); ``name`` is the key at fault (``"joints[3].parent"``)."""
 
 
 class CalibrationError(InputError):

@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-#: Norm below which :func:`unit` returns its ``fallback`` direction.
+#: The library's one "tiny": a norm below which :func:`unit` returns its ``fallback``
+#: direction, a segment shorter than which is its end point
+#: (:func:`~qpavoid.human._kernels.point_segment_distance`), a distance below which two
+#: points have no direction between them (:mod:`qpavoid.distance._kernels`), m. A compiled
+#: kernel freezes it in: its disk cache sees an edit here only through
+#: :func:`~qpavoid.core.compiling.recompile_if_stale`.
 TINY = 1e-12
 
 
@@ -45,15 +50,3 @@ def unit(
     out = v / np.where(small, 1.0, norm)[..., None]
     out[small] = fallback
     return out
-
-
-def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distances from points ``p`` (..., 3) to the segments ``[a, b]`` (..., 3), m.
-
-    The closest point is ``a + s (b − a)`` with ``s = clip((p − a)·(b − a) / ‖b − a‖², 0, 1)``
-    (a degenerate segment is its end point).
-    """
-    ab, ap = b - a, p - a
-    s = (ap * ab).sum(axis=-1) / np.maximum((ab * ab).sum(axis=-1), TINY)
-    d = ap - np.minimum(np.maximum(s, 0.0), 1.0)[..., None] * ab
-    return np.sqrt((d * d).sum(axis=-1))

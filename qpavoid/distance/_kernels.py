@@ -15,12 +15,9 @@ import numpy as np
 from numba import njit
 
 from qpavoid.core.compiling import ctrl_c_deferred
+from qpavoid.core.geometry import TINY
 
-__all__ = ["TINY_DISTANCE_M", "capsule_axes", "capsule_directions", "sphere_table", "warm_up"]
-
-#: Two points closer than this have no direction between them; the table's fallback is
-#: used instead, m.
-TINY_DISTANCE_M = 1e-12
+__all__ = ["capsule_axes", "capsule_directions", "sphere_table", "warm_up"]
 
 
 @njit(cache=True)
@@ -80,7 +77,7 @@ def sphere_table(
             continue
         p, m = best // M, best % M
         robot_point[r], human_point[r] = p, m
-        if best_value < TINY_DISTANCE_M:
+        if best_value < TINY:  # no direction between the points: the fallback
             direction[r] = fallback
         else:
             for k in range(3):

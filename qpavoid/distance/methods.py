@@ -37,6 +37,7 @@ __all__ = [
     "METHODS",
     "CapsuleDistance",
     "DistanceTable",
+    "PointDistance",
     "SphereDistance",
     "axis_rotations",
     "capsule_distances",
@@ -118,6 +119,52 @@ class SphereDistance:
         ``who`` (S, K), the index of each entry's person
         (:func:`~qpavoid.human.people.closest_of`)."""
         return closest_of([self(kin, g) for g in geos])
+
+
+class PointDistance:
+    """Eq. (1) between one robot control point and every human part; build once, call
+    every tick.
+
+    Each part's distance is the smallest of its points' ``‖x − h_m‖ − r_R − r_j``, through
+    the sphere table's own compiled pass (:func:`~qpavoid.distance._kernels.sphere_table`,
+    one row per part); the parts' uncertainty margins are not added.
+
+    Parameters
+    ----------
+    point
+        Index of the robot point among the control points.
+    n_points
+        Number of control points (the rows of ``Kinematics.points``).
+    radius_m
+        Sphere radius r_R of the robot point, m.
+    human
+        Gives the points' part membership and the parts' sphere radii r_j.
+    """
+
+    def __init__(self, point: int, n_points: int, radius_m: float, human: KinectHuman):
+        M = human.n_points
+        members = [np.flatnonzero(human.point_part[:, j]) for j in range(len(human.parts))]
+        width = max(len(m) for m in members)
+        self._pairs = np.full((len(members), width), n_points * M)  # padded: no pair
+        for j, m in enumerate(members):
+            self._pairs[j, : len(m)] = point * M + m
+        self._radii = radius_m + np.asarray(human.sphere_radii, dtype=float)
+        self._no_margin = np.zeros(len(members))
+        warm_up()
+
+    def __call__(self, points: np.ndarray, geo: HumanGeometry) -> tuple[np.ndarray, np.ndarray]:
+        """(K,) distance of the point to each part, m (+inf for a part not seen), and (K, 3)
+        unit directions from the part to the point, for the robot's control ``points``."""
+        d, vector, _, _ = sphere_table(
+            points,
+            geo.points,
+            geo.point_valid,
+            self._pairs,
+            self._radii,
+            self._no_margin,
+            FALLBACK_DIRECTION,
+        )
+        return d, vector
 
 
 METHODS: dict[str, type[SphereDistance] | type[CapsuleDistance]] = {

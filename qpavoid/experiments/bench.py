@@ -181,12 +181,13 @@ def _scaling(
     out: dict[str, dict[str, float]] = {}
     geos = [human.geometry(s[1]) for s in states[:50]]
     rng = np.random.default_rng(0)
-    for n in (9, 30, 100, 300, 1000):  # n robot spheres over three sets, on a 1 m arm
-        per = [list(range(k, n, 3)) for k in range(3)]
+    n_sets = len(robot.sets)
+    for n in (9, 30, 100, 300, 1000):  # n robot spheres over the robot's sets, on a 1 m arm
+        per = [list(range(k, n, n_sets)) for k in range(n_sets)]
         fake = SimpleNamespace(
             sets=[SimpleNamespace(points=p, sphere_radius_m=0.08) for p in per],
-            point_set=np.arange(n) % 3,
-            set_names=("L1", "L2", "EE"),
+            point_set=np.arange(n) % n_sets,
+            set_names=robot.set_names,
         )
         table = SphereDistance(fake, human)  # type: ignore[arg-type]  # duck-typed robot
         kin = SimpleNamespace(points=rng.uniform(-0.5, 0.5, (n, 3)) + np.array([0, 0.5, 0.5]))

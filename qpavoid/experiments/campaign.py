@@ -1,13 +1,14 @@
-"""Safety campaigns: many randomized strikes, judged against the truth, on any executor.
+"""Safety campaigns (``qpavoid sweep``): many randomized strikes, judged against the truth,
+on any executor.
 
-A campaign (``qpavoid sweep``) runs ``n`` adversarial cases (:mod:`qpavoid.scenarios.strikes`: a
-hand, or both, driven from rest into every robot set, the shoulder or the base at up to
-2 m/s, with lost, inferred or frozen limbs, frame gaps and jitter on a Kinect with its
-latency) from seed ``seed`` on, each along the whole path (until the goal, or a cap),
-and sums them up (:func:`summarize_campaign`). Every run depends on its seed alone, so a
-summary is the same whatever the number of workers and wherever they run: a local
-process pool, or Ray (:class:`RayExecutor`; a cluster when ``RAY_ADDRESS`` is set). Only
-the tick times (``timing``) are measured, not reproduced.
+A campaign runs ``n`` strikes of the sweep engine (:mod:`qpavoid.experiments.sweep`, kind
+``"strike"``: a hand, or both, driven from rest into every robot set, the shoulder or the
+base at up to 2 m/s, with lost, inferred or frozen limbs, frame gaps and jitter on a
+Kinect with its latency) from seed ``seed`` on, each along the whole path (until the
+goal, or a cap), and sums them up (:func:`~qpavoid.experiments.sweep.summarize`). Every
+run depends on its seed alone, so a summary is the same whatever the number of workers
+and wherever they run: a local process pool, or Ray (:class:`RayExecutor`; a cluster when
+``RAY_ADDRESS`` is set). Only the tick times (``timing``) are measured, not reproduced.
 
 :func:`write_campaign` writes ``summary.json``, ``runs.json`` and, in ``worst/``, the true
 motion of the worst runs as replayable recordings (``qpavoid run --human``) with their
@@ -19,20 +20,22 @@ from __future__ import annotations
 import json
 import logging
 import os
+import shlex
 import signal
 import socket
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from qpavoid.arm.model import load_robot
 from qpavoid.core.errors import InputError, Terminated
 from qpavoid.core.signals import handled_by
-from qpavoid.experiments.strike_sweep import StrikeCheck, strike_sweep
+from qpavoid.experiments.run_spec import RunSpec
+from qpavoid.experiments.sweep import StrikeCheck, SweepSpec, summarize, sweep
 from qpavoid.human.frames import HumanFrame
 from qpavoid.output.run_files import staged_output
 from qpavoid.scenarios.strikes import strike_case, strike_motion
@@ -41,9 +44,10 @@ from qpavoid.sensing.recording import Recording, save_npz
 __all__ = [
     "MAX_RUNS",
     "RayExecutor",
+    "campaign_settings",
+    "campaign_spec",
     "replay_command",
     "run_campaign",
-    "summarize_campaign",
     "write_campaign",
 ]
 
@@ -55,6 +59,43 @@ WORST = 5
 #: row of runs.json (about 0.5 kB), and 100 000 runs are the campaign docs/performance.md
 #: prices; split a larger one by --seed.
 MAX_RUNS = 1_000_000
+
+
+def campaign_spec(
+    controller: str,
+    distance: str = "capsules",
+    safety: str = "ssm",
+    rate_hz: float = 100.0,
+    max_speed_mps: float = 2.0,
+    max_time_s: float = CAMPAIGN_MAX_TIME_S,
+    robot: str = "iiwa14",
+) -> SweepSpec:
+    """The runs of a campaign: strikes at up to ``max_speed_mps`` (m/s) on ``robot``, each
+    until the goal or ``max_time_s`` (s), at ``rate_hz`` (Hz)."""
+    return SweepSpec(
+        "strike",
+        controller,
+        distance,
+        safety,
+        rate_hz,
+        max_time_s,
+        max_speed_mps,
+        robot=robot,
+    )
+
+
+def campaign_settings(spec: SweepSpec, n: int, seed: int) -> dict[str, Any]:
+    """The ``settings`` of ``summary.json``: what a campaign of ``n`` runs of ``spec``
+    from seed ``seed`` on was (the robot and the cap, fixed on the command line, aside)."""
+    return {
+        "n": n,
+        "controller": spec.controller,
+        "distance": spec.distance,
+        "safety": spec.safety,
+        "seed": seed,
+        "max_speed_mps": spec.max_speed_mps,
+        "rate_hz": spec.rate_hz,
+    }
 
 
 class RayExecutor(Executor):
@@ -137,64 +178,21 @@ def _reachable(address: str, timeout_s: float = 5.0) -> None:
 
 
 def run_campaign(
+    spec: SweepSpec,
     n: int,
-    controller: str,
-    distance: str = "capsules",
-    safety: str = "ssm",
     seed: int = 0,
     workers: int | None = None,
     executor: Executor | None = None,
     progress: bool = False,
-    rate_hz: float = 100.0,
-    max_speed_mps: float = 2.0,
-    max_time_s: float = CAMPAIGN_MAX_TIME_S,
 ) -> list[StrikeCheck]:
-    """``n`` strikes from seed ``seed`` on, each until the goal (or ``max_time_s``), in
-    seed order."""
+    """``n`` strikes of ``spec`` from seed ``seed`` on, in seed order."""
     if not 1 <= n <= MAX_RUNS:
         raise InputError(f"--n must be from 1 to {MAX_RUNS}, got {n}", name="--n", value=n)
-    return strike_sweep(
-        range(seed, seed + n),
-        controller,
-        safety,
-        rate_hz=rate_hz,
-        max_speed_mps=max_speed_mps,
-        workers=workers,
-        executor=executor,
-        progress=progress,
-        distance=distance,
-        max_time_s=max_time_s,
-    )
-
-
-def summarize_campaign(runs: list[StrikeCheck]) -> dict[str, Any]:
-    """The campaign's totals: everything but ``timing`` is reproducible from the seeds."""
-    clear = np.array([r.min_true_clearance_moving_m for r in runs])
-    moved = np.isfinite(clear)
-
-    def mm(x: float) -> float:
-        return round(float(x) * 1e3, 3)
-
-    return {
-        "runs": len(runs),
-        "runs_moving_in_true_contact": sum(r.ticks_moving_in_true_contact > 0 for r in runs),
-        "runs_moving_below_stop_distance": sum(
-            r.ticks_moving_below_stop_distance > 0 for r in runs
-        ),
-        "true_clearance_moving_mm": {
-            "min": mm(clear[moved].min()) if moved.any() else None,
-            "p01": mm(np.percentile(clear[moved], 1)) if moved.any() else None,
-            "median": mm(np.median(clear[moved])) if moved.any() else None,
-        },
-        "fraction_reaching_goal": sum(r.reached_goal for r in runs) / len(runs),
-        "mean_time_stopped_s": round(float(np.mean([r.stopped_s for r in runs])), 6),
-        "mean_duration_s": round(float(np.mean([r.duration_s for r in runs])), 6),
-        "runs_with_limit_violations": sum(r.limit_violations > 0 for r in runs),
-        "timing": {
-            "tick_us_median": float(np.median([r.tick_us_median for r in runs])),
-            "tick_us_p99": float(np.percentile([r.tick_us_p99 for r in runs], 99)),
-        },
-    }
+    if spec.kind != "strike":
+        raise InputError(
+            f"a campaign runs strikes, got a sweep of {spec.kind!r}", name="kind", value=spec.kind
+        )
+    return cast(list[StrikeCheck], sweep(spec, range(seed, seed + n), workers, executor, progress))
 
 
 def worst_runs(runs: list[StrikeCheck], count: int = WORST) -> list[StrikeCheck]:
@@ -204,10 +202,11 @@ def worst_runs(runs: list[StrikeCheck], count: int = WORST) -> list[StrikeCheck]
     )[:count]
 
 
-def true_recording(run: StrikeCheck, max_speed_mps: float, rate_hz: float = 30.0) -> Recording:
-    """The true motion of ``run``'s strike (drawn with ``max_speed_mps``), sampled at
-    ``rate_hz`` for the run's duration."""
-    motion = strike_motion(strike_case(run.seed, max_speed_mps), load_robot("iiwa14"))
+def true_recording(run: StrikeCheck, spec: SweepSpec, rate_hz: float = 30.0) -> Recording:
+    """The true motion of ``run``'s strike (drawn as ``spec`` draws them, on its robot),
+    sampled at ``rate_hz`` (Hz) for the run's duration."""
+    robot = load_robot(spec.robot)
+    motion = strike_motion(strike_case(run.seed, spec.max_speed_mps, robot), robot)
     times = np.arange(0.0, run.duration_s + 1.0 / rate_hz, 1.0 / rate_hz)
     frames = [HumanFrame.check(*motion.frame_at(t)) for t in times]
     return Recording(
@@ -215,27 +214,31 @@ def true_recording(run: StrikeCheck, max_speed_mps: float, rate_hz: float = 30.0
     )
 
 
-def replay_command(run: StrikeCheck, settings: dict[str, Any]) -> str:
+def replay_command(run: StrikeCheck, spec: SweepSpec) -> str:
     """The ``qpavoid run`` line that drives the campaign's controller with ``run``'s true
     motion (from inside ``worst/``). Its sensor faults are not in the recording: the
     replay sees the person through ``run``'s ordinary Kinect (``--bench real``)."""
+    robot = "" if spec.robot == RunSpec.robot else f" --robot {shlex.quote(spec.robot)}"
     return (
-        f"qpavoid run --human seed{run.seed}.npz --controller {settings['controller']} "
-        f"--distance {settings['distance']} --safety {settings['safety']} --bench real "
-        f"--rate {settings['rate_hz']:g} --max-time {CAMPAIGN_MAX_TIME_S:g}"
+        f"qpavoid run --human seed{run.seed}.npz --controller {spec.controller} "
+        f"--distance {spec.distance} --safety {spec.safety} --bench real "
+        f"--rate {spec.rate_hz:g} --max-time {CAMPAIGN_MAX_TIME_S:g}{robot}"
     )
 
 
-def write_campaign(out: str | Path, settings: dict[str, Any], runs: list[StrikeCheck]) -> dict:
-    """Write ``summary.json``, ``runs.json`` and ``worst/`` into ``out``; return the summary."""
-    summary = {"settings": settings, **summarize_campaign(runs)}
+def write_campaign(
+    out: str | Path, spec: SweepSpec, n: int, seed: int, runs: list[StrikeCheck]
+) -> dict[str, Any]:
+    """Write ``summary.json``, ``runs.json`` and ``worst/`` of the campaign of ``n`` runs
+    of ``spec`` from seed ``seed`` on into ``out``; return the summary."""
+    summary = {"settings": campaign_settings(spec, n, seed), **summarize(runs)}
     with staged_output(out) as stage:
         (stage / "summary.json").write_text(json.dumps(summary, indent=1))
         (stage / "runs.json").write_text(json.dumps([asdict(r) for r in runs], indent=1))
         worst = stage / "worst"
         worst.mkdir()
         for r in worst_runs(runs):
-            save_npz(worst / f"seed{r.seed}.npz", true_recording(r, settings["max_speed_mps"]))
-            case = {**asdict(r), "replay": replay_command(r, settings)}
+            save_npz(worst / f"seed{r.seed}.npz", true_recording(r, spec))
+            case = {**asdict(r), "replay": replay_command(r, spec)}
             (worst / f"seed{r.seed}.json").write_text(json.dumps(case, indent=1))
     return summary

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import signal
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import Executor
+from contextlib import ExitStack
 from typing import Any, TypeVar
 
 from tqdm.auto import tqdm
 
+from qpavoid.core import signals
 from qpavoid.core.errors import InputError
 
 T = TypeVar("T")
@@ -73,8 +74,13 @@ def map_jobs(
             return list(_ticking(map(fn, items), bar))
         results: list[Any] = [None] * len(items)
         # Pool.__exit__ terminates the workers: a Ctrl-C, a SIGTERM turned into an
-        # exception, or a worker's error ends the pool at once, with nothing left running
-        with multiprocessing.Pool(workers, initializer=_worker_signals) as pool:
+        # exception, or a worker's error ends the pool at once, with nothing left running.
+        # Its workers start with both signals blocked until they have set their own.
+        with ExitStack() as stack:
+            with signals.blocked():
+                pool = stack.enter_context(
+                    multiprocessing.Pool(workers, initializer=signals.worker_process)
+                )
             for i, result in pool.imap_unordered(_Indexed(fn), enumerate(items)):
                 results[i] = result
                 bar.update(1)
@@ -89,13 +95,6 @@ class _Indexed:
 
     def __call__(self, pair: tuple[int, Any]) -> tuple[int, Any]:
         return pair[0], self.fn(pair[1])
-
-
-def _worker_signals() -> None:
-    """A worker leaves Ctrl-C to its caller, which ends the pool, and dies on SIGTERM
-    (the caller's own SIGTERM handler, inherited on fork, is not for it)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _ticking(results: Iterable[R], bar: Any) -> Iterable[R]:

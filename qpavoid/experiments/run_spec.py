@@ -174,6 +174,13 @@ class RunSpec:
             motions.check_human_files(self.sensor_files, self.sensors)
 
     @property
+    def human_files(self) -> tuple[str, ...]:
+        """The recordings the run replays: the per-sensor ones, or the base-frame one."""
+        if self.sensor_files:
+            return self.sensor_files
+        return (self.human_file,) if self.human_file else ()
+
+    @property
     def label(self) -> str:
         """The run's name: the scenario, or the recording's file stem."""
         if self.listen is not None:

@@ -120,18 +120,15 @@ def live_view(spec: RunSpec, address: str) -> Iterator[LiveView]:
         yield v
 
 
-def load_motion(spec: RunSpec, robot: Robot) -> HumanMotion:
-    """The human motion ``spec`` names (:func:`qpavoid.scenarios.motions.load_motion`)."""
-    files = spec.sensor_files or ((spec.human_file,) if spec.human_file else ())
-    return motions.load_motion(robot, spec.scenario, files, spec.sensors)
-
-
 def simulate_one(
     spec: RunSpec,
     motion: HumanMotion | None = None,
     progress: Callable[[float], None] | None = None,
     watch: Callable[[dict[str, Any]], None] | None = None,
     clear: threading.Event | None = None,
+    *,
+    robot: Robot | None = None,
+    sensor: SensorConfig | None = None,
 ) -> RunResult:
     """Build the robot, controller and motion of ``spec`` and simulate them.
 
@@ -140,7 +137,8 @@ def simulate_one(
     spec
         The run.
     motion
-        The human motion if already loaded (else :func:`load_motion`).
+        The human motion if already made (else the one ``spec`` names,
+        :func:`qpavoid.scenarios.motions.load_motion`).
     progress
         Called with the simulated time, s, at every human frame.
     watch
@@ -149,21 +147,30 @@ def simulate_one(
     clear
         A live run's request to clear the people flagged as suspect
         (:attr:`LiveView.clear_requested <qpavoid.output.live_view.LiveView.clear_requested>`).
+    robot
+        ``spec``'s robot if already loaded (:func:`spec_robot`).
+    sensor
+        What the controller sees, if not the camera of ``spec``'s bench (a strike's faulty
+        Kinect).
     """
-    robot = spec_robot(spec)
+    robot = spec_robot(spec) if robot is None else robot
     controller = build_controller(spec, robot)
     live = spec.listen is not None
     if motion is None and not live:
-        motion = load_motion(spec, robot)
+        motion = motions.load_motion(robot, spec.scenario, spec.human_files, spec.sensors)
+    if sensor is None:
+        sensor = (
+            SensorConfig.ideal()
+            if spec.bench == "ideal"
+            else SensorConfig(latency_s=spec.latency_s)
+        )
     with live_source(spec, clear) as source:
         sim = simulate(
             controller,
             motion,
             SimConfig(
                 control_rate_hz=spec.rate_hz,
-                sensor=SensorConfig.ideal()
-                if spec.bench == "ideal"
-                else SensorConfig(latency_s=spec.latency_s),
+                sensor=sensor,
                 braking=None if spec.bench == "ideal" else BrakingConfig(),
                 max_time_s=spec.max_time_s,
                 goal_tolerance_m=spec.goal_tolerance_m,

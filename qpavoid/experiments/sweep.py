@@ -1,34 +1,141 @@
-"""Safety sweeps: many random hand approaches, each run checked for the safety invariants.
+"""Sweeps: many seeded runs of one kind, each judged, then summed up.
 
-Every approach is an independent closed-loop run (:func:`check_approach`), so a sweep is a
-map over seeds: here over a local process pool; on a cluster, the same function over
-another executor (anything with ``map``).
+The one engine behind ``qpavoid sweep`` (:mod:`qpavoid.experiments.campaign`),
+:func:`safety_sweep` and :func:`strike_sweep`. A sweep is a :class:`SweepSpec` (what its
+runs share) and seeds; the spec's *kind* chooses the motion and the check:
 
-Each run is checked, tick by tick, for what must never happen:
+``"approach"`` (:class:`ApproachCheck`)
+    A random hand approach (scenario ``random:SEED``,
+    :func:`~qpavoid.scenarios.generated.random_approach`) on the real bench, each tick
+    checked (:func:`check_log`) for what must never happen:
 
-* a joint outside its position limits, or faster than its (eq. 3 scaled) velocity limit;
-* a non-zero command while one of the paper's stop rules holds;
-* the robot moving while the *exact capsule* distance of a set is below that set's stop
-  threshold (0.05 m for L2 and EE; for L1 the distance where f = 0.8), whichever distance
-  method the controller itself uses.
+    * a joint outside its position limits, or faster than its (eq. 3 scaled) velocity
+      limit;
+    * a non-zero command while one of the paper's stop rules holds;
+    * the robot moving while the *exact capsule* distance of a set is below that set's
+      stop threshold (0.05 m for L2 and EE; for L1 the distance where f = 0.8),
+      whichever distance method the controller itself uses.
 
-The adversarial sweep, judged against the true motion, is :mod:`qpavoid.experiments.strike_sweep`.
+``"strike"`` (:class:`StrikeCheck`)
+    A hand, or both, driven from rest into a robot set, the shoulder or the base
+    (:mod:`qpavoid.scenarios.strikes`: up to ``max_speed_mps``, lost, inferred or frozen
+    limbs, frame gaps and jitter) on the real bench, judged against the truth: ticks in
+    which the arm moved while a robot capsule touched the true person, and the true
+    clearance while moving.
+
+Every run depends on its seed alone, so a sweep is a map over seeds
+(:func:`~qpavoid.experiments.jobs.map_jobs`): a local process pool or any executor with
+``map`` (Ray's, a cluster's), results in seed order whatever the number of workers.
+:func:`summarize` sums either kind up.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from concurrent.futures import Executor
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, ClassVar, TypeAlias, cast
 
 import numpy as np
 
-from qpavoid.arm.model import Robot, joint_columns
+from qpavoid.arm.model import Robot, joint_columns, load_robot
 from qpavoid.control.tick import ControllerConfig
+from qpavoid.core.checks import check_choice
+from qpavoid.core.errors import InputError
 from qpavoid.experiments.jobs import map_jobs
-from qpavoid.experiments.runs import RunSpec, simulate_one
+from qpavoid.experiments.runs import RunResult, RunSpec, simulate_one
 from qpavoid.laws.avoidance import scaled_velocity_limits, stop_distances, stop_rule_holds
+from qpavoid.loop.camera import KINECT_V2_LATENCY_S, SensorConfig
+from qpavoid.scenarios.strikes import StrikeCase, strike_case, strike_motion, strike_sensor
+
+__all__ = [
+    "KINDS",
+    "ApproachCheck",
+    "Check",
+    "StrikeCheck",
+    "SweepSpec",
+    "as_dicts",
+    "check_log",
+    "run_case",
+    "safety_sweep",
+    "strike_sweep",
+    "summarize",
+    "sweep",
+]
+
+#: The kinds of case a sweep runs.
+KINDS = ("approach", "strike")
+#: An approach lasts this long unless the spec says otherwise, s.
+APPROACH_MAX_TIME_S = 25.0
+#: The progress bar's label and unit, per kind.
+_PROGRESS = {"approach": ("safety sweep", "approach"), "strike": ("strike sweep", "strike")}
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """What every run of a sweep shares; a run is this and its seed.
+
+    Checked when it is made (as the :class:`~qpavoid.experiments.run_spec.RunSpec` of
+    its runs), so that bad settings fail before any run starts.
+
+    Attributes
+    ----------
+    kind
+        ``"approach"`` or ``"strike"`` (module docstring).
+    controller, distance, safety
+        As in :class:`~qpavoid.experiments.run_spec.RunSpec`.
+    rate_hz
+        Control rate, Hz.
+    max_time_s
+        Cap on each run, s; None: an approach's 25 s, a strike's own duration (the
+        hand's approach, 1.5 s of holding and 0.5 s more).
+    max_speed_mps
+        Strikes only: the fastest peak hand speed drawn, m/s (from 0.5 m/s up).
+    latency_s
+        The Kinect's latency, s.
+    robot
+        The robot description (a bundled name or a folder).
+    """
+
+    kind: str
+    controller: str = "qp"
+    distance: str = "capsules"
+    safety: str = "ssm"
+    rate_hz: float = 100.0
+    max_time_s: float | None = None
+    max_speed_mps: float = 2.0
+    latency_s: float = KINECT_V2_LATENCY_S
+    robot: str = "iiwa14"
+
+    def __post_init__(self) -> None:
+        check_choice("sweep kind", self.kind, KINDS)
+        self.run_spec(0, APPROACH_MAX_TIME_S)  # checks every other setting
+
+    def run_spec(self, seed: int, duration_s: float | None = None) -> RunSpec:
+        """The run of ``seed``, lasting ``max_time_s`` or else the case's own
+        ``duration_s`` (a strike's, s); a strike's motion and sensor aside
+        (:func:`run_case`)."""
+        if self.kind == "approach":
+            scenario, truth = f"random:{seed}", False  # checked on what the controller saw
+            duration_s = APPROACH_MAX_TIME_S
+        else:
+            scenario, truth = "free", True  # the strike is its motion; judged on the truth
+        max_time_s = self.max_time_s if self.max_time_s is not None else duration_s
+        if max_time_s is None:
+            raise InputError(
+                "a strike's run needs its duration or a cap", name="max_time_s", value=None
+            )
+        return RunSpec(
+            scenario=scenario,
+            controller=self.controller,
+            distance=self.distance,
+            safety=self.safety,
+            rate_hz=self.rate_hz,
+            max_time_s=max_time_s,
+            latency_s=self.latency_s,
+            robot=self.robot,
+            measure_truth=truth,
+        )
 
 
 @dataclass(frozen=True)
@@ -49,10 +156,13 @@ class ApproachCheck:
         Ticks with a non-zero command while a set's capsule distance was below its
         threshold.
     min_capsule_distance_moving_m
-        (L1, L2, EE) smallest capsule distance over the ticks where the robot moved, m.
+        Per set that plays a part in the laws (the robot description's roles), by the
+        set's name: the smallest capsule distance over the ticks where the robot moved, m.
     stopped_s, reached_goal
-        Time spent stopped, and whether the goal was reached.
+        Time spent stopped, s, and whether the goal was reached.
     """
+
+    kind: ClassVar[str] = "approach"
 
     seed: int
     controller: str
@@ -62,7 +172,7 @@ class ApproachCheck:
     velocity_violations: int
     moving_under_stop_rule: int
     moving_below_capsule_threshold: int
-    min_capsule_distance_moving_m: tuple[float, float, float]
+    min_capsule_distance_moving_m: dict[str, float]
     stopped_s: float
     reached_goal: bool
 
@@ -77,17 +187,74 @@ class ApproachCheck:
         )
 
 
+@dataclass(frozen=True)
+class StrikeCheck:
+    """One strike (:func:`~qpavoid.scenarios.strikes.strike_case`) judged against the truth.
+
+    Attributes
+    ----------
+    seed, controller, safety
+        What was run.
+    target, speed_mps, side, both_hands, fault
+        The strike.
+    ticks_moving_in_true_contact
+        Ticks in which the arm moved (its real velocity, braking included) while a robot
+        capsule touched the true person.
+    min_true_clearance_moving_m
+        Smallest true capsule distance over the ticks in which the arm moved, m (+inf if
+        it never moved).
+    moving_s, stopped_s
+        Time the arm moved / the controller held a stop, s.
+    max_stop_speed_mps
+        The fastest robot point when a stop began, m/s (0 if none).
+    ticks_moving_below_stop_distance
+        Ticks in which the arm moved while a set was truly closer than its stop distance.
+    reached_goal, duration_s
+        Whether the path's goal was reached, and when the run ended, s.
+    limit_violations
+        Ticks over a joint's velocity or position limit.
+    tick_us_median, tick_us_p99
+        The controller's time per tick, µs (measured: not reproducible).
+    """
+
+    kind: ClassVar[str] = "strike"
+
+    seed: int
+    controller: str
+    safety: str
+    target: str
+    speed_mps: float
+    side: str
+    both_hands: bool
+    fault: str
+    ticks_moving_in_true_contact: int
+    min_true_clearance_moving_m: float
+    moving_s: float
+    stopped_s: float
+    max_stop_speed_mps: float
+    ticks_moving_below_stop_distance: int = 0
+    reached_goal: bool = False
+    duration_s: float = 0.0
+    limit_violations: int = 0
+    tick_us_median: float = 0.0
+    tick_us_p99: float = 0.0
+
+
+#: What a sweep's run gives: an approach's or a strike's check.
+Check: TypeAlias = ApproachCheck | StrikeCheck
+
+
 def check_log(
     log: dict[str, np.ndarray], robot: Robot, config: ControllerConfig, distance: str
 ) -> dict[str, Any]:
-    """Tick counts of every broken invariant in a simulation log (see the module docstring).
+    """Tick counts of every broken invariant in a simulation log (module docstring).
 
     Returns a dict with ``position_violations``, ``velocity_violations``,
     ``moving_under_stop_rule``, ``moving_below_capsule_threshold`` (tick counts) and
-    ``min_capsule_distance_moving_m`` (per set, m).
+    ``min_capsule_distance_moving_m`` (per set that plays a part, by name, m).
     """
     avo = config.avoidance
-    sets = [robot.set_index(name) for name in ("L1", "L2", "EE")]  # the paper's three sets
+    sets = list(robot.roles.rows)  # the scaled, repelled and end-effector sets
     capsule = (log["distance"] if distance == "capsules" else log["distance_other"])[:, sets]
     threshold = stop_distances(avo)
     moving = np.any(log["dq_command"] != 0.0, axis=1)  # the controller's decisions
@@ -103,43 +270,176 @@ def check_log(
         "velocity_violations": int(over.sum()),
         "moving_under_stop_rule": int((moving & rule).sum()),
         "moving_below_capsule_threshold": int((moving & below).sum()),
-        "min_capsule_distance_moving_m": tuple(
-            float(x) for x in (capsule[moving].min(axis=0) if moving.any() else np.full(3, np.inf))
-        ),
+        "min_capsule_distance_moving_m": {
+            robot.set_names[i]: float(x)
+            for i, x in zip(
+                sets,
+                capsule[moving].min(axis=0) if moving.any() else np.full(len(sets), np.inf),
+                strict=True,
+            )
+        },
     }
 
 
-def check_approach(
-    seed: int,
-    controller: str = "qp",
-    distance: str = "spheres",
-    rate_hz: float = 50.0,
-    max_time_s: float = 25.0,
-) -> ApproachCheck:
-    """Simulate the random approach ``seed`` and check the invariants of every tick."""
+def run_case(spec: SweepSpec, seed: int) -> Check:
+    """Simulate the case ``seed`` of ``spec``'s kind and judge it (module docstring)."""
+    if spec.kind == "approach":  # the scenario random:SEED, seen through the bench's Kinect
+        return _approach_check(seed, simulate_one(spec.run_spec(seed)))
+    robot = load_robot(spec.robot)  # the strike, aimed at its sets, seen through a faulty Kinect
+    case = strike_case(seed, spec.max_speed_mps, robot)
+    sensor = strike_sensor(case, SensorConfig(latency_s=spec.latency_s, seed=case.seed))
     run = simulate_one(
-        RunSpec(
-            scenario=f"random:{seed}",
-            controller=controller,
-            distance=distance,
-            max_time_s=max_time_s,
-            rate_hz=rate_hz,
-            measure_truth=False,  # the checks here use the seen frames' capsule table
-        )
+        spec.run_spec(seed, case.duration_s),
+        strike_motion(case, robot),
+        robot=robot,
+        sensor=sensor,
     )
+    return _strike_check(case, run)
+
+
+def _approach_check(seed: int, run: RunResult) -> ApproachCheck:
+    spec = run.spec
     return ApproachCheck(
         seed,
-        controller,
-        distance,
+        spec.controller,
+        spec.distance,
         len(run.sim.log["t"]),
-        **check_log(run.sim.log, run.robot, run.config, distance),
+        **check_log(run.sim.log, run.robot, run.config, spec.distance),
         stopped_s=run.metrics["stopped_s"],
         reached_goal=run.metrics["reached_goal"],
     )
 
 
-def _check(args: tuple[int, str, str, float, float]) -> ApproachCheck:
-    return check_approach(*args)
+def _strike_check(case: StrikeCase, run: RunResult) -> StrikeCheck:
+    m, log = run.sim.metrics, run.sim.log
+    moving = np.any(log["dq"] != 0.0, axis=1)
+    clearance = m["min_true_clearance_moving_m"]
+    return StrikeCheck(
+        case.seed,
+        run.spec.controller,
+        run.spec.safety,
+        case.target,
+        case.speed_mps,
+        case.side,
+        case.both_hands,
+        case.fault,
+        int(m["ticks_moving_in_true_contact"]),
+        float("inf") if clearance is None else float(clearance),
+        float(moving.sum() / run.spec.rate_hz),
+        float(m["stopped_s"]),
+        max((e.get("robot_speed_mps", 0.0) for e in m["stop_events"]), default=0.0),
+        int(m["ticks_moving_below_stop_distance"] or 0),
+        bool(m["reached_goal"]),
+        float(m["duration_s"]),
+        int(m["joint_velocity_limit_violations"] + m["joint_position_limit_violations"]),
+        float(m["tick_us"]["median"]),
+        float(m["tick_us"]["p99"]),
+    )
+
+
+def _run_case(job: tuple[SweepSpec, int]) -> Check:
+    return run_case(*job)
+
+
+def sweep(
+    spec: SweepSpec,
+    seeds: Iterable[int],
+    workers: int | None = None,
+    executor: Executor | None = None,
+    progress: bool = False,
+) -> list[Check]:
+    """:func:`run_case` of every seed, in parallel.
+
+    Parameters
+    ----------
+    spec
+        What the runs share.
+    seeds
+        One run each.
+    workers
+        Local processes (default: all cores); 1 runs in this process.
+    executor
+        Any object with ``map`` (Ray's, a cluster's) to use instead of a local pool.
+    progress
+        Show a progress bar (on a terminal only).
+
+    Returns
+    -------
+    list of ApproachCheck or of StrikeCheck
+        In the order of ``seeds``, whatever the number of workers.
+    """
+    desc, unit = _PROGRESS[spec.kind]
+    jobs = [(spec, int(s)) for s in seeds]
+    return map_jobs(
+        _run_case, jobs, workers=workers, executor=executor, progress=progress, desc=desc, unit=unit
+    )
+
+
+def summarize(checks: Sequence[Check]) -> dict[str, Any]:
+    """A sweep's totals (the ``qpavoid sweep`` summary for strikes); everything but a
+    strike sweep's ``timing`` is reproducible from the seeds.
+
+    Raises
+    ------
+    InputError
+        If there is nothing to sum up.
+    """
+    if not checks:
+        raise InputError("a sweep's summary needs at least one run", name="checks", value=[])
+    if checks[0].kind == "approach":
+        return _approach_totals(cast(Sequence[ApproachCheck], checks))
+    return _strike_totals(cast(Sequence[StrikeCheck], checks))
+
+
+def _approach_totals(checks: Sequence[ApproachCheck]) -> dict[str, Any]:
+    return {
+        "approaches": len(checks),
+        "unsafe": sum(not c.safe for c in checks),
+        "position_violations": sum(c.position_violations for c in checks),
+        "velocity_violations": sum(c.velocity_violations for c in checks),
+        "moving_under_stop_rule": sum(c.moving_under_stop_rule for c in checks),
+        "moving_below_capsule_threshold": sum(c.moving_below_capsule_threshold for c in checks),
+        "min_capsule_distance_moving_m": {
+            name: min(c.min_capsule_distance_moving_m[name] for c in checks)
+            for name in checks[0].min_capsule_distance_moving_m
+        },
+        "reached_goal": sum(c.reached_goal for c in checks),
+        "mean_stopped_s": float(np.mean([c.stopped_s for c in checks])),
+    }
+
+
+def _strike_totals(runs: Sequence[StrikeCheck]) -> dict[str, Any]:
+    clear = np.array([r.min_true_clearance_moving_m for r in runs])
+    moved = np.isfinite(clear)
+
+    def mm(x: float) -> float:
+        return round(float(x) * 1e3, 3)
+
+    return {
+        "runs": len(runs),
+        "runs_moving_in_true_contact": sum(r.ticks_moving_in_true_contact > 0 for r in runs),
+        "runs_moving_below_stop_distance": sum(
+            r.ticks_moving_below_stop_distance > 0 for r in runs
+        ),
+        "true_clearance_moving_mm": {
+            "min": mm(clear[moved].min()) if moved.any() else None,
+            "p01": mm(np.percentile(clear[moved], 1)) if moved.any() else None,
+            "median": mm(np.median(clear[moved])) if moved.any() else None,
+        },
+        "fraction_reaching_goal": sum(r.reached_goal for r in runs) / len(runs),
+        "mean_time_stopped_s": round(float(np.mean([r.stopped_s for r in runs])), 6),
+        "mean_duration_s": round(float(np.mean([r.duration_s for r in runs])), 6),
+        "runs_with_limit_violations": sum(r.limit_violations > 0 for r in runs),
+        "timing": {
+            "tick_us_median": float(np.median([r.tick_us_median for r in runs])),
+            "tick_us_p99": float(np.percentile([r.tick_us_p99 for r in runs], 99)),
+        },
+    }
+
+
+def as_dicts(checks: Sequence[Check]) -> list[dict[str, Any]]:
+    """The checks as plain dicts (JSON)."""
+    return [asdict(c) for c in checks]
 
 
 def safety_sweep(
@@ -147,12 +447,13 @@ def safety_sweep(
     controller: str = "qp",
     distance: str = "spheres",
     rate_hz: float = 50.0,
-    max_time_s: float = 25.0,
+    max_time_s: float = APPROACH_MAX_TIME_S,
     workers: int | None = None,
     executor: Executor | None = None,
     progress: bool = False,
 ) -> list[ApproachCheck]:
-    """Check every seed's random approach; in parallel over ``workers`` processes.
+    """Random approaches checked for the safety invariants (:func:`sweep` of approaches
+    with the paper's rules: docs/qp.md's table).
 
     Parameters
     ----------
@@ -161,56 +462,36 @@ def safety_sweep(
     controller, distance
         ``"analytic"`` or ``"qp"``; ``"spheres"`` or ``"capsules"``.
     rate_hz, max_time_s
-        Control rate and cap of each run.
-    workers
-        Local processes (default: all cores).
-    executor
-        Any object with ``map`` (e.g. a cluster's executor) to use instead of a local pool.
-    progress
-        Show a progress bar (on a terminal only).
+        Control rate, Hz, and cap of each run, s.
+    workers, executor, progress
+        As for :func:`sweep`.
 
     Returns
     -------
     list of ApproachCheck
-        In the order of ``seeds``, whatever the number of workers.
+        In the order of ``seeds``.
     """
-    jobs = [(int(s), controller, distance, rate_hz, max_time_s) for s in seeds]
-    RunSpec(
-        scenario="free",
-        controller=controller,
-        distance=distance,
-        max_time_s=max_time_s,
-        rate_hz=rate_hz,
-    )  # check the settings before any job starts
-    return map_jobs(
-        _check,
-        jobs,
-        workers=workers,
-        executor=executor,
-        progress=progress,
-        desc="safety sweep",
-        unit="approach",
+    spec = SweepSpec("approach", controller, distance, "paper", rate_hz, max_time_s)
+    return cast(list[ApproachCheck], sweep(spec, seeds, workers, executor, progress))
+
+
+def strike_sweep(
+    seeds: Iterable[int],
+    controller: str = "qp",
+    safety: str = "ssm",
+    rate_hz: float = 100.0,
+    max_speed_mps: float = 2.0,
+    latency_s: float = KINECT_V2_LATENCY_S,
+    workers: int | None = None,
+    executor: Executor | None = None,
+    progress: bool = False,
+    distance: str = "capsules",
+    max_time_s: float | None = None,
+) -> list[StrikeCheck]:
+    """Strikes judged against the truth (:func:`sweep` of strikes: docs/safety.md's
+    tables, ``benchmarks/safety.py``), in the order of ``seeds``; each lasts the strike
+    (``max_time_s=None``) or until the goal, capped at ``max_time_s`` (s)."""
+    spec = SweepSpec(
+        "strike", controller, distance, safety, rate_hz, max_time_s, max_speed_mps, latency_s
     )
-
-
-def summarize(checks: list[ApproachCheck]) -> dict:
-    """Totals over a sweep (for reports and docs)."""
-    mins = np.array([c.min_capsule_distance_moving_m for c in checks])
-    return {
-        "approaches": len(checks),
-        "unsafe": sum(not c.safe for c in checks),
-        "position_violations": sum(c.position_violations for c in checks),
-        "velocity_violations": sum(c.velocity_violations for c in checks),
-        "moving_under_stop_rule": sum(c.moving_under_stop_rule for c in checks),
-        "moving_below_capsule_threshold": sum(c.moving_below_capsule_threshold for c in checks),
-        "min_capsule_distance_moving_m": dict(
-            zip(("L1", "L2", "EE"), mins.min(axis=0).tolist(), strict=True)
-        ),
-        "reached_goal": sum(c.reached_goal for c in checks),
-        "mean_stopped_s": float(np.mean([c.stopped_s for c in checks])),
-    }
-
-
-def as_dicts(checks: list[ApproachCheck]) -> list[dict]:
-    """The checks as plain dicts (JSON)."""
-    return [asdict(c) for c in checks]
+    return cast(list[StrikeCheck], sweep(spec, seeds, workers, executor, progress))

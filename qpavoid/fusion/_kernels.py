@@ -1,13 +1,16 @@
-"""The fusion's per-joint arithmetic, compiled (numba): one person, ``S`` sensors, 25 joints.
+"""The fusion's per-joint arithmetic, compiled (numba): one person, ``S`` sensors, J joints.
 
 :mod:`qpavoid.fusion.fuser` decides *what* to merge (which frames, which person, whom to believe);
 these kernels do the arithmetic on every joint in one pass each, instead of some thirty
-numpy calls on (S, 25, 3) arrays that cost more in call overhead than in arithmetic
+numpy calls on (S, J, 3) arrays that cost more in call overhead than in arithmetic
 (docs/performance.md measures it). Their compiled code is cached on disk
-(``cache=True``) and :func:`warm_up` compiles or loads it before the first frame.
+(``cache=True``) and :func:`warm_up` compiles or loads it before the first frame, for the
+skeleton format the fusion will see. The person's α-β filter is
+:func:`qpavoid.human.alpha_beta.alpha_beta_step` (the tracker's too).
 
-Arrays: ``P`` (S, 25, 3) float64 joints in the base frame, NaN where not usable;
-``states`` (S, 25) int8 (0 NotTracked, 1 Inferred, 2 Tracked; 0 wherever ``P`` is NaN).
+Arrays: ``P`` (S, J, 3) float64 joints in the base frame, NaN where not usable;
+``states`` (S, J) int8 (0 NotTracked, 1 Inferred, 2 Tracked; 0 wherever ``P`` is NaN);
+``parent`` (J,) int64, -1 at a root (a copy of the format's).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import numpy as np
 from numba import njit
 
 from qpavoid.core.compiling import ctrl_c_deferred
+from qpavoid.human.skeleton import SkeletonFormat
 
 __all__ = [
     "believed",
@@ -26,14 +30,13 @@ __all__ = [
     "mean_gaps",
     "merge",
     "subset_mean",
-    "update_track",
     "warm_up",
 ]
 
 
 @njit(cache=True)
 def mean_gaps(P: np.ndarray, reference: np.ndarray, joints: np.ndarray) -> np.ndarray:
-    """(S,) mean distance of ``joints`` of each body to ``reference`` (25, 3), m.
+    """(S,) mean distance of ``joints`` of each body to ``reference`` (J, 3), m.
 
     Joints missing on either side do not count; NaN for a body with nothing to compare.
     """
@@ -56,9 +59,9 @@ def mean_gaps(P: np.ndarray, reference: np.ndarray, joints: np.ndarray) -> np.nd
 def ingest(
     joints: np.ndarray, state: np.ndarray, rotation: np.ndarray, translation: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """A sensor's joints (25, 3) and states (25,) in the base frame, m: ``R p + t``, NaN and
-    NotTracked (0) wherever a joint is not finite or NotTracked, in a new (25, 3) array and
-    a new (25,) int8 array."""
+    """A sensor's joints (J, 3) and states (J,) in the base frame, m: ``R p + t``, NaN and
+    NotTracked (0) wherever a joint is not finite or NotTracked, in a new (J, 3) array and
+    a new (J,) int8 array."""
     out = np.empty(joints.shape)
     usable = np.empty(state.shape, dtype=np.int8)
     for j in range(joints.shape[0]):
@@ -80,23 +83,28 @@ def ingest(
 
 @njit(cache=True)
 def subset_mean(joints: np.ndarray, subset: np.ndarray) -> np.ndarray:
-    """Mean (3,) of the finite ``joints`` (25, 3) among ``subset``; of all finite joints if
+    """Mean (3,) of the finite ``joints`` (J, 3) among ``subset``; of all finite joints if
     none is; NaN if no joint is finite, m."""
     out = np.zeros(3)
-    for pick in (subset, np.arange(joints.shape[0])):
-        n = 0
-        for j in pick:
-            if not np.isnan(joints[j, 0] + joints[j, 1] + joints[j, 2]):
-                out += joints[j]
-                n += 1
-        if n:
-            return out / n
+    n = 0
+    for j in subset:
+        if not np.isnan(joints[j, 0] + joints[j, 1] + joints[j, 2]):
+            out += joints[j]
+            n += 1
+    if n:
+        return out / n
+    for j in range(joints.shape[0]):  # none of the subset: every joint (out is still 0)
+        if not np.isnan(joints[j, 0] + joints[j, 1] + joints[j, 2]):
+            out += joints[j]
+            n += 1
+    if n:
+        return out / n
     return np.full(3, np.nan)
 
 
 @njit(cache=True)
 def disagreement(P: np.ndarray) -> np.ndarray:
-    """(25,) largest distance between two sensors' positions of each joint, m (-1 where
+    """(J,) largest distance between two sensors' positions of each joint, m (-1 where
     fewer than two sensors see it)."""
     S, J = P.shape[0], P.shape[1]
     out = np.full(J, -1.0)
@@ -125,9 +133,9 @@ def believed(
     """Whom to believe on each joint where the sensors disagree: (S, len(joints)) bool.
 
     For joint ``j`` the best sensor is one that tracks it rather than infers it, then the
-    one closest to the person's predicted joint (``prediction`` (25, 3); all NaN for a new
+    one closest to the person's predicted joint (``prediction`` (J, 3); all NaN for a new
     person) plus the error of the bone to the predicted parent against its known length
-    (``bone`` (25,), m; 0 unknown); every sensor within ``threshold_m`` of the best is
+    (``bone`` (J,), m; 0 unknown); every sensor within ``threshold_m`` of the best is
     kept. A sensor that does not see the joint is never kept.
     """
     S = P.shape[0]
@@ -175,14 +183,14 @@ def merge(
     P, states
         The sensors' joints and states (module docstring).
     W
-        (S, 25) weights, 0 for a sensor not used on a joint.
+        (S, J) weights, 0 for a sensor not used on a joint.
     disputed
-        (25,) joints on which sensors disagreed: Inferred whoever was believed.
+        (J,) joints on which sensors disagreed: Inferred whoever was believed.
 
     Returns
     -------
     joints, state
-        (25, 3) fused joints (NaN where no weight) and (25,) int8 states: Tracked where a
+        (J, 3) fused joints (NaN where no weight) and (J,) int8 states: Tracked where a
         weighted sensor tracks the joint, Inferred where only inferring ones do or it was
         disputed, NotTracked where no sensor has weight.
     """
@@ -205,81 +213,20 @@ def merge(
     return joints, state
 
 
-@njit(cache=True)
-def update_track(
-    positions: np.ndarray,
-    velocity: np.ndarray,
-    last_seen: np.ndarray,
-    bone: np.ndarray,
-    parent: np.ndarray,
-    joints: np.ndarray,
-    state: np.ndarray,
-    t: float,
-    alpha: float,
-    beta: float,
-    max_gap_s: float,
-) -> None:
-    """One α-β step of a person's filtered joints, in place, and their bone lengths.
-
-    A joint fused now (finite in ``joints``) and seen before at ``last_seen < t``, at most
-    ``max_gap_s`` before:
-
-    .. math:: \\hat p = p + v\\,\\Delta t,\\quad r = z - \\hat p,\\quad
-              p \\leftarrow \\hat p + \\alpha r,\\quad v \\leftarrow v + \\beta r / \\Delta t
-
-    A joint fused for the first time, or after a longer gap (its velocity then is no
-    guide: the person may have stopped, turned, or be another), takes ``z`` with zero
-    velocity. A bone whose two ends
-    are Tracked (``state`` 2) moves its length 10 % towards the measured one (its first
-    measure taken as is).
-    """
-    for j in range(joints.shape[0]):
-        if np.isnan(joints[j, 0]):
-            continue
-        dt = t - last_seen[j]
-        if dt > max_gap_s:  # never seen (inf), or not for too long
-            for k in range(3):
-                positions[j, k], velocity[j, k] = joints[j, k], 0.0
-        elif dt > 0.0:
-            for k in range(3):
-                pred = positions[j, k] + velocity[j, k] * dt
-                r = joints[j, k] - pred
-                positions[j, k] = pred + alpha * r
-                velocity[j, k] += beta * r / dt
-        last_seen[j] = t
-    for j in range(joints.shape[0]):
-        a = parent[j]
-        if a < 0 or state[j] != 2 or state[a] != 2:
-            continue
-        dx = joints[j, 0] - joints[a, 0]
-        dy = joints[j, 1] - joints[a, 1]
-        dz = joints[j, 2] - joints[a, 2]
-        length = np.sqrt(dx * dx + dy * dy + dz * dz)
-        bone[j] = 0.9 * bone[j] + 0.1 * length if bone[j] > 0.0 else length
-
-
 @functools.cache
-def warm_up() -> None:
-    """Compile (or load from the disk cache) every kernel, once per process."""
+def warm_up(skeleton: SkeletonFormat) -> None:
+    """Compile (or load from the disk cache) every kernel for frames of ``skeleton``, once
+    per process and format, with the argument types the fusion passes (writable copies of
+    the format's index arrays; :func:`~qpavoid.fusion.association.torso_centre` passes the
+    format's read-only ``torso_ids``)."""
     with ctrl_c_deferred():  # a Ctrl-C while the kernels compile comes right after
-        P = np.zeros((2, 25, 3))
-        states = np.full((2, 25), 2, dtype=np.int8)
-        mean_gaps(P, P[0], np.arange(4))
-        subset_mean(P[0], np.arange(4))
+        n = skeleton.n_joints
+        P = np.zeros((2, n, 3))
+        states = np.full((2, n), 2, dtype=np.int8)
+        mean_gaps(P, P[0], np.array(skeleton.sided))
+        subset_mean(P[0], skeleton.torso_ids)
         ingest(P[0], states[0], np.eye(3), np.zeros(3))
         disagreement(P)
-        believed(P, states, np.arange(3), P[0], np.zeros(25), np.full(25, -1), 0.2)
-        joints, state = merge(P, states, np.ones((2, 25)), np.zeros(25, dtype=np.bool_))
-        update_track(
-            np.zeros((25, 3)),
-            np.zeros((25, 3)),
-            np.full(25, -np.inf),
-            np.zeros(25),
-            np.full(25, -1),
-            joints,
-            state,
-            1.0,
-            0.3,
-            0.05,
-            0.1,
-        )
+        disputed = np.arange(min(n, 3), dtype=np.int64)
+        believed(P, states, disputed, P[0], np.zeros(n), np.array(skeleton.parent), 0.2)
+        merge(P, states, np.ones((2, n)), np.zeros(n, dtype=np.bool_))

@@ -19,6 +19,7 @@ to believe.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -27,23 +28,8 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from qpavoid.fusion._kernels import subset_mean
-from qpavoid.human.frames import MIRROR, N_KINECT_JOINTS, JointType, TrackingState
-
-J = JointType
-
-#: Joints whose mean is a body's torso centre (the most stable part of a Kinect skeleton).
-TORSO = np.array(
-    [
-        J.SpineBase,
-        J.SpineMid,
-        J.SpineShoulder,
-        J.Neck,
-        J.ShoulderLeft,
-        J.ShoulderRight,
-        J.HipLeft,
-        J.HipRight,
-    ]
-)
+from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.skeleton import TRACKED, SkeletonFormat
 
 
 @dataclass
@@ -56,13 +42,13 @@ class PersonTrack:
     id
         Stable id, from 0 in order of first appearance.
     joints
-        (25, 3) last fused joints, base frame, m (NaN where never seen).
+        (J, 3) last fused joints, base frame, m (NaN where never seen).
     velocity
-        (25, 3) filtered joint velocities, m/s.
+        (J, 3) filtered joint velocities, m/s (zeros at first).
     last_seen
-        (25,) time each joint was last fused from some sensor, s (-inf never).
+        (J,) time each joint was last fused from some sensor, s (-inf: never).
     bone
-        (25,) running estimate of the length of the bone from each joint to its parent, m
+        (J,) running estimate of the length of the bone from each joint to its parent, m
         (0 until measured).
     seen_s
         Last time any sensor saw the person, s.
@@ -72,34 +58,48 @@ class PersonTrack:
         The sensors that saw the person during their first ``settle_s``.
     flag
         Why the person is suspect ("": not; :attr:`~qpavoid.fusion.fuser.FusedPerson.flag`).
+    skeleton
+        The format of the person's joints (default: the Kinect v2's).
     """
 
     id: int
     joints: np.ndarray
-    velocity: np.ndarray = field(default_factory=lambda: np.zeros((N_KINECT_JOINTS, 3)))
-    last_seen: np.ndarray = field(default_factory=lambda: np.full(N_KINECT_JOINTS, -np.inf))
-    bone: np.ndarray = field(default_factory=lambda: np.zeros(N_KINECT_JOINTS))
     seen_s: float = -np.inf
     born_s: float = -np.inf
     seen_by: set[str] = field(default_factory=set)
     flag: str = ""
+    skeleton: SkeletonFormat = KINECT_V2
+    # sized from ``joints``: a person has as many joints as their frames
+    velocity: np.ndarray = field(init=False)
+    last_seen: np.ndarray = field(init=False)
+    bone: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        n = self.joints.shape[0]
+        self.velocity = np.zeros((n, 3))
+        self.last_seen = np.full(n, -np.inf)
+        self.bone = np.zeros(n)
 
     def mirror(self) -> None:
         """Swap the track's left and right (its joints, velocities, times and bones)."""
+        mirror = self.skeleton.mirror
         for a in (self.joints, self.velocity, self.last_seen, self.bone):
-            a[:] = a[MIRROR]
+            a[:] = a[mirror]
 
     def centre(self) -> np.ndarray:
         """Torso centre, m (NaN if no joint is known)."""
-        return torso_centre(self.joints)
+        return torso_centre(self.joints, self.skeleton)
 
 
-def torso_centre(joints: np.ndarray) -> np.ndarray:
-    """Mean of the finite torso joints (of all finite joints if none), m; NaN if none."""
-    return subset_mean(joints, TORSO)
+def torso_centre(joints: np.ndarray, skeleton: SkeletonFormat = KINECT_V2) -> np.ndarray:
+    """Mean of the finite torso joints of ``skeleton`` (of all finite joints if none), m;
+    NaN if none."""
+    return subset_mean(joints, skeleton.torso_ids)
 
 
-def reference_rank(joints: np.ndarray, state: np.ndarray) -> tuple[bool, int]:
+def reference_rank(
+    joints: np.ndarray, state: np.ndarray, skeleton: SkeletonFormat = KINECT_V2
+) -> tuple[bool, int]:
     """Sort key of a new person's bodies: the best reference for the others first.
 
     A Kinect labels every body as if it faced the sensor, so a sensor behind the person
@@ -107,15 +107,35 @@ def reference_rank(joints: np.ndarray, state: np.ndarray) -> tuple[bool, int]:
     (``(ShoulderLeft − ShoulderRight) × up``) points towards the robot's base comes
     first, then the one with more Tracked joints.
     """
-    return (not faces_robot(joints), -int((state == TrackingState.Tracked).sum()))
+    return (not faces_robot(joints, skeleton), -int((state == TRACKED).sum()))
 
 
-def faces_robot(joints: np.ndarray) -> bool:
-    """Whether a skeleton's labelled front, ``(ShoulderLeft − ShoulderRight) × up``, points
-    towards the robot's base (False if a shoulder is missing)."""
-    left, right = joints[J.ShoulderLeft], joints[J.ShoulderRight]
+def faces_robot(joints: np.ndarray, skeleton: SkeletonFormat = KINECT_V2) -> bool:
+    """Whether a skeleton's labelled front, ``(left shoulder − right shoulder) × up``, points
+    from its chest towards the robot's base (False if a shoulder is missing, or if the
+    format names no shoulders and chest: the roles ``arm_left.shoulder``,
+    ``arm_right.shoulder`` and ``spine.chest`` of
+    :meth:`~qpavoid.human.skeleton.SkeletonFormat.group`)."""
+    roles = _facing_joints(skeleton)
+    if roles is None:
+        return False
+    left, right, chest = (joints[j] for j in roles)
     front = np.cross(left - right, [0.0, 0.0, 1.0])
-    return bool(np.dot(front, -joints[J.SpineShoulder]) > 0)  # NaN compares False
+    return bool(np.dot(front, -chest) > 0)  # NaN compares False
+
+
+@functools.cache
+def _facing_joints(skeleton: SkeletonFormat) -> tuple[int, int, int] | None:
+    """The ids of the left and right shoulders and the chest, or None if the format has
+    no such roles."""
+    groups = {g for g, _ in skeleton.groups}
+    if not {"arm_left", "arm_right", "spine"} <= groups:
+        return None
+    left, right = skeleton.group("arm_left"), skeleton.group("arm_right")
+    chest = skeleton.group("spine").get("chest")
+    if "shoulder" not in left or "shoulder" not in right or chest is None:
+        return None
+    return left["shoulder"], right["shoulder"], chest
 
 
 def associate(

@@ -31,7 +31,7 @@ class FusedPerson(NamedTuple):
         Joints in the robot base frame, m, and states (NaN and NotTracked where no
         sensor sees the joint).
     confidence
-        (25,) per joint, in [0, 1].
+        (J,) per joint, in [0, 1].
     sensors
         Names of the sensors that contributed.
     outliers

@@ -47,8 +47,9 @@ from qpavoid.fusion.association import (
 from qpavoid.fusion.config import FusionConfig
 from qpavoid.fusion.frame import FusedFrame, FusedPerson, OutlierChoice
 from qpavoid.fusion.person import fuse_person, mirror_costs, warm_up
-from qpavoid.human.frames import N_KINECT_JOINTS, HumanFrame, TrackingState
-from qpavoid.human.people import NOBODY
+from qpavoid.human.frames import HumanFrame, nobody
+from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.skeleton import NOT_TRACKED, SkeletonFormat
 from qpavoid.sensing.calibration import Calibration
 from qpavoid.sensing.per_sensor import BodyFrame, checked_arrays
 
@@ -56,20 +57,18 @@ __all__ = ["Fuser", "FusionConfig"]
 
 
 HISTORY = 4  #: frames kept per (sensor, body)
-#: Tracking states as plain ints (comparing an array with an IntEnum member is 6× slower).
-NOT_TRACKED, INFERRED, TRACKED = (int(s) for s in TrackingState)
 
 
 class _Frame(NamedTuple):
     t: float  # capture time, controller clock, s
-    joints: np.ndarray  # (25, 3) base frame, NaN where not usable
-    state: np.ndarray  # (25,) NotTracked where not usable
+    joints: np.ndarray  # (J, 3) base frame, NaN where not usable
+    state: np.ndarray  # (J,) NotTracked where not usable
     centre: tuple[float, float, float]  # torso centre, m (NaN: no joint usable)
 
 
 class _Contribution(NamedTuple):
     sensor: str
-    joints: np.ndarray  # (25, 3) base frame
+    joints: np.ndarray  # (J, 3) base frame
     state: np.ndarray
     age: float
 
@@ -83,11 +82,25 @@ class Fuser:
         The sensors; a frame from any other sensor is refused by :meth:`add`.
     config
         Fusion settings.
+    skeleton
+        The sensors' skeleton format (default: the Kinect v2's).
     """
 
-    def __init__(self, calibration: Calibration, config: FusionConfig | None = None):
+    def __init__(
+        self,
+        calibration: Calibration,
+        config: FusionConfig | None = None,
+        skeleton: SkeletonFormat = KINECT_V2,
+    ):
         self.calibration = calibration
         self.cfg = config or FusionConfig()
+        self.skeleton = skeleton
+        self._nobody = nobody(skeleton)
+        # writable copies of the format's arrays for the compiled fusion (numba types
+        # read-only arrays apart, and dispatches them slower)
+        self._parent, self._mirror, self._sided = (
+            np.array(a) for a in (skeleton.parent, skeleton.mirror, skeleton.sided)
+        )
         self.tracks: list[PersonTrack] = []
         self.counters: Counter[str] = Counter()
         # each body's newest frames (a few, so that a fusion time just before the newest
@@ -106,7 +119,7 @@ class Fuser:
             )
             for n in calibration.names
         }
-        warm_up()
+        warm_up(skeleton)
         # averaging weight and confidence by tracking state (NotTracked, Inferred, Tracked)
         self._weight = np.array([0.0, self.cfg.weight_inferred, self.cfg.weight_tracked])
         self._confidence = np.array(
@@ -121,20 +134,21 @@ class Fuser:
         CalibrationError
             If the frame's sensor is not in the calibration.
         InputError
-            If its time is not finite, its joints are not (25, 3) numbers (NaN: not
-            usable) or its states not (25,) values in {0, 1, 2} (recordings and datagrams
+            If its time is not finite, its joints are not (J, 3) numbers (NaN: not
+            usable) or its states not (J,) values in {0, 1, 2} (recordings and datagrams
             are checked so already; a frame made by hand is checked here).
         """
         cal = self.calibration[frame.sensor]
         t = finite_number(frame.t, "t (capture time, s)") + cal.time_offset_s
-        joints_in, state_in = checked_arrays(frame)
+        joints_in, state_in = checked_arrays(frame, self.skeleton)
         history = self._latest[frame.sensor].setdefault(int(frame.body), [])
         if history and t <= history[-1].t:
             self.counters["out_of_order_or_duplicate"] += 1
             return False
         rotation, translation = self._pose[frame.sensor]
         joints, state = ingest(joints_in, state_in, rotation, translation)
-        history.append(_Frame(t, joints, state, tuple(torso_centre(joints).tolist())))
+        centre = torso_centre(joints, self.skeleton)
+        history.append(_Frame(t, joints, state, tuple(centre.tolist())))
         del history[:-HISTORY]
         self._admission.heard(frame.sensor, t)
         return True
@@ -181,8 +195,8 @@ class Fuser:
             elif t - track.seen_s > cfg.person_timeout_s and self._far(track):
                 self.tracks.remove(track)
             else:
-                nobody = np.zeros(N_KINECT_JOINTS)
-                people.append(FusedPerson(track.id, NOBODY, nobody, (), (), (), track.flag))
+                unseen = np.zeros(self.skeleton.n_joints)
+                people.append(FusedPerson(track.id, self._nobody, unseen, (), (), (), track.flag))
         ages = [c.age for cs in per_track.values() for c in cs]
         return FusedFrame(float(t), tuple(people), float(t - min(ages)) if ages else -np.inf)
 
@@ -210,7 +224,9 @@ class Fuser:
         admitted, flag = self._admission.admit(centre, t, len(self.tracks))
         if not admitted:
             return None
-        track = PersonTrack(self._next_id, joints.copy(), born_s=t, flag=flag)
+        track = PersonTrack(
+            self._next_id, joints.copy(), born_s=t, flag=flag, skeleton=self.skeleton
+        )
         self._next_id += 1
         self.tracks.append(track)
         return track
@@ -242,9 +258,9 @@ class Fuser:
         recent = t - track.seen_s <= 0.5
         settling = t - track.born_s <= cfg.settle_s
         if not recent or settling:  # a new person: the best body is the others' reference
-            contributions.sort(key=lambda c: reference_rank(c.joints, c.state))
-        P = np.array([c.joints for c in contributions])  # (S, 25, 3), NaN not usable
-        S = np.array([c.state for c in contributions])  # (S, 25), NotTracked not usable
+            contributions.sort(key=lambda c: reference_rank(c.joints, c.state, self.skeleton))
+        P = np.array([c.joints for c in contributions])  # (S, J, 3), NaN not usable
+        S = np.array([c.state for c in contributions])  # (S, J), NotTracked not usable
         names = [c.sensor for c in contributions]
         if recent and settling and self._mirrored_track(track, P[0]):
             track.mirror()  # its first frames came from a sensor behind the person
@@ -258,6 +274,9 @@ class Fuser:
             track.velocity,
             track.last_seen,
             track.bone,
+            self._parent,
+            self._mirror,
+            self._sided,
             float(t),
             self._weight,
             self._confidence,
@@ -296,12 +315,13 @@ class Fuser:
         return not distance <= self.cfg.forget_beyond_m  # NaN (never placed): far
 
     def _mirrored_track(self, track: PersonTrack, reference: np.ndarray) -> bool:
-        """The track faces away from the robot while the reference body (25, 3) faces it,
+        """The track faces away from the robot while the reference body (J, 3) faces it,
         and fits it better with left and right swapped: it started from a sensor behind
         the person (operators face their robot)."""
-        if not faces_robot(reference) or faces_robot(track.joints):
+        sk = self.skeleton
+        if not faces_robot(reference, sk) or faces_robot(track.joints, sk):
             return False
-        as_is, swapped = mirror_costs(track.joints, reference)
+        as_is, swapped = mirror_costs(track.joints, reference, self._sided, self._mirror)
         return bool(swapped + self.cfg.mirror_margin_m < as_is)
 
     def _outliers(

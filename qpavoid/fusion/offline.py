@@ -6,7 +6,7 @@ clock, after each sensor's ``time_offset_s``) and fuses at every capture time, a
 cell would: each fused frame uses only frames captured by then. The result is a
 :class:`FusedRecording`: one row per person per fused time, in the base frame, with a
 per-joint ``confidence``; saved as NPZ (docs/formats.md): ``t``, ``joints``, ``state``,
-``confidence`` (N, 25) and, where several people are present, ``body`` (N,) (the
+``confidence`` (N, J) and, where several people are present, ``body`` (N,) (the
 person's stable id). One person's rows are an ordinary base-frame recording.
 """
 
@@ -20,7 +20,6 @@ import numpy as np
 
 from qpavoid.core.errors import InputError, RecordingError
 from qpavoid.fusion.fuser import Fuser, FusionConfig
-from qpavoid.human.frames import N_KINECT_JOINTS
 from qpavoid.sensing.calibration import Calibration
 from qpavoid.sensing.per_sensor import SensorRecording
 from qpavoid.sensing.recording import Recording
@@ -40,10 +39,10 @@ class FusedRecording:
     body
         (N,) the person's stable id.
     joints, state
-        (N, 25, 3) base-frame joints, m (NaN where no sensor saw the joint), and (N, 25)
+        (N, J, 3) base-frame joints, m (NaN where no sensor saw the joint), and (N, J)
         tracking states.
     confidence
-        (N, 25) per-joint confidence in [0, 1].
+        (N, J) per-joint confidence in [0, 1].
     """
 
     t: np.ndarray
@@ -83,6 +82,7 @@ def fuse_recordings(
     for rec in recordings:
         calibration.check_names(rec.sensors)
     fuser = Fuser(calibration, config)
+    n = fuser.skeleton.n_joints
     frames = [f for rec in recordings for f in rec.frames()]
     clock = [f.t + calibration[f.sensor].time_offset_s for f in frames]
     order = np.argsort(clock, kind="stable")
@@ -100,9 +100,9 @@ def fuse_recordings(
     return FusedRecording(
         np.array([r[0] for r in rows]),
         np.array([r[1] for r in rows], dtype=np.int64),
-        np.array([r[2] for r in rows]).reshape(-1, N_KINECT_JOINTS, 3),
-        np.array([r[3] for r in rows], dtype=np.int8).reshape(-1, N_KINECT_JOINTS),
-        np.array([r[4] for r in rows]).reshape(-1, N_KINECT_JOINTS),
+        np.array([r[2] for r in rows]).reshape(-1, n, 3),
+        np.array([r[3] for r in rows], dtype=np.int8).reshape(-1, n),
+        np.array([r[4] for r in rows]).reshape(-1, n),
     )
 
 

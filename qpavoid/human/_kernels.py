@@ -12,11 +12,36 @@ import functools
 import numpy as np
 from numba import njit
 
-from qpavoid.core.compiling import ctrl_c_deferred
+from qpavoid.core import geometry
+from qpavoid.core.compiling import ctrl_c_deferred, recompile_if_stale
+from qpavoid.core.geometry import TINY
+from qpavoid.human.skeleton import SkeletonFormat
 
-__all__ = ["capsules", "fastest_joint", "largest_per_part", "tracked_body", "warm_up"]
+__all__ = [
+    "capsules",
+    "fastest_joint",
+    "largest_per_part",
+    "point_segment_distance",
+    "tracked_body",
+    "warm_up",
+]
 
-TINY = 1e-12  #: a segment shorter than this is its end point, m (as geometry.TINY)
+
+@njit(cache=True, inline="always")  # compiled into the capsules' loop
+def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """Distance from the point ``p`` (3,) to the segment ``[a, b]``, m.
+
+    The closest point is ``a + s (b − a)`` with ``s = clip((p − a)·(b − a) / ‖b − a‖², 0, 1)``;
+    a segment shorter than :data:`~qpavoid.core.geometry.TINY` is its end point ``a``. NaN
+    if any coordinate is.
+    """
+    ab, ap = b - a, p - a
+    s = (ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / max(
+        ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2], TINY
+    )
+    s = min(max(s, 0.0), 1.0)
+    d = ap - s * ab
+    return np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
 
 
 @njit(cache=True)
@@ -86,14 +111,7 @@ def capsules(
     reach = np.zeros(K)
     for r in range(reach_pairs.shape[0]):
         k, j = reach_pairs[r, 0], reach_pairs[r, 1]
-        a, b, p = segments[k, 0], segments[k, 1], clean[j]
-        ab, ap = b - a, p - a
-        s = (ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / max(
-            ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2], TINY
-        )
-        s = min(max(s, 0.0), 1.0)
-        d = ap - s * ab
-        out = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) - capsule_radii[k]
+        out = point_segment_distance(clean[j], segments[k, 0], segments[k, 1]) - capsule_radii[k]
         if out > reach[k]:  # NaN compares False: sticks out by 0
             reach[k] = out
     return points, point_valid, segments, segment_valid, reach
@@ -101,8 +119,8 @@ def capsules(
 
 @njit(cache=True)
 def largest_per_part(members: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """(K,) the largest of each part's ``values`` (25,) ≥ 0 over its joints ``members``
-    (K, 25) bool; 0 for a part with none."""
+    """(K,) the largest of each part's ``values`` (J,) ≥ 0 over its joints ``members``
+    (K, J) bool; 0 for a part with none."""
     out = np.zeros(members.shape[0])
     for k in range(members.shape[0]):
         for j in range(members.shape[1]):
@@ -114,7 +132,7 @@ def largest_per_part(members: np.ndarray, values: np.ndarray) -> np.ndarray:
 @njit(cache=True)
 def fastest_joint(members: np.ndarray, velocity: np.ndarray) -> np.ndarray:
     """(K, 3) each part's velocity: that of its fastest joint (the first of equals; joint 0
-    for a part with none), from the joints' ``velocity`` (25, 3), m/s."""
+    for a part with none), from the joints' ``velocity`` (J, 3), m/s."""
     out = np.empty((members.shape[0], 3))
     for k in range(members.shape[0]):
         best, pick = -1.0, 0
@@ -153,23 +171,20 @@ def tracked_body(
 
 
 @functools.cache
-def warm_up() -> None:
-    """Compile (or load from the disk cache) every kernel, once per process."""
+def warm_up(skeleton: SkeletonFormat) -> None:
+    """Compile (or load from the disk cache) every kernel for frames of ``skeleton``, once
+    per process and format: the argument types :class:`~qpavoid.human.body.BodyModel`
+    passes (a frame, the joints' uncertainty and velocity, the model's index arrays)."""
     with ctrl_c_deferred():  # a Ctrl-C while the kernels compile comes right after
-        z = np.zeros((25, 3))
-        state = np.full(25, 2, dtype=np.int8)
-        ids = np.arange(3, dtype=np.int64)
-        capsules(
-            z,
-            state,
-            ids,
-            np.zeros((1, 2), dtype=np.int64),
-            np.zeros((1, 2), dtype=np.int64),
-            np.zeros((1, 2), dtype=np.int64),
-            np.ones(1),
-        )
-        members = np.ones((2, 25), dtype=np.bool_)
-        largest_per_part(members, np.zeros(25))
-        fastest_joint(members, z)
+        n = skeleton.n_joints
+        z = np.zeros((n, 3))
+        state = np.full(n, 2, dtype=np.int8)
+        ids = np.arange(min(n, 3), dtype=np.int64)
         pairs = np.zeros((1, 2), dtype=np.int64)
-        tracked_body(z, state, np.zeros(25), z, ids, pairs, pairs, pairs, np.ones(1), members)
+        members = np.ones((2, n), dtype=np.bool_)
+        capsules(z, state, ids, pairs, pairs, pairs, np.ones(1))
+        largest_per_part(members, np.zeros(n))
+        fastest_joint(members, z)
+        tracked_body(z, state, np.zeros(n), z, ids, pairs, pairs, pairs, np.ones(1), members)
+        for kernel in (point_segment_distance, capsules, tracked_body):
+            recompile_if_stale(kernel, geometry)  # they compile geometry.TINY in

@@ -1,36 +1,46 @@
-"""The human: Kinect v2 skeleton joints and the paper's upper-body model (Sect. 4).
+"""The human: the paper's upper-body model (Sect. 4) on a skeleton, as data.
 
-The Kinect v2 gives 25 joints, each with a tracking state. The paper keeps the upper
-body: 8 parts, 21 points (13 Kinect joints plus one mid-point per part). Each part is
-covered by spheres of one radius centred on its points (eq. 1) and, for the exact method,
-by one capsule along its chain of joints.
+A body model is parts of a skeleton format's joints (:class:`BodyPart`): each part is
+covered by spheres of one radius centred on its points (eq. 1) and, for the exact
+method, by one capsule along its chain of joints. :class:`BodyModel` is any such model
+(:meth:`BodyModel.load` reads one from a TOML file); :class:`KinectHuman` is the paper's
+on the Kinect v2 (``formats/kinect_v2_body.toml``): 8 parts, 21 points (13 joints plus
+one mid-point per part).
 
 A joint is *usable* when its coordinates are finite and its state is not NotTracked
 (Inferred joints are used, as the Kinect SDK's consumers usually do). A mid-point is
 usable when both its ends are. A part whose points are all unusable is left out of the
 distances (distance +inf), so a lost limb never becomes a NaN command; the controller's
-:class:`~qpavoid.perception.tracker.Tracker` keeps a lost joint at its last known position instead,
-with an uncertainty radius that :meth:`KinectHuman.geometry` adds to the part's radius.
+:class:`~qpavoid.perception.tracker.Tracker` keeps a lost joint at its last known position
+instead, with an uncertainty radius that :meth:`BodyModel.geometry` adds to the part's
+radius.
 
-The fingers (HandTip, Thumb) are the hands' *reach* joints: not model points (the paper's
-21 points and spheres stay as published), but the capsule method widens a hand's capsule
-by however far they stick out of it.
+A part's *reach* joints (a hand's fingers: HandTip, Thumb) are not model points (the
+paper's 21 points and spheres stay as published), but the capsule method widens the
+part's capsule by however far they stick out of it.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 
 from qpavoid.core.compiling import kernel_input
+from qpavoid.core.errors import SkeletonFormatError
 from qpavoid.human._kernels import tracked_body, warm_up
-from qpavoid.human.frames import N_KINECT_JOINTS, HumanFrame, JointType, TrackingState
+from qpavoid.human.frames import HumanFrame
+from qpavoid.human.kinect_v2 import KINECT_V2, JointType, TrackingState
+from qpavoid.human.skeleton import FORMATS_DIR, SkeletonFormat, read_toml
 
 __all__ = [
-    "N_KINECT_JOINTS",
+    "KINECT_V2_BODY_FILE",
+    "KINECT_V2_BODY_PARTS",
     "UPPER_BODY",
+    "BodyModel",
     "BodyPart",
     "HumanFrame",
     "HumanGeometry",
@@ -39,38 +49,35 @@ __all__ = [
     "TrackingState",
 ]
 
+#: A joint of a part: its name in the skeleton format, or its id (row).
+Joint = str | int
 
-J = JointType
+#: The paper's model on the Kinect v2.
+KINECT_V2_BODY_FILE = FORMATS_DIR / "kinect_v2_body.toml"
 
-#: Order of the Kinect joints among the model points (spine up, then left and right arm).
-POINT_ORDER = (
-    J.SpineBase,
-    J.SpineMid,
-    J.SpineShoulder,
-    J.Neck,
-    J.Head,
-    J.ShoulderLeft,
-    J.ElbowLeft,
-    J.WristLeft,
-    J.HandLeft,
-    J.ShoulderRight,
-    J.ElbowRight,
-    J.WristRight,
-    J.HandRight,
+_BODY_KEYS = ("format", "points", "parts")
+_PART_KEYS = (
+    "name",
+    "chain",
+    "mid",
+    "sphere_radius_m",
+    "capsule_radius_m",
+    "reach",
+    "moves_with_body",
 )
 
 
 @dataclass(frozen=True)
 class BodyPart:
-    """One part of the upper-body model.
+    """One part of an upper-body model.
 
     Attributes
     ----------
     name
         Part name.
     chain
-        Kinect joints along the part, proximal first. The capsule runs between the first
-        and the last usable joint of the chain.
+        Joints along the part, proximal first (names in the skeleton format, or ids). The
+        capsule runs between the first and the last usable joint of the chain.
     mid
         The two joints whose mid-point is the part's extra point (paper Fig. 3).
     sphere_radius_m
@@ -80,58 +87,19 @@ class BodyPart:
     reach
         Joints beyond the chain that the capsule must cover (a hand's HandTip and Thumb):
         the capsule is widened, each frame, by how far they stick out of it.
+    moves_with_body
+        The part moves with the body, not the arm (the head and trunk of a seated
+        person): speed and separation monitoring gives it the body's approach speed.
+        Default False: an arm's part, the faster case.
     """
 
     name: str
-    chain: tuple[JointType, ...]
-    mid: tuple[JointType, JointType]
+    chain: tuple[Joint, ...]
+    mid: tuple[Joint, Joint]
     sphere_radius_m: float
     capsule_radius_m: float
-    reach: tuple[JointType, ...] = ()
-
-
-def _arm(
-    side: str,
-    shoulder: JointType,
-    elbow: JointType,
-    wrist: JointType,
-    hand: JointType,
-    fingers: tuple[JointType, JointType],
-) -> tuple[BodyPart, ...]:
-    # Sphere radii cover the capsule between consecutive points (spacing h):
-    # r_sphere >= sqrt(r_capsule^2 + (h/2)^2), with h about 0.14 m (upper arm),
-    # 0.125 m (forearm) and 0.045 m (hand) for an adult skeleton.
-    return (
-        BodyPart(f"{side}_upper_arm", (shoulder, elbow), (shoulder, elbow), 0.09, 0.055),
-        BodyPart(f"{side}_forearm", (elbow, wrist), (elbow, wrist), 0.08, 0.045),
-        BodyPart(f"{side}_hand", (wrist, hand), (wrist, hand), 0.06, 0.05, fingers),
-    )
-
-
-#: The paper's eight parts, in the order of the distance tables' columns.
-UPPER_BODY: tuple[BodyPart, ...] = (
-    BodyPart("head", (J.Neck, J.Head), (J.Neck, J.Head), 0.11, 0.10),
-    # The trunk's extra point is on the chest (SpineShoulder-SpineMid), the part of the
-    # trunk at the height of the robot's links when the operator sits at the table.
-    BodyPart(
-        "trunk",
-        (J.SpineShoulder, J.SpineMid, J.SpineBase),
-        (J.SpineShoulder, J.SpineMid),
-        0.17,
-        0.15,
-    ),
-    *_arm(
-        "left", J.ShoulderLeft, J.ElbowLeft, J.WristLeft, J.HandLeft, (J.HandTipLeft, J.ThumbLeft)
-    ),
-    *_arm(
-        "right",
-        J.ShoulderRight,
-        J.ElbowRight,
-        J.WristRight,
-        J.HandRight,
-        (J.HandTipRight, J.ThumbRight),
-    ),
-)
+    reach: tuple[Joint, ...] = ()
+    moves_with_body: bool = False
 
 
 @dataclass(frozen=True)
@@ -186,69 +154,180 @@ class HumanGeometry:
 
 
 @dataclass(frozen=True)
-class KinectHuman:
-    """The upper-body model on top of a Kinect v2 skeleton.
+class BodyModel:
+    """An upper-body model on a skeleton format.
 
     Parameters
     ----------
     parts
-        The body parts, in table-column order (default: the paper's eight).
+        The body parts, in table-column order.
+    skeleton
+        The skeleton format their joints belong to.
+    point_order
+        Joints that are model points, in point order; a part's chain joint missing here
+        comes after them, in format order. The parts' mid-points follow, in part order.
 
     Attributes
     ----------
     joint_ids
-        (13,) Kinect joints used as points, in point order.
+        (P,) the joints used as points, in point order.
     point_part
         (M, K) bool, True where point m belongs to part k.
+
+    Raises
+    ------
+    SkeletonFormatError
+        For a part that names a joint the format does not have, two parts of one name, or
+        a radius that is not a positive number.
     """
 
-    parts: tuple[BodyPart, ...] = UPPER_BODY
-    joint_ids: np.ndarray = field(init=False, repr=False)
-    point_part: np.ndarray = field(init=False, repr=False)
-    _mid_ids: np.ndarray = field(init=False, repr=False)
-    _chains: np.ndarray = field(init=False, repr=False)
-    _members: np.ndarray = field(init=False, repr=False)
-    _reach: np.ndarray = field(init=False, repr=False)
-    _radii: np.ndarray = field(init=False, repr=False)
+    parts: tuple[BodyPart, ...]
+    skeleton: SkeletonFormat
+    point_order: tuple[Joint, ...] = ()
+    # derived in __post_init__ (not compared: two models of the same parts are equal)
+    joint_ids: np.ndarray = field(init=False, repr=False, compare=False)
+    point_part: np.ndarray = field(init=False, repr=False, compare=False)
+    _mid_ids: np.ndarray = field(init=False, repr=False, compare=False)
+    _chains: np.ndarray = field(init=False, repr=False, compare=False)
+    _members: np.ndarray = field(init=False, repr=False, compare=False)
+    _reach: np.ndarray = field(init=False, repr=False, compare=False)
+    _radii: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        members = np.zeros((len(self.parts), N_KINECT_JOINTS), dtype=bool)
-        for k, p in enumerate(self.parts):
-            members[k, [int(j) for j in (*p.chain, *p.mid, *p.reach)]] = True
-        object.__setattr__(self, "_members", members)
-        object.__setattr__(self, "_radii", np.array([p.capsule_radius_m for p in self.parts]))
-        warm_up()
-        reach = [(k, int(j)) for k, p in enumerate(self.parts) for j in p.reach]
-        object.__setattr__(self, "_reach", np.array(reach, dtype=int).reshape(-1, 2))
-        used = {int(j) for p in self.parts for j in (*p.chain, *p.mid)}
-        joints = [int(j) for j in POINT_ORDER if int(j) in used] + sorted(used - set(POINT_ORDER))
-        n_points = len(joints) + len(self.parts)
-        member = np.zeros((n_points, len(self.parts)), dtype=bool)
-        for k, p in enumerate(self.parts):
-            for j in p.chain:
-                member[joints.index(int(j)), k] = True
+        parts, skeleton = self.parts, self.skeleton
+        self._check_parts()
+        chains = [[self._joint(j, f"{p.name}.chain") for j in p.chain] for p in parts]
+        mids = [[self._joint(j, f"{p.name}.mid") for j in p.mid] for p in parts]
+        reaches = [[self._joint(j, f"{p.name}.reach") for j in p.reach] for p in parts]
+        order = [self._joint(j, "point_order") for j in self.point_order]
+        members = np.zeros((len(parts), skeleton.n_joints), dtype=bool)
+        for k in range(len(parts)):
+            members[k, [*chains[k], *mids[k], *reaches[k]]] = True
+        used = {j for k in range(len(parts)) for j in (*chains[k], *mids[k])}
+        joints = [j for j in order if j in used] + sorted(used - set(order))
+        member = np.zeros((len(joints) + len(parts), len(parts)), dtype=bool)
+        for k in range(len(parts)):
+            for j in chains[k]:
+                member[joints.index(j), k] = True
             member[len(joints) + k, k] = True
-        object.__setattr__(self, "joint_ids", np.array(joints))
-        object.__setattr__(self, "point_part", member)
-        object.__setattr__(
-            self, "_mid_ids", np.array([[int(a), int(b)] for a, b in (p.mid for p in self.parts)])
+        width = max(len(c) for c in chains)
+        padded = [c + [c[-1]] * (width - len(c)) for c in chains]
+        reach = [(k, j) for k in range(len(parts)) for j in reaches[k]]
+        for name, value in (
+            ("_members", members),
+            ("_radii", np.array([p.capsule_radius_m for p in parts], dtype=np.float64)),
+            ("_reach", np.array(reach, dtype=np.int64).reshape(-1, 2)),
+            ("joint_ids", np.array(joints, dtype=np.int64)),
+            ("point_part", member),
+            ("_mid_ids", np.array(mids, dtype=np.int64)),
+            ("_chains", np.array(padded, dtype=np.int64)),
+        ):
+            object.__setattr__(self, name, value)
+        warm_up(skeleton)
+
+    def _check_parts(self) -> None:
+        if not self.parts:
+            raise SkeletonFormatError("a body model needs parts", name="parts", value=self.parts)
+        names = [p.name for p in self.parts]
+        for p in self.parts:
+            if not isinstance(p.name, str) or not p.name.strip():
+                raise SkeletonFormatError(
+                    f"a part's name must be a non-empty string, got {p.name!r}",
+                    name="parts",
+                    value=p.name,
+                )
+            if names.count(p.name) > 1:
+                raise SkeletonFormatError(
+                    f"two parts are called {p.name!r}", name="parts", value=names
+                )
+            for key in ("sphere_radius_m", "capsule_radius_m"):
+                r = getattr(p, key)
+                if not isinstance(r, (int, float)) or isinstance(r, bool) or not r > 0:
+                    raise SkeletonFormatError(
+                        f"part {p.name!r}: {key} must be a number > 0, m, got {r!r}",
+                        name=f"{p.name}.{key}",
+                        value=r,
+                    )
+                if not math.isfinite(r):
+                    raise SkeletonFormatError(
+                        f"part {p.name!r}: {key} is {r!r}", name=f"{p.name}.{key}", value=r
+                    )
+            if not p.chain or len(p.mid) != 2:
+                raise SkeletonFormatError(
+                    f"part {p.name!r} needs a chain of joints and two mid joints, got chain "
+                    f"{p.chain!r} and mid {p.mid!r}",
+                    name=f"{p.name}.chain",
+                    value=(p.chain, p.mid),
+                )
+
+    def _joint(self, joint: Joint, key: str) -> int:
+        """The id of ``joint`` (a name or an id) in the format, or SkeletonFormatError."""
+        skeleton = self.skeleton
+        if isinstance(joint, str) and joint in skeleton.joints:
+            return skeleton.index(joint)
+        is_id = isinstance(joint, (int, np.integer)) and not isinstance(joint, bool)
+        if is_id and 0 <= int(joint) < skeleton.n_joints:
+            return int(joint)
+        raise SkeletonFormatError(
+            f"{key}: {joint!r} is not a joint of the {skeleton.name} format; its joints are "
+            f"{list(skeleton.joints)}",
+            name=key,
+            value=joint,
         )
-        width = max(len(p.chain) for p in self.parts)
-        object.__setattr__(
-            self,
-            "_chains",
-            np.array(
-                [
-                    [int(j) for j in p.chain] + [int(p.chain[-1])] * (width - len(p.chain))
-                    for p in self.parts
-                ]
-            ),
-        )
+
+    @classmethod
+    def load(cls, path: str | Path, skeleton: SkeletonFormat | None = None) -> BodyModel:
+        """The body model of the TOML file at ``path`` (``formats/kinect_v2_body.toml``
+        shows the keys, each with its meaning).
+
+        Parameters
+        ----------
+        path
+            The body file; its ``format`` key names the skeleton format, a file
+            ``<format>.toml`` beside it.
+        skeleton
+            That format, if already loaded (it must have the name the file gives).
+
+        Raises
+        ------
+        SkeletonFormatError
+            For a file that cannot be read, is not TOML, lacks a key or has an unknown
+            one, or names a joint its format does not have; the message names the file.
+        """
+        points, parts, format_name = read_body_file(path)
+        if skeleton is None:
+            try:
+                skeleton = SkeletonFormat.load(Path(path).with_name(f"{format_name}.toml"))
+            except SkeletonFormatError as exc:
+                raise SkeletonFormatError(
+                    f"{path}: its format {format_name!r}: {exc}",
+                    path=path,
+                    name=f"format: {exc.name}" if exc.name else "format",
+                    value=exc.value if exc.name else format_name,
+                ) from None
+        if skeleton.name != format_name:
+            raise SkeletonFormatError(
+                f"{path}: the body is on the {format_name!r} format, not {skeleton.name!r}",
+                path=path,
+                name="format",
+                value=format_name,
+            )
+        try:
+            return cls(parts, skeleton, points)
+        except SkeletonFormatError as exc:
+            raise SkeletonFormatError(
+                f"{path}: {exc}", path=path, name=exc.name, value=exc.value
+            ) from None
 
     @property
     def part_names(self) -> tuple[str, ...]:
         """Names of the parts, in column order."""
         return tuple(p.name for p in self.parts)
+
+    @property
+    def body_parts(self) -> tuple[str, ...]:
+        """Names of the parts that move with the body (:attr:`BodyPart.moves_with_body`)."""
+        return tuple(p.name for p in self.parts if p.moves_with_body)
 
     @property
     def sphere_radii(self) -> np.ndarray:
@@ -266,11 +345,11 @@ class KinectHuman:
         return self.point_part.shape[0]
 
     def points(self, joints: object, state: object = None) -> np.ndarray:
-        """The model points (21, 3) from (25, 3) Kinect joints, m.
+        """The model points (M, 3) from a frame's (J, 3) joints, m.
 
-        Rows are the 13 joints (SpineBase, SpineMid, SpineShoulder, Neck, Head, then
-        Shoulder, Elbow, Wrist, Hand left and right) followed by the 8 mid-points in part
-        order. Unusable points are NaN.
+        Rows are the joints of :attr:`joint_ids` (for the paper's model SpineBase,
+        SpineMid, SpineShoulder, Neck, Head, then Shoulder, Elbow, Wrist, Hand left and
+        right) followed by the mid-points in part order. Unusable points are NaN.
         """
         return self.geometry(joints, state).points
 
@@ -278,7 +357,7 @@ class KinectHuman:
         self, frame: HumanFrame, joint_radius: np.ndarray, joint_velocity: np.ndarray
     ) -> tuple[HumanGeometry, np.ndarray]:
         """A tracker's frame (:class:`~qpavoid.perception.tracker.Perceived`) in one compiled call:
-        :meth:`geometry` with ``joint_radius`` (25,), m, and each part's velocity (K, 3),
+        :meth:`geometry` with ``joint_radius`` (J,), m, and each part's velocity (K, 3),
         m/s, that of its fastest joint (:func:`~qpavoid.perception.tracker.part_velocities`).
 
         Each part's capsule runs between the first and last usable joints of its chain;
@@ -299,7 +378,7 @@ class KinectHuman:
         return geometry, velocity
 
     def part_joints(self) -> np.ndarray:
-        """(K, 25) bool: the Kinect joints of each part (chain, mid-point ends and reach)."""
+        """(K, J) bool: the joints of each part (chain, mid-point ends and reach)."""
         return self._members.copy()
 
     def geometry(
@@ -308,10 +387,120 @@ class KinectHuman:
         """Points, capsules and their usability at one frame.
 
         ``joints`` is a :class:`~qpavoid.human.frames.HumanFrame` (already checked: used as is)
-        or (25, 3) joints with optional (25,) states (checked here). ``joint_radius``
-        (25,), m, is each joint's position uncertainty (default 0); a part's
+        or (J, 3) joints with optional (J,) states (checked here). ``joint_radius``
+        (J,), m, is each joint's position uncertainty (default 0); a part's
         ``part_margin`` is the largest of its joints'.
         """
-        frame = HumanFrame.check(joints, state)
-        radius = np.zeros(N_KINECT_JOINTS) if joint_radius is None else joint_radius
-        return self.tracked_geometry(frame, radius, np.zeros((N_KINECT_JOINTS, 3)))[0]
+        frame = HumanFrame.check(joints, state, self.skeleton)
+        n = self.skeleton.n_joints
+        radius = np.zeros(n) if joint_radius is None else joint_radius
+        return self.tracked_geometry(frame, radius, np.zeros((n, 3)))[0]
+
+
+def read_body_file(path: str | Path) -> tuple[tuple[str, ...], tuple[BodyPart, ...], str]:
+    """The point order, the parts and the format's name of the body file at ``path``.
+
+    Raises
+    ------
+    SkeletonFormatError
+        For a file that cannot be read, is not TOML, or lacks a key or has an unknown one
+        (joint names are checked against the format by :class:`BodyModel`).
+    """
+    data = read_toml(path)
+
+    def fail(message: str, key: str, value: object) -> SkeletonFormatError:
+        return SkeletonFormatError(f"{path}: {message}", path=path, name=key, value=value)
+
+    unknown = [k for k in data if k not in _BODY_KEYS]
+    if unknown:
+        raise fail(
+            f"unknown key {unknown[0]}; the keys are {', '.join(_BODY_KEYS)}",
+            unknown[0],
+            data[unknown[0]],
+        )
+    format_name, points, rows = data.get("format"), data.get("points", []), data.get("parts")
+    if not isinstance(format_name, str):
+        raise fail(
+            f"format must name a skeleton format, got {format_name!r}", "format", format_name
+        )
+    if not isinstance(points, list) or not all(isinstance(p, str) for p in points):
+        raise fail(f"points must be an array of joint names, got {points!r}", "points", points)
+    if not isinstance(rows, list) or not rows:
+        raise fail(f"parts must be an array of tables ([[parts]]), got {rows!r}", "parts", rows)
+    parts = []
+    for k, row in enumerate(rows):
+        if not isinstance(row, dict):
+            raise fail(f"parts[{k}] must be a table, got {row!r}", f"parts[{k}]", row)
+        unknown = [key for key in row if key not in _PART_KEYS]
+        missing = [key for key in _PART_KEYS[:5] if key not in row]
+        if unknown or missing:
+            key = (unknown or missing)[0]
+            what = "unknown key" if unknown else "missing key"
+            raise fail(
+                f"parts[{k}]: {what} {key}; the keys are {', '.join(_PART_KEYS)}",
+                f"parts[{k}].{key}",
+                row.get(key),
+            )
+        for key in ("chain", "mid", "reach"):
+            joints = row.get(key, [])
+            if not isinstance(joints, list) or not all(isinstance(j, str) for j in joints):
+                raise fail(
+                    f"parts[{k}].{key} must be an array of joint names, got {joints!r}",
+                    f"parts[{k}].{key}",
+                    joints,
+                )
+        moves = row.get("moves_with_body", False)
+        if not isinstance(moves, bool):
+            raise fail(
+                f"parts[{k}].moves_with_body must be true or false, got {moves!r}",
+                f"parts[{k}].moves_with_body",
+                moves,
+            )
+        parts.append(
+            BodyPart(
+                row["name"],
+                tuple(row["chain"]),
+                tuple(row["mid"]),
+                row["sphere_radius_m"],
+                row["capsule_radius_m"],
+                tuple(row.get("reach", ())),
+                moves,
+            )
+        )
+    return tuple(points), tuple(parts), format_name
+
+
+_POINTS, _PARTS, _FORMAT = read_body_file(KINECT_V2_BODY_FILE)
+if KINECT_V2.name != _FORMAT:
+    raise SkeletonFormatError(
+        f"{KINECT_V2_BODY_FILE}: the body is on the {_FORMAT!r} format, not {KINECT_V2.name!r}",
+        path=KINECT_V2_BODY_FILE,
+        name="format",
+        value=_FORMAT,
+    )
+
+#: The paper's eight parts on the Kinect v2 (``formats/kinect_v2_body.toml``), in the order
+#: of the distance tables' columns.
+UPPER_BODY: tuple[BodyPart, ...] = _PARTS
+#: Those of the paper's parts that move with the body, not the arm (the head and the trunk):
+#: speed and separation monitoring's default ``body_parts``.
+KINECT_V2_BODY_PARTS: tuple[str, ...] = tuple(p.name for p in UPPER_BODY if p.moves_with_body)
+
+
+@dataclass(frozen=True)
+class KinectHuman(BodyModel):
+    """The paper's upper-body model on a Kinect v2 skeleton (``formats/kinect_v2_body.toml``).
+
+    Parameters
+    ----------
+    parts
+        The body parts, in table-column order (default: the paper's eight).
+    skeleton
+        The skeleton format (default: the Kinect v2's).
+    point_order
+        The joints that are model points, in point order (default: the file's).
+    """
+
+    parts: tuple[BodyPart, ...] = UPPER_BODY
+    skeleton: SkeletonFormat = KINECT_V2
+    point_order: tuple[Joint, ...] = _POINTS

@@ -13,15 +13,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import NamedTuple
 
-import numpy as np
-
 from qpavoid.core.errors import InputError
-from qpavoid.human.frames import HumanFrame
+from qpavoid.human.frames import HumanFrame, nobody
 
 __all__ = ["NOBODY", "People", "as_people", "same_frames"]
 
-#: Nobody in view: a frame with no usable joint (every distance +inf).
-NOBODY = HumanFrame(np.full((25, 3), np.nan), np.zeros(25, dtype=np.int8))
+#: Nobody in view: a Kinect v2 frame with no usable joint (every distance +inf);
+#: :func:`~qpavoid.human.frames.nobody` for another format.
+NOBODY = nobody()
 
 
 class People(NamedTuple):

@@ -1,7 +1,10 @@
-"""Synthetic Kinect skeletons: a seated operator and arm reaches.
+"""Synthetic skeletons: a seated operator and arm reaches.
 
 The generated scenarios (``test1``, ``test2``, ``free``, random approaches), the tests
-and the benchmarks need plausible (25, 3) Kinect skeletons in the robot base frame. The
+and the benchmarks need plausible (J, 3) skeletons in the robot base frame (by default
+Kinect v2 ones). Joints are placed by role (the format's groups ``spine``, ``arm_left``,
+``arm_right``, ``leg_left``, ``leg_right``: :meth:`~qpavoid.human.skeleton.SkeletonFormat.group`),
+never by index. The
 operator sits at the table facing the robot (the paper's layout, Sect. 2): the robot base
 is on the table top (z = 0), the operator's chest is ``Operator.distance_m`` in front of
 it along +y, and the arms reach with a two-link inverse kinematics so segment lengths
@@ -16,28 +19,30 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from qpavoid.core.geometry import unit
-from qpavoid.human.body import JointType as J
+from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.skeleton import SkeletonFormat
 
-#: Per-side joint chains (shoulder, elbow, wrist, hand, hand tip, thumb).
-ARM = {
-    "left": (J.ShoulderLeft, J.ElbowLeft, J.WristLeft, J.HandLeft, J.HandTipLeft, J.ThumbLeft),
-    "right": (
-        J.ShoulderRight,
-        J.ElbowRight,
-        J.WristRight,
-        J.HandRight,
-        J.HandTipRight,
-        J.ThumbRight,
-    ),
-}
-#: Per-side leg chains (hip, knee, ankle, foot).
-LEG = {
-    "left": (J.HipLeft, J.KneeLeft, J.AnkleLeft, J.FootLeft),
-    "right": (J.HipRight, J.KneeRight, J.AnkleRight, J.FootRight),
-}
+#: The roles of an arm's joints, in the order of :func:`arm` (each a role of the format's
+#: ``arm_<side>`` group).
+ARM_ROLES = ("shoulder", "elbow", "wrist", "hand", "hand_tip", "thumb")
+#: The roles of a leg's joints, in the order of :func:`leg`.
+LEG_ROLES = ("hip", "knee", "ankle", "foot")
 
-#: Joints that move with the upper body when the operator leans.
-UPPER = (J.SpineShoulder, J.Neck, J.Head, *ARM["left"], *ARM["right"])
+
+def arm(skeleton: SkeletonFormat, side: str) -> tuple[int, ...]:
+    """The ``side`` arm's joint ids: shoulder, elbow, wrist, hand, hand tip, thumb."""
+    group = skeleton.group(f"arm_{side}")
+    return tuple(group[role] for role in ARM_ROLES)
+
+
+def leg(skeleton: SkeletonFormat, side: str) -> tuple[int, ...]:
+    """The ``side`` leg's joint ids: hip, knee, ankle, foot."""
+    group = skeleton.group(f"leg_{side}")
+    return tuple(group[role] for role in LEG_ROLES)
+
+
+#: Per-side Kinect v2 arm joints (shoulder, elbow, wrist, hand, hand tip, thumb): :func:`arm`.
+ARM = {side: arm(KINECT_V2, side) for side in ("left", "right")}
 
 
 @dataclass(frozen=True)
@@ -54,6 +59,8 @@ class Operator:
         Half the distance between the shoulders.
     max_lean_m
         How far the upper body may lean towards an out-of-reach target.
+    skeleton
+        The skeleton format of the frames made (default: the Kinect v2's).
     """
 
     x_m: float = 0.15
@@ -63,26 +70,32 @@ class Operator:
     hand_m: float = 0.08
     shoulder_half_width_m: float = 0.18
     max_lean_m: float = 0.35
+    skeleton: SkeletonFormat = KINECT_V2
+
+    def arm(self, side: str) -> tuple[int, ...]:
+        """The ``side`` arm's joint ids (:func:`arm`)."""
+        return arm(self.skeleton, side)
 
     def rest(self) -> np.ndarray:
-        """(25, 3) skeleton at rest: seated upright, forearms on the table, hands in front."""
+        """(J, 3) skeleton at rest: seated upright, forearms on the table, hands in front."""
         x, y = self.x_m, self.distance_m
-        j = np.zeros((25, 3))
-        j[J.SpineBase] = (x, y + 0.05, -0.20)
-        j[J.SpineMid] = (x, y + 0.02, 0.08)
-        j[J.SpineShoulder] = (x, y, 0.32)
-        j[J.Neck] = (x, y, 0.40)
-        j[J.Head] = (x, y - 0.02, 0.52)
+        spine = self.skeleton.group("spine")
+        j = np.zeros((self.skeleton.n_joints, 3))
+        j[spine["base"]] = (x, y + 0.05, -0.20)
+        j[spine["mid"]] = (x, y + 0.02, 0.08)
+        j[spine["chest"]] = (x, y, 0.32)
+        j[spine["neck"]] = (x, y, 0.40)
+        j[spine["head"]] = (x, y - 0.02, 0.52)
         for side, sign in (("left", 1.0), ("right", -1.0)):
             # Facing -y, the operator's left is +x. Hands rest on the table 0.3 m in
             # front of the chest, a little inside the shoulders.
             sh = np.array([x + sign * self.shoulder_half_width_m, y, 0.30])
             hand = np.array([sh[0] - sign * 0.08, y - 0.30, 0.06])
-            j[ARM[side][0]] = sh
+            j[self.arm(side)[0]] = sh
             self._place_arm(j, side, hand)
             # Seated: thighs forward along -y, shins down, hips 0.1 m either side.
             hx = x + sign * 0.1
-            hip, knee, ankle, foot = LEG[side]
+            hip, knee, ankle, foot = leg(self.skeleton, side)
             j[hip] = (hx, y + 0.05, -0.25)
             j[knee] = (hx, y - 0.35, -0.25)
             j[ankle] = (hx, y - 0.35, -0.70)
@@ -100,20 +113,32 @@ class Operator:
         """
         out = np.array(joints, dtype=float, copy=True)
         target = np.asarray(target, dtype=float)
-        shoulder = out[ARM[side][0]]
+        shoulder = out[self.arm(side)[0]]
         missing = np.linalg.norm(target - shoulder) - 0.98 * (
             self.upper_arm_m + self.forearm_m + self.hand_m
         )
         horizontal = (target - shoulder) * [1.0, 1.0, 0.0]
         if missing > 0 and np.linalg.norm(horizontal) > 1e-9:
             lean = min(missing, self.max_lean_m) * horizontal / np.linalg.norm(horizontal)
-            out[list(UPPER)] += lean
-            out[J.SpineMid] += 0.5 * lean
+            out[list(self._upper())] += lean
+            out[self.skeleton.group("spine")["mid"]] += 0.5 * lean
         self._place_arm(out, side, target)
         return out
 
+    def _upper(self) -> tuple[int, ...]:
+        """Joints that move with the upper body when the operator leans: the spine from
+        the chest up, and both arms."""
+        spine = self.skeleton.group("spine")
+        return (
+            spine["chest"],
+            spine["neck"],
+            spine["head"],
+            *self.arm("left"),
+            *self.arm("right"),
+        )
+
     def _place_arm(self, j: np.ndarray, side: str, hand: np.ndarray) -> None:
-        s_id, e_id, w_id, h_id, tip_id, th_id = ARM[side]
+        s_id, e_id, w_id, h_id, tip_id, th_id = self.arm(side)
         a, b, c = self.upper_arm_m, self.forearm_m, self.hand_m
         s = j[s_id]
         to_hand = hand - s
@@ -160,7 +185,9 @@ def random_posture(
     """
     op = operator or Operator()
     op = Operator(
-        x_m=op.x_m + rng.uniform(-0.15, 0.15), distance_m=op.distance_m + rng.uniform(-0.15, 0.1)
+        x_m=op.x_m + rng.uniform(-0.15, 0.15),
+        distance_m=op.distance_m + rng.uniform(-0.15, 0.1),
+        skeleton=op.skeleton,
     )
     joints = op.rest()
     side = "right" if rng.random() < 0.5 else "left"

@@ -34,21 +34,17 @@ import functools
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from qpavoid.arm.braking import (
-    IIWA14_MAX_ACCELERATION_RADPS2,
-    IIWA14_REACTION_TIME_S,
-    per_joint,
-    stop_time,
-)
+from qpavoid.arm.braking import per_joint, stop_time
+from qpavoid.arm.description import ArmDynamics
+from qpavoid.core.errors import InputError
 from qpavoid.distance.table import DistanceTable
-
-#: A bound on an approach speed above this cannot bind (no iiwa point moves so fast), m/s.
-BOUND_INACTIVE_MPS = 3.0
+from qpavoid.human.body import KINECT_V2_BODY_PARTS
+from qpavoid.human.kinect_v2 import KINECT_V2
 
 
 @dataclass(frozen=True)
@@ -61,22 +57,26 @@ class SSMConfig:
         ISO 13855 approach speed of a hand or arm: 2.0 m/s when the separation is at most
         0.5 m, 1.6 m/s beyond.
     body_parts, body_speed_mps
-        Parts that move with the body, not the arm (the head and trunk of a seated person),
-        and their speed: ISO 13855's approach speed of the body, 1.6 m/s.
+        Parts that move with the body, not the arm (the head and trunk of a seated person:
+        by default the body model file's ``moves_with_body`` parts), and their speed:
+        ISO 13855's approach speed of the body, 1.6 m/s.
     reaction_time_s
         T_r: from the controller's tick to the arm starting to brake: one control period
-        and the arm's reaction (:data:`~qpavoid.arm.braking.IIWA14_REACTION_TIME_S`), s.
+        and the arm's reaction, s. None (the default): the robot description's
+        (``[arm] reaction_time_s``; :meth:`resolve`).
     stop_time_s
         T_s,max: the longest stop the controllers allow, s; each tick's budget is shorter
         while the robot moves slowly (:class:`StopTimeBudget`), and every joint is kept
         within ``a_j T_s``.
     max_acceleration_radps2
         a_j: the arm's joint deceleration limits, ``(joint name, rad/s²)`` pairs (as in
-        :class:`~qpavoid.arm.braking.BrakingConfig`).
+        :class:`~qpavoid.arm.braking.BrakingConfig`). None (the default): the robot
+        description's (``[arm] max_acceleration_radps2``; :meth:`resolve`).
     intrusion_m
         C: how far a hand reaches past its modelled capsule (the fingers beyond HandTip).
     sensing_uncertainty_m
-        Z_d: the position error of a tracked Kinect v2 joint, m.
+        Z_d: the position error of a tracked joint, m (by default the Kinect v2 format
+        file's ``sensor.tracked_uncertainty_m``).
     robot_uncertainty_m
         Z_r: the robot's position error (repeatability and the capsules' fit), m.
     """
@@ -84,14 +84,47 @@ class SSMConfig:
     human_speed_near_mps: float = 2.0
     human_speed_far_mps: float = 1.6
     human_speed_zone_m: float = 0.5
-    body_parts: tuple[str, ...] = ("head", "trunk")
+    body_parts: tuple[str, ...] = KINECT_V2_BODY_PARTS
     body_speed_mps: float = 1.6
-    reaction_time_s: float = IIWA14_REACTION_TIME_S
+    reaction_time_s: float | None = None
     stop_time_s: float = 0.06
-    max_acceleration_radps2: tuple[tuple[str, float], ...] = IIWA14_MAX_ACCELERATION_RADPS2
+    max_acceleration_radps2: tuple[tuple[str, float], ...] | None = None
     intrusion_m: float = 0.02
-    sensing_uncertainty_m: float = 0.03
+    sensing_uncertainty_m: float = KINECT_V2.sensor.tracked_uncertainty_m
     robot_uncertainty_m: float = 0.005
+
+    def resolve(self, arm: ArmDynamics) -> SSMConfig:
+        """This config with the arm's values left at None taken from the robot
+        description's ``arm`` (its reaction time and acceleration limits)."""
+        return replace(
+            self,
+            reaction_time_s=(
+                arm.reaction_time_s if self.reaction_time_s is None else self.reaction_time_s
+            ),
+            max_acceleration_radps2=(
+                arm.max_acceleration_radps2
+                if self.max_acceleration_radps2 is None
+                else self.max_acceleration_radps2
+            ),
+        )
+
+
+def _t_r(cfg: SSMConfig) -> float:
+    """T_r of ``cfg``, s.
+
+    Raises
+    ------
+    InputError
+        If ``cfg`` leaves it to the robot description (not resolved: :meth:`SSMConfig.resolve`).
+    """
+    if cfg.reaction_time_s is None:
+        raise InputError(
+            "no reaction time: take it from the robot description first "
+            "(SSMConfig.resolve(robot.arm))",
+            name="reaction_time_s",
+            value=None,
+        )
+    return cfg.reaction_time_s
 
 
 def human_speed(separation_m: ArrayLike, cfg: SSMConfig, body: ArrayLike = False) -> np.ndarray:
@@ -107,13 +140,13 @@ def human_distance(
 ) -> np.ndarray:
     """S_h = v_h (T_f + T_r + T_s): the person's travel from capture until the robot stands."""
     return np.asarray(human_speed_mps, dtype=float) * (
-        np.asarray(frame_age_s, dtype=float) + cfg.reaction_time_s + cfg.stop_time_s
+        np.asarray(frame_age_s, dtype=float) + _t_r(cfg) + cfg.stop_time_s
     )
 
 
 def reaction_distance(robot_speed_mps: ArrayLike, cfg: SSMConfig) -> np.ndarray:
     """S_r = v_r T_r: the robot's travel during its reaction time."""
-    return np.asarray(robot_speed_mps, dtype=float) * cfg.reaction_time_s
+    return np.asarray(robot_speed_mps, dtype=float) * _t_r(cfg)
 
 
 def stopping_distance(robot_speed_mps: ArrayLike, cfg: SSMConfig) -> np.ndarray:
@@ -169,7 +202,7 @@ def max_approach_speed(
     if not np.all(np.isfinite(frame_age_s)):
         return np.full(d.shape, -np.inf)
     room = d - human_distance(human_speed(d, cfg, body), frame_age_s, cfg) - fixed_terms(cfg)
-    return room / (cfg.reaction_time_s + cfg.stop_time_s / 2.0)
+    return room / (_t_r(cfg) + cfg.stop_time_s / 2.0)
 
 
 def with_stop_time(cfg: SSMConfig, stop_time_s: float) -> SSMConfig:
@@ -232,7 +265,7 @@ def reaction_time(cfg: SSMConfig, control_period_s: float) -> float:
     """T_r of a controller ticking every ``control_period_s``: a decision waits up to one
     period to be revised, then the arm's reaction, in whole periods (as the simulation's
     arm, :class:`~qpavoid.arm.braking.ArmResponse`), s."""
-    periods = math.ceil(cfg.reaction_time_s / control_period_s - 1e-9)
+    periods = math.ceil(_t_r(cfg) / control_period_s - 1e-9)
     return control_period_s * (1 + periods)
 
 
@@ -263,7 +296,7 @@ class StopTimeBudget:
     def __init__(self, cfg: SSMConfig, joint_names: Sequence[str], control_period_s: float):
         self.a = per_joint(cfg.max_acceleration_radps2, joint_names)
         self.cap, self.dt = cfg.stop_time_s, control_period_s
-        ticks = math.ceil((cfg.reaction_time_s + 2.0 * cfg.stop_time_s) / control_period_s) + 2
+        ticks = math.ceil((_t_r(cfg) + 2.0 * cfg.stop_time_s) / control_period_s) + 2
         self.history: deque[float] = deque([0.0], maxlen=ticks)
 
     def budget(self) -> float:

@@ -27,18 +27,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from qpavoid.core.errors import InputError
-from qpavoid.human.frames import HumanFrame, HumanMotion, TrackingState
+from qpavoid.human.frames import HumanFrame, HumanMotion
+from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.people import People
+from qpavoid.human.skeleton import INFERRED, NOT_TRACKED
 from qpavoid.sensing.recording import Recording
 
-#: Kinect v2 latency, s: "~60 ms with processing" in Microsoft's sensor specification (as
-#: published by VGLeaks, 2013); an end-to-end measurement including the display found
-#: about 0.12 s. docs/safety.md ("Sensor") and both runs.
-KINECT_V2_LATENCY_S = 0.06
+#: Kinect v2 latency, s, from its format file (``sensor.latency_s``, with its source:
+#: Microsoft's "~60 ms with processing"; docs/safety.md, "Sensor").
+KINECT_V2_LATENCY_S = KINECT_V2.sensor.latency_s
 
-#: Joint noise, standard deviation per axis, m: our assumption (no published value found),
-#: small on purpose; a real sensor is never noiseless, which the frozen-frame check needs.
-KINECT_V2_NOISE_M = 0.002
+#: Kinect v2 joint noise, standard deviation per axis, m, from its format file
+#: (``sensor.noise_m``: our assumption, small on purpose; a real sensor is never noiseless,
+#: which the frozen-frame check needs).
+KINECT_V2_NOISE_M = KINECT_V2.sensor.noise_m
 
 #: The kinds of :class:`SensorFault`.
 FAULT_KINDS = ("freeze", "lost", "inferred", "gap")
@@ -58,7 +60,7 @@ class SensorFault:
     start_s, end_s
         The window, s.
     joints
-        Kinect joint indices (``lost`` and ``inferred``).
+        Joint ids of the frames' skeleton format (``lost`` and ``inferred``).
     """
 
     kind: str
@@ -104,7 +106,7 @@ class SensorConfig:
         Seed of the noise, jitter and dropouts.
     """
 
-    frame_rate_hz: float = 30.0
+    frame_rate_hz: float = KINECT_V2.sensor.frame_rate_hz
     latency_s: float = KINECT_V2_LATENCY_S
     noise_m: float = KINECT_V2_NOISE_M
     jitter_s: float = 0.0
@@ -113,7 +115,7 @@ class SensorConfig:
     seed: int = 0
 
     @classmethod
-    def ideal(cls, frame_rate_hz: float = 30.0) -> SensorConfig:
+    def ideal(cls, frame_rate_hz: float = KINECT_V2.sensor.frame_rate_hz) -> SensorConfig:
         """A perfect sensor: the true skeleton at every frame, no latency, no noise."""
         return cls(frame_rate_hz, latency_s=0.0, noise_m=0.0)
 
@@ -203,7 +205,7 @@ class Sensor:
                 idx = list(fault.joints)
                 if fault.kind == "lost":
                     joints[idx] = np.nan
-                    state[idx] = TrackingState.NotTracked
+                    state[idx] = NOT_TRACKED
                 else:
                     at_start = self._true(-1, fault.start_s)
                     if isinstance(at_start, People):
@@ -211,7 +213,7 @@ class Sensor:
                             continue
                         at_start = at_start.frames[at_start.ids.index(pid)]
                     joints[idx] = at_start.joints[idx]
-                    state[idx] = TrackingState.Inferred
+                    state[idx] = INFERRED
         if self.cfg.noise_m > 0.0:
             joints = joints + rng.normal(0.0, self.cfg.noise_m, joints.shape)
         return HumanFrame(joints, state)

@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import signal
 import threading
 import time
 from collections import Counter
 from collections.abc import Callable
 
+from qpavoid.core import signals
 from qpavoid.core.checks import is_loopback
 from qpavoid.core.errors import InputError
 from qpavoid.fusion.fuser import Fuser, FusionConfig
@@ -134,11 +134,8 @@ class Listener:
         )
         # The receiver starts with Ctrl-C blocked (a terminal's Ctrl-C reaches the whole
         # process group; it is ours to handle, and we stop the receiver).
-        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-        try:
+        with signals.blocked(signals.CTRL_C):
             self._process.start()
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         child_status.close()
         try:
             if status.poll(start_timeout_s):

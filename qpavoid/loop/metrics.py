@@ -15,7 +15,7 @@ import numpy as np
 
 from qpavoid.arm.model import Robot
 from qpavoid.control.tick import Command
-from qpavoid.laws.avoidance import AvoidanceConfig, stop_distances
+from qpavoid.laws.avoidance import AvoidanceConfig, set_stop_distances, stop_rule_prefixes
 
 
 def end_of_run(
@@ -41,7 +41,7 @@ def end_of_run(
     s, k = np.unravel_index(int(np.argmin(table.distance)), table.distance.shape)
     closest = float(table.distance[s, k])
     by_rule = last.stopped and last.reason.startswith(
-        ("f = ", "d_L2", "d_EE", "speed and separation")
+        (*stop_rule_prefixes(robot.role_names), "speed and separation")
     )
     if by_rule or closest < avoidance.rho_rep_m:
         held = {
@@ -69,7 +69,7 @@ def truth_metrics(
     with a non-zero command, m; None if never measured or never moving),
     ``ticks_moving_in_true_contact`` (moving while a true distance is <= 0),
     ``ticks_moving_below_stop_distance`` (moving while a set is closer than its stop
-    distance, :func:`~qpavoid.laws.avoidance.stop_distances`), and adds to each stop event the
+    distance, :func:`~qpavoid.laws.avoidance.set_stop_distances`), and adds to each stop event the
     robot's speed when it began (``robot_speed_mps``: the fastest control point over the
     tick before it).
     """
@@ -88,8 +88,7 @@ def truth_metrics(
             "ticks_moving_in_true_contact": None,
             "ticks_moving_below_stop_distance": None,
         }
-    sets = [robot.set_index(name) for name in ("L1", "L2", "EE")]
-    below = np.any(true[:, sets] < stop_distances(avoidance), axis=1)
+    below = np.any(true < set_stop_distances(avoidance, robot.roles, len(robot.sets)), axis=1)
     closest = true.min(axis=1)
     return {
         "min_true_clearance_moving_m": float(closest[moving].min()) if moving.any() else None,

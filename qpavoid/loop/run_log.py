@@ -1,5 +1,10 @@
 """A run's log: one row per control tick, as :func:`~qpavoid.loop.simulation.simulate` writes it
-(its docstring says what each array holds; ``log.npz`` keeps them as they are)."""
+(its docstring says what each array holds; ``log.npz`` keeps them as they are).
+
+Its shapes and the names of its repulsion arrays come from the robot description: one
+column per robot set, and ``v_rep_<set>`` named after the sets playing the repelled and
+end-effector parts (``v_rep_L2`` and ``v_rep_EE`` for the iiwa).
+"""
 
 from __future__ import annotations
 
@@ -8,16 +13,24 @@ import numpy as np
 from qpavoid.arm.model import Robot
 from qpavoid.human.frames import N_KINECT_JOINTS
 
-__all__ = ["TEXT_KEYS", "finished", "new_log"]
+__all__ = ["TEXT_KEYS", "finished", "new_log", "repulsion_keys"]
 
 #: The arrays of text, one string a tick: why the robot stops ("" while it moves) and why
 #: the input is suspect ("" while it is not: a live source's flagged people).
 TEXT_KEYS = ("stop_reason", "input_alert")
 
 
+def repulsion_keys(robot: Robot) -> tuple[str, str]:
+    """The log's keys of the repulsive velocities of the repelled set (eq. 5) and of the end
+    effector (eq. 7): ``v_rep_`` and the name of the set playing each part."""
+    return f"v_rep_{robot.role_name('repelled')}", f"v_rep_{robot.role_name('end_effector')}"
+
+
 def new_log(n_max: int, robot: Robot) -> dict[str, np.ndarray]:
     """Room for ``n_max`` ticks of every numeric array (the text ones are lists meanwhile)."""
-    sets = (n_max, 3)
+    n_sets = len(robot.sets)
+    sets = (n_max, n_sets)
+    v_repelled, v_end_effector = repulsion_keys(robot)
     return {
         "t": np.empty(n_max),
         "q": np.empty((n_max, robot.nq)),
@@ -29,16 +42,16 @@ def new_log(n_max: int, robot: Robot) -> dict[str, np.ndarray]:
         "f": np.empty(n_max),
         "distance": np.empty(sets),
         "distance_other": np.empty(sets),
-        "v_rep_L2": np.empty((n_max, 3)),
-        "v_rep_EE": np.empty((n_max, 3)),
+        v_repelled: np.empty((n_max, 3)),
+        v_end_effector: np.empty((n_max, 3)),
         "ee_pos": np.empty((n_max, 3)),
         "ee_ref": np.empty((n_max, 3)),
         "tau": np.empty(n_max),
         "tick_us": np.empty(n_max),
         "frame_age_s": np.empty(n_max),
         "true_distance": np.full(sets, np.nan),
-        "robot_point": np.empty((n_max, 3, 3)),
-        "human_point": np.empty((n_max, 3, 3)),
+        "robot_point": np.empty((n_max, n_sets, 3)),
+        "human_point": np.empty((n_max, n_sets, 3)),
     }
 
 

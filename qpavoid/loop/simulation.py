@@ -44,13 +44,13 @@ from qpavoid.arm.braking import ArmResponse, BrakingConfig, WallClockArm
 from qpavoid.control.controller import Controller
 from qpavoid.control.task import inverse_kinematics
 from qpavoid.core.errors import InputError
-from qpavoid.core.interruption import Interruption
+from qpavoid.core.signals import Interruption
 from qpavoid.distance.methods import distance_method
 from qpavoid.human.frames import HumanFrame, HumanMotion
 from qpavoid.human.people import People
 from qpavoid.loop.camera import Sensor, SensorConfig
 from qpavoid.loop.metrics import end_of_run, run_metrics, truth_metrics
-from qpavoid.loop.run_log import TEXT_KEYS, finished, new_log
+from qpavoid.loop.run_log import TEXT_KEYS, finished, new_log, repulsion_keys
 from qpavoid.loop.truth import TrueClearance
 
 
@@ -66,8 +66,9 @@ class SimConfig:
         What the controller sees of the true motion (default: a Kinect v2, docs/safety.md);
         ``SensorConfig.ideal()`` for the true skeleton at 30 Hz with no latency or noise.
     braking
-        How the arm follows its command (default: the iiwa 14's reaction time and
-        acceleration limits, docs/safety.md); None: exactly and at once.
+        How the arm follows its command (default: the robot description's reaction time
+        and acceleration limits, for the iiwa 14 those of docs/safety.md); None: exactly
+        and at once.
     max_time_s
         Cap on the run's duration, s.
     goal_tolerance_m, goal_tolerance_rad
@@ -151,14 +152,17 @@ def simulate(
         ``log`` keys (row k = state at t[k] and the command computed from it, so that
         ``q[k+1] = q[k] + dq[k] · (t[k+1] − t[k])``): ``t``, ``q`` (T, nq), ``dq`` (T, nv),
         ``joints`` (T, 25, 3), ``state`` (T, 25), ``stopped`` (T,), ``f`` (T,),
-        ``distance`` (T, 3) per set of the method in use, ``distance_other`` (T, 3) of the
-        other method, ``v_rep_L2`` and ``v_rep_EE`` (T, 3), ``ee_pos`` and ``ee_ref`` (T, 3),
+        ``distance`` (T, S) per robot set (S of them, the description's order) of the
+        method in use, ``distance_other`` (T, S) of the other method, ``v_rep_<set>``
+        (T, 3) for the repelled set and the end effector (``v_rep_L2`` and ``v_rep_EE``
+        for the iiwa: :func:`~qpavoid.loop.run_log.repulsion_keys`), ``ee_pos`` and
+        ``ee_ref`` (T, 3),
         ``tau`` (T,) path clock, ``tick_us`` (T,) controller time per tick,
         ``dq_command`` (T, nv) the controller's command (``dq`` is what the arm did),
         ``frame_age_s`` (T,) the age of the frame the controller was given (now minus its
-        capture time), ``true_distance`` (T, 3) exact capsule distance per set to where the
+        capture time), ``true_distance`` (T, S) exact capsule distance per set to where the
         person really is (NaN without ``measure_truth``), ``robot_point`` and
-        ``human_point`` (T, 3, 3) the witness points of each set's closest pair (NaN if no
+        ``human_point`` (T, S, 3) the witness points of each set's closest pair (NaN if no
         part is seen), ``stop_reason`` (T,) str why the robot stops ("" while it moves),
         ``input_alert`` (T,) str why the source's input is suspect ("" while it is not).
         In real time the metrics add ``realtime_overruns``, ``min_true_clearance_in_gaps_m``.
@@ -181,7 +185,11 @@ def simulate(
         sensor = Sensor(motion, cfg.sensor)
     else:
         raise InputError("simulate needs a motion or a frame source", name="motion")
-    arm = None if cfg.braking is None else ArmResponse(cfg.braking, robot.joint_names, dt)
+    arm = (
+        None
+        if cfg.braking is None
+        else ArmResponse(cfg.braking.resolve(robot.arm), robot.joint_names, dt)
+    )
     truth = (
         TrueClearance(robot, controller.human, motion)
         if cfg.measure_truth and motion is not None
@@ -191,6 +199,7 @@ def simulate(
     wall = WallClockArm(arm, dt, robot, record=truth is not None)  # real time only
 
     log = new_log(n_max, robot)
+    v_repelled, v_end_effector = repulsion_keys(robot)
     texts: dict[str, list[str]] = {key: [] for key in TEXT_KEYS}
     stop_events = []
     vel_violations = pos_violations = 0
@@ -243,7 +252,7 @@ def simulate(
             log["joints"][k], log["state"][k] = controller.closest_frame or human
             log["stopped"][k], log["f"][k] = cmd.stopped, cmd.f
             log["distance"][k], log["distance_other"][k] = cmd.distance, other_table.min_per_set()
-            log["v_rep_L2"][k], log["v_rep_EE"][k] = cmd.v_rep_L2, cmd.v_rep_EE
+            log[v_repelled][k], log[v_end_effector][k] = cmd.v_repelled, cmd.v_end_effector
             log["ee_pos"][k], log["ee_ref"][k] = cmd.ee_pos, cmd.ee_ref
             log["tau"][k], log["tick_us"][k], log["frame_age_s"][k] = tau, tick_us, t - captured_s
             closest = np.argmin(cmd.table.distance, axis=1)  # each set's closest pair

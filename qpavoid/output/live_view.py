@@ -163,7 +163,7 @@ class LiveView:
 
 def _one_tick(robot: Robot) -> dict[str, np.ndarray]:
     """A log of one tick with the robot at rest and nobody in view (the page's start)."""
-    nan3 = np.full((1, 3, 3), np.nan)
+    nan3 = np.full((1, len(robot.sets), 3), np.nan)  # no closest pair for any set
     return {
         "t": np.zeros(1),
         "q": robot.neutral()[None],
@@ -172,7 +172,7 @@ def _one_tick(robot: Robot) -> dict[str, np.ndarray]:
         "stopped": np.ones(1, dtype=bool),
         "stop_reason": np.array(["waiting for the run"]),
         "f": np.zeros(1),
-        "distance": np.full((1, 3), np.inf),
+        "distance": np.full((1, len(robot.sets)), np.inf),
         "robot_point": nan3,
         "human_point": nan3,
         "ee_pos": np.full((1, 3), np.nan),

@@ -43,6 +43,10 @@ class Run:
         d = self.log["distance"][:, self.robot.set_index(name)]
         return np.where(np.isfinite(d), d, np.nan)
 
+    def role_column(self, role: str) -> np.ndarray:
+        """:meth:`column` of the set playing ``role`` (``"scaled"``, ``"repelled"``, ...)."""
+        return self.column(self.robot.role_name(role))
+
 
 def finish(ax: Any, ylabel: str, *extra: Any) -> None:
     """Label, grid and a legend outside the axes (never over the data)."""

@@ -1,4 +1,8 @@
-"""The figures against time (paper Figs. 6, 8-11, 13 and the timeline of other runs)."""
+"""The figures against time (paper Figs. 6, 8-11, 13 and the timeline of other runs).
+
+The sets are taken by the part they play (the robot description's roles: ``"scaled"``,
+``"repelled"``, ``"end_effector"``) and labelled with their names (L1, L2, EE for the iiwa).
+"""
 
 from __future__ import annotations
 
@@ -6,7 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from qpavoid.laws.avoidance import l1_factor
+from qpavoid.arm.model import ROLE_NAMES
+from qpavoid.laws.avoidance import l1_factor, stop_distances
+from qpavoid.loop.run_log import repulsion_keys
 from qpavoid.output.plot_base import STOP, Run, finish, set_title
 
 F6_D_MAX_M = 0.25  # right end of Fig. 6's distance axis
@@ -36,17 +42,19 @@ def _frames_note() -> Any:
     return Line2D([], [], ls="none", label="steps: 30 Hz camera frames,\nheld between ticks")
 
 
-def _distance_lines(ax: Any, run: Run, sets: tuple[str, ...]) -> None:
-    """Stop distances and the repulsion range of ``sets`` (L2 and/or EE)."""
-    stops = {n: getattr(run.cfg, f"d_stop_{n}_m") for n in sets}
+def _distance_lines(ax: Any, run: Run, roles: tuple[str, ...]) -> None:
+    """Stop distances and the repulsion range of the sets playing ``roles`` (the repelled
+    and/or the end-effector set)."""
+    by_role = dict(zip(ROLE_NAMES, stop_distances(run.cfg).tolist(), strict=True))
+    stops = {run.robot.role_name(r): by_role[r] for r in roles}
     for d in sorted(set(stops.values())):
-        who = ", ".join(n for n in sets if stops[n] == d)
+        who = ", ".join(n for n in stops if stops[n] == d)
         ax.axhline(
             d,
             color="r",
             ls="--",
             lw=0.9,
-            label=f"stop distance {d:g} m" + (f" ({who})" if len(sets) > 1 else ""),
+            label=f"stop distance {d:g} m" + (f" ({who})" if len(roles) > 1 else ""),
         )
     ax.axhline(
         run.cfg.rho_rep_m,
@@ -55,12 +63,14 @@ def _distance_lines(ax: Any, run: Run, sets: tuple[str, ...]) -> None:
         lw=1.0,
         label=f"repulsion starts (ρ = {run.cfg.rho_rep_m:g} m)",
     )
-    lowest = min(np.nanmin(run.column(n), initial=np.inf) for n in sets)
+    lowest = min(np.nanmin(run.role_column(r), initial=np.inf) for r in roles)
     ax.set_ylim(bottom=min(0.0, lowest - 0.01))
 
 
-def _speed(run: Run, name: str) -> np.ndarray:
-    return np.linalg.norm(run.log[f"v_rep_{name}"], axis=1)
+def _speed(run: Run, role: str) -> np.ndarray:
+    """|v_rep| over time of the repelled set or the end effector (``role``), m/s."""
+    keys = dict(zip(("repelled", "end_effector"), repulsion_keys(run.robot), strict=True))
+    return np.linalg.norm(run.log[keys[role]], axis=1)
 
 
 def _plot_f(ax: Any, run: Run) -> None:
@@ -70,10 +80,11 @@ def _plot_f(ax: Any, run: Run) -> None:
 
 
 def fig_f_vs_distance(run: Run) -> Any:
-    """Fig. 6: f of eq. (2) against the L1 distance, the run's samples on it."""
+    """Fig. 6: f of eq. (2) against the scaled set's (L1's) distance, the run's samples on it."""
     from matplotlib.figure import Figure
 
     cfg, d_max = run.cfg, F6_D_MAX_M
+    name = run.robot.role_name("scaled")
     fig = Figure(figsize=(8.5, 3.6), layout="constrained")
     ax = fig.subplots()
     d = np.linspace(-0.02, d_max, 500)
@@ -85,7 +96,7 @@ def fig_f_vs_distance(run: Run) -> Any:
         zorder=3,
         label=f"eq. (2): ρ = {cfg.rho_L1_m:g} m, α = {cfg.alpha_L1:g}",
     )
-    dl, f = run.column("L1"), run.log["f"]
+    dl, f = run.column(name), run.log["f"]
     near, far = dl <= d_max, dl > d_max
     if near.any():
         step = max(1, int(near.sum()) // 1500)
@@ -115,7 +126,7 @@ def fig_f_vs_distance(run: Run) -> Any:
             label=label,
         )
     if not (near | far).any():
-        ax.plot([], [], ls="none", label="this run: L1 never measured")
+        ax.plot([], [], ls="none", label=f"this run: {name} never measured")
     ax.axhspan(cfg.f_stop, 1.05, **STOP, label=f"robot stops: f > {cfg.f_stop:g}")
     ax.axvline(
         cfg.d_stop_L1_m(),
@@ -124,26 +135,31 @@ def fig_f_vs_distance(run: Run) -> Any:
         lw=0.9,
         label=f"f = {cfg.f_stop:g} at d = {cfg.d_stop_L1_m():.3f} m",
     )
-    ax.set(xlim=(d[0], d_max), ylim=(-0.03, 1.05), xlabel=f"L1 distance ‖d_L1,H‖ (m, {run.method})")
+    xlabel = f"{name} distance ‖d_{name},H‖ (m, {run.method})"
+    ax.set(xlim=(d[0], d_max), ylim=(-0.03, 1.05), xlabel=xlabel)
     finish(ax, "f")
-    set_title(fig, run, "Fig. 6: the factor f of eq. (2) against the L1 distance")
+    set_title(fig, run, f"Fig. 6: the factor f of eq. (2) against the {name} distance")
     return fig
 
 
-def fig_distance(name: str, number: int, run: Run) -> Any:
-    """Figs. 8 and 10: distance between the operator and set ``name`` against time."""
+def fig_distance(role: str, number: int, run: Run) -> Any:
+    """Figs. 8 and 10: distance between the operator and the set playing ``role`` (the
+    repelled set, the end-effector set) against time."""
     fig, (ax,), stop = _time_axes(run, 1, 3.4)
+    name = run.robot.role_name(role)
     ax.plot(run.log["t"], run.column(name), color="C0", lw=1.2, label=f"distance to {name}")
-    _distance_lines(ax, run, (name,))
+    _distance_lines(ax, run, (role,))
     finish(ax, "distance (m)", stop, _frames_note())
     set_title(fig, run, f"Fig. {number}: distance between the operator and {name}")
     return fig
 
 
-def fig_vrep(name: str, number: int, run: Run) -> Any:
-    """Figs. 9 and 11: norm of the repulsive velocity of set ``name`` against time."""
+def fig_vrep(role: str, number: int, run: Run) -> Any:
+    """Figs. 9 and 11: norm of the repulsive velocity of the set playing ``role`` (the
+    repelled set, the end effector) against time."""
     fig, (ax,), stop = _time_axes(run, 1, 3.4)
-    ax.plot(run.log["t"], _speed(run, name), color="C2", lw=1.2, label=f"|v_rep| of {name}")
+    name = run.robot.role_name(role)
+    ax.plot(run.log["t"], _speed(run, role), color="C2", lw=1.2, label=f"|v_rep| of {name}")
     ax.set_ylim(bottom=0.0)
     finish(ax, "speed (m/s)", stop, _frames_note())
     set_title(fig, run, f"Fig. {number}: repulsive velocity of {name} (eqs. 4-5, norm)")
@@ -151,10 +167,11 @@ def fig_vrep(name: str, number: int, run: Run) -> Any:
 
 
 def fig_f_and_l1(run: Run) -> Any:
-    """Fig. 13: f and the L1 distance against time."""
+    """Fig. 13: f and the scaled set's (L1's) distance against time."""
     fig, (a1, a2), stop = _time_axes(run, 2, 4.8)
     _plot_f(a1, run)
-    a2.plot(run.log["t"], run.column("L1"), color="C1", lw=1.2, label="distance to L1")
+    name = run.robot.role_name("scaled")
+    a2.plot(run.log["t"], run.column(name), color="C1", lw=1.2, label=f"distance to {name}")
     a2.axhline(
         run.cfg.d_stop_L1_m(),
         color="r",
@@ -163,8 +180,8 @@ def fig_f_and_l1(run: Run) -> Any:
         label=f"f = {run.cfg.f_stop:g} at {run.cfg.d_stop_L1_m():.3f} m",
     )
     finish(a1, "f", stop)
-    finish(a2, "L1 distance (m)", stop)
-    set_title(fig, run, "Fig. 13: the factor f and the L1 distance")
+    finish(a2, f"{name} distance (m)", stop)
+    set_title(fig, run, f"Fig. 13: the factor f and the {name} distance")
     return fig
 
 
@@ -173,14 +190,15 @@ def fig_timeline(run: Run) -> Any:
     fig, (a1, a2, a3), stop = _time_axes(run, 3, 7.0)
     for k, name in enumerate(run.robot.set_names):
         a1.plot(run.log["t"], run.column(name), color=f"C{k}", lw=1.1, label=name)
-    _distance_lines(a1, run, ("L2", "EE"))
-    for name in ("L2", "EE"):
+    roles = ("repelled", "end_effector")
+    _distance_lines(a1, run, roles)
+    for role in roles:
         a2.plot(
             run.log["t"],
-            _speed(run, name),
+            _speed(run, role),
             lw=1.1,
-            label=f"|v_rep| of {name}",
-            color=f"C{run.robot.set_index(name)}",
+            label=f"|v_rep| of {run.robot.role_name(role)}",
+            color=f"C{getattr(run.robot.roles, role)}",
         )
     a2.set_ylim(bottom=0.0)
     _plot_f(a3, run)

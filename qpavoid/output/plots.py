@@ -3,13 +3,15 @@
 Each scenario gets the figures that belong to it (:data:`FIGURES_BY_SCENARIO`):
 
 * ``test1`` (paper Sect. 6.1): Fig. 6, Fig. 7 snapshots, Figs. 8-11 (distance and
-  repulsive speed |v_rep| of L2 and EE against time);
+  repulsive speed |v_rep| of the repelled and end-effector sets, L2 and EE, against time);
 * ``test2`` (paper Sect. 6.2): Fig. 6, Fig. 12 snapshots (the paper's upper side view),
-  Fig. 13 (f and the L1 distance against time);
+  Fig. 13 (f and the scaled set's, L1's, distance against time);
 * any other run (``free``, ``random:SEED``, a recording, ""): Fig. 6, ``timeline.png``
   (distances per set, |v_rep| and f against time, stacked) and ``snapshots.png``.
 
-Fig. 6 is f of eq. (2) against the L1 distance with the run's samples. The snapshots show
+Fig. 6 is f of eq. (2) against the scaled set's distance with the run's samples. The
+figures' file names and labels name the sets as the robot description does
+(``fig08_distance_L2.png`` for the iiwa). The snapshots show
 the robot (links and its spheres or capsules), the operator's skeleton, the planned path
 and the end-effector trace at the start, the first stop (or closest approach) and the end.
 
@@ -28,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from qpavoid.arm.model import Robot
+from qpavoid.arm.model import ROLE_NAMES, Robot
 from qpavoid.laws.avoidance import AvoidanceConfig
 from qpavoid.output.plot_base import PATH, SCENARIO_TITLES, STOP, TRACE, Run, finish
 from qpavoid.output.plot_snapshots import BONES, VIEWS, fig_snapshots, snapshot_ticks
@@ -66,17 +68,18 @@ __all__ = [
     "write_figures",
 ]
 
-#: Figure files written per scenario; any scenario not listed gets those of "other".
+#: Figure files written per scenario; any scenario not listed gets those of "other". A
+#: ``{role}`` in a name is the name of the set playing that part (:func:`figures_for`).
 FIGURES_BY_SCENARIO: dict[str, tuple[str, ...]] = {
     "test1": (
         "fig06_f_vs_distance.png",
         "fig07_snapshots.png",
-        "fig08_distance_L2.png",
-        "fig09_vrep_L2.png",
-        "fig10_distance_EE.png",
-        "fig11_vrep_EE.png",
+        "fig08_distance_{repelled}.png",
+        "fig09_vrep_{repelled}.png",
+        "fig10_distance_{end_effector}.png",
+        "fig11_vrep_{end_effector}.png",
     ),
-    "test2": ("fig06_f_vs_distance.png", "fig12_snapshots.png", "fig13_f_and_L1.png"),
+    "test2": ("fig06_f_vs_distance.png", "fig12_snapshots.png", "fig13_f_and_{scaled}.png"),
     "other": ("fig06_f_vs_distance.png", "timeline.png", "snapshots.png"),
 }
 DPI = 110
@@ -91,9 +94,18 @@ def available() -> bool:
     return True
 
 
-def figures_for(scenario: str) -> tuple[str, ...]:
-    """File names that :func:`write_figures` writes for ``scenario``."""
+def _templates(scenario: str) -> tuple[str, ...]:
     return FIGURES_BY_SCENARIO.get(scenario, FIGURES_BY_SCENARIO["other"])
+
+
+def _file_name(template: str, robot: Robot) -> str:
+    """A figure's file name for ``robot``: each ``{role}`` is the name of its set."""
+    return template.format(**dict(zip(ROLE_NAMES, robot.role_names, strict=True)))
+
+
+def figures_for(scenario: str, robot: Robot) -> tuple[str, ...]:
+    """File names that :func:`write_figures` writes for ``scenario`` and ``robot``."""
+    return tuple(_file_name(t, robot) for t in _templates(scenario))
 
 
 def write_figures(
@@ -144,19 +156,19 @@ def build_figures(
 ) -> dict:
     """The matplotlib Figures of :func:`write_figures`, by file name, not saved."""
     run = Run(log, robot, avoidance or AvoidanceConfig(), method, scenario, controller)
-    return {name: BUILDERS[name](run) for name in figures_for(scenario)}
+    return {_file_name(t, robot): BUILDERS[t](run) for t in _templates(scenario)}
 
 
-#: Builder of each figure file from a run.
+#: Builder of each figure file (by its name's template) from a run.
 BUILDERS: dict[str, Callable[[Run], Any]] = {
     "fig06_f_vs_distance.png": fig_f_vs_distance,
     "fig07_snapshots.png": partial(fig_snapshots, 7),
-    "fig08_distance_L2.png": partial(fig_distance, "L2", 8),
-    "fig09_vrep_L2.png": partial(fig_vrep, "L2", 9),
-    "fig10_distance_EE.png": partial(fig_distance, "EE", 10),
-    "fig11_vrep_EE.png": partial(fig_vrep, "EE", 11),
+    "fig08_distance_{repelled}.png": partial(fig_distance, "repelled", 8),
+    "fig09_vrep_{repelled}.png": partial(fig_vrep, "repelled", 9),
+    "fig10_distance_{end_effector}.png": partial(fig_distance, "end_effector", 10),
+    "fig11_vrep_{end_effector}.png": partial(fig_vrep, "end_effector", 11),
     "fig12_snapshots.png": partial(fig_snapshots, 12),
-    "fig13_f_and_L1.png": fig_f_and_l1,
+    "fig13_f_and_{scaled}.png": fig_f_and_l1,
     "timeline.png": fig_timeline,
     "snapshots.png": partial(fig_snapshots, None),
 }

@@ -3,7 +3,8 @@ fills in the viewer bundle, the scene commands and the run's arrays).
 
 The script keeps one tick index. The slider (``#time``, seconds) and play/pause
 (``#play``, at ``#speed`` times real time) move it; each move shows that tick's numbers
-(``#t``, ``#f``, ``#d0``-``#d2`` and ``#s0``-``#s2`` per robot set, ``#reason``,
+(``#t``, ``#f``, ``#d0``, ``#s0``, ... per robot set (one row of ``#sets`` each, as many
+as the robot description has sets), ``#reason``,
 ``#alert``: a suspect input, ``#safety``) and places every object from the scene frame
 at or before it. Shapes are
 unit cylinders (axis y) and spheres, scaled and placed by one matrix each; a shape that
@@ -53,13 +54,8 @@ PAGE = r"""<!DOCTYPE html>
   </div>
   <div>t = <b id="t"></b> s &nbsp; f = <b id="f"></b> &nbsp; <span id="moving"></span></div>
   <table>
-    <tr><td></td><td>distance</td><td>pair</td></tr>
-    <tr><td id="n0"></td><td id="d0"></td>
-        <td><span class="swatch" id="c0"></span> <span id="s0"></span></td></tr>
-    <tr><td id="n1"></td><td id="d1"></td>
-        <td><span class="swatch" id="c1"></span> <span id="s1"></span></td></tr>
-    <tr><td id="n2"></td><td id="d2"></td>
-        <td><span class="swatch" id="c2"></span> <span id="s2"></span></td></tr>
+    <thead><tr><td></td><td>distance</td><td>pair</td></tr></thead>
+    <tbody id="sets"></tbody>
   </table>
   <div id="reason"></div>
   <div id="alert"></div>
@@ -92,6 +88,18 @@ function decode(value) {
 }
 
 const D = decode(RAW);
+const nSets = D.set_names.length;  // one row of numbers per robot set
+for (let s = 0; s < nSets; s++) {
+  const row = document.getElementById("sets").insertRow();
+  for (const id of ["n", "d"]) row.insertCell().id = id + s;
+  const pair = row.insertCell();
+  const swatch = document.createElement("span");
+  swatch.className = "swatch";
+  swatch.id = "c" + s;
+  const label = document.createElement("span");
+  label.id = "s" + s;
+  pair.append(swatch, " ", label);
+}
 const viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
 for (const cmd of SCENE) {
   viewer.handle_command_bytearray(Uint8Array.from(atob(cmd), (c) => c.charCodeAt(0)));
@@ -160,11 +168,12 @@ function showFrame(j) {
 }
 
 function showPairs(j, k) {
-  for (let s = 0; s < 3; s++) {
-    const o = (j * 3 + s) * 6;
+  for (let s = 0; s < nSets; s++) {
+    const o = (j * nSets + s) * 6;
     const a = vec(D.pairs, o), b = vec(D.pairs, o + 3);
     for (let c = 0; c < D.pair_states.length; c++) {
-      place("pairs/set" + s + "/" + c, c === D.state[k * 3 + s] ? cylinder(a, b, 0.006) : ZERO);
+      const shown = c === D.state[k * nSets + s];
+      place("pairs/set" + s + "/" + c, shown ? cylinder(a, b, 0.006) : ZERO);
     }
   }
 }
@@ -175,10 +184,10 @@ function showNumbers(k) {
   document.getElementById("t").textContent = D.t[k].toFixed(3);
   document.getElementById("f").textContent = D.f[k].toFixed(3);
   document.getElementById("moving").textContent = D.stopped[k] ? "stopped" : "moving";
-  for (let s = 0; s < 3; s++) {
-    const state = D.pair_states[D.state[k * 3 + s]];
+  for (let s = 0; s < nSets; s++) {
+    const state = D.pair_states[D.state[k * nSets + s]];
     document.getElementById("n" + s).textContent = D.set_names[s];
-    document.getElementById("d" + s).textContent = fmt(D.distance[k * 3 + s], 3) + " m";
+    document.getElementById("d" + s).textContent = fmt(D.distance[k * nSets + s], 3) + " m";
     document.getElementById("s" + s).textContent = state;
     document.getElementById("c" + s).style.background =
       "#" + COLOURS[state].toString(16).padStart(6, "0");
@@ -188,7 +197,7 @@ function showNumbers(k) {
   const alert = D.alert && D.alert[k] >= 0 ? D.alerts[D.alert[k]] : "";
   document.getElementById("alert").textContent = alert ? "suspect input: " + alert : "";
   document.getElementById("clear").hidden = !(LIVE && alert);
-  const truth = [0, 1, 2].map((s) => D.true_distance[k * 3 + s]);
+  const truth = Array.from({ length: nSets }, (_, s) => D.true_distance[k * nSets + s]);
   const clearance = truth.map((v) => fmt(v, 3)).join(" / ");
   document.getElementById("safety").textContent =
     "frame age " + fmt(D.frame_age[k] * 1000, 0) + " ms" +

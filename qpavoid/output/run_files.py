@@ -46,7 +46,8 @@ __all__ = [
     "write_run",
 ]
 
-#: The arrays every ``log.npz`` contains.
+#: The arrays every ``log.npz`` of the bundled iiwa contains (another arm's repulsion
+#: arrays are named after its sets: :func:`qpavoid.loop.run_log.repulsion_keys`).
 LOG_KEYS = (
     "t",
     "q",

@@ -4,10 +4,10 @@
 browser replay (:mod:`qpavoid.output.replay_html`) draws and prints:
 
 * **scene frames**, at most ``fps`` a second of run time: the arm's links (Pinocchio's
-  joint placements), the robot's safety shapes of the run's distance method (the three
-  set capsules, or the nine control-point spheres), the person's (eight part capsules, or
-  21 spheres), each robot set's closest pair (``robot_point``, ``human_point`` of the log)
-  and the end effector;
+  joint placements), the robot's safety shapes of the run's distance method (a capsule per
+  set, or a sphere per control point: three and nine for the iiwa), the person's (eight
+  part capsules, or 21 spheres), each robot set's closest pair (``robot_point``,
+  ``human_point`` of the log) and the end effector;
 * **ticks**, every one: time, f (eq. 2), the distance per set and its state (free,
   repulsion active, within the stop distance), the stop reason while stopped, the frame
   age and, where measured, the true clearance (docs/safety.md);
@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from qpavoid.arm.model import Robot
+from qpavoid.arm.model import Robot, Roles
 from qpavoid.core.errors import InputError
 from qpavoid.human.body import KinectHuman
-from qpavoid.laws.avoidance import AvoidanceConfig, distance_at_factor
+from qpavoid.laws.avoidance import AvoidanceConfig, distance_at_factor, set_stop_distances
 from qpavoid.loop.run_log import TEXT_KEYS
 
 __all__ = ["PAIR_STATES", "pair_states", "replay_data"]
@@ -42,43 +42,42 @@ MAX_TICKS = 20_000
 ACTIVE_SHARE = 0.01
 
 
-def pair_states(distance: np.ndarray, cfg: AvoidanceConfig) -> np.ndarray:
-    """(T, 3) state of each set's closest pair (index into :data:`PAIR_STATES`).
+def pair_states(distance: np.ndarray, cfg: AvoidanceConfig, roles: Roles) -> np.ndarray:
+    """(T, S) state of each set's closest pair (index into :data:`PAIR_STATES`).
 
-    Within the stop distance: L1 at or below the distance where f reaches ``f_stop``
-    (eq. 2 inverted), L2 and EE at or below 0.05 m (the paper's rules). Repulsion active:
-    where eq. (2) (L1) or eq. (4) (L2, EE) is above :data:`ACTIVE_SHARE` of its maximum.
+    The sets play their parts of the robot description's ``roles``. Within the stop
+    distance: the scaled set (L1) at or below the distance where f reaches ``f_stop``
+    (eq. 2 inverted), the repelled and end-effector sets (L2, EE) at or below 0.05 m (the
+    paper's rules), a set playing no part at or below 0 (contact). Repulsion active: where
+    eq. (2) (scaled set) or eq. (4) (the others) is above :data:`ACTIVE_SHARE` of its
+    maximum.
     """
-    stop = np.array([cfg.d_stop_L1_m(), cfg.d_stop_L2_m, cfg.d_stop_EE_m])
-    active = np.array(
-        [
-            distance_at_factor(ACTIVE_SHARE, cfg.rho_L1_m, cfg.alpha_L1),
-            distance_at_factor(ACTIVE_SHARE, cfg.rho_rep_m, cfg.alpha_rep),
-            distance_at_factor(ACTIVE_SHARE, cfg.rho_rep_m, cfg.alpha_rep),
-        ]
-    )
     d = np.asarray(distance, dtype=float)
+    stop = set_stop_distances(cfg, roles, d.shape[-1])
+    active = np.full(d.shape[-1], distance_at_factor(ACTIVE_SHARE, cfg.rho_rep_m, cfg.alpha_rep))
+    active[roles.scaled] = distance_at_factor(ACTIVE_SHARE, cfg.rho_L1_m, cfg.alpha_L1)
     return np.where(d <= stop, 2, np.where(d < active, 1, 0)).astype(np.int8)
 
 
-#: The log arrays a replay needs, with the shape of one tick's row (None: any).
-_ROWS: dict[str, tuple[int | None, ...]] = {
-    "q": (None,),
+#: The log arrays a replay needs, with the shape of one tick's row (``"S"``: one per robot
+#: set; ``"nq"``: one per joint angle).
+_ROWS: dict[str, tuple[int | str, ...]] = {
+    "q": ("nq",),
     "joints": (25, 3),
     "state": (25,),
     "stopped": (),
     "f": (),
-    "distance": (3,),
+    "distance": ("S",),
     "ee_pos": (3,),
     "ee_ref": (3,),
 }
 #: Optional arrays (older logs lack them), with their row shapes.
-_OPTIONAL: dict[str, tuple[int | None, ...]] = {
+_OPTIONAL: dict[str, tuple[int | str, ...]] = {
     "stop_reason": (),
-    "robot_point": (3, 3),
-    "human_point": (3, 3),
+    "robot_point": ("S", 3),
+    "human_point": ("S", 3),
     "frame_age_s": (),
-    "true_distance": (3,),
+    "true_distance": ("S",),
     "input_alert": (),
 }
 
@@ -102,18 +101,18 @@ def checked_log(log: dict[str, np.ndarray], robot: Robot) -> dict[str, np.ndarra
     if not np.isfinite(t).all() or np.any(np.diff(t) <= 0):
         raise refuse("t", "must be finite and strictly increasing")
     out = {"t": t.astype(float)}
-    for name, row in (_ROWS | _OPTIONAL).items():
+    sizes = {"S": len(robot.sets), "nq": robot.nq}
+    for name, shape in (_ROWS | _OPTIONAL).items():
         if name not in log:
             if name in _ROWS:
                 raise refuse(name, "is missing")
             continue
         value = np.asarray(log[name])
-        if name == "q":
-            row = (robot.nq,)
+        row = tuple(sizes[n] if isinstance(n, str) else n for n in shape)
         text = name in TEXT_KEYS
         if value.shape != (len(t), *row) or (value.dtype.kind == "U") != text:
-            shape = (len(t), *row)
-            raise refuse(name, f"must be {'text' if text else 'numbers'} of shape {shape}")
+            expected = (len(t), *row)
+            raise refuse(name, f"must be {'text' if text else 'numbers'} of shape {expected}")
         if not text and value.dtype.kind not in "fiub":
             raise refuse(name, "must be numbers")
         out[name] = value
@@ -186,12 +185,13 @@ def replay_data(
     alert_text = np.asarray(log.get("input_alert", np.full(n, "")), dtype=str)
     alerts = sorted({str(a) for a in alert_text if a})
     alert_code = {a: i for i, a in enumerate(alerts)}
-    true = np.asarray(log.get("true_distance", np.full((n, 3), np.nan)), dtype=float)
+    n_sets = len(robot.sets)
+    true = np.asarray(log.get("true_distance", np.full((n, n_sets), np.nan)), dtype=float)
     f32 = np.float32
     if "robot_point" in log and "human_point" in log:  # older logs have no closest pairs
         pairs = np.stack([log["robot_point"][frames], log["human_point"][frames]], axis=2)
     else:
-        pairs = np.full((len(frames), 3, 2, 3), np.nan)
+        pairs = np.full((len(frames), n_sets, 2, 3), np.nan)
     return {
         "method": method,
         "controller": metrics.get("controller"),
@@ -210,7 +210,7 @@ def replay_data(
         "t": t.astype(np.float64),
         "f": np.asarray(log["f"], dtype=f32),
         "distance": np.asarray(log["distance"], dtype=f32),
-        "state": pair_states(log["distance"], cfg),
+        "state": pair_states(log["distance"], cfg, robot.roles),
         "stopped": stopped.astype(np.int8),
         "reasons": reasons,
         "reason": np.array(

@@ -4,7 +4,7 @@
 kernel computes it, instead of some thirty numpy calls on (J, 3) arrays whose call
 overhead outweighed their arithmetic (docs/performance.md measures it). The compiled code
 is cached on disk (``cache=True``) and :func:`warm_up` compiles or loads it before the
-first frame.
+first frame, for the skeleton format the tracker will see.
 
 Arrays: ``joints`` (J, 3) float64, m; ``state`` (J,) int8 (0 NotTracked, 1 Inferred,
 2 Tracked); ``parent`` (J,) int64, -1 at the root.
@@ -17,9 +17,17 @@ import functools
 import numpy as np
 from numba import njit
 
-from qpavoid.core.compiling import ctrl_c_deferred
+from qpavoid.core.compiling import ctrl_c_deferred, recompile_if_stale
+from qpavoid.human import alpha_beta
+from qpavoid.human.alpha_beta import alpha_beta_step
+from qpavoid.human.skeleton import INFERRED, SkeletonFormat
 
-__all__ = ["track", "warm_up"]
+__all__ = ["BONE_GROW", "BONE_SHRINK", "track", "warm_up"]
+
+#: The tracker's bones are the longest seen (an upper bound: :func:`alpha_beta_step`'s
+#: ``grow``, ``shrink``): a Kinect folds a forearm onto the elbow just before losing the
+#: hand, and that frame must not shrink the reach of a lost hand.
+BONE_GROW, BONE_SHRINK = 1.0, 0.0
 
 
 @njit(cache=True)
@@ -40,13 +48,15 @@ def track(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """One frame ``z``, ``state`` captured at ``t`` into a tracker's memory, in place.
 
-    The memory (``position``, ``velocity`` (25, 3); ``last_seen``, ``last_tracked``,
-    ``bone`` (25,)) follows :meth:`qpavoid.perception.tracker.Tracker.update`:
+    The memory (``position``, ``velocity`` (J, 3); ``last_seen``, ``last_tracked``,
+    ``bone`` (J,)) follows :meth:`qpavoid.perception.tracker.Tracker.update`:
 
-    * a joint seen (finite, not NotTracked) now and before takes an α-β step,
-      ``p̂ = p + v Δt``, ``r = z − p̂``, ``p = p̂ + α r``, ``v = v + β r / Δt``; seen
-      for the first time, it starts at rest at ``z``; not seen, its velocity is 0;
-    * a bone seen at both ends keeps its longest length;
+    * a joint seen (finite, not NotTracked) takes a step of the α-β filter
+      (:func:`~qpavoid.human.alpha_beta.alpha_beta_step`: with no gap limit, so a joint
+      seen again after a loss steps from its last position); not seen, its velocity is 0
+      (it comes back from rest);
+    * a bone seen at both ends keeps its longest length (:data:`BONE_GROW`,
+      :data:`BONE_SHRINK`);
     * the uncertainty of a joint: 0 tracked; ``inferred_uncertainty + max_speed ×``
       (time since last tracked) inferred; ``max_speed ×`` (time since last seen) lost;
       infinite if never seen;
@@ -60,34 +70,31 @@ def track(
         is known, radius 0 there), each joint's uncertainty (m) and velocity (m/s, 0
         where not seen now).
     """
+    seen = alpha_beta_step(
+        position,
+        velocity,
+        last_seen,
+        bone,
+        parent,
+        z,
+        state,
+        t,
+        alpha,
+        beta,
+        np.inf,
+        np.int64(INFERRED),  # (not a literal: one specialisation for both callers)
+        BONE_GROW,
+        BONE_SHRINK,
+    )
     n = z.shape[0]
-    seen = np.empty(n, dtype=np.bool_)
     tracked = np.empty(n, dtype=np.bool_)
     for j in range(n):
-        seen[j] = state[j] != 0 and not np.isnan(z[j, 0] + z[j, 1] + z[j, 2])
         tracked[j] = seen[j] and state[j] == 2
-        if seen[j]:
-            dt = t - last_seen[j]
-            if np.isfinite(dt):
-                for k in range(3):
-                    pred = position[j, k] + velocity[j, k] * dt
-                    r = z[j, k] - pred
-                    position[j, k] = pred + alpha * r
-                    velocity[j, k] = velocity[j, k] + beta * r / dt
-            else:
-                for k in range(3):
-                    position[j, k], velocity[j, k] = z[j, k], 0.0
-            last_seen[j] = t
-            if tracked[j]:
-                last_tracked[j] = t
-        else:
+        if tracked[j]:
+            last_tracked[j] = t
+        if not seen[j]:
             for k in range(3):
                 velocity[j, k] = 0.0
-    for j in range(n):
-        a = parent[j]
-        if a >= 0 and seen[j] and seen[a]:
-            dx, dy, dz = z[j, 0] - z[a, 0], z[j, 1] - z[a, 1], z[j, 2] - z[a, 2]
-            bone[j] = max(bone[j], np.sqrt(dx * dx + dy * dy + dz * dz))
     joints = np.empty((n, 3))
     radius = np.zeros(n)
     for j in range(n):
@@ -121,19 +128,21 @@ def track(
 
 
 @functools.cache
-def warm_up() -> None:
-    """Compile (or load from the disk cache) every kernel, once per process."""
+def warm_up(skeleton: SkeletonFormat) -> None:
+    """Compile (or load from the disk cache) every kernel for frames of ``skeleton``, once
+    per process and format: the argument types :class:`~qpavoid.perception.tracker.Tracker`
+    passes (its memory, its copy of the format's ``parent``, a frame)."""
     with ctrl_c_deferred():  # a Ctrl-C while the kernels compile comes right after
-        z = np.zeros((25, 3))
-        state = np.full(25, 2, dtype=np.int8)
-        parent = np.full(25, -1, dtype=np.int64)
+        n = skeleton.n_joints
+        z = np.zeros((n, 3))
+        state = np.full(n, 2, dtype=np.int8)
         track(
             z.copy(),
             z.copy(),
-            np.zeros(25),
-            np.zeros(25),
-            np.zeros(25),
-            parent,
+            np.full(n, -np.inf),
+            np.full(n, -np.inf),
+            np.array(skeleton.max_bone_m),
+            np.array(skeleton.parent),  # writable, as the tracker's copy
             z,
             state,
             1.0,
@@ -142,3 +151,4 @@ def warm_up() -> None:
             0.05,
             1.6,
         )
+        recompile_if_stale(track, alpha_beta)  # it compiles alpha_beta_step in

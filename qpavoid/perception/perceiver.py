@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from qpavoid.human.body import HumanGeometry, KinectHuman
-from qpavoid.human.frames import HumanFrame
-from qpavoid.human.people import NOBODY, People, as_people, same_frames
+from qpavoid.human.body import BodyModel, HumanGeometry
+from qpavoid.human.frames import HumanFrame, nobody
+from qpavoid.human.people import People, as_people, same_frames
 from qpavoid.perception.tracker import PeopleTracker, Perceived, PerceptionConfig
 
 __all__ = ["Perceiver"]
@@ -19,12 +19,14 @@ class Perceiver:
     One :class:`~qpavoid.perception.tracker.Tracker` per person id
     (:class:`~qpavoid.perception.tracker.PeopleTracker`), each person's geometry (widened by the
     uncertainty of lost joints) and part velocities (K, 3), kept until the frame changes:
-    new frame objects (:func:`same_frames`) or a new capture time.
+    new frame objects (:func:`same_frames`) or a new capture time. The frames are of the
+    body model's skeleton format.
     """
 
-    def __init__(self, human: KinectHuman, cfg: PerceptionConfig | None = None):
+    def __init__(self, human: BodyModel, cfg: PerceptionConfig | None = None):
         self.human = human
-        self.trackers = PeopleTracker(cfg)
+        self.trackers = PeopleTracker(cfg, human.skeleton)
+        self._nobody = nobody(human.skeleton)
         self.perceived: list[Perceived] = []
         self.geometry: list[HumanGeometry] = []
         self.part_velocity = np.zeros((0, len(human.parts), 3))
@@ -46,8 +48,10 @@ class Perceiver:
 
     def geometries(self, frame: HumanFrame | People) -> list[HumanGeometry]:
         """The geometries perceived for ``frame`` if it is the frame in hand, else its own
-        (nothing filled in, no uncertainty; :data:`NOBODY`'s for nobody)."""
+        (nothing filled in, no uncertainty; an empty frame's for nobody)."""
         people = frame if isinstance(frame, People) else as_people(frame)
         if self._frame is not None and same_frames(people, self._frame[0]) and self.geometry:
             return self.geometry
-        return [self.human.geometry(f) for f in people.frames] or [self.human.geometry(NOBODY)]
+        return [self.human.geometry(f) for f in people.frames] or [
+            self.human.geometry(self._nobody)
+        ]

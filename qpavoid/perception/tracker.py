@@ -11,7 +11,8 @@ stream of frames into what the distances may trust (:class:`Perceived`):
   Inferred joint that has not moved for a second is a second old.
 * **Every joint not tracked now, lost, Inferred or never seen at all, is within the reach
   of its nearest tracked ancestor**: the bones between, each at the longest it has been
-  seen or :data:`MAX_BONE_M`, whichever is larger (a Kinect folds a forearm onto the elbow
+  seen or the format's bound (:attr:`~qpavoid.human.skeleton.SkeletonFormat.max_bone_m`),
+  whichever is larger (a Kinect folds a forearm onto the elbow
   just before losing the hand; that frame must not shrink the reach). Where that bound is
   the tighter one the joint is placed at the ancestor with the reach as its radius (a
   hand never seen, under a tracked shoulder, is a ball of an arm's length there). The
@@ -24,8 +25,8 @@ stream of frames into what the distances may trust (:class:`Perceived`):
   than ``max_identical_frames`` as stale.
 * **Out-of-order frames** (a capture time not after the last one) are ignored.
 * **The person's velocity**, per joint, from an α-β filter on the frames' positions and
-  capture times (docs/safety.md measures its lag and noise), and per part as the velocity
-  of its fastest joint.
+  capture times (:mod:`qpavoid.human.alpha_beta`, the fusion's too; docs/safety.md
+  measures its lag and noise), and per part as the velocity of its fastest joint.
 """
 
 from __future__ import annotations
@@ -37,11 +38,10 @@ import numpy as np
 
 from qpavoid.core.compiling import kernel_input
 from qpavoid.human._kernels import fastest_joint
-from qpavoid.human.frames import MAX_BONE_M, N_KINECT_JOINTS, PARENT, HumanFrame, TrackingState
+from qpavoid.human.frames import HumanFrame
+from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.perception._kernels import track, warm_up
-
-#: Tracking state Tracked as a plain int (comparing an array with the IntEnum is 6× slower).
-TRACKED = int(TrackingState.Tracked)
 
 
 @dataclass(frozen=True)
@@ -80,9 +80,9 @@ class Perceived(NamedTuple):
         The frame with every joint ever seen at its best known position (lost joints
         filled in and flagged Inferred).
     joint_radius
-        (25,) uncertainty of each joint, m (0 for a tracked joint).
+        (J,) uncertainty of each joint, m (0 for a tracked joint).
     joint_velocity
-        (25, 3) filtered velocity of each joint, m/s (0 where unknown).
+        (J, 3) filtered velocity of each joint, m/s (0 where unknown).
     identical
         How many frames in a row repeated the previous skeleton bit for bit.
     capture_time_s
@@ -98,24 +98,36 @@ class Perceived(NamedTuple):
     @classmethod
     def untracked(cls, frame: HumanFrame) -> Perceived:
         """A frame taken as it is (no memory, no uncertainty, no velocity)."""
-        n = N_KINECT_JOINTS
+        n = frame.joints.shape[0]
         return cls(frame, np.zeros(n), np.zeros((n, 3)), 0, float("nan"))
 
 
 class Tracker:
-    """Memory of the person across frames (one per controller; :meth:`update` per frame)."""
+    """Memory of the person across frames (one per controller; :meth:`update` per frame).
 
-    def __init__(self, cfg: PerceptionConfig | None = None):
+    Parameters
+    ----------
+    cfg
+        How much to trust a frame.
+    skeleton
+        The frames' skeleton format (its joints, parents and bone bounds).
+    """
+
+    def __init__(self, cfg: PerceptionConfig | None = None, skeleton: SkeletonFormat = KINECT_V2):
         self.cfg = cfg or PerceptionConfig()
-        n = N_KINECT_JOINTS
+        self.skeleton = skeleton
+        n = skeleton.n_joints
         self.position = np.full((n, 3), np.nan)
         self.velocity = np.zeros((n, 3))
         self.last_seen = np.full(n, -np.inf)
         self.last_tracked = np.full(n, -np.inf)
-        self.bone = MAX_BONE_M.copy()  # longest bone to the parent: seen, or the bound
+        # longest bone to the parent: seen, or the format's bound
+        self.bone = np.array(skeleton.max_bone_m)
+        # a writable copy: numba types read-only arrays apart, and dispatches them slower
+        self._parent = np.array(skeleton.parent)
         self._last: HumanFrame | None = None
         self._perceived: Perceived | None = None
-        warm_up()
+        warm_up(skeleton)
 
     def update(self, frame: HumanFrame, capture_time_s: float) -> Perceived:
         """Take a new frame captured at ``capture_time_s`` (s) and return what to trust."""
@@ -140,7 +152,7 @@ class Tracker:
             self.last_seen,
             self.last_tracked,
             self.bone,
-            PARENT,
+            self._parent,
             kernel_input(frame.joints, np.float64),
             kernel_input(frame.state, np.int8),
             float(capture_time_s),
@@ -163,15 +175,16 @@ class Tracker:
 class PeopleTracker:
     """One :class:`Tracker` per person id; a person no longer reported is forgotten."""
 
-    def __init__(self, cfg: PerceptionConfig | None = None):
+    def __init__(self, cfg: PerceptionConfig | None = None, skeleton: SkeletonFormat = KINECT_V2):
         self.cfg = cfg or PerceptionConfig()
+        self.skeleton = skeleton
         self.trackers: dict[int, Tracker] = {}
 
     def person(self, pid: int) -> Tracker:
         """Person ``pid``'s tracker (made on first use)."""
         tracker = self.trackers.get(pid)
         if tracker is None:  # (setdefault would build, and drop, one every frame)
-            tracker = self.trackers[pid] = Tracker(self.cfg)
+            tracker = self.trackers[pid] = Tracker(self.cfg, self.skeleton)
         return tracker
 
     def update(
@@ -189,7 +202,7 @@ def part_velocities(
 ) -> np.ndarray:
     """Velocity of each body part, m/s: that of its fastest joint.
 
-    ``velocity`` holds each person's (25, 3) joint velocities; ``part_joints`` (K, 25)
+    ``velocity`` holds each person's (J, 3) joint velocities; ``part_joints`` (K, J)
     bool membership. Without ``who``, (K, 3) of the first person; with ``who`` (S, K) (the
     person closest to each robot set and part, :func:`~qpavoid.human.people.closest_of`),
     (S, K, 3): the velocity of each pair's own person's part.

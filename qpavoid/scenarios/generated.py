@@ -1,6 +1,6 @@
 """Human motions for the paper's tests, generated in code, and random approaches.
 
-A motion is anything with ``frame_at(t) -> (joints (25, 3), state (25,))``: these
+A motion is anything with ``frame_at(t) -> (joints (J, 3), state (J,))``: these
 scripted reaches, or a :class:`~qpavoid.sensing.recording.Recording`. The simulation samples it
 at the camera rate (sample and hold).
 
@@ -30,7 +30,8 @@ from qpavoid.core.errors import InputError
 from qpavoid.core.geometry import unit
 from qpavoid.distance.methods import distance_method
 from qpavoid.human.body import KinectHuman
-from qpavoid.human.posture import ARM, Operator
+from qpavoid.human.posture import Operator
+from qpavoid.human.skeleton import TRACKED
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,7 @@ class ScriptedReach:
 
     def hand_position(self, t: float) -> np.ndarray:
         """The hand target at time ``t`` (s)."""
-        rest = self.operator.rest()[_hand_joint(self.side)]
+        rest = self.operator.rest()[_hand_joint(self.operator, self.side)]
         pts = [(tk, rest if p is None else np.asarray(p, dtype=float)) for tk, p in self.keyframes]
         if t <= pts[0][0]:
             return pts[0][1]
@@ -66,9 +67,9 @@ class ScriptedReach:
         return pts[-1][1]
 
     def frame_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """Kinect joints (25, 3) and states (25,) (all tracked) at time ``t``."""
+        """Joints (J, 3) and states (J,) (all tracked) at time ``t``."""
         joints = self.operator.reach(self.operator.rest(), self.side, self.hand_position(t))
-        return joints, np.full(25, 2, dtype=np.int8)
+        return joints, np.full(len(joints), TRACKED, dtype=np.int8)
 
 
 @dataclass(frozen=True)
@@ -83,9 +84,10 @@ class Working:
         joints = self.operator.rest()
         for side, phase in (("right", 0.0), ("left", np.pi)):
             w = 2 * np.pi * t / self.period_s + phase
-            target = joints[_hand_joint(side)] + self.radius_m * np.array([np.cos(w), np.sin(w), 0])
+            hand = joints[_hand_joint(self.operator, side)]
+            target = hand + self.radius_m * np.array([np.cos(w), np.sin(w), 0])
             joints = self.operator.reach(joints, side, target)
-        return joints, np.full(25, 2, dtype=np.int8)
+        return joints, np.full(len(joints), TRACKED, dtype=np.int8)
 
 
 def reach_and_return(
@@ -99,9 +101,9 @@ def reach_and_return(
     )
 
 
-def _hand_joint(side: str) -> int:
-    """Kinect index of the ``side`` hand."""
-    return int(ARM[side][3])
+def _hand_joint(operator: Operator, side: str) -> int:
+    """The id of the ``side`` hand in the operator's skeleton format."""
+    return operator.skeleton.group(f"arm_{side}")["hand"]
 
 
 def nominal_configurations(robot: Robot, path: ArcPath, times: np.ndarray) -> np.ndarray:
@@ -170,8 +172,8 @@ def make_scenario(
         # deflect the robot to keep it beyond the 0.05 m stop distance.
         tc = 0.6 * path.duration_s
         P = robot.control_points(nominal_configurations(robot, path, np.array([tc]))[0])
-        wrist = P[robot.sets[robot.set_index("L2")].points[-1]]
-        flange = P[robot.sets[robot.set_index("EE")].points[-1]]
+        wrist = P[robot.sets[robot.roles.repelled].points[-1]]
+        flange = P[robot.sets[robot.roles.end_effector].points[-1]]
         axis = unit(flange - wrist)
         towards = np.array([0.0, 1.0, 0.3])  # the operator's side, above
         target = _clearance_target(
@@ -183,7 +185,7 @@ def make_scenario(
             0.5 * (wrist + flange),
             unit(towards - (towards @ axis) * axis),
             0.04,
-            ("L2", "EE"),
+            (robot.role_name("repelled"), robot.role_name("end_effector")),
         )
         return reach_and_return(op, "right", target, (2.0, 5.0, 11.0, 14.0))
     if name == "test2":
@@ -195,7 +197,7 @@ def make_scenario(
         # the end effector.
         op = operator or Operator(x_m=-0.25)
         q0 = inverse_kinematics(robot, path.reference(0.0)[0])
-        anchor = robot.control_points(q0)[1]
+        anchor = robot.control_points(q0)[robot.sets[robot.roles.scaled].points[1]]
         target = _clearance_target(
             robot,
             human,
@@ -205,7 +207,7 @@ def make_scenario(
             anchor,
             unit([-1.0, 0.5, -0.2]),
             0.02,
-            ("L1",),
+            (robot.role_name("scaled"),),
             ("spheres", "capsules"),
         )
         return reach_and_return(op, "right", target, (1.0, 4.0, 9.0, 11.0))
@@ -261,7 +263,7 @@ def random_approach(
     side = "right" if rng.random() < 0.7 else "left"
     direction = unit(rng.normal(size=3) + np.array([0.0, 1.5, 0.3]))
     target = P[rng.integers(len(P))] + rng.uniform(0.0, 0.1) * direction
-    rest = op.rest()[_hand_joint(side)]
+    rest = op.rest()[_hand_joint(op, side)]
     peak = rng.uniform(0.3, max_speed_mps)
     travel = np.linalg.norm(target - rest) * 1.875 / peak
     start = max(0.0, times[k] - travel + rng.uniform(-3.0, 2.0))

@@ -3,8 +3,9 @@
 A :class:`StrikeCase` is one randomized attack on the controller: one or both hands move
 from rest straight *into* a robot set (the target is on the set's capsule axis, so a robot
 that does not get out of the way is hit), arriving at a random path time with a chosen
-peak speed, holding there, then withdrawing. The targets are the three sets (``L1``,
-``L2``, ``EE``), the ``shoulder`` (A2, where L1 starts) and the ``base`` column under it.
+peak speed, holding there, then withdrawing. The targets (:func:`strike_targets`) are the
+robot description's sets by name (``L1``, ``L2``, ``EE`` for the iiwa), the ``shoulder``
+(where the scaled set's capsule starts: A2 for the iiwa) and the ``base`` column under it.
 A fault can be laid on top (:class:`~qpavoid.loop.camera.SensorFault`): the striking hand
 ``lost`` or ``inferred`` as it arrives, a ``frozen`` sensor, a ``gap`` in the frames, or
 ``jitter`` (delayed and dropped frames all run long).
@@ -15,18 +16,20 @@ A fault can be laid on top (:class:`~qpavoid.loop.camera.SensorFault`): the stri
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from qpavoid.arm.model import Robot
+from qpavoid.arm.model import Robot, load_robot
 from qpavoid.control.task import ArcPath
+from qpavoid.core.errors import InputError
 from qpavoid.human.posture import ARM, Operator
 from qpavoid.loop.camera import SensorConfig, SensorFault
 from qpavoid.scenarios.generated import ScriptedReach, nominal_configurations, reach_and_return
 
-#: Where a strike aims.
-TARGETS = ("L1", "L2", "EE", "shoulder", "base")
+#: Where a strike aims besides the robot's sets (:func:`strike_targets`).
+BODY_TARGETS = ("shoulder", "base")
 #: Faults a case may carry ("none" for a clean sensor).
 FAULTS = ("none", "lost", "inferred", "frozen", "gap", "jitter")
 
@@ -40,7 +43,7 @@ class StrikeCase:
     seed
         The seed it was drawn from.
     target
-        One of :data:`TARGETS`.
+        One of the robot's :func:`strike_targets`.
     speed_mps
         Peak speed of the hand, m/s (the quintic time law peaks at 1.875 × the mean).
     side
@@ -67,12 +70,26 @@ class StrikeCase:
         return self.arrival_s + 2.0
 
 
-def strike_case(seed: int, max_speed_mps: float = 2.0) -> StrikeCase:
-    """The strike of ``seed``: target, speed (0.5 to ``max_speed_mps``), fault, timing."""
+def strike_targets(robot: Robot) -> tuple[str, ...]:
+    """Where a strike may aim on ``robot``: each of its sets by name, then
+    :data:`BODY_TARGETS`."""
+    return (*robot.set_names, *BODY_TARGETS)
+
+
+@functools.cache
+def _default_robot() -> Robot:
+    """The default robot description (:func:`~qpavoid.arm.model.load_robot`), read once."""
+    return load_robot()
+
+
+def strike_case(seed: int, max_speed_mps: float = 2.0, robot: Robot | None = None) -> StrikeCase:
+    """The strike of ``seed`` on ``robot`` (default: the default robot description): target
+    (:func:`strike_targets`), speed (0.5 to ``max_speed_mps``), fault, timing."""
+    targets = strike_targets(robot or _default_robot())
     rng = np.random.default_rng([seed, 9])
     return StrikeCase(
         seed,
-        TARGETS[int(rng.integers(len(TARGETS)))],
+        targets[int(rng.integers(len(targets)))],
         float(rng.uniform(0.5, max_speed_mps)),
         "right" if rng.random() < 0.7 else "left",
         bool(rng.random() < 0.25),
@@ -84,10 +101,11 @@ def strike_case(seed: int, max_speed_mps: float = 2.0) -> StrikeCase:
 def _aim(robot: Robot, q: np.ndarray, target: str, rng: np.random.Generator) -> np.ndarray:
     """A point inside the robot at joint angles ``q``: on the named capsule's axis."""
     seg = robot.capsules(q)
+    shoulder = seg[robot.roles.scaled, 0]  # where the scaled set's capsule starts
     if target == "shoulder":
-        return seg[robot.set_index("L1"), 0].copy()
+        return shoulder.copy()
     if target == "base":
-        return seg[robot.set_index("L1"), 0] - np.array([0.0, 0.0, 0.1])
+        return shoulder - np.array([0.0, 0.0, 0.1])
     a, b = seg[robot.set_index(target)]
     return a + rng.uniform(0.2, 1.0) * (b - a)
 
@@ -114,8 +132,15 @@ def strike_motion(
     op = Operator(x_m=0.15 + rng.uniform(-0.15, 0.15))
     reaches = {}
     sides = ("right", "left") if case.both_hands else (case.side,)
+    targets = strike_targets(robot)
+    if case.target not in targets:
+        raise InputError(
+            f"strike target {case.target!r} is not one of {targets}",
+            name="target",
+            value=case.target,
+        )
     for n, side in enumerate(sides):
-        target = TARGETS[(TARGETS.index(case.target) + n) % len(TARGETS)]
+        target = targets[(targets.index(case.target) + n) % len(targets)]
         aim = _aim(robot, q, target, rng)
         start = op.reach(op.rest(), side, aim)[ARM[side][3]]  # where the hand can get to
         rest = op.rest()[ARM[side][3]]
@@ -145,11 +170,12 @@ def strike_sensor(case: StrikeCase, base: SensorConfig | None = None) -> SensorC
 
 
 __all__ = [
+    "BODY_TARGETS",
     "FAULTS",
-    "TARGETS",
     "StrikeCase",
     "TwoHands",
     "strike_case",
     "strike_motion",
     "strike_sensor",
+    "strike_targets",
 ]

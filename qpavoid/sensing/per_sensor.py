@@ -8,7 +8,8 @@ sensor's clock. :mod:`qpavoid.sensing.calibration` puts the rows in the base fra
 :mod:`qpavoid.fusion.fuser` merges them. The file formats (docs/formats.md, "Per-sensor
 recordings") extend the base-frame ones:
 
-* **NPZ**: ``t`` (N,), ``joints`` (N, 25, 3), ``state`` (N, 25) as before, plus ``sensor``
+* **NPZ**: ``t`` (N,), ``joints`` (N, J, 3), ``state`` (N, J) as before (J = 25 Kinect v2
+  joints), plus ``sensor``
   (a string, or (N,) strings) and optionally ``body`` (N,) integers (default 0).
 * **CSV**: the header ``t,sensor,body,SpineBase_x,...,ThumbRight_state`` (``body`` may be
   left out), one row per body per frame.
@@ -32,7 +33,9 @@ from qpavoid.core.checks import as_array
 from qpavoid.core.compiling import kernel_input
 from qpavoid.core.errors import InputError
 from qpavoid.core.file_bounds import check_file_size
-from qpavoid.human.frames import N_KINECT_JOINTS, check_joints, check_states
+from qpavoid.human.frames import check_joints, check_states
+from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.sensing.recording_files import (
     CSV_JOINT_FIELDS,
     csv_header,
@@ -49,16 +52,17 @@ __all__ = [
     "save_sensor_npz",
 ]
 
-#: Most bodies a Kinect v2 tracks at once (body ids 0-5).
-MAX_BODIES = 6
+#: Most bodies a Kinect v2 tracks at once (body ids 0-5), from its format file.
+MAX_BODIES = KINECT_V2.sensor.max_bodies
 
 SENSOR_NPZ_EXPECTED = (
-    "expected a per-sensor NPZ recording: arrays t (N,), joints (N, 25, 3) in the camera "
-    "frame, state (N, 25), sensor (a name, or N names) and optionally body (N,)"
+    f"expected a per-sensor NPZ recording: arrays t (N,), joints (N, {KINECT_V2.n_joints}, 3) "
+    f"in the camera frame, state (N, {KINECT_V2.n_joints}), sensor (a name, or N names) and "
+    "optionally body (N,)"
 )
 SENSOR_CSV_EXPECTED = (
-    "expected a per-sensor CSV recording: the header t,sensor,body,SpineBase_x,...,"
-    "ThumbRight_state (body optional), one row per body per frame"
+    f"expected a per-sensor CSV recording: the header t,sensor,body,{KINECT_V2.joints[0]}_x,"
+    f"...,{KINECT_V2.joints[-1]}_state (body optional), one row per body per frame"
 )
 
 
@@ -74,9 +78,9 @@ class BodyFrame(NamedTuple):
     t
         Capture time on the sensor's clock, s.
     joints
-        (25, 3) joint positions in the sensor's camera frame, m; NaN = not usable.
+        (J, 3) joint positions in the sensor's camera frame, m; NaN = not usable.
     state
-        (25,) tracking states (0 not tracked, 1 inferred, 2 tracked).
+        (J,) tracking states (0 not tracked, 1 inferred, 2 tracked).
     """
 
     sensor: str
@@ -86,31 +90,31 @@ class BodyFrame(NamedTuple):
     state: np.ndarray
 
 
-def checked_arrays(frame: BodyFrame) -> tuple[np.ndarray, np.ndarray]:
-    """A frame's joints as (25, 3) float64 and states as (25,) int8, writeable and
-    contiguous (the compiled fusion's input types: :func:`~qpavoid.core.compiling.kernel_input`).
+def checked_arrays(
+    frame: BodyFrame, skeleton: SkeletonFormat = KINECT_V2
+) -> tuple[np.ndarray, np.ndarray]:
+    """A frame's joints as (J, 3) float64 and states as (J,) int8 (J the joints of
+    ``skeleton``), writeable and contiguous (the compiled fusion's input types:
+    :func:`~qpavoid.core.compiling.kernel_input`).
 
     Raises
     ------
     InputError
-        For joints that are not (25, 3) numbers (NaN: not usable) or states that are not
-        (25,) values in {0, 1, 2}. Recordings and datagrams are checked so already; a
+        For joints that are not (J, 3) numbers (NaN: not usable) or states that are not
+        (J,) values in {0, 1, 2}. Recordings and datagrams are checked so already; a
         frame made by hand is checked here, in a few microseconds.
     """
     joints, state = frame.joints, frame.state
-    if not (
-        isinstance(joints, np.ndarray)
-        and joints.shape == (N_KINECT_JOINTS, 3)
-        and joints.dtype.kind == "f"
-    ):
-        joints = check_joints(joints)
+    n = skeleton.n_joints
+    if not (isinstance(joints, np.ndarray) and joints.shape == (n, 3) and joints.dtype.kind == "f"):
+        joints = check_joints(joints, skeleton=skeleton)
     if not (
         isinstance(state, np.ndarray)
         and state.dtype == np.int8
-        and state.shape == (N_KINECT_JOINTS,)
+        and state.shape == (n,)
         and ((state >= 0) & (state <= 2)).all()
     ):
-        state = check_states(state)
+        state = check_states(state, skeleton=skeleton)
     return kernel_input(joints, np.float64), kernel_input(state, np.int8)
 
 
@@ -207,8 +211,8 @@ class SensorRecording:
             sensor=np.array([f.sensor for f in frames], dtype=str),
             t=np.array([f.t for f in frames]),
             body=np.array([f.body for f in frames]),
-            joints=np.array([f.joints for f in frames]).reshape(-1, N_KINECT_JOINTS, 3),
-            state=np.array([f.state for f in frames]).reshape(-1, N_KINECT_JOINTS),
+            joints=np.array([f.joints for f in frames]).reshape(-1, KINECT_V2.n_joints, 3),
+            state=np.array([f.state for f in frames]).reshape(-1, KINECT_V2.n_joints),
         )
 
 
@@ -280,8 +284,8 @@ def _load_csv(path: Path) -> SensorRecording:
     header = _csv_first_row(path)
     names = _names(with_body=len(header) > 2 and header[2] == "body")
     data, words = read_csv_columns(path, names, SENSOR_CSV_EXPECTED, text=("sensor",))
-    first = names.index("SpineBase_x")
-    per_joint = data[:, first:].reshape(-1, N_KINECT_JOINTS, len(CSV_JOINT_FIELDS))
+    first = names.index(csv_header()[1])  # the first joint's first column
+    per_joint = data[:, first:].reshape(-1, KINECT_V2.n_joints, len(CSV_JOINT_FIELDS))
     body = data[:, 2] if "body" in names else np.zeros(len(data))
     return SensorRecording(
         np.array(words["sensor"], dtype=str),

@@ -22,7 +22,8 @@ import numpy as np
 
 from qpavoid.core.checks import as_array, finite_number
 from qpavoid.core.errors import InputError
-from qpavoid.human.frames import N_KINECT_JOINTS, HumanFrame, check_joints, check_states
+from qpavoid.human.frames import HumanFrame, check_joints, check_states
+from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.sensing.recording_files import (
     CSV_EXPECTED,
     CSV_JOINT_FIELDS,
@@ -219,9 +220,9 @@ def _load_npz(path: Path) -> Recording:
 
 
 def _load_csv(path: Path) -> Recording:
-    """Read a CSV recording (header row, then one row of 101 numbers per frame)."""
+    """Read a CSV recording (header row, then one row of numbers per frame)."""
     data = read_csv_table(path, csv_header(), CSV_EXPECTED)
-    per_joint = data[:, 1:].reshape(-1, N_KINECT_JOINTS, len(CSV_JOINT_FIELDS))
+    per_joint = data[:, 1:].reshape(-1, KINECT_V2.n_joints, len(CSV_JOINT_FIELDS))
     return Recording(t=data[:, 0], joints=per_joint[:, :, :3], state=per_joint[:, :, 3])
 
 

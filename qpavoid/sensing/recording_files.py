@@ -27,7 +27,7 @@ from numpy.lib import format as npy_format
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import InputError, RecordingError
 from qpavoid.core.file_bounds import check_file_size, check_npy_headers
-from qpavoid.human.frames import JointType
+from qpavoid.human.kinect_v2 import KINECT_V2
 
 T = TypeVar("T")
 
@@ -40,29 +40,33 @@ CSV_JOINT_FIELDS: tuple[str, ...] = ("x", "y", "z", "state")
 #: Where the file formats are described (named by every file-format error).
 FORMATS_DOC = "docs/formats.md"
 
+_N = KINECT_V2.n_joints  # recordings hold Kinect v2 skeletons (docs/formats.md)
+_FIRST, _LAST = KINECT_V2.joints[0], KINECT_V2.joints[-1]
+
 #: What an NPZ recording must be, for error messages.
 NPZ_EXPECTED = (
-    "expected a NumPy .npz archive with arrays t (N,), joints (N, 25, 3) and state (N, 25)"
+    f"expected a NumPy .npz archive with arrays t (N,), joints (N, {_N}, 3) and state (N, {_N})"
 )
 
 #: What a CSV recording must be, for error messages.
 CSV_EXPECTED = (
-    "expected a UTF-8 CSV file: the header row t,SpineBase_x,SpineBase_y,"
-    "SpineBase_z,SpineBase_state,...,ThumbRight_state (101 columns), then one row "
-    "of numbers per frame"
+    f"expected a UTF-8 CSV file: the header row t,{_FIRST}_x,{_FIRST}_y,"
+    f"{_FIRST}_z,{_FIRST}_state,...,{_LAST}_state ({1 + _N * len(CSV_JOINT_FIELDS)} columns), "
+    "then one row of numbers per frame"
 )
 
 
 def csv_header() -> list[str]:
-    """The 101 column names of a CSV recording.
+    """The column names of a CSV recording (101 for the Kinect v2's 25 joints).
 
     Returns
     -------
     list of str
         ``t`` then ``<Joint>_x, <Joint>_y, <Joint>_z, <Joint>_state`` for each Kinect v2
-        joint in :class:`~qpavoid.human.body.JointType` order.
+        joint in the format's order (:data:`~qpavoid.human.kinect_v2.KINECT_V2`, the
+        SDK's :class:`~qpavoid.human.kinect_v2.JointType`).
     """
-    return ["t"] + [f"{joint.name}_{field}" for joint in JointType for field in CSV_JOINT_FIELDS]
+    return ["t"] + [f"{joint}_{field}" for joint in KINECT_V2.joints for field in CSV_JOINT_FIELDS]
 
 
 def read_file(path: Path, reader: Callable[[Path], T], what: str, hint: str = "") -> T:

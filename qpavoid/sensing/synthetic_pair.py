@@ -28,18 +28,23 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from qpavoid.human.frames import MIRROR, HumanFrame, HumanMotion, JointType, TrackingState
-from qpavoid.human.posture import ARM
+from qpavoid.human.frames import HumanFrame, HumanMotion
+from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.posture import arm
+from qpavoid.human.skeleton import INFERRED, NOT_TRACKED, TRACKED
 from qpavoid.sensing.calibration import Calibration, SensorCalibration
 from qpavoid.sensing.keys import SensorKeys
 from qpavoid.sensing.per_sensor import BodyFrame, SensorRecording
 
 __all__ = ["TwoSensorConfig", "TwoSensorData", "look_at", "two_sensor_data"]
 
-#: A Kinect v2's depth camera: 70.6 × 60 degrees, 0.5 to 4.5 m (Microsoft's specification);
-#: written into the simulated sensors' calibration so that the fusion knows where each looks.
-KINECT_V2_FIELD_OF_VIEW_DEG = (70.6, 60.0)
-KINECT_V2_RANGE_M = (0.5, 4.5)
+#: The simulated sensors' skeleton format: the Kinect v2's.
+SKELETON = KINECT_V2
+#: A Kinect v2's depth camera: 70.6 × 60 degrees, 0.5 to 4.5 m (Microsoft's specification,
+#: in the format file); written into the simulated sensors' calibration so that the fusion
+#: knows where each looks.
+KINECT_V2_FIELD_OF_VIEW_DEG = SKELETON.sensor.field_of_view_deg
+KINECT_V2_RANGE_M = SKELETON.sensor.range_m
 #: The mean norm of a 3D isotropic Gaussian of unit σ per axis: √(8/π).
 _MEAN_NORM = float(np.sqrt(8.0 / np.pi))
 
@@ -83,7 +88,7 @@ class TwoSensorConfig:
     distance_m: float = 1.6
     height_m: float = 1.3
     noise_mean_m: float = 0.05
-    frame_rate_hz: float = 30.0
+    frame_rate_hz: float = SKELETON.sensor.frame_rate_hz
     phase_s: float = 0.013
     clock_offset_s: float = 0.25
     occlusions_per_s: float = 0.3
@@ -129,7 +134,7 @@ def two_sensor_data(
     cfg = cfg or TwoSensorConfig()
     rng = np.random.default_rng([cfg.seed, 10])
     first = _frame(motions[0], 0.0)
-    chest = first.joints[JointType.SpineShoulder]
+    chest = first.joints[SKELETON.group("spine")["chest"]]
     facing = np.array([0.0, -1.0, 0.0])  # the seated operator faces the robot (-y)
     sensors = {}
     for k, (name, az) in enumerate(zip(cfg.names, cfg.azimuth_deg, strict=True)):
@@ -149,7 +154,7 @@ def two_sensor_data(
     recordings = {}
     for k, name in enumerate(cfg.names):
         cal = sensors[name]
-        far_arm = ARM["right" if cfg.azimuth_deg[k] > 0 else "left"]
+        far_arm = arm(SKELETON, "right" if cfg.azimuth_deg[k] > 0 else "left")
         occluded = _windows(rng, duration_s, cfg.occlusions_per_s, cfg.occlusion_s)
         mirrored = _windows(rng, duration_s, cfg.mirror_per_s, cfg.mirror_s)
         camera_from_base = np.linalg.inv(cal.base_from_camera)
@@ -164,13 +169,14 @@ def two_sensor_data(
                     if start <= t < end:
                         idx = list(far_arm)
                         if kind < 0.5:
-                            joints[idx], state[idx] = np.nan, TrackingState.NotTracked
+                            joints[idx], state[idx] = np.nan, NOT_TRACKED
                         else:
                             joints[idx] += rng.normal(0.0, cfg.inferred_error_m / _MEAN_NORM, 3)
-                            state[idx] = TrackingState.Inferred
+                            state[idx] = INFERRED
                 if any(s <= t < e for s, e, _ in mirrored):
-                    joints, state = joints[MIRROR], state[MIRROR]
-                    state[state == TrackingState.Tracked] = TrackingState.Inferred
+                    mirror = SKELETON.mirror
+                    joints, state = joints[mirror], state[mirror]
+                    state[state == TRACKED] = INFERRED
                 camera = joints @ camera_from_base[:3, :3].T + camera_from_base[:3, 3]
                 frames.append(BodyFrame(name, body, t - cal.time_offset_s, camera, state))
         recordings[name] = SensorRecording.from_frames(frames)

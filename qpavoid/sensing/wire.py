@@ -8,16 +8,17 @@ loopback, unsigned (version 1). The skeleton itself is JSON in both.
 object::
 
     {"v": 1, "sensor": "kinect_left", "body": 0, "t": 1763864400.0333,
-     "joints": [[x, y, z, state], ... 25 rows in Kinect JointType order]}
+     "joints": [[x, y, z, state], ... one row per joint of the Kinect v2 format]}
 
 In both (in a signed datagram the sensor's name is in the header, and the payload is
 ``{"body", "t", "joints"}``):
 
 * ``sensor``: the sensor's name, as in the calibration file.
-* ``body``: the sensor's body id, 0-5.
+* ``body``: the sensor's body id, 0-5 (the format's ``max_bodies``).
 * ``t``: capture time, s, on a clock shared with the controller (UNIX time from PTP or
   NTP; the calibration's ``time_offset_s`` corrects a known offset).
-* ``joints``: 25 rows ``[x, y, z, state]`` in the sensor's camera frame, m (six
+* ``joints``: one row ``[x, y, z, state]`` per joint (25, in the SDK's JointType order:
+  :data:`~qpavoid.human.kinect_v2.KINECT_V2`) in the sensor's camera frame, m (six
   decimals); ``state`` 0
   (not tracked: the coordinates are ignored), 1 (inferred) or 2 (tracked).
 
@@ -38,9 +39,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from qpavoid.core.errors import InputError
-from qpavoid.human.frames import N_KINECT_JOINTS
+from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.skeleton import TRACKING_STATES
 from qpavoid.sensing.calibration import Calibration
-from qpavoid.sensing.per_sensor import MAX_BODIES, BodyFrame
+from qpavoid.sensing.per_sensor import BodyFrame
 
 __all__ = [
     "MAX_DATAGRAM_BYTES",
@@ -62,6 +64,10 @@ MAX_DATAGRAM_BYTES = 8192
 #: Coordinates are sent to the micrometre (a Kinect measures to the millimetre), which keeps
 #: a body's datagram near 1 kB, inside one Ethernet frame.
 COORDINATE_DECIMALS = 6
+#: A datagram's skeleton: joints of the Kinect v2 format.
+SKELETON = KINECT_V2
+#: The tracking states a datagram's joint may carry.
+STATES = tuple(code for _, code in TRACKING_STATES)
 #: Why a datagram is dropped, in the order they are checked.
 REASONS = (
     "too_long",
@@ -176,7 +182,11 @@ def skeleton(
     body, joint_rows = msg.get("body"), msg.get("joints")
     if t is None:
         t = msg.get("t")
-    if not isinstance(body, int) or isinstance(body, bool) or not 0 <= body < MAX_BODIES:
+    if (
+        not isinstance(body, int)
+        or isinstance(body, bool)
+        or not 0 <= body < SKELETON.sensor.max_bodies
+    ):
         raise WireError(f"body {body!r}", reason="bad_field")
     if not isinstance(t, (int, float)) or isinstance(t, bool):
         raise WireError(f"t {str(t)[:40]}", reason="bad_field")
@@ -186,15 +196,19 @@ def skeleton(
     except OverflowError:
         raise WireError("a number too large for a float", reason="non_finite") from None
     except (TypeError, ValueError):
-        raise WireError("joints are not 25 rows of 4 numbers", reason="bad_field") from None
+        raise WireError(
+            f"joints are not {SKELETON.n_joints} rows of 4 numbers", reason="bad_field"
+        ) from None
     if not math.isfinite(t):
         raise WireError(f"t {t!r}", reason="non_finite")
-    if arr.shape != (N_KINECT_JOINTS, 4) or not _all_numbers(joint_rows):
-        raise WireError(f"joints of shape {arr.shape}, expected (25, 4)", reason="bad_field")
+    if arr.shape != (SKELETON.n_joints, 4) or not _all_numbers(joint_rows):
+        raise WireError(
+            f"joints of shape {arr.shape}, expected ({SKELETON.n_joints}, 4)", reason="bad_field"
+        )
     if not np.isfinite(arr).all():
         raise WireError("a non-finite coordinate", reason="non_finite")
     state = arr[:, 3]
-    if not np.isin(state, (0, 1, 2)).all():
+    if not np.isin(state, STATES).all():
         raise WireError(f"states {sorted(set(state.tolist()))}", reason="bad_field")
     if sensor not in calibration.sensors:
         raise WireError(f"unknown sensor {sensor!r}", reason="unknown_sensor")

@@ -16,8 +16,9 @@ class QPConfig:
         task of eq. (8). Where the task can be met exactly (nobody near) they do not change
         the answer; they set the trade-off once constraints bind.
     weight_repulsion
-        Weight of the slack of each repulsion cost (per m/s): how hard the closest L2 point
-        and the end effector are asked to move away at least as fast as eqs. (4)-(7) say.
+        Weight of the slack of each repulsion cost (per m/s): how hard the repelled set's
+        closest point and the end effector are asked to move away at least as fast as
+        eqs. (4)-(7) say.
     regularization
         Weight of ‖q̇‖² (per rad/s): keeps the problem strictly convex; small enough that
         the answer stays within 1e-5 rad/s of eq. (8) when nothing binds.
@@ -30,9 +31,10 @@ class QPConfig:
         γ in (0, 1]: a joint may close at most this fraction of its distance to a position
         limit in one control period.
     elbow_weight, elbow_influence_m, elbow_speed_mps
-        Redundancy mode only (7 joints): a cost asking the elbow (A4) to move away from
-        the closest person point at ``elbow_speed_mps`` times eq. (4)'s shape with
-        ρ = ``elbow_influence_m``; 0 disables it.
+        Redundancy mode only (7 joints): a cost asking the elbow (the robot description's
+        ``[roles] elbow``; A4 for the iiwa) to move away from the closest person point at
+        ``elbow_speed_mps`` times eq. (4)'s shape with ρ = ``elbow_influence_m``; 0
+        disables it.
     backend
         ``"persistent"`` (the default): one ``osqp.OSQP`` problem set up once and updated
         each tick (warm started); ``"daqp"``: daqp called directly each tick, cold

@@ -7,7 +7,7 @@ import numpy as np
 from qpavoid.arm.model import Robot
 from qpavoid.control.controller import Controller
 from qpavoid.control.qp.backends import make_backend
-from qpavoid.control.qp.barriers.repulsion import EERepulsionTask, L2RepulsionTask
+from qpavoid.control.qp.barriers.repulsion import EERepulsionTask, RepelledRepulsionTask
 from qpavoid.control.qp.barriers.separation import SeparationLimit
 from qpavoid.control.qp.config import QPConfig
 from qpavoid.control.qp.kernels import warm_up
@@ -23,8 +23,10 @@ from qpavoid.control.qp.tasks.regularization import Regularization
 from qpavoid.control.qp.variables import Variables
 from qpavoid.control.task import ArcPath
 from qpavoid.control.tick import Command, ControllerConfig, Tick
+from qpavoid.core.errors import InputError
+from qpavoid.distance.methods import PointDistance
 from qpavoid.human.body import KinectHuman
-from qpavoid.laws.avoidance import stop_distances
+from qpavoid.laws.avoidance import set_stop_distances
 
 #: A solution may break a hard row by at most this much (m/s or rad/s) to be applied.
 FEASIBILITY_TOL = 1e-5
@@ -34,17 +36,18 @@ class QPController(Controller):
     """Drop-in alternative to :class:`~qpavoid.control.analytic.AnalyticController`.
 
     Each tick, after the shared prelude (distances, f of eq. 2, the stop rules), it solves
+    (L2 is the repelled set, EE the end effector, as the robot description's roles say)
 
         minimise    ‖W (J q̇ − (v_PL + K e + v_EE))‖²          eq. (8), EndEffectorTask
                   + w (s_L2² + s_EE²)                          eqs. (4)-(7), repulsion
                   + ε ‖q̇‖²                                       Regularization
                   [+ w_el (nᵀ J_p q̇ − v_el)²]                    ElbowClearanceTask (7 joints)
-        subject to  u_L2ᵀ J_L2 q̇ + s_L2 ≥ u_L2ᵀ J_L2 q̇₈ + |v_rep,L2|     L2RepulsionTask
+        subject to  u_L2ᵀ J_L2 q̇ + s_L2 ≥ u_L2ᵀ J_L2 q̇₈ + |v_rep,L2|     RepelledRepulsionTask
                     u_EEᵀ J_EE q̇ + s_EE ≥ u_EEᵀ (v_PL + K e) + |v_EE|  EERepulsionTask
                     s_L2, s_EE ≥ 0
                     −nᵀ J_p q̇ ≤ ξ (d − d_s) / (d_i − d_s) [− v_h,n] VelocityDamper, every pair
                    [−nᵀ J_p q̇ ≤ v_max(d)                         SeparationLimit, ssm only]
-                    |q̇| ≤ q̇_max, A1 and A2 scaled by (1 − f)     VelocityLimit, eq. (3)
+                    |q̇| ≤ q̇_max, scaled joints × (1 − f)          VelocityLimit, eq. (3)
                     γ (q_min − q)/dt ≤ q̇ ≤ γ (q_max − q)/dt      PositionLimit
 
     (q̇₈: eq. (8)'s joint velocities; :mod:`qpavoid.control.qp.barriers.repulsion` explains the
@@ -76,24 +79,29 @@ class QPController(Controller):
         w, cfg = self.qp, self.config
         self.variables = x = Variables(robot.nv)
         ssm = cfg.safety == "ssm"
-        d_stop = np.zeros(len(robot.sets))
-        d_stop[[self.i_L1, self.i_L2, self.i_EE]] = stop_distances(cfg.avoidance)
+        d_stop = set_stop_distances(cfg.avoidance, self.roles, len(robot.sets))
         self.ee_task = EndEffectorTask(x, w.weight_position, w.weight_orientation)
         pieces: list[QPPiece[Tick]] = [
             self.ee_task,
-            L2RepulsionTask(x, w.weight_repulsion, self.i_L2, self.task_joint_velocities),
+            RepelledRepulsionTask(x, w.weight_repulsion, self.task_joint_velocities),
             EERepulsionTask(x, w.weight_repulsion),
             Regularization(x, w.regularization),
         ]
         if w.elbow_weight > 0:
-            elbow = robot.sets[self.i_L1].points[-1]  # A4, where L1 meets L2
-            radii = np.where(self.human.point_part, self.human.sphere_radii, 0.0).max(axis=1)
+            elbow = self.roles.elbow  # the description's: for the iiwa A4, where L1 meets L2
+            if elbow is None:
+                raise InputError(
+                    f"elbow_weight: the robot description {robot.name!r} names no elbow "
+                    "point (add elbow to its [roles], docs/robot.md)",
+                    name="elbow_weight",
+                    value=w.elbow_weight,
+                )
+            radius = float(robot.sphere_radii[elbow])
             pieces.append(
                 ElbowClearanceTask(
                     x,
                     elbow,
-                    robot.sphere_radii[elbow],
-                    radii,
+                    PointDistance(elbow, len(robot.point_frames), radius, self.human),
                     w.elbow_weight,
                     w.elbow_influence_m,
                     w.elbow_speed_mps,
@@ -104,7 +112,15 @@ class QPController(Controller):
                 x, d_stop, w.damper_influence_m, w.damper_gain_mps, len(self.human.parts)
             ),
             # with the paper's rules every separation row is inactive: not in the problem
-            *([SeparationLimit(x, len(robot.sets) * len(self.human.parts))] if ssm else []),
+            *(
+                [
+                    SeparationLimit(
+                        x, len(robot.sets) * len(self.human.parts), robot.arm.max_point_speed_mps
+                    )
+                ]
+                if ssm
+                else []
+            ),
             VelocityLimit(x),
             PositionLimit(x, robot.q_min, robot.q_max, w.position_limit_gain),
         ]
@@ -158,7 +174,7 @@ class QPController(Controller):
             tick,
             np.minimum(np.maximum(dq_x, lb), ub),  # np.clip: the same, 5 µs slower
             1.0,
-            tick.v_rep_L2,
-            tick.v_rep_EE,
+            tick.v_repelled,
+            tick.v_end_effector,
             info=info,
         )

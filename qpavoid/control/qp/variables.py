@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-#: The slacks of the two repulsion rows (eqs. 4-7), in order after the joint velocities.
-REPULSION_SLACKS = ("repulsion_L2", "repulsion_EE")
+#: The slacks of the two repulsion rows, in order after the joint velocities: the repelled
+#: set's (eqs. 4-6) and the end effector's (eq. 7).
+REPULSION_SLACKS = ("repulsion_repelled", "repulsion_end_effector")
 
 
 @dataclass(frozen=True)

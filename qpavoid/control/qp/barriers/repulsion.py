@@ -2,15 +2,16 @@
 
 In the paper the repulsion is *added* to the motion the task asks for: eq. (8) puts v_EE
 into the end effector's target, and eq. (9) adds to the joints the velocity that moves
-the closest L2 point at v_rep,L2 on top of eq. (8)'s motion. As a QP: the point's speed
-along the repulsion direction u = v / |v| should be at least its nominal speed plus the
-law's speed,
+the repelled set's (L2's) closest point at v_rep,L2 on top of eq. (8)'s motion. As a QP:
+the point's speed along the repulsion direction u = v / |v| should be at least its
+nominal speed plus the law's speed,
 
     uᵀ J_p q̇ + s ≥ uᵀ ṗ_nominal + |v|,   s ≥ 0,   cost w s²,
 
 written as the row ``−uᵀ J_p q̇ − s ≤ −(uᵀ ṗ_nominal + |v|)``. For the end effector
 (:class:`EERepulsionTask`, eq. 7) ṗ_nominal is the linear part of v_PL + K e (eq. 8
-without v_EE); for the closest L2 point (:class:`L2RepulsionTask`, eqs. 4-6) it is
+without v_EE); for the repelled set's closest point (:class:`RepelledRepulsionTask`,
+eqs. 4-6) it is
 J_p q̇₈ with q̇₈ eq. (8)'s joint velocities. Moving away faster costs nothing; falling
 short costs w s². Where the task can be met the row costs nothing either, so it only acts
 against other constraints. The row is always present (fixed structure); below
@@ -96,47 +97,45 @@ class RepulsionTask(QPPiece[Tick]):
         h[0] = -(u @ nominal + speed)
 
 
-class L2RepulsionTask(RepulsionTask):
-    """Eqs. (4)-(6): the L2 point closest to the person moves away at v_rep,L2.
+class RepelledRepulsionTask(RepulsionTask):
+    """Eqs. (4)-(6): the repelled set's point closest to the person moves away at v_rep
+    (the paper's L2 and v_rep,L2). The set is the tick's ``roles.repelled``.
 
     Parameters
     ----------
     variables, weight
         As for :class:`RepulsionTask`.
-    set_index
-        Row of L2 in the distance table.
     task_joint_velocities
         Eq. (8)'s joint velocities q̇₈ of a tick (the controller's), for the point's
         nominal velocity J_p q̇₈.
     """
 
-    name = "repulsion_L2"
+    name = "repulsion_repelled"
 
     def __init__(
         self,
         variables: Variables,
         weight: float,
-        set_index: int,
         task_joint_velocities: Callable[[Tick], np.ndarray],
     ):
         super().__init__(variables, weight)
-        self.set_index, self.task_joint_velocities = set_index, task_joint_velocities
+        self.task_joint_velocities = task_joint_velocities
 
     def velocity(self, tick: Tick) -> np.ndarray:
-        return tick.v_rep_L2
+        return tick.v_repelled
 
     def motion(self, tick: Tick) -> tuple[np.ndarray, np.ndarray]:
-        Jp = tick.table.robot_jacobian(tick.kin, self.set_index, tick.L2_part)
+        Jp = tick.table.robot_jacobian(tick.kin, tick.roles.repelled, tick.repelled_part)
         return Jp, Jp @ self.task_joint_velocities(tick)  # J_p q̇₈, eq. (8)
 
 
 class EERepulsionTask(RepulsionTask):
     """Eq. (7): the end effector moves away at v_EE, on top of v_PL + K e."""
 
-    name = "repulsion_EE"
+    name = "repulsion_end_effector"
 
     def velocity(self, tick: Tick) -> np.ndarray:
-        return tick.v_rep_EE
+        return tick.v_end_effector
 
     def motion(self, tick: Tick) -> tuple[np.ndarray, np.ndarray]:
         assert tick.kin.ee_jacobian is not None

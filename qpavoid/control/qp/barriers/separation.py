@@ -21,7 +21,6 @@ from qpavoid.control.qp.pieces import QPPiece
 from qpavoid.control.qp.variables import Variables
 from qpavoid.control.tick import Tick
 from qpavoid.core.compiling import kernel_input
-from qpavoid.laws.ssm import BOUND_INACTIVE_MPS
 
 
 class SeparationLimit(QPPiece[Tick]):
@@ -34,14 +33,13 @@ class SeparationLimit(QPPiece[Tick]):
     rows
         Number of set × part pairs.
     inactive_above_mps
-        A bound above this speed cannot bind (no robot point moves that fast), m/s.
+        A bound above this speed cannot bind (no robot point moves that fast: the robot
+        description's ``[arm] max_point_speed_mps``), m/s.
     """
 
     name = "separation"
 
-    def __init__(
-        self, variables: Variables, rows: int, inactive_above_mps: float = BOUND_INACTIVE_MPS
-    ):
+    def __init__(self, variables: Variables, rows: int, inactive_above_mps: float):
         self.variables, self.rows = variables, rows
         self.inactive_above_mps = float(inactive_above_mps)  # as compiled
 

@@ -1,4 +1,4 @@
-"""Joint velocity limits: nominal, with A1 and A2 scaled by (1 − f) (eq. 3)."""
+"""Joint velocity limits: nominal, with the scaled joints' scaled by (1 − f) (eq. 3)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ class VelocityLimit(QPPiece[Tick]):
     """Bounds ``−q̇_max,r ≤ q̇ ≤ q̇_max,r`` with ``q̇_max,r`` of eq. (3) (rad/s).
 
     The shared prelude computed the limits (:func:`~qpavoid.laws.avoidance.scaled_velocity_limits`):
-    the L1 joints (A1, A2) scaled by (1 − f).
+    the joints that move the scaled set (the iiwa's A1, A2) scaled by (1 − f).
     """
 
     name = "velocity_limits"

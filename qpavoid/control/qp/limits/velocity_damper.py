@@ -7,7 +7,8 @@ from the human to the robot and the Jacobian J_p of the robot's closest point:
 
 so the allowed approach speed falls linearly from ξ at d_i to 0 at the set's stop
 distance d_s (Faverjon and Tournassoud's damper). d_s is the stop distance of the
-paper's rules: 0.05 m for L2 and EE, and for L1 the distance at which f reaches 0.8
+paper's rules: 0.05 m for the repelled and end-effector sets (L2, EE), for the scaled set
+(L1) the distance at which f reaches 0.8
 (eq. 2 inverted, 0.0423 m). A row exists for every pair (fixed structure); pairs beyond
 d_i, or not seen, get the bound +inf.
 

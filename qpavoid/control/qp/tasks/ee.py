@@ -37,7 +37,7 @@ class EndEffectorTask(QPPiece[Tick]):
     def target(tick: Tick) -> np.ndarray:
         """v* of eq. (8): planned twist + K e + the EE repulsion (linear part), (6,)."""
         v = tick.task_twist.copy()
-        v[:3] += tick.v_rep_EE
+        v[:3] += tick.v_end_effector
         return v
 
     def add_qp_objective(self, tick: Tick, dt: float, H: np.ndarray, c: np.ndarray) -> None:
@@ -48,7 +48,7 @@ class EndEffectorTask(QPPiece[Tick]):
             kernel_input(J, np.float64),  # Pinocchio's are column-major
             self.w2,
             kernel_input(tick.task_twist, np.float64),
-            kernel_input(tick.v_rep_EE, np.float64),
+            kernel_input(tick.v_end_effector, np.float64),
             H,
             c,
         )

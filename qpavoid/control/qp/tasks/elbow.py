@@ -7,19 +7,22 @@ import numpy as np
 from qpavoid.control.qp.pieces import Objective, QPPiece
 from qpavoid.control.qp.variables import Variables
 from qpavoid.control.tick import Tick
+from qpavoid.distance.methods import PointDistance
 from qpavoid.laws.avoidance import logistic
 
 
 class ElbowClearanceTask(QPPiece[Tick]):
-    """Cost ``w (nᵀ J_e q̇ − v)²`` on the elbow point (A4 for the iiwa).
+    """Cost ``w (nᵀ J_e q̇ − v)²`` on the elbow point (the description's ``[roles] elbow``).
 
-    ``d`` and ``n`` are the sphere distance and unit direction from the closest usable
-    human point to the elbow (radii as in eq. 1, each human point with the largest radius
-    of its parts), ``J_e`` the elbow's Jacobian and ``v = v_el / (1 + exp((2d/ρ − 1) α))``
-    eq. (4)'s shape with a wider ρ: the elbow drifts away well before the paper's laws
-    act. With A3 free, the end effector's 6 rows leave one joint motion that does not move
-    it (the elbow turning about the shoulder-wrist line), so a small weight lets this cost
-    act in that null space without disturbing the path.
+    ``d`` and ``n`` are the sphere distance of eq. (1) and the unit direction from the
+    closest human part to the elbow (the distance stage's
+    :class:`~qpavoid.distance.methods.PointDistance`: each part's own radius, no
+    uncertainty margin), ``J_e`` the elbow's Jacobian and
+    ``v = v_el / (1 + exp((2d/ρ − 1) α))`` eq. (4)'s shape with a wider ρ: the elbow
+    drifts away well before the paper's laws act. With a redundant arm (the iiwa with A3
+    free), the end effector's 6 rows leave one joint motion that does not move it (the
+    elbow turning about the shoulder-wrist line), so a small weight lets this cost act in
+    that null space without disturbing the path.
 
     Parameters
     ----------
@@ -27,12 +30,10 @@ class ElbowClearanceTask(QPPiece[Tick]):
         The QP's variables.
     point
         Index of the elbow among the robot's control points.
-    robot_radius_m
-        Sphere radius of the elbow point, m.
-    human_radii_m
-        (M,) radius of each human model point, m.
+    distance
+        The elbow's distance to each human part (built for ``point``).
     weight, influence_m, speed_mps, alpha
-        w, ρ, v_el and α.
+        w, ρ (m), v_el (m/s) and α.
     """
 
     name = "elbow_task"
@@ -41,26 +42,23 @@ class ElbowClearanceTask(QPPiece[Tick]):
         self,
         variables: Variables,
         point: int,
-        robot_radius_m: float,
-        human_radii_m: np.ndarray,
+        distance: PointDistance,
         weight: float,
         influence_m: float,
         speed_mps: float,
         alpha: float = 9.0,
     ):
         self.variables, self.point, self.weight = variables, point, weight
-        self.radii = robot_radius_m + np.asarray(human_radii_m, dtype=float)
+        self.distance = distance
         self.rho, self.speed, self.alpha = influence_m, speed_mps, alpha
 
     def clearance(self, tick: Tick) -> tuple[float, np.ndarray]:
         """Distance (m) and unit direction human → elbow (zero if nobody is seen)."""
-        geo = tick.human
-        diff = tick.kin.points[self.point] - geo.filled_points
-        d = np.sqrt(np.einsum("mk,mk->m", diff, diff)) - self.radii + geo.point_penalty
+        d, vector = self.distance(tick.kin.points, tick.human)
         k = int(np.argmin(d))
         if not np.isfinite(d[k]):
             return float("inf"), np.zeros(3)
-        return float(d[k]), diff[k] / max(np.linalg.norm(diff[k]), 1e-12)
+        return float(d[k]), vector[k]
 
     def compute_qp_objective(self, tick: Tick | None, dt: float) -> Objective:
         assert tick is not None

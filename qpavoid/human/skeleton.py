@@ -1,0 +1,511 @@
+"""Skeleton formats as data: what a body-tracking sensor's skeletons are made of.
+
+A :class:`SkeletonFormat` says what the library needs to know of a sensor's skeletons,
+as mmpose's dataset configs do for their keypoints: the joints' names in the sensor's
+order (a joint's id is its row in a frame), each joint's parent, the left/right pairs,
+the torso joints, the tracking-state codes, the longest plausible bone per joint, joints
+by role (:meth:`SkeletonFormat.group`), and the sensor's frame rate, latency, noise,
+field of view, range and bodies per sensor (:class:`SensorSpec`). It is read from a TOML
+file (:meth:`SkeletonFormat.load`; ``formats/kinect_v2.toml`` is the Kinect v2's, loaded
+by :mod:`qpavoid.human.kinect_v2`) and checked when built: a wrong file is refused with a
+:class:`SkeletonFormatError` naming the file, the key and the offending value.
+
+The code sizes its arrays from a format (:attr:`SkeletonFormat.n_joints`) and addresses
+joints through it (:attr:`~SkeletonFormat.parent`, :attr:`~SkeletonFormat.mirror`,
+:meth:`~SkeletonFormat.group`), never by a literal joint count or index.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from functools import cached_property
+from pathlib import Path
+from typing import Any, NoReturn
+
+import numpy as np
+
+from qpavoid.core.checks import one_line
+from qpavoid.core.errors import InputError, SkeletonFormatError
+from qpavoid.core.file_bounds import read_bounded
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+__all__ = [
+    "FORMATS_DIR",
+    "INFERRED",
+    "NOT_TRACKED",
+    "TRACKED",
+    "TRACKING_STATES",
+    "SensorSpec",
+    "SkeletonFormat",
+    "SkeletonFormatError",
+]
+
+#: The library's tracking states of a joint: not usable, usable but uncertain, trusted.
+#: Frames, recordings, datagrams and the compiled kernels use these codes.
+NOT_TRACKED, INFERRED, TRACKED = 0, 1, 2
+#: The tracking-state table a format file must hold (key: code).
+TRACKING_STATES: tuple[tuple[str, int], ...] = (
+    ("not_tracked", NOT_TRACKED),
+    ("inferred", INFERRED),
+    ("tracked", TRACKED),
+)
+#: Where the library's own format and body files are.
+FORMATS_DIR = Path(__file__).with_name("formats")
+#: Largest format or body file read, bytes: the Kinect v2's is 6 kB; 1 MB is junk.
+MAX_FORMAT_FILE_BYTES = 2**20
+
+_TOP_KEYS = (
+    "name",
+    "title",
+    "tracking_states",
+    "sensor",
+    "joints",
+    "mirror_pairs",
+    "torso",
+    "groups",
+)
+_JOINT_KEYS = ("id", "name", "parent", "max_bone_m")
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """The sensor's numbers, as its format file gives them (with their sources there).
+
+    Attributes
+    ----------
+    frame_rate_hz
+        Skeleton frames per second, Hz.
+    latency_s
+        From capture to the frame reaching the controller, s.
+    noise_m
+        Standard deviation of a tracked joint's noise per axis, m.
+    tracked_uncertainty_m
+        Z_d of speed and separation monitoring: a tracked joint's position error, m.
+    field_of_view_deg
+        The depth camera's (horizontal, vertical) field of view, degrees.
+    range_m
+        (near, far) distance at which the sensor sees a person, m.
+    max_bodies
+        Most bodies the sensor tracks at once (body ids 0 to ``max_bodies - 1``).
+    """
+
+    frame_rate_hz: float
+    latency_s: float
+    noise_m: float
+    tracked_uncertainty_m: float
+    field_of_view_deg: tuple[float, float]
+    range_m: tuple[float, float]
+    max_bodies: int
+
+    def __post_init__(self) -> None:
+        for key, low, value in (
+            ("frame_rate_hz", 0.0, self.frame_rate_hz),
+            ("latency_s", None, self.latency_s),
+            ("noise_m", None, self.noise_m),
+            ("tracked_uncertainty_m", None, self.tracked_uncertainty_m),
+        ):
+            if not _is_number(value) or not (value > low if low is not None else value >= 0):
+                rule = "a number > 0" if low is not None else "a number >= 0"
+                _fail(f"sensor.{key} must be {rule}, got {value!r}", f"sensor.{key}", value)
+        fov = self.field_of_view_deg
+        if not _pair(fov) or not all(0.0 < v < 180.0 for v in fov):
+            _fail(
+                f"sensor.field_of_view_deg must be two angles in (0, 180) degrees, got {fov!r}",
+                "sensor.field_of_view_deg",
+                fov,
+            )
+        near_far = self.range_m
+        if not _pair(near_far) or not 0.0 <= near_far[0] < near_far[1]:
+            _fail(
+                f"sensor.range_m must be [near, far] with 0 <= near < far, m, got {near_far!r}",
+                "sensor.range_m",
+                near_far,
+            )
+        if (
+            not isinstance(self.max_bodies, int)
+            or isinstance(self.max_bodies, bool)
+            or self.max_bodies < 1
+        ):
+            _fail(
+                f"sensor.max_bodies must be a whole number >= 1, got {self.max_bodies!r}",
+                "sensor.max_bodies",
+                self.max_bodies,
+            )
+
+
+@dataclass(frozen=True)
+class SkeletonFormat:
+    """A sensor's skeleton format, checked when built (module docstring).
+
+    Parameters
+    ----------
+    name
+        The format's name (``"kinect_v2"``).
+    title
+        How messages call the sensor (``"Kinect v2"``).
+    joints
+        Joint names in the sensor's order: joint ``j`` is row ``j`` of a frame.
+    parents
+        Each joint's parent (a name of ``joints``), or None for a root and for joints
+        outside the modelled tree.
+    bone_bounds_m
+        Each joint's longest plausible bone to its parent, m (0: no bound; a joint without
+        a parent has none).
+    mirror_pairs
+        (left, right) joint pairs swapped by a left/right relabelling; a joint in no pair
+        is its own mirror. The swap must map the tree onto itself.
+    torso
+        The joints whose mean is a body's centre.
+    groups
+        Joints by role: ``((group, ((role, joint), ...)), ...)`` (see :meth:`group`).
+    sensor
+        The sensor's numbers.
+    tracking_states
+        ``(state, code)`` pairs; they must be the library's :data:`TRACKING_STATES` (a
+        sensor with other codes is translated by its streamer).
+
+    Raises
+    ------
+    SkeletonFormatError
+        For anything inconsistent, naming the key and its value.
+    """
+
+    name: str
+    title: str
+    joints: tuple[str, ...]
+    parents: tuple[str | None, ...]
+    bone_bounds_m: tuple[float, ...]
+    mirror_pairs: tuple[tuple[str, str], ...]
+    torso: tuple[str, ...]
+    groups: tuple[tuple[str, tuple[tuple[str, str], ...]], ...]
+    sensor: SensorSpec
+    tracking_states: tuple[tuple[str, int], ...] = TRACKING_STATES
+
+    def __post_init__(self) -> None:
+        for key in ("name", "title"):
+            value = getattr(self, key)
+            if not isinstance(value, str) or not value.strip():
+                _fail(f"{key} must be a non-empty string, got {value!r}", key, value)
+        self._check_joints()
+        self._check_tree()
+        self._check_mirror()
+        for k, joint in enumerate(self.torso):
+            self._known(joint, f"torso[{k}]")
+        if not self.torso or len(set(self.torso)) != len(self.torso):
+            _fail(f"torso must name distinct joints, got {self.torso!r}", "torso", self.torso)
+        for group, roles in self.groups:
+            if not roles:
+                _fail(f"group {group!r} names no joint", f"groups.{group}", roles)
+            for role, joint in roles:
+                self._known(joint, f"groups.{group}.{role}")
+        if dict(self.tracking_states) != dict(TRACKING_STATES):
+            _fail(
+                f"tracking_states must be {dict(TRACKING_STATES)} (the codes of the library's "
+                f"frames, recordings and datagrams; a sensor with other codes is translated "
+                f"by its streamer), got {dict(self.tracking_states)}",
+                "tracking_states",
+                dict(self.tracking_states),
+            )
+
+    def _check_joints(self) -> None:
+        joints = self.joints
+        if not joints or not all(isinstance(j, str) and j.strip() for j in joints):
+            _fail(f"joints must be non-empty names, got {joints!r}", "joints", joints)
+        seen: set[str] = set()
+        for k, joint in enumerate(joints):
+            if joint in seen:
+                _fail(f"joints[{k}]: the name {joint!r} is used twice", f"joints[{k}].name", joint)
+            seen.add(joint)
+        for key, values in (("parents", self.parents), ("bone_bounds_m", self.bone_bounds_m)):
+            if len(values) != len(joints):
+                _fail(f"{key} has {len(values)} entries for {len(joints)} joints", key, values)
+
+    def _check_tree(self) -> None:
+        for k, (joint, parent, bound) in enumerate(
+            zip(self.joints, self.parents, self.bone_bounds_m, strict=True)
+        ):
+            if parent is not None:
+                self._known(parent, f"joints[{k}].parent")
+                if parent == joint:
+                    _fail(
+                        f"joints[{k}]: {joint!r} is its own parent", f"joints[{k}].parent", parent
+                    )
+            if not _is_number(bound) or bound < 0.0:
+                _fail(
+                    f"joints[{k}].max_bone_m ({joint}) must be a number >= 0, m, got {bound!r}",
+                    f"joints[{k}].max_bone_m",
+                    bound,
+                )
+            if parent is None and bound > 0.0:
+                _fail(
+                    f"joints[{k}]: {joint!r} has a max_bone_m ({bound!r}) but no parent",
+                    f"joints[{k}].max_bone_m",
+                    bound,
+                )
+        ids = self.parent
+        for start in range(len(self.joints)):
+            j, steps = start, 0
+            while j >= 0:
+                j, steps = int(ids[j]), steps + 1
+                if steps > len(self.joints):
+                    _fail(
+                        f"joints: the parents of {self.joints[start]!r} form a cycle",
+                        f"joints[{start}].parent",
+                        self.parents[start],
+                    )
+
+    def _check_mirror(self) -> None:
+        paired: set[str] = set()
+        for k, pair in enumerate(self.mirror_pairs):
+            if len(pair) != 2 or pair[0] == pair[1]:
+                _fail(f"mirror_pairs[{k}] must be two joints, got {pair!r}", "mirror_pairs", pair)
+            for joint in pair:
+                self._known(joint, f"mirror_pairs[{k}]")
+                if joint in paired:
+                    _fail(
+                        f"mirror_pairs[{k}]: {joint!r} is in two pairs",
+                        f"mirror_pairs[{k}]",
+                        pair,
+                    )
+                paired.add(joint)
+        mirror, parent, bound = self.mirror, self.parent, self.bone_bounds_m
+        for j, m in enumerate(mirror):
+            expected = -1 if parent[j] < 0 else mirror[parent[j]]
+            if parent[m] != expected or bound[m] != bound[j]:
+                _fail(
+                    f"mirror_pairs: {self.joints[j]!r} and {self.joints[m]!r} are a pair but "
+                    "their parents or max_bone_m do not mirror each other",
+                    "mirror_pairs",
+                    (self.joints[j], self.joints[m]),
+                )
+
+    def _known(self, joint: object, key: str) -> None:
+        if not isinstance(joint, str) or joint not in self._ids:
+            _fail(f"{key}: unknown joint {joint!r}; the joints are {list(self.joints)}", key, joint)
+
+    def __hash__(self) -> int:
+        # the dataclass hash of every field, computed once (kernels' warm-ups and the
+        # fusion's lookups are keyed on the format)
+        return self._hash
+
+    @cached_property
+    def _hash(self) -> int:
+        return hash(tuple(getattr(self, f.name) for f in fields(self)))
+
+    @cached_property
+    def _ids(self) -> dict[str, int]:
+        return {name: j for j, name in enumerate(self.joints)}
+
+    @property
+    def n_joints(self) -> int:
+        """Joints per skeleton (rows of a frame)."""
+        return len(self.joints)
+
+    def index(self, joint: str) -> int:
+        """The id (row) of the joint called ``joint``.
+
+        Raises
+        ------
+        InputError
+            For a name that is not a joint of the format.
+        """
+        j = self._ids.get(joint)
+        if j is None:
+            raise InputError(
+                f"{joint!r} is not a joint of the {self.name} format; its joints are "
+                f"{list(self.joints)}",
+                name="joint",
+                value=joint,
+            )
+        return j
+
+    def indices(self, joints: tuple[str, ...] | list[str]) -> np.ndarray:
+        """(n,) int64 ids of the named joints, in the order given."""
+        return np.array([self.index(j) for j in joints], dtype=np.int64)
+
+    def group(self, name: str) -> dict[str, int]:
+        """The joints of group ``name`` by role, in the file's order (``group("arm_left")
+        ["hand"]`` is the left hand's id).
+
+        Raises
+        ------
+        InputError
+            For a group the format does not have.
+        """
+        roles = self._groups.get(name)
+        if roles is None:
+            raise InputError(
+                f"the {self.name} format has no joint group {name!r}; its groups are "
+                f"{list(self._groups)}",
+                name="group",
+                value=name,
+            )
+        return dict(roles)
+
+    @cached_property
+    def _groups(self) -> dict[str, dict[str, int]]:
+        return {
+            group: {role: self._ids[joint] for role, joint in roles} for group, roles in self.groups
+        }
+
+    @cached_property
+    def parent(self) -> np.ndarray:
+        """(J,) int64 each joint's parent id, -1 for none (read-only)."""
+        return _frozen([-1 if p is None else self._ids[p] for p in self.parents], np.int64)
+
+    @cached_property
+    def mirror(self) -> np.ndarray:
+        """(J,) int64 each joint's counterpart on the other side (itself on the spine):
+        ``joints[mirror]`` undoes a left/right swap (read-only)."""
+        out = list(range(self.n_joints))
+        for left, right in self.mirror_pairs:
+            a, b = self._ids[left], self._ids[right]
+            out[a], out[b] = b, a
+        return _frozen(out, np.int64)
+
+    @cached_property
+    def sided(self) -> np.ndarray:
+        """(n,) int64 the joints that change under a left/right swap (read-only)."""
+        return _frozen(np.flatnonzero(np.arange(self.n_joints) != self.mirror), np.int64)
+
+    @cached_property
+    def torso_ids(self) -> np.ndarray:
+        """(n,) int64 the torso joints, in the file's order (read-only)."""
+        return _frozen([self._ids[j] for j in self.torso], np.int64)
+
+    @cached_property
+    def max_bone_m(self) -> np.ndarray:
+        """(J,) float64 each joint's longest plausible bone to its parent, m; 0 for none
+        (read-only)."""
+        return _frozen(self.bone_bounds_m, np.float64)
+
+    @classmethod
+    def load(cls, path: str | Path) -> SkeletonFormat:
+        """The format of the TOML file at ``path`` (``formats/kinect_v2.toml`` shows the
+        keys, each with its meaning and source).
+
+        Raises
+        ------
+        SkeletonFormatError
+            If the file cannot be read, is not TOML, lacks a key, has an unknown one, or
+            is inconsistent; the message names the file, the key and the value.
+        """
+        data = read_toml(path)
+        try:
+            return cls.from_mapping(data)
+        except SkeletonFormatError as exc:
+            raise SkeletonFormatError(
+                f"{path}: {exc}", path=path, name=exc.name, value=exc.value
+            ) from None
+
+    @classmethod
+    def from_mapping(cls, data: Mapping[str, object]) -> SkeletonFormat:
+        """The format of a parsed format file (the keys of :meth:`load`)."""
+        _only_keys(data, _TOP_KEYS, "")
+        rows = _require(data, "joints", list, "an array of tables")
+        names, parents, bounds = [], [], []
+        for k, row in enumerate(rows):
+            if not isinstance(row, dict):
+                _fail(f"joints[{k}] must be a table, got {row!r}", f"joints[{k}]", row)
+            _only_keys(row, _JOINT_KEYS, f"joints[{k}].")
+            if row.get("id") != k or isinstance(row.get("id"), bool):
+                _fail(
+                    f"joints[{k}].id must be {k} (ids run 0, 1, 2, ... in file order), "
+                    f"got {row.get('id')!r}",
+                    f"joints[{k}].id",
+                    row.get("id"),
+                )
+            names.append(_require(row, "name", str, "a string", f"joints[{k}]."))
+            parent = row.get("parent")
+            if parent is not None and not isinstance(parent, str):
+                _fail(f"joints[{k}].parent must be a joint name, got {parent!r}", "parent", parent)
+            parents.append(parent)
+            bounds.append(row.get("max_bone_m", 0.0))
+        pairs = _require(data, "mirror_pairs", list, "an array of [left, right] pairs")
+        groups = data.get("groups", {})  # optional: code that needs a role says so
+        if not isinstance(groups, dict):
+            _fail(f"groups must be a table of tables, got {groups!r}", "groups", groups)
+        for group, roles in groups.items():
+            if not isinstance(roles, dict):
+                _fail(f"groups.{group} must be a table, got {roles!r}", f"groups.{group}", roles)
+        sensor = _require(data, "sensor", dict, "a table")
+        _only_keys(sensor, tuple(SensorSpec.__dataclass_fields__), "sensor.")
+        missing = [k for k in SensorSpec.__dataclass_fields__ if k not in sensor]
+        if missing:
+            _fail(f"sensor has no key {missing[0]!r}", f"sensor.{missing[0]}", None)
+        states = _require(data, "tracking_states", dict, "a table")
+        return cls(
+            name=_require(data, "name", str, "a string"),
+            title=_require(data, "title", str, "a string"),
+            joints=tuple(names),
+            parents=tuple(parents),
+            bone_bounds_m=tuple(bounds),
+            mirror_pairs=tuple(tuple(p) if isinstance(p, list) else p for p in pairs),
+            torso=tuple(_require(data, "torso", list, "an array of joint names")),
+            groups=tuple((g, tuple(roles.items())) for g, roles in groups.items()),
+            sensor=SensorSpec(
+                **{k: tuple(v) if isinstance(v, list) else v for k, v in sensor.items()}  # type: ignore[arg-type]
+            ),
+            tracking_states=tuple(states.items()),
+        )
+
+
+def read_toml(path: str | Path) -> dict:
+    """The parsed TOML file at ``path`` (bounded to :data:`MAX_FORMAT_FILE_BYTES`), or a
+    :class:`SkeletonFormatError` naming the file."""
+    try:
+        text = read_bounded(path, MAX_FORMAT_FILE_BYTES).decode("utf-8")
+    except (OSError, ValueError) as exc:
+        raise SkeletonFormatError(
+            f"{path}: cannot read the file: {one_line(exc)}", path=path
+        ) from None
+    try:
+        return tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise SkeletonFormatError(f"{path}: not TOML: {one_line(exc)}", path=path) from None
+
+
+def _fail(message: str, name: str, value: object) -> NoReturn:
+    raise SkeletonFormatError(message, name=name, value=value)
+
+
+def _require(data: Mapping[str, object], key: str, kind: type, what: str, prefix: str = "") -> Any:
+    """``data[key]``, which must be a ``kind`` (``what`` in the message)."""
+    if key not in data:
+        _fail(f"{prefix}{key} is missing (expected {what})", f"{prefix}{key}", None)
+    value = data[key]
+    if not isinstance(value, kind):
+        _fail(f"{prefix}{key} must be {what}, got {value!r}", f"{prefix}{key}", value)
+    return value
+
+
+def _only_keys(data: Mapping[str, object], known: tuple[str, ...], prefix: str) -> None:
+    unknown = [k for k in data if k not in known]
+    if unknown:
+        _fail(
+            f"unknown key {prefix}{unknown[0]}; the keys are {', '.join(known)}",
+            f"{prefix}{unknown[0]}",
+            data[unknown[0]],
+        )
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _pair(value: object) -> bool:
+    return isinstance(value, tuple) and len(value) == 2 and all(_is_number(v) for v in value)
+
+
+def _frozen(values: object, dtype: type) -> np.ndarray:
+    """A read-only array: shared by every user of the format, written by none."""
+    out: np.ndarray = np.array(values, dtype=dtype)
+    out.setflags(write=False)
+    return out

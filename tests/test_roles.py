@@ -1,0 +1,316 @@
+"""The arm as data: the controllers address the robot's sets by role, never by name.
+
+A copy of the iiwa's description with every joint and set renamed gives the same commands;
+the package's code holds no iiwa joint name and no iiwa fact; the description loader
+refuses what the controllers could not use, saying how to fix the file.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+import shutil
+from dataclasses import replace
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import ideal_sim, paper_config, random_q
+
+import qpavoid
+from qpavoid.arm.description import CHECK_TOLERANCE, LWA
+from qpavoid.control.analytic import AnalyticController
+from qpavoid.control.qp import QPController
+from qpavoid.control.tick import ControllerConfig
+from qpavoid.core.errors import RobotDescriptionError
+from qpavoid.loop.run_log import repulsion_keys
+from qpavoid.loop.simulation import SimConfig, simulate
+from qpavoid.scenarios.generated import make_scenario
+
+PACKAGE = Path(qpavoid.__file__).parent
+#: The renames of the copy: every joint of the URDF, and the three sets.
+SETS = {"L1": "upper_arm", "L2": "forearm", "EE": "tool"}
+
+
+def iiwa_copy(folder: Path, edit=None) -> Path:
+    """The bundled iiwa description copied into ``folder`` (its control-point file passed
+    through ``edit``, a function of its text, if given)."""
+    src = resources.files("qpavoid.robots") / "iiwa14"
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in ("iiwa14.urdf", "control_points.toml"):
+        shutil.copy(str(src / name), folder / name)
+    if edit is not None:
+        path = folder / "control_points.toml"
+        path.write_text(edit(path.read_text()))
+    return folder
+
+
+def renamed(text: str) -> str:
+    """Every iiwa joint A1..A7 renamed J1..J7 and the sets L1, L2, EE renamed."""
+    text = re.sub(r"\bA([1-7])\b", r"J\1", text)
+    for old, new in SETS.items():
+        text = text.replace(f'"{old}"', f'"{new}"')
+    return text
+
+
+@pytest.fixture(scope="module")
+def other(tmp_path_factory) -> qpavoid.Robot:
+    """The iiwa under other names: joints J1..J7, sets upper_arm, forearm, tool."""
+    folder = iiwa_copy(tmp_path_factory.mktemp("renamed") / "other_arm")
+    for name in ("iiwa14.urdf", "control_points.toml"):
+        path = folder / name
+        path.write_text(renamed(path.read_text()))
+    return qpavoid.load_robot(folder)
+
+
+def test_the_renamed_copy_has_no_iiwa_name_left(other, robot):
+    assert other.joint_names == ("J1", "J2", "J4", "J5", "J6", "J7")  # J3 locked, as A3
+    assert other.set_names == ("upper_arm", "forearm", "tool")
+    assert other.role_names == ("upper_arm", "forearm", "tool")
+    assert other.roles == robot.roles.__class__(
+        scaled=0,
+        scaled_joints=("J1", "J2"),
+        repelled=1,
+        repelled_joints=("J1", "J2", "J4"),
+        end_effector=2,
+        elbow=3,
+    )
+    assert dict(other.arm.max_acceleration_radps2)["J4"] == 11.36
+    assert other.ik_seed.aim == "J1" and dict(other.ik_seed.angles) == {
+        "J2": 0.5,
+        "J4": -1.5,
+        "J6": -1.0,
+    }
+    assert repulsion_keys(other) == ("v_rep_forearm", "v_rep_tool")
+    assert repulsion_keys(robot) == ("v_rep_L2", "v_rep_EE")  # the iiwa's log keys, as ever
+
+
+@pytest.mark.parametrize(
+    "controller, safety",
+    [("analytic", "paper"), ("qp", "paper"), ("qp", "ssm"), ("analytic", "ssm")],
+)
+def test_renamed_joints_and_sets_give_the_same_commands(other, robot, controller, safety):
+    """Test 1 until the hand is at its closest (12 s at 100 Hz): the repulsion of the
+    repelled set and of the end effector acts (the paper's rules) or the separation bounds
+    stop the robot (ssm), and every command of the renamed robot equals the iiwa's."""
+    logs = []
+    for arm in (robot, other):
+        cls = AnalyticController if controller == "analytic" else QPController
+        if safety == "paper":
+            cfg, sim = paper_config(control_period_s=0.01), ideal_sim(control_rate_hz=100.0)
+        else:  # the description's reaction time, accelerations and fastest point speed
+            cfg = ControllerConfig(control_period_s=0.01, safety="ssm")
+            sim = SimConfig(control_rate_hz=100.0)
+        sim = replace(sim, max_time_s=12.0)
+        logs.append(simulate(cls(arm, config=cfg), make_scenario("test1", arm), sim).log)
+    iiwa, renamed_log = logs
+    if safety == "paper":  # the repulsion of both sets acts
+        assert np.linalg.norm(iiwa["v_rep_L2"], axis=1).max() > 1e-3
+        assert np.linalg.norm(iiwa["v_rep_EE"], axis=1).max() > 1e-3
+    else:  # the separation bounds (the arm's reaction and braking) stop the robot
+        assert any(str(r).startswith("speed and separation") for r in iiwa["stop_reason"])
+    np.testing.assert_allclose(renamed_log["dq_command"], iiwa["dq_command"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(renamed_log["q"], iiwa["q"], rtol=0, atol=1e-9)
+    for role in (0, 1):
+        np.testing.assert_allclose(
+            renamed_log[repulsion_keys(other)[role]],
+            iiwa[repulsion_keys(robot)[role]],
+            rtol=0,
+            atol=1e-9,
+        )
+    reasons = {str(r) for r in iiwa["stop_reason"]}
+    names = dict(zip(robot.role_names, other.role_names, strict=True))
+    expected = {re.sub(r"\b(L1|L2|EE)\b", lambda m: names[m.group(1)], r) for r in reasons}
+    assert {str(r) for r in renamed_log["stop_reason"]} == expected
+
+
+# --------------------------------------------------------------------------- no iiwa in code
+
+#: An iiwa joint name, or a string naming the iiwa (its maker, its product line).
+IIWA = re.compile(r"\bA[1-7]\b|iiwa|kuka|\blbr\b", re.IGNORECASE)
+
+
+def _docstrings(tree: ast.AST) -> set[int]:
+    """Ids of the string constants that are docstrings: a module's, class's or function's
+    first statement, and any other bare string statement (an attribute's docstring)."""
+    return {
+        id(node.value)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Expr)
+        and isinstance(node.value, ast.Constant)
+        and isinstance(node.value.value, str)
+    }
+
+
+def iiwa_strings(root: Path) -> list[str]:
+    """Every string constant of the Python code under ``root`` (docstrings and comments
+    aside) that names an iiwa joint or the iiwa, other than the default robot's name."""
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        docs = _docstrings(tree)
+        for node in ast.walk(tree):
+            if (
+                isinstance(node, ast.Constant)
+                and isinstance(node.value, str)
+                and id(node) not in docs
+                and node.value != "iiwa14"
+                and IIWA.search(node.value)
+            ):
+                found.append(f"{path.relative_to(root)}:{node.lineno}: {node.value!r}")
+    return found
+
+
+def test_the_scan_sees_a_joint_name_and_the_iiwa_in_code_not_in_docstrings(tmp_path):
+    (tmp_path / "a.py").write_text(
+        '"""Module docstring: A1 of the iiwa."""\n'
+        "def f():\n"
+        '    """A2."""\n'
+        "    #: a comment on A3\n"
+        '    return ("A4", f"{1} KUKA", "iiwa14", "A10")\n'
+    )
+    assert iiwa_strings(tmp_path) == ["a.py:5: 'A4'", "a.py:5: ' KUKA'"]
+
+
+def test_the_package_code_holds_no_iiwa_joint_name_and_no_iiwa_fact():
+    """Docstrings and comments may cite the paper's iiwa; code takes it from the robot
+    description (robots/iiwa14/), except the default robot's name "iiwa14"."""
+    assert iiwa_strings(PACKAGE) == []
+
+
+# --------------------------------------------------------------------------- refusals
+
+
+def test_a_capsule_bent_by_a_joint_is_refused_with_the_fix(tmp_path):
+    """The forearm's capsule from A3 to A5 spans the elbow A4, which does not turn about
+    it: its points do not move as the interpolation of its ends (with A3 locked or free)."""
+    folder = iiwa_copy(
+        tmp_path / "bent",
+        lambda t: t.replace('{ from = "A4", to = "A6"', '{ from = "A3", to = "A5"'),
+    )
+    for locked in (None, ()):
+        with pytest.raises(RobotDescriptionError) as info:
+            qpavoid.load_robot(folder, locked=locked)
+        err = info.value
+        assert err.path == folder / "control_points.toml"
+        assert (err.name, err.value) == ("sets.L2.capsule", ["A4"])
+        message = str(err)
+        assert "capsule of set 'L2' is carried by no single body" in message
+        assert "joint(s) ['A4']" in message
+        assert "Fix the file: give the set a capsule whose two ends lie on one link" in message
+
+
+@pytest.mark.parametrize("locked", [None, ()])
+def test_the_interpolated_capsule_jacobian_is_pinocchios_at_the_witness_point(locked):
+    """What the load-time check guarantees, at random configurations: a point on each
+    capsule axis moves as the body that carries it (Pinocchio's Jacobian of the point on
+    body carrying the capsule's first end), i.e. as the interpolation."""
+    robot = qpavoid.load_robot("iiwa14", locked=locked)
+    model, data = robot.model, robot.model.createData()
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        q = random_q(rng, robot)
+        kin = robot.kinematics(q)
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        for i, cs in enumerate(robot.sets):
+            body = model.frames[cs.capsule_frames[0]].parentJoint  # its first end's body
+            s = rng.uniform()
+            a, b = kin.segments[i]
+            point = pin.SE3(np.eye(3), (1 - s) * a + s * b)
+            J = pin.getFrameJacobian(model, data, body, data.oMi[body].actInv(point), LWA)[:3]
+            np.testing.assert_allclose(
+                kin.segment_point_jacobian(i, s), J, rtol=0, atol=CHECK_TOLERANCE
+            )
+
+
+ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
+
+
+@pytest.mark.parametrize(
+    "edit, name, fix",
+    [
+        (
+            lambda t: t[: t.index("[roles]")],
+            "roles",
+            "no [roles] table; add one, e.g. scaled = {",
+        ),
+        (
+            lambda t: t.replace('repelled = { set = "L2"', 'repelled = { set = "L3"'),
+            "roles.repelled.set",
+            "[roles] repelled: no set named 'L3'; the sets are ['L1', 'L2', 'EE']",
+        ),
+        (
+            lambda t: t.replace('joints = ["A1", "A2"] }', 'joints = ["A1", "A9"] }'),
+            "roles.scaled.joints",
+            "roles.scaled.joints: ['A9'] are not joints of the URDF",
+        ),
+        (
+            lambda t: t.replace('end_effector = { set = "EE" }', ""),
+            "roles.end_effector",
+            "[roles] needs end_effector = { set = ... }",
+        ),
+        (
+            lambda t: t.replace('elbow = ["A4"]', 'elbow = ["A9"]'),
+            "roles.elbow",
+            "[roles] elbow must list the frames of one control point",
+        ),
+        (
+            lambda t: t.replace("A7 = 15.72 }", "}").replace("A6 = 15.72, ", "A6 = 15.72 "),
+            "arm.max_acceleration_radps2",
+            "must give one limit (rad/s²) for each joint of the URDF",
+        ),
+        (
+            lambda t: t.replace("max_point_speed_mps = 3.0\n", ""),
+            "arm",
+            "[arm] is missing key(s) max_point_speed_mps",
+        ),
+        (
+            lambda t: t.replace("reaction_time_s = 0.005\n", "reaction_time_s = -1.0\n"),
+            "arm.reaction_time_s",
+            "arm.reaction_time_s must be a number at least 0, got -1.0",
+        ),
+        (
+            lambda t: t.replace('aim = "A1"', 'aim = "flange"'),
+            "ik_seed.aim",
+            "ik_seed.aim: ['flange'] are not joints of the URDF",
+        ),
+        (
+            lambda t: t.replace("[roles]\n", "[roles]\nscaled_joints = []\n"),
+            "roles",
+            "[roles] has unknown key(s) ['scaled_joints']",
+        ),
+    ],
+)
+def test_description_refusals_say_how_to_fix_the_file(tmp_path, edit, name, fix):
+    folder = iiwa_copy(tmp_path / "arm", edit)
+    with pytest.raises(RobotDescriptionError) as info:
+        qpavoid.load_robot(folder)
+    assert info.value.path == folder / "control_points.toml"
+    assert info.value.name == name
+    assert fix in str(info.value)
+
+
+def test_iiwa_defaults_come_from_the_description(robot):
+    """What was code is the file's: the scaled and repelled joints, the elbow, the arm's
+    reaction and accelerations (with their sources), its fastest point, the IK seed."""
+    assert robot.role_names == ("L1", "L2", "EE")
+    assert robot.roles.scaled_joints == ("A1", "A2")
+    assert robot.roles.repelled_joints == ("A1", "A2", "A4")
+    assert robot.point_frames[robot.roles.elbow] == robot.model.getFrameId("L1_p3")  # A4
+    assert robot.arm.reaction_time_s == 0.005 and robot.arm.max_point_speed_mps == 3.0
+    assert dict(robot.arm.max_acceleration_radps2) == {
+        "A1": 8.57, "A2": 8.57, "A3": 8.74, "A4": 11.36, "A5": 12.23, "A6": 15.72, "A7": 15.72,
+    }  # fmt: skip
+    assert {k for k, _ in robot.arm.sources} == {
+        "reaction_time_s",
+        "max_acceleration_radps2",
+        "max_point_speed_mps",
+    }
+    assert robot.ik_seed.wrist_to_tool_m == 0.126
+    ctrl = AnalyticController(robot)  # the settings' None: the description's joints
+    assert robot.joint_names[ctrl.scaled_cols[0]] == "A1"
+    assert [robot.joint_names[c] for c in ctrl.repelled_cols] == ["A1", "A2", "A4"]
+    assert ctrl.ssm.max_acceleration_radps2 == robot.arm.max_acceleration_radps2
