@@ -24,7 +24,7 @@ import time
 import numpy as np
 
 import qpavoid
-from qpavoid.human.body import JointType
+from qpavoid.human.kinect_v2 import JointType
 from qpavoid.human.posture import random_posture
 
 SAFE_M, NEAR_M = 0.05, 0.20  # "safe" threshold; the interesting range (capsules below it), m

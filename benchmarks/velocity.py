@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from qpavoid.human.frames import HumanFrame, JointType
+from qpavoid.human.frames import HumanFrame
+from qpavoid.human.kinect_v2 import JointType
 from qpavoid.human.posture import Operator
 from qpavoid.loop.camera import KINECT_V2_NOISE_M
 from qpavoid.perception.tracker import Tracker

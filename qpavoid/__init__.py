@@ -23,7 +23,8 @@ import importlib
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the names as type checkers and editors see them
-    from .arm.model import ControlSet, Kinematics, Robot, load_robot
+    from .arm.description import ControlSet
+    from .arm.model import Kinematics, Robot, load_robot
     from .control.analytic import AnalyticConfig, AnalyticController
     from .control.controller import Command, ControllerConfig
     from .control.qp import QPConfig, QPController
@@ -44,8 +45,10 @@ if TYPE_CHECKING:  # the names as type checkers and editors see them
         distance_method,
         sphere_distances,
     )
-    from .human.body import BodyPart, HumanGeometry, JointType, KinectHuman, TrackingState
+    from .human.body import BodyModel, BodyPart, HumanGeometry, KinectHuman
     from .human.frames import HumanFrame
+    from .human.kinect_v2 import JointType, TrackingState
+    from .human.skeleton import SkeletonFormat
     from .laws.avoidance import AvoidanceConfig
     from .loop.simulation import SimConfig, simulate
 
@@ -56,17 +59,18 @@ _LAZY = {
     "AnalyticController": "control.analytic",
     "ArcPath": "control.task",
     "AvoidanceConfig": "laws.avoidance",
+    "BodyModel": "human.body",
     "BodyPart": "human.body",
     "CapsuleDistance": "distance.methods",
     "Command": "control.controller",
-    "ControlSet": "arm.model",
+    "ControlSet": "arm.description",
     "ControllerConfig": "control.controller",
     "DistanceTable": "distance.methods",
     "HumanFrame": "human.frames",
     "HumanGeometry": "human.body",
     "IKNotConvergedError": "core.errors",
     "InputError": "core.errors",
-    "JointType": "human.body",
+    "JointType": "human.kinect_v2",
     "KinectHuman": "human.body",
     "Kinematics": "arm.model",
     "QPConfig": "control.qp",
@@ -76,9 +80,10 @@ _LAZY = {
     "Robot": "arm.model",
     "RobotDescriptionError": "core.errors",
     "SimConfig": "loop.simulation",
+    "SkeletonFormat": "human.skeleton",
     "SolverError": "core.errors",
     "SphereDistance": "distance.methods",
-    "TrackingState": "human.body",
+    "TrackingState": "human.kinect_v2",
     "capsule_distances": "distance.methods",
     "distance_method": "distance.methods",
     "inverse_kinematics": "control.task",
@@ -108,6 +113,7 @@ __all__ = [
     "AnalyticController",
     "ArcPath",
     "AvoidanceConfig",
+    "BodyModel",
     "BodyPart",
     "CapsuleDistance",
     "Command",
@@ -128,6 +134,7 @@ __all__ = [
     "Robot",
     "RobotDescriptionError",
     "SimConfig",
+    "SkeletonFormat",
     "SolverError",
     "SphereDistance",
     "TrackingState",

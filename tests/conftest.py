@@ -13,7 +13,7 @@ from qpavoid.fusion import person as fusion_person
 from qpavoid.human import _kernels as body_kernels
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.laws import _kernels as law_kernels
-from qpavoid.loop.camera import SensorConfig
+from qpavoid.loop.camera import CameraConfig
 from qpavoid.perception import _kernels as perception_kernels
 from qpavoid.perception.tracker import PerceptionConfig
 
@@ -55,7 +55,7 @@ def random_q(rng: np.random.Generator, robot, margin: float = 0.05) -> np.ndarra
 def ideal_sim(**kw) -> qpavoid.SimConfig:
     """The paper's bench: a perfect sensor (no latency, no noise) and an arm that follows
     its command at once."""
-    return qpavoid.SimConfig(sensor=SensorConfig.ideal(), braking=None, **kw)
+    return qpavoid.SimConfig(camera=CameraConfig.ideal(), braking=None, **kw)
 
 
 def paper_config(**kw) -> qpavoid.ControllerConfig:

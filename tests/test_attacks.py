@@ -33,7 +33,7 @@ from qpavoid.sensing.calibration import Calibration
 from qpavoid.sensing.keys import SensorKeys
 from qpavoid.sensing.per_sensor import BodyFrame
 from qpavoid.sensing.signing import Signer, fields
-from qpavoid.sensing.streamer import replay
+from qpavoid.sensing.streamer import stream
 from qpavoid.sensing.synthetic_pair import TwoSensorConfig, two_sensor_data
 from qpavoid.sensing.wire import encode
 
@@ -236,7 +236,7 @@ def live_run(robot, motion, attack=None, signed=True, mangle_real=None):
                 sent[0] += 1
                 return mangle_real(i, datagram) if mangle_real else [datagram]
 
-            replay(
+            stream(
                 recordings, listener.address, 30.0, calibration, mangle=count, unsigned=not signed
             )
             os.write(writer, str(sent[0]).encode())

@@ -1,15 +1,18 @@
 """The body model as data: the Kinect v2 body file is the paper's model, a wrong body file
 is refused with its path and key, and another skeleton format works through the body
-model, the tracker and the fusion with nothing but its two files."""
+model, the tracker, the fusion, the run log, the receiver's slots, the file bounds and the
+views with nothing but its two files."""
 
 from __future__ import annotations
 
+import multiprocessing
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from qpavoid.core.errors import InputError, SkeletonFormatError
+from qpavoid.core.file_bounds import row_values
 from qpavoid.fusion.fuser import Fuser
 from qpavoid.human.body import (
     KINECT_V2_BODY_FILE,
@@ -24,9 +27,13 @@ from qpavoid.human.kinect_v2 import KINECT_V2, KINECT_V2_FILE, JointType
 from qpavoid.human.posture import Operator
 from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.laws.ssm import SSMConfig
+from qpavoid.loop.run_log import new_log
+from qpavoid.output.live_view import _one_tick
+from qpavoid.output.view_data import checked_log, replay_data
 from qpavoid.perception.tracker import Tracker
 from qpavoid.sensing.calibration import Calibration, SensorCalibration
 from qpavoid.sensing.per_sensor import BodyFrame
+from qpavoid.sensing.receiver import SlotTable
 
 J = JointType
 BODY_TEXT = KINECT_V2_BODY_FILE.read_text()
@@ -247,6 +254,30 @@ def test_another_format_runs_through_the_fusion(stick):
     np.testing.assert_allclose(fuser.tracks[0].centre(), joints[0] + 0.00845, atol=1e-12)
     # the bones, first measured as they are, then averaged: all equal lengths here
     np.testing.assert_allclose(fuser.tracks[0].bone, [0.0, 0.3, 0.3])
+
+
+def test_another_format_sizes_the_log_the_slots_the_file_bounds_and_the_view(stick, robot):
+    sk = stick.skeleton
+    log = new_log(4, robot, sk)
+    assert log["joints"].shape == (4, 3, 3) and log["state"].shape == (4, 3)
+    table = SlotTable.create(multiprocessing.get_context("spawn"), ["a", "b"], sk)
+    assert (table.n_joints, table.max_bodies) == (3, 2)
+    assert len(table.values) == 2 * 2 * (3 + 4 * 3)  # sensors × bodies × (head + frame)
+    assert table.take() == []
+    assert dict(row_values(sk.n_joints)) == {
+        "t": 1,
+        "sensor": 1,
+        "body": 1,
+        "joints": 9,
+        "state": 3,
+        "confidence": 3,
+    }
+    start = _one_tick(robot, sk)
+    assert checked_log(start, robot, sk)["joints"].shape == (1, 3, 3)
+    with pytest.raises(InputError, match=r"joints must be numbers of shape \(1, 25, 3\)"):
+        checked_log(start, robot, KINECT_V2)
+    data = replay_data(start, {"distance_method": "capsules"}, robot, human=stick)
+    assert data["part_names"] == ["upper_arm", "forearm"] and data["human"].shape == (1, 2, 2, 3)
 
 
 def test_a_format_file_in_the_formats_folder_loads_as_any_other():

@@ -10,7 +10,7 @@ import pytest
 
 import qpavoid
 from qpavoid.cli.commands import main
-from qpavoid.loop.camera import SensorConfig
+from qpavoid.loop.camera import CameraConfig
 from qpavoid.output import plots
 from qpavoid.output.run_files import LOG_KEYS, load_log
 from qpavoid.scenarios.generated import make_scenario
@@ -124,10 +124,10 @@ def test_replay_a_recording(robot, tmp_path, fmt):
     # The controller saw the recording's frames through a Kinect (one latency late, with
     # millimetres of noise), sample-and-hold from its first frame, the last held after it.
     k = np.searchsorted(log["t"], 2.0)
-    sensor = SensorConfig()
-    seen = rec.frame_at(100.0 + 2.0 - sensor.latency_s)[0]
-    np.testing.assert_allclose(log["joints"][k], seen, atol=6 * sensor.noise_m)
-    np.testing.assert_allclose(log["joints"][-1], rec.joints[-1], atol=6 * sensor.noise_m)
+    camera = CameraConfig()
+    seen = rec.frame_at(100.0 + 2.0 - camera.latency_s)[0]
+    np.testing.assert_allclose(log["joints"][k], seen, atol=6 * camera.noise_m)
+    np.testing.assert_allclose(log["joints"][-1], rec.joints[-1], atol=6 * camera.noise_m)
     assert m["safety"] == "paper" and m["bench"] == "real" and m["distance_method"] == "capsules"
 
 

@@ -14,7 +14,8 @@ from conftest import random_q
 import qpavoid
 from qpavoid.arm.model import Kinematics
 from qpavoid.distance.methods import CapsuleDistance, SphereDistance, axis_rotations
-from qpavoid.human.body import HumanGeometry, JointType, TrackingState
+from qpavoid.human.body import HumanGeometry
+from qpavoid.human.kinect_v2 import JointType, TrackingState
 from qpavoid.human.posture import random_posture
 
 # ----------------------------------------------------------------------------- references

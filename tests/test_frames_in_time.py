@@ -6,13 +6,13 @@ import numpy as np
 
 from qpavoid.control.analytic import AnalyticController
 from qpavoid.control.qp import QPController
-from qpavoid.loop.camera import SensorConfig
+from qpavoid.loop.camera import CameraConfig
 from qpavoid.loop.simulation import SimConfig, simulate
 from qpavoid.scenarios.generated import make_scenario
 from qpavoid.sensing.recording import Recording
 
 RATE = 100.0
-LATENCY = SensorConfig().latency_s
+LATENCY = CameraConfig().latency_s
 
 
 def recording_of(robot, times: np.ndarray) -> Recording:

@@ -8,8 +8,7 @@ import pytest
 from qpavoid.core.errors import CalibrationError, InputError
 from qpavoid.fusion.association import torso_centre
 from qpavoid.fusion.fuser import Fuser, FusionConfig
-from qpavoid.human.frames import JointType, TrackingState
-from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.kinect_v2 import KINECT_V2, JointType, TrackingState
 from qpavoid.human.posture import Operator
 from qpavoid.scenarios.generated import make_scenario
 from qpavoid.sensing.calibration import Calibration, SensorCalibration
@@ -341,7 +340,7 @@ def test_a_sensor_stuck_on_a_still_arm_cannot_hide_a_strike(robot, stuck):
     widen until the robot stands."""
     from qpavoid.control.qp import QPController
     from qpavoid.control.tick import ControllerConfig
-    from qpavoid.human.frames import JointType
+    from qpavoid.human.kinect_v2 import JointType
     from qpavoid.loop.simulation import SimConfig, simulate
     from qpavoid.scenarios.strikes import StrikeCase, strike_motion
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from qpavoid.human.body import JointType as J
+from qpavoid.human.kinect_v2 import JointType as J
 from qpavoid.human.posture import Operator
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from qpavoid.core.errors import InputError
-from qpavoid.human.body import JointType
+from qpavoid.human.kinect_v2 import JointType
 from qpavoid.sensing.recording import Recording, csv_header, load_recording, save_csv, save_npz
 
 N_FRAMES = 5

@@ -30,7 +30,7 @@ from qpavoid.sensing.calibration import Calibration, SensorCalibration
 from qpavoid.sensing.keys import SensorKeys
 from qpavoid.sensing.per_sensor import BodyFrame, save_sensor_npz
 from qpavoid.sensing.signing import Signer, Verifier, fields
-from qpavoid.sensing.streamer import replay
+from qpavoid.sensing.streamer import stream
 from qpavoid.sensing.synthetic_pair import TwoSensorConfig, look_at, two_sensor_data
 from qpavoid.sensing.wire import WireError, Workspace, decode, encode
 
@@ -156,7 +156,7 @@ def test_a_busy_port_is_a_clear_error():
 
 
 def test_loopback_replay_with_faults_never_moves_on_stale_or_invalid_data(robot):
-    """replay → UDP → listener → fusion → controller, in real time, with bad datagrams."""
+    """stream → UDP → listener → fusion → controller, in real time, with bad datagrams."""
     motion = make_scenario("free", robot)
     data = two_sensor_data([motion], 3.0, TwoSensorConfig(seed=4))
     recordings = list(data.recordings.values())
@@ -207,7 +207,7 @@ def test_loopback_replay_with_faults_never_moves_on_stale_or_invalid_data(robot)
         pid = os.fork()
         if pid == 0:  # the sensors' side
             time.sleep(0.3)
-            replay(recordings, listener.address, 30.0, data.calibration, mangle=mangle)
+            stream(recordings, listener.address, 30.0, data.calibration, mangle=mangle)
             os._exit(0)
         sim = simulate(
             controller,

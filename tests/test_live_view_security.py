@@ -224,7 +224,8 @@ def test_the_state_is_made_once_per_tick_by_one_thread_at_a_time(view, monkeypat
                 inside -= 1
 
     monkeypatch.setattr(live_view, "replay_data", counted)
-    tick = {key: value[0] for key, value in live_view._one_tick(view.robot).items()}
+    start = live_view._one_tick(view.robot, view.human.skeleton)
+    tick = {key: value[0] for key, value in start.items()}
     for round_ in (1, 2):
         view.update(tick)
         barrier = threading.Barrier(8)

@@ -1,4 +1,4 @@
-"""What the controller may trust: lost, inferred and frozen joints, velocities, fingers, sensor."""
+"""What the controller may trust: lost, inferred and frozen joints, velocities, fingers, camera."""
 
 from __future__ import annotations
 
@@ -7,10 +7,10 @@ import pytest
 
 from qpavoid.arm.braking import ArmResponse, BrakingConfig, stop_time
 from qpavoid.human.body import KinectHuman
-from qpavoid.human.frames import HumanFrame, JointType, TrackingState
-from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.frames import HumanFrame
+from qpavoid.human.kinect_v2 import KINECT_V2, JointType, TrackingState
 from qpavoid.human.posture import Operator
-from qpavoid.loop.camera import Sensor, SensorConfig, SensorFault
+from qpavoid.loop.camera import Camera, CameraConfig, CameraFault
 from qpavoid.perception.tracker import PerceptionConfig, Tracker, part_velocities
 
 J = JointType
@@ -168,28 +168,28 @@ class Still:
         return Operator().rest(), np.full(25, 2)
 
 
-def test_sensor_latency_noise_and_faults():
-    cfg = SensorConfig(latency_s=0.06, noise_m=0.002, seed=1)
-    sensor = Sensor(Still(), cfg)
+def test_camera_latency_noise_and_faults():
+    cfg = CameraConfig(latency_s=0.06, noise_m=0.002, seed=1)
+    camera = Camera(Still(), cfg)
     for t in (0.0, 0.1, 0.5, 1.234):
-        f, captured = sensor.frame_at(t)
+        f, captured = camera.frame_at(t)
         assert captured == pytest.approx(np.floor((t - 0.06) * 30 + 1e-9) / 30)
     noise = np.array(
-        [sensor.frame_at(k / 30 + 0.07)[0].joints - Operator().rest() for k in range(300)]
+        [camera.frame_at(k / 30 + 0.07)[0].joints - Operator().rest() for k in range(300)]
     )
     assert noise.std() == pytest.approx(0.002, rel=0.05)
     faults = (
-        SensorFault("freeze", 1.0, 1.5),
-        SensorFault("lost", 2.0, 2.5, (HAND,)),
-        SensorFault("gap", 3.0, 3.5),
+        CameraFault("freeze", 1.0, 1.5),
+        CameraFault("lost", 2.0, 2.5, (HAND,)),
+        CameraFault("gap", 3.0, 3.5),
     )
-    sensor = Sensor(Still(), SensorConfig(latency_s=0.0, faults=faults))
-    frozen = [sensor.frame_at(1.0 + k / 30) for k in range(10)]
+    camera = Camera(Still(), CameraConfig(latency_s=0.0, faults=faults))
+    frozen = [camera.frame_at(1.0 + k / 30) for k in range(10)]
     assert all(np.array_equal(f.joints, frozen[0][0].joints) for f, _ in frozen)
     assert frozen[-1][1] > frozen[0][1]  # time stamps advance
-    f, _ = sensor.frame_at(2.2)
+    f, _ = camera.frame_at(2.2)
     assert np.isnan(f.joints[HAND]).all() and f.state[HAND] == TrackingState.NotTracked
-    _, captured = sensor.frame_at(3.4)
+    _, captured = camera.frame_at(3.4)
     assert captured < 3.0  # nothing delivered in the gap
 
 

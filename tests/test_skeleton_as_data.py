@@ -18,16 +18,6 @@ FORMAT_MODULE = PACKAGE / "human" / "kinect_v2.py"
 INDEX_NAMES = {"JointType", "TrackingState", "N_KINECT_JOINTS"}
 #: A 25 that is a number of its own, not part of 0.25 or 2025.
 COUNT = re.compile(rf"(?<![\d.]){KINECT_V2.n_joints}(?![\d.])")
-#: Files of other stages still sizing Kinect frames in code (issue 25's other work: the
-#: file bounds, the run log, the receiver's shared slots and the views); each must still
-#: offend, so that the list only shrinks.
-PENDING = {
-    "core/file_bounds.py",
-    "loop/run_log.py",
-    "sensing/receiver.py",
-    "output/view_data.py",
-    "output/live_view.py",
-}
 
 
 def docstring_nodes(tree: ast.AST) -> set[int]:
@@ -76,9 +66,7 @@ def test_the_code_holds_no_kinect_joint_count_index_or_name():
         hits = offences(path)
         if hits:
             found[path.relative_to(PACKAGE).as_posix()] = hits
-    pending = {k: v for k, v in found.items() if k in PENDING}
-    assert {k: v for k, v in found.items() if k not in PENDING} == {}
-    assert set(pending) == PENDING, f"no longer offending: {PENDING - set(pending)}"
+    assert found == {}
 
 
 def test_the_scan_finds_what_it_looks_for(tmp_path):

@@ -12,10 +12,10 @@ import pytest
 from qpavoid.arm.model import load_robot
 from qpavoid.experiments import sweep
 from qpavoid.experiments.runs import RunSpec, build_controller
-from qpavoid.loop.camera import SensorConfig, SensorFault
+from qpavoid.loop.camera import CameraConfig, CameraFault
 from qpavoid.loop.simulation import SimConfig, simulate
 from qpavoid.scenarios.generated import make_scenario
-from qpavoid.scenarios.strikes import StrikeCase, strike_motion, strike_sensor, strike_targets
+from qpavoid.scenarios.strikes import StrikeCase, strike_camera, strike_motion, strike_targets
 
 
 def run_case(robot, case: StrikeCase, controller: str, safety: str = "ssm"):
@@ -25,7 +25,7 @@ def run_case(robot, case: StrikeCase, controller: str, safety: str = "ssm"):
         strike_motion(case, robot),
         SimConfig(
             control_rate_hz=100.0,
-            sensor=strike_sensor(case),
+            camera=strike_camera(case),
             max_time_s=case.duration_s,
             measure_truth=True,
         ),
@@ -80,12 +80,12 @@ def test_frozen_and_stale_frames_stop_the_robot_until_fresh_frames(robot):
     """A hung sensor (the same skeleton from 4.7 s to 5.6 s) and a gap in the frames stop
     the person at work (``free``) with the reason, until fresh frames come."""
     for kind, word in (("freeze", "frozen"), ("gap", "stale")):
-        sensor = SensorConfig(faults=(SensorFault(kind, 4.7, 5.6),))
+        camera = CameraConfig(faults=(CameraFault(kind, 4.7, 5.6),))
         spec = RunSpec(scenario="free", controller="qp", rate_hz=100.0)
         sim = simulate(
             build_controller(spec, robot),
             make_scenario("free", robot),
-            SimConfig(control_rate_hz=100.0, sensor=sensor, max_time_s=8.0),
+            SimConfig(control_rate_hz=100.0, camera=camera, max_time_s=8.0),
         )
         log, events = sim.log, sim.metrics["stop_events"]
         # The last fresh frame is captured at 140/30 s. Frozen: frames 141-143 repeat it
@@ -116,7 +116,7 @@ def test_an_arm_never_seen_that_appears_inside_the_robot_finds_it_stationary(
     bounded by the reach of the tracked shoulder)."""
     from qpavoid.control.task import ArcPath, inverse_kinematics
     from qpavoid.experiments.runs import simulate_one
-    from qpavoid.human.frames import JointType as J
+    from qpavoid.human.kinect_v2 import JointType as J
     from qpavoid.human.posture import Operator
 
     t = np.arange(0.0, 3.0, 1 / 30)

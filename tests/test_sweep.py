@@ -66,7 +66,7 @@ def test_a_campaign_uses_its_spec_s_robot(tmp_path):
     run = StrikeCheck(4, "qp", "ssm", "L2", 1.0, "right", False, "none", 0, 0.1, 1.0, 1.0, 0.0)
     with pytest.raises(RobotDescriptionError):
         campaign.true_recording(run, spec)
-    args = build_parser().parse_args(shlex.split(campaign.replay_command(run, spec))[1:])
+    args = build_parser().parse_args(shlex.split(campaign.rerun_command(run, spec))[1:])
     assert args.robot == elsewhere
-    default = campaign.replay_command(run, campaign.campaign_spec("qp"))
+    default = campaign.rerun_command(run, campaign.campaign_spec("qp"))
     assert "--robot" not in default  # the default robot's line as it always was

@@ -23,11 +23,8 @@ import pinocchio as pin
 from numpy.typing import ArrayLike
 
 from qpavoid.arm.description import (
-    CAPSULE_KEYS,
-    CONFIG_NAME,
     LWA,
     ROLE_NAMES,
-    SET_KEYS,
     ArmDynamics,
     ControlSet,
     IKSeed,
@@ -37,21 +34,7 @@ from qpavoid.arm.description import (
 from qpavoid.core.checks import as_array
 from qpavoid.core.errors import InputError
 
-__all__ = [
-    "CAPSULE_KEYS",
-    "CONFIG_NAME",
-    "LWA",
-    "ROLE_NAMES",
-    "SET_KEYS",
-    "ArmDynamics",
-    "ControlSet",
-    "IKSeed",
-    "Kinematics",
-    "Robot",
-    "Roles",
-    "joint_columns",
-    "load_robot",
-]
+__all__ = ["Kinematics", "Robot", "joint_columns", "load_robot"]
 
 
 @dataclass(frozen=True)

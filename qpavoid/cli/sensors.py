@@ -23,7 +23,7 @@ from qpavoid.output.run_files import check_output_dir, check_output_file
 from qpavoid.sensing.calibration_file import load_calibration
 from qpavoid.sensing.keys import new_key_file, sensor_name_error
 from qpavoid.sensing.per_sensor import load_sensor_recording
-from qpavoid.sensing.streamer import replay
+from qpavoid.sensing.streamer import stream
 
 __all__ = ["add_sensor_commands", "fuse_command", "keygen_command", "replay_command"]
 
@@ -133,7 +133,7 @@ def check_distinct(files: list[str]) -> None:
 
 
 def replay_command(args: argparse.Namespace) -> str:
-    """``qpavoid replay``: stream recordings over UDP (:func:`qpavoid.sensing.streamer.replay`)."""
+    """``qpavoid replay``: stream recordings over UDP (:func:`qpavoid.sensing.streamer.stream`)."""
     address = parse_address(args.to, "--to")
     if not 1.0 <= args.rate <= 1000.0:
         raise InputError(f"--rate must be 1 to 1000 Hz, got {args.rate}", name="--rate")
@@ -144,7 +144,7 @@ def replay_command(args: argparse.Namespace) -> str:
         for rec in recordings:
             calibration.check_names(rec.sensors)
     try:
-        sent = replay(recordings, address, args.rate, calibration, unsigned=args.unsigned)
+        sent = stream(recordings, address, args.rate, calibration, unsigned=args.unsigned)
     except OSError as exc:
         raise InputError(
             f"cannot send to {args.to}: {exc.strerror or exc}", name="--to", value=args.to

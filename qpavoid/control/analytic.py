@@ -11,7 +11,7 @@ from qpavoid.control.controller import Controller
 from qpavoid.control.task import ArcPath
 from qpavoid.control.tick import Command, ControllerConfig, Tick
 from qpavoid.core.errors import InputError
-from qpavoid.human.body import KinectHuman
+from qpavoid.human.body import BodyModel
 from qpavoid.laws.avoidance import repelled_joint_velocity
 from qpavoid.laws.ssm import speed_scale
 
@@ -99,7 +99,7 @@ class AnalyticController(Controller):
         robot: Robot,
         path: ArcPath | None = None,
         config: ControllerConfig | None = None,
-        human: KinectHuman | None = None,
+        human: BodyModel | None = None,
         analytic: AnalyticConfig | None = None,
     ):
         super().__init__(robot, path, config, human)

@@ -27,7 +27,7 @@ from qpavoid.core.checks import finite_number
 from qpavoid.core.compiling import kernel_input
 from qpavoid.core.errors import SolverError
 from qpavoid.distance.methods import distance_method
-from qpavoid.human.body import HumanGeometry, KinectHuman
+from qpavoid.human.body import BodyModel, HumanGeometry, KinectHuman
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.people import NOBODY, People, as_people
 from qpavoid.laws._kernels import NOT_FINITE, limit_crossed, warm_up
@@ -64,7 +64,8 @@ class Controller:
     config
         Shared settings (:class:`ControllerConfig`).
     human
-        The human model (default: the paper's upper body).
+        The body model (default: the paper's upper body on the Kinect v2,
+        :class:`~qpavoid.human.body.KinectHuman`).
     """
 
     name = "base"
@@ -74,7 +75,7 @@ class Controller:
         robot: Robot,
         path: ArcPath | None = None,
         config: ControllerConfig | None = None,
-        human: KinectHuman | None = None,
+        human: BodyModel | None = None,
     ):
         self.robot = robot
         self.path = path or ArcPath()

@@ -6,7 +6,8 @@ calibration, a key) whole on one descriptor;
 :data:`MAX_CSV_BYTES` unopened, and :func:`check_npy_headers` an NPZ whose members declare
 more than :data:`MAX_NPZ_BYTES` in all, or an array whose ``.npy`` header (read with
 numpy's own header readers) declares Python objects, more values than :data:`MAX_ROWS` rows
-of its columns (:data:`ROW_VALUES`), or a size its member does not hold.
+of its columns (:func:`row_values`, for frames of the skeleton format's joints, which the
+caller gives: this layer knows no skeleton), or a size its member does not hold.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ __all__ = [
     "check_file_size",
     "check_npy_headers",
     "read_bounded",
+    "row_values",
 ]
 
 
@@ -41,27 +43,40 @@ __all__ = [
 #: 1 800 000). Rounded up.
 MAX_ROWS = 3_000_000
 
-#: Values per row of the arrays of recordings (base-frame, per-sensor, fused) and run logs,
-#: by name: such an array may declare at most ``MAX_ROWS`` times as many values.
-ROW_VALUES: Mapping[str, int] = MappingProxyType(
-    {
-        "t": 1,
-        "sensor": 1,
-        "body": 1,
-        "joints": 25 * 3,  # a Kinect v2 frame's 25 joints (frames imports this module)
-        "state": 25,
-        "confidence": 25,
-    }
-)
 
-#: Values per row of any other array (a run log's, or one a recording carries along): the
-#: widest row of the formats, a frame's joints (25 × 3).
-MAX_ROW_VALUES = ROW_VALUES["joints"]
+def row_values(n_joints: int) -> Mapping[str, int]:
+    """Values per row of the arrays of recordings (base-frame, per-sensor, fused) and run
+    logs, by name, for frames of ``n_joints`` joints: such an array may declare at most
+    :data:`MAX_ROWS` times as many values. Any other array (a run log's, or one a recording
+    carries along) may have rows as wide as the widest of these, a frame's joints.
+
+    Parameters
+    ----------
+    n_joints
+        Joints per frame of the files' skeleton format (25 for the Kinect v2).
+
+    Returns
+    -------
+    Mapping of str to int
+        ``t``, ``sensor``, ``body``: 1; ``joints``: ``3 n_joints``; ``state``,
+        ``confidence``: ``n_joints``.
+    """
+    return MappingProxyType(
+        {
+            "t": 1,
+            "sensor": 1,
+            "body": 1,
+            "joints": n_joints * 3,
+            "state": n_joints,
+            "confidence": n_joints,
+        }
+    )
+
 
 #: Most bytes the members of one NPZ may declare in all, uncompressed: what reading it may
-#: allocate, however well it compresses. ``MAX_ROWS`` rows of a fused recording take about
-#: 1 kB each (t and body 8 B, joints 600 B, state 25 B, confidence 200 B), 3 GB; a run log
-#: of 1.8 M ticks about 1.5 GB.
+#: allocate, however well it compresses. ``MAX_ROWS`` rows of a fused Kinect v2 recording
+#: take about 1 kB each (t and body 8 B, joints 600 B, state 25 B, confidence 200 B), 3 GB;
+#: a run log of 1.8 M ticks about 1.5 GB.
 MAX_NPZ_BYTES = 4 * 2**30
 
 #: Most bytes an NPZ file may have on disk, checked before it is opened: ``np.savez``
@@ -143,7 +158,9 @@ def check_file_size(path: Path, fmt: Literal["npz", "csv"]) -> None:
         )
 
 
-def check_npy_headers(archive: zipfile.ZipFile, names: Sequence[str], expected: str) -> None:
+def check_npy_headers(
+    archive: zipfile.ZipFile, names: Sequence[str], expected: str, n_joints: int
+) -> None:
     """Check an NPZ archive's declared sizes and the headers of its arrays ``names``
     (members ``<name>.npy``), reading no array data: what every NPZ reader checks first.
 
@@ -155,6 +172,9 @@ def check_npy_headers(archive: zipfile.ZipFile, names: Sequence[str], expected: 
         The arrays that will be read.
     expected
         What the file should be, for format messages.
+    n_joints
+        Joints per frame of the file's skeleton format (the rows' widths,
+        :func:`row_values`).
 
     Raises
     ------
@@ -162,8 +182,8 @@ def check_npy_headers(archive: zipfile.ZipFile, names: Sequence[str], expected: 
         Without the path: the members declare more than :data:`MAX_NPZ_BYTES` in all; or
         an array's member is not a ``.npy`` array, declares Python objects (an object
         dtype, or a structured one with object fields), more values than
-        :data:`MAX_ROWS` rows of its columns (:data:`ROW_VALUES`, else
-        :data:`MAX_ROW_VALUES`), or a data size its member does not hold. ``name`` is the
+        :data:`MAX_ROWS` rows of its columns (:func:`row_values`, else a frame's
+        joints'), or a data size its member does not hold. ``name`` is the
         array at fault, ``value`` the shape it declares.
     ValueError, zipfile.BadZipFile
         From numpy's header readers and zipfile on a damaged archive (the reader says so).
@@ -175,6 +195,7 @@ def check_npy_headers(archive: zipfile.ZipFile, names: Sequence[str], expected: 
             f"the {MAX_NPZ_BYTES:,} bytes an NPZ file may hold",
             value=total,
         )
+    widths = row_values(n_joints)
     for name in names:
         info = archive.getinfo(f"{name}.npy")
         shape, dtype, data_at = _npy_header(archive, info, name, expected)
@@ -191,7 +212,7 @@ def check_npy_headers(archive: zipfile.ZipFile, names: Sequence[str], expected: 
                 name=name,
                 value=shape,
             )
-        per_row = ROW_VALUES.get(name, MAX_ROW_VALUES)
+        per_row = widths.get(name, widths["joints"])
         limit = MAX_ROWS * per_row
         count = math.prod(shape)
         if count > limit or any(n > limit for n in shape):

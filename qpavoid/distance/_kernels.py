@@ -14,7 +14,8 @@ import functools
 import numpy as np
 from numba import njit
 
-from qpavoid.core.compiling import ctrl_c_deferred
+from qpavoid.core import geometry
+from qpavoid.core.compiling import ctrl_c_deferred, recompile_if_stale
 from qpavoid.core.geometry import TINY
 
 __all__ = ["capsule_axes", "capsule_directions", "sphere_table", "warm_up"]
@@ -145,7 +146,10 @@ def capsule_directions(
 
 @functools.cache
 def warm_up() -> None:
-    """Compile (or load from the disk cache) the kernel, once per process."""
+    """Compile (or load from the disk cache) the kernels, once per process; the sphere
+    table again if :mod:`qpavoid.core.geometry` changed after its cache was written (it
+    compiles :data:`~qpavoid.core.geometry.TINY` in:
+    :func:`~qpavoid.core.compiling.recompile_if_stale`)."""
     with ctrl_c_deferred():  # a Ctrl-C while the kernel compiles comes right after
         sphere_table(
             np.zeros((2, 3)),
@@ -158,3 +162,4 @@ def warm_up() -> None:
         )
         capsule_directions(np.zeros((1, 2, 3)), np.ones(2), np.zeros((2, 3)), np.ones((2, 3)))
         capsule_axes(np.zeros((1, 2, 3)))
+        recompile_if_stale(sphere_table, geometry)  # it compiles geometry.TINY in

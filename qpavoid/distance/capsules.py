@@ -18,7 +18,7 @@ from qpavoid.core.geometry import TINY, unit
 from qpavoid.distance._kernels import capsule_axes, capsule_directions
 from qpavoid.distance._kernels import warm_up as warm_up_kernels
 from qpavoid.distance.table import FALLBACK_DIRECTION, DistanceTable
-from qpavoid.human.body import HumanGeometry, KinectHuman
+from qpavoid.human.body import BodyModel, HumanGeometry
 
 #: A capsule's axis in its own frame (coal's convention): +z.
 EZ = np.array([0.0, 0.0, 1.0])
@@ -88,7 +88,7 @@ class CapsuleDistance:
 
     method = "capsules"
 
-    def __init__(self, robot: Robot, human: KinectHuman):
+    def __init__(self, robot: Robot, human: BodyModel):
         self.set_names, self.part_names = robot.set_names, human.part_names
         self._robot = _Capsules(robot.capsule_radii)
         self._robot_valid = np.ones(len(self._robot.shapes), dtype=bool)

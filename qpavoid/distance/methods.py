@@ -30,7 +30,7 @@ from qpavoid.core.errors import InputError
 from qpavoid.distance._kernels import sphere_table, warm_up
 from qpavoid.distance.capsules import CapsuleDistance, axis_rotations
 from qpavoid.distance.table import FALLBACK_DIRECTION, DistanceTable, closest_of
-from qpavoid.human.body import HumanGeometry, KinectHuman
+from qpavoid.human.body import BodyModel, HumanGeometry
 
 __all__ = [
     "FALLBACK_DIRECTION",
@@ -59,7 +59,7 @@ class SphereDistance:
 
     method = "spheres"
 
-    def __init__(self, robot: Robot, human: KinectHuman):
+    def __init__(self, robot: Robot, human: BodyModel):
         n_sets, n_parts = len(robot.sets), len(human.parts)
         self.set_names, self.part_names = robot.set_names, human.part_names
         # For every (set, part) the flat indices p * M + m of its (robot point, human point)
@@ -141,7 +141,7 @@ class PointDistance:
         Gives the points' part membership and the parts' sphere radii r_j.
     """
 
-    def __init__(self, point: int, n_points: int, radius_m: float, human: KinectHuman):
+    def __init__(self, point: int, n_points: int, radius_m: float, human: BodyModel):
         M = human.n_points
         members = [np.flatnonzero(human.point_part[:, j]) for j in range(len(human.parts))]
         width = max(len(m) for m in members)
@@ -173,9 +173,7 @@ METHODS: dict[str, type[SphereDistance] | type[CapsuleDistance]] = {
 }
 
 
-def distance_method(
-    name: str, robot: Robot, human: KinectHuman
-) -> SphereDistance | CapsuleDistance:
+def distance_method(name: str, robot: Robot, human: BodyModel) -> SphereDistance | CapsuleDistance:
     """Build the distance method called ``name`` (``"spheres"`` or ``"capsules"``)."""
     if name not in METHODS:
         raise InputError(
@@ -187,7 +185,7 @@ def distance_method(
 
 
 def sphere_distances(
-    robot: Robot, q: ArrayLike, human: KinectHuman, joints: object, state: object = None
+    robot: Robot, q: ArrayLike, human: BodyModel, joints: object, state: object = None
 ) -> DistanceTable:
     """The paper's sphere distance table (eq. 1) at robot angles ``q`` (rad).
 
@@ -196,8 +194,8 @@ def sphere_distances(
     robot, q
         The robot and its joint angles (nq,), rad.
     human, joints, state
-        The human model, its (25, 3) Kinect joints (m, robot base frame) and optional
-        (25,) tracking states (None = all tracked).
+        The body model, its skeleton's (J, 3) joints (m, robot base frame; J = 25 for the
+        Kinect v2) and optional (J,) tracking states (None = all tracked).
     """
     return SphereDistance(robot, human)(
         robot.kinematics(q, jacobians=False), human.geometry(joints, state)
@@ -205,7 +203,7 @@ def sphere_distances(
 
 
 def capsule_distances(
-    robot: Robot, q: ArrayLike, human: KinectHuman, joints: object, state: object = None
+    robot: Robot, q: ArrayLike, human: BodyModel, joints: object, state: object = None
 ) -> DistanceTable:
     """The exact capsule distance table (coal) at robot angles ``q`` (rad).
 

@@ -46,7 +46,7 @@ __all__ = [
     "RayExecutor",
     "campaign_settings",
     "campaign_spec",
-    "replay_command",
+    "rerun_command",
     "run_campaign",
     "write_campaign",
 ]
@@ -214,10 +214,11 @@ def true_recording(run: StrikeCheck, spec: SweepSpec, rate_hz: float = 30.0) -> 
     )
 
 
-def replay_command(run: StrikeCheck, spec: SweepSpec) -> str:
+def rerun_command(run: StrikeCheck, spec: SweepSpec) -> str:
     """The ``qpavoid run`` line that drives the campaign's controller with ``run``'s true
-    motion (from inside ``worst/``). Its sensor faults are not in the recording: the
-    replay sees the person through ``run``'s ordinary Kinect (``--bench real``)."""
+    motion (from inside ``worst/``; a worst case's ``"replay"`` key). Its camera faults
+    are not in the recording: the rerun sees the person through ``run``'s ordinary Kinect
+    (``--bench real``)."""
     robot = "" if spec.robot == RunSpec.robot else f" --robot {shlex.quote(spec.robot)}"
     return (
         f"qpavoid run --human seed{run.seed}.npz --controller {spec.controller} "
@@ -239,6 +240,6 @@ def write_campaign(
         worst.mkdir()
         for r in worst_runs(runs):
             save_npz(worst / f"seed{r.seed}.npz", true_recording(r, spec))
-            case = {**asdict(r), "replay": replay_command(r, spec)}
+            case = {**asdict(r), "replay": rerun_command(r, spec)}
             (worst / f"seed{r.seed}.json").write_text(json.dumps(case, indent=1))
     return summary

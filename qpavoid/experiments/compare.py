@@ -49,7 +49,11 @@ def run_case(spec: RunSpec, view: bool = False) -> tuple[RunSpec, dict, Series, 
         "path_error": np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)[::10],
     }
     named = not spec.label.startswith("random:")
-    data = replay_data(log, run.metrics, run.robot) if view and named else None
+    data = (
+        replay_data(log, run.metrics, run.robot, human=run.controller.human)
+        if view and named
+        else None
+    )
     return spec, run.metrics, series, data
 
 

@@ -28,7 +28,7 @@ from qpavoid.experiments.run_spec import (
     STALE_AFTER_LATENCY_S,
     RunSpec,
 )
-from qpavoid.loop.camera import SensorConfig
+from qpavoid.loop.camera import CameraConfig
 from qpavoid.loop.live_input import Listener, LiveSource, parse_address
 from qpavoid.loop.simulation import HumanMotion, SimConfig, SimResult, simulate
 from qpavoid.output import plots as plotting
@@ -128,7 +128,7 @@ def simulate_one(
     clear: threading.Event | None = None,
     *,
     robot: Robot | None = None,
-    sensor: SensorConfig | None = None,
+    camera: CameraConfig | None = None,
 ) -> RunResult:
     """Build the robot, controller and motion of ``spec`` and simulate them.
 
@@ -149,7 +149,7 @@ def simulate_one(
         (:attr:`LiveView.clear_requested <qpavoid.output.live_view.LiveView.clear_requested>`).
     robot
         ``spec``'s robot if already loaded (:func:`spec_robot`).
-    sensor
+    camera
         What the controller sees, if not the camera of ``spec``'s bench (a strike's faulty
         Kinect).
     """
@@ -158,11 +158,11 @@ def simulate_one(
     live = spec.listen is not None
     if motion is None and not live:
         motion = motions.load_motion(robot, spec.scenario, spec.human_files, spec.sensors)
-    if sensor is None:
-        sensor = (
-            SensorConfig.ideal()
+    if camera is None:
+        camera = (
+            CameraConfig.ideal()
             if spec.bench == "ideal"
-            else SensorConfig(latency_s=spec.latency_s)
+            else CameraConfig(latency_s=spec.latency_s)
         )
     with live_source(spec, clear) as source:
         sim = simulate(
@@ -170,7 +170,7 @@ def simulate_one(
             motion,
             SimConfig(
                 control_rate_hz=spec.rate_hz,
-                sensor=sensor,
+                camera=camera,
                 braking=None if spec.bench == "ideal" else BrakingConfig(),
                 max_time_s=spec.max_time_s,
                 goal_tolerance_m=spec.goal_tolerance_m,
@@ -235,7 +235,7 @@ def write_outputs(run: RunResult, out: str | Path, plots: bool = True, view: boo
             extra["plots"] = [p.name for p in figures]
         write_run(stage, run.sim, {**run.metrics, **extra})
         if extra["view"]:
-            data = replay_data(run.sim.log, run.metrics, run.robot)
+            data = replay_data(run.sim.log, run.metrics, run.robot, human=run.controller.human)
             title = view_html.replay_title(run.metrics, Path(out).name)
             view_html.write_html(stage / "replay.html", view_html.replay_html(data, title))
     return {**run.metrics, **extra}

@@ -45,8 +45,8 @@ from qpavoid.core.errors import InputError
 from qpavoid.experiments.jobs import map_jobs
 from qpavoid.experiments.runs import RunResult, RunSpec, simulate_one
 from qpavoid.laws.avoidance import scaled_velocity_limits, stop_distances, stop_rule_holds
-from qpavoid.loop.camera import KINECT_V2_LATENCY_S, SensorConfig
-from qpavoid.scenarios.strikes import StrikeCase, strike_case, strike_motion, strike_sensor
+from qpavoid.loop.camera import KINECT_V2_LATENCY_S, CameraConfig
+from qpavoid.scenarios.strikes import StrikeCase, strike_camera, strike_case, strike_motion
 
 __all__ = [
     "KINDS",
@@ -113,7 +113,7 @@ class SweepSpec:
 
     def run_spec(self, seed: int, duration_s: float | None = None) -> RunSpec:
         """The run of ``seed``, lasting ``max_time_s`` or else the case's own
-        ``duration_s`` (a strike's, s); a strike's motion and sensor aside
+        ``duration_s`` (a strike's, s); a strike's motion and camera aside
         (:func:`run_case`)."""
         if self.kind == "approach":
             scenario, truth = f"random:{seed}", False  # checked on what the controller saw
@@ -287,12 +287,12 @@ def run_case(spec: SweepSpec, seed: int) -> Check:
         return _approach_check(seed, simulate_one(spec.run_spec(seed)))
     robot = load_robot(spec.robot)  # the strike, aimed at its sets, seen through a faulty Kinect
     case = strike_case(seed, spec.max_speed_mps, robot)
-    sensor = strike_sensor(case, SensorConfig(latency_s=spec.latency_s, seed=case.seed))
+    camera = strike_camera(case, CameraConfig(latency_s=spec.latency_s, seed=case.seed))
     run = simulate_one(
         spec.run_spec(seed, case.duration_s),
         strike_motion(case, robot),
         robot=robot,
-        sensor=sensor,
+        camera=camera,
     )
     return _strike_check(case, run)
 

@@ -33,7 +33,7 @@ from qpavoid.core.compiling import kernel_input
 from qpavoid.core.errors import SkeletonFormatError
 from qpavoid.human._kernels import tracked_body, warm_up
 from qpavoid.human.frames import HumanFrame
-from qpavoid.human.kinect_v2 import KINECT_V2, JointType, TrackingState
+from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.skeleton import FORMATS_DIR, SkeletonFormat, read_toml
 
 __all__ = [
@@ -42,11 +42,8 @@ __all__ = [
     "UPPER_BODY",
     "BodyModel",
     "BodyPart",
-    "HumanFrame",
     "HumanGeometry",
-    "JointType",
     "KinectHuman",
-    "TrackingState",
 ]
 
 #: A joint of a part: its name in the skeleton format, or its id (row).

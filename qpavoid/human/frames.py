@@ -18,20 +18,14 @@ import numpy as np
 
 from qpavoid.core.checks import as_array
 from qpavoid.core.errors import InputError
-
-# (JointType, TrackingState and N_KINECT_JOINTS are the Kinect v2 format's, re-exported for
-# the users of a frame's rows: sensing.receiver and loop.run_log size their buffers by it)
-from qpavoid.human.kinect_v2 import KINECT_V2, N_KINECT_JOINTS, JointType, TrackingState
+from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.skeleton import TRACKED, TRACKING_STATES, SkeletonFormat
 
 __all__ = [
     "MAX_COORDINATE_M",
-    "N_KINECT_JOINTS",
     "VALID_STATES",
     "HumanFrame",
     "HumanMotion",
-    "JointType",
-    "TrackingState",
     "check_joints",
     "check_states",
     "nobody",

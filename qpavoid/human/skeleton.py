@@ -5,7 +5,7 @@ as mmpose's dataset configs do for their keypoints: the joints' names in the sen
 order (a joint's id is its row in a frame), each joint's parent, the left/right pairs,
 the torso joints, the tracking-state codes, the longest plausible bone per joint, joints
 by role (:meth:`SkeletonFormat.group`), and the sensor's frame rate, latency, noise,
-field of view, range and bodies per sensor (:class:`SensorSpec`). It is read from a TOML
+field of view, range and bodies per sensor (:class:`CameraSpec`). It is read from a TOML
 file (:meth:`SkeletonFormat.load`; ``formats/kinect_v2.toml`` is the Kinect v2's, loaded
 by :mod:`qpavoid.human.kinect_v2`) and checked when built: a wrong file is refused with a
 :class:`SkeletonFormatError` naming the file, the key and the offending value.
@@ -42,7 +42,7 @@ __all__ = [
     "NOT_TRACKED",
     "TRACKED",
     "TRACKING_STATES",
-    "SensorSpec",
+    "CameraSpec",
     "SkeletonFormat",
     "SkeletonFormatError",
 ]
@@ -75,8 +75,9 @@ _JOINT_KEYS = ("id", "name", "parent", "max_bone_m")
 
 
 @dataclass(frozen=True)
-class SensorSpec:
-    """The sensor's numbers, as its format file gives them (with their sources there).
+class CameraSpec:
+    """The body-tracking camera's numbers, as its format file's ``[sensor]`` table gives
+    them (with their sources there).
 
     Attributes
     ----------
@@ -166,7 +167,7 @@ class SkeletonFormat:
     groups
         Joints by role: ``((group, ((role, joint), ...)), ...)`` (see :meth:`group`).
     sensor
-        The sensor's numbers.
+        The camera's numbers (:class:`CameraSpec`, the file's ``[sensor]`` table).
     tracking_states
         ``(state, code)`` pairs; they must be the library's :data:`TRACKING_STATES` (a
         sensor with other codes is translated by its streamer).
@@ -185,7 +186,7 @@ class SkeletonFormat:
     mirror_pairs: tuple[tuple[str, str], ...]
     torso: tuple[str, ...]
     groups: tuple[tuple[str, tuple[tuple[str, str], ...]], ...]
-    sensor: SensorSpec
+    sensor: CameraSpec
     tracking_states: tuple[tuple[str, int], ...] = TRACKING_STATES
 
     def __post_init__(self) -> None:
@@ -436,8 +437,8 @@ class SkeletonFormat:
             if not isinstance(roles, dict):
                 _fail(f"groups.{group} must be a table, got {roles!r}", f"groups.{group}", roles)
         sensor = _require(data, "sensor", dict, "a table")
-        _only_keys(sensor, tuple(SensorSpec.__dataclass_fields__), "sensor.")
-        missing = [k for k in SensorSpec.__dataclass_fields__ if k not in sensor]
+        _only_keys(sensor, tuple(CameraSpec.__dataclass_fields__), "sensor.")
+        missing = [k for k in CameraSpec.__dataclass_fields__ if k not in sensor]
         if missing:
             _fail(f"sensor has no key {missing[0]!r}", f"sensor.{missing[0]}", None)
         states = _require(data, "tracking_states", dict, "a table")
@@ -450,7 +451,7 @@ class SkeletonFormat:
             mirror_pairs=tuple(tuple(p) if isinstance(p, list) else p for p in pairs),
             torso=tuple(_require(data, "torso", list, "an array of joint names")),
             groups=tuple((g, tuple(roles.items())) for g, roles in groups.items()),
-            sensor=SensorSpec(
+            sensor=CameraSpec(
                 **{k: tuple(v) if isinstance(v, list) else v for k, v in sensor.items()}  # type: ignore[arg-type]
             ),
             tracking_states=tuple(states.items()),

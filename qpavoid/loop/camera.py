@@ -1,7 +1,8 @@
-"""The sensor between the true person and the controller: frame rate, latency, noise, faults.
+"""The simulated camera between the true person and the controller: frame rate, latency,
+noise, faults.
 
 The true motion (a scenario, or a recording taken as ground truth) is what the person
-does; :class:`Sensor` is what a Kinect v2 pipeline makes of it. Frame k is *captured* at
+does; :class:`Camera` is what a Kinect v2 pipeline makes of it. Frame k is *captured* at
 ``c_k`` (every ``1 / frame_rate_hz`` for a generated motion; the recording's own frame
 times for a recording) and *delivered* ``latency_s`` (plus a random ``jitter_s``) later;
 it may be dropped (``dropout_probability``). At run time t the controller holds the
@@ -11,7 +12,7 @@ Every usable joint of a delivered frame carries Gaussian noise of ``noise_m`` pe
 a depth sensor never repeats a skeleton bit for bit, which is what lets the controller
 tell a hung pipeline (frozen frames) from a person holding still.
 
-:class:`SensorFault` injects what goes wrong in practice: a ``"freeze"`` (the same
+:class:`CameraFault` injects what goes wrong in practice: a ``"freeze"`` (the same
 skeleton repeated with advancing time stamps), joints ``"lost"`` (NaN, NotTracked) or
 ``"inferred"`` (held where they were, flagged Inferred), and ``"gap"`` (no frame).
 
@@ -42,12 +43,12 @@ KINECT_V2_LATENCY_S = KINECT_V2.sensor.latency_s
 #: which the frozen-frame check needs).
 KINECT_V2_NOISE_M = KINECT_V2.sensor.noise_m
 
-#: The kinds of :class:`SensorFault`.
+#: The kinds of :class:`CameraFault`.
 FAULT_KINDS = ("freeze", "lost", "inferred", "gap")
 
 
 @dataclass(frozen=True)
-class SensorFault:
+class CameraFault:
     """Something going wrong between ``start_s`` and ``end_s`` (run clock, s).
 
     Attributes
@@ -71,7 +72,7 @@ class SensorFault:
     def __post_init__(self) -> None:
         if self.kind not in FAULT_KINDS:
             raise InputError(
-                f"unknown sensor fault {self.kind!r}; choose from {FAULT_KINDS}",
+                f"unknown camera fault {self.kind!r}; choose from {FAULT_KINDS}",
                 name="kind",
                 value=self.kind,
             )
@@ -82,8 +83,8 @@ class SensorFault:
 
 
 @dataclass(frozen=True)
-class SensorConfig:
-    """A skeleton sensor's timing and errors.
+class CameraConfig:
+    """A skeleton camera's timing and errors.
 
     Attributes
     ----------
@@ -101,7 +102,7 @@ class SensorConfig:
     dropout_probability
         Chance that a frame is lost on the way.
     faults
-        Faults to inject (:class:`SensorFault`).
+        Faults to inject (:class:`CameraFault`).
     seed
         Seed of the noise, jitter and dropouts.
     """
@@ -111,16 +112,16 @@ class SensorConfig:
     noise_m: float = KINECT_V2_NOISE_M
     jitter_s: float = 0.0
     dropout_probability: float = 0.0
-    faults: tuple[SensorFault, ...] = field(default=())
+    faults: tuple[CameraFault, ...] = field(default=())
     seed: int = 0
 
     @classmethod
-    def ideal(cls, frame_rate_hz: float = KINECT_V2.sensor.frame_rate_hz) -> SensorConfig:
-        """A perfect sensor: the true skeleton at every frame, no latency, no noise."""
+    def ideal(cls, frame_rate_hz: float = KINECT_V2.sensor.frame_rate_hz) -> CameraConfig:
+        """A perfect camera: the true skeleton at every frame, no latency, no noise."""
         return cls(frame_rate_hz, latency_s=0.0, noise_m=0.0)
 
 
-class Sensor:
+class Camera:
     """What the controller receives from a true motion (build once per run).
 
     Parameters
@@ -131,7 +132,7 @@ class Sensor:
         Timing and errors.
     """
 
-    def __init__(self, motion: HumanMotion, cfg: SensorConfig):
+    def __init__(self, motion: HumanMotion, cfg: CameraConfig):
         self.motion, self.cfg = motion, cfg
         self.recording = motion if isinstance(motion, Recording) else None
         self.t0 = float(self.recording.t[0]) if self.recording is not None else 0.0
@@ -198,7 +199,7 @@ class Sensor:
     def _degrade(
         self, frame: HumanFrame, captured: float, rng: np.random.Generator, pid: int | None
     ) -> HumanFrame:
-        """One person's frame as the sensor reports it: lost and inferred faults, noise."""
+        """One person's frame as the camera reports it: lost and inferred faults, noise."""
         joints, state = frame.joints.copy(), frame.state.copy()
         for fault in self.cfg.faults:
             if fault.kind in ("lost", "inferred") and fault.active(captured):

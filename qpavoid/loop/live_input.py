@@ -1,4 +1,4 @@
-"""Live skeletons over UDP: a listener for the controller, and a replayer that feeds it.
+"""Live skeletons over UDP: a listener for the controller, and the streamer that feeds it.
 
 :class:`Listener` receives datagrams (:mod:`qpavoid.sensing.wire`) on a UDP socket in a process of
 its own (:mod:`qpavoid.sensing.receiver`), which checks each (invalid ones dropped and counted by
@@ -12,7 +12,7 @@ moves each frame's time stamp onto the run clock, fuses (:class:`~qpavoid.fusion
 and returns everybody with the capture time of the newest frame used, so the controller
 judges the age of what it sees: no fresh frame for the stale limit, and it stops.
 
-:func:`qpavoid.sensing.streamer.replay` streams per-sensor recordings to a listener in real time,
+:func:`qpavoid.sensing.streamer.stream` streams per-sensor recordings to a listener in real time,
 as live sensors would: the whole path runs on one machine over loopback.
 """
 

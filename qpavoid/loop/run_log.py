@@ -3,7 +3,8 @@
 
 Its shapes and the names of its repulsion arrays come from the robot description: one
 column per robot set, and ``v_rep_<set>`` named after the sets playing the repelled and
-end-effector parts (``v_rep_L2`` and ``v_rep_EE`` for the iiwa).
+end-effector parts (``v_rep_L2`` and ``v_rep_EE`` for the iiwa); the person's rows from the
+body model's skeleton format (one per joint).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from qpavoid.arm.model import Robot
-from qpavoid.human.frames import N_KINECT_JOINTS
+from qpavoid.human.skeleton import SkeletonFormat
 
 __all__ = ["TEXT_KEYS", "finished", "new_log", "repulsion_keys"]
 
@@ -26,9 +27,20 @@ def repulsion_keys(robot: Robot) -> tuple[str, str]:
     return f"v_rep_{robot.role_name('repelled')}", f"v_rep_{robot.role_name('end_effector')}"
 
 
-def new_log(n_max: int, robot: Robot) -> dict[str, np.ndarray]:
-    """Room for ``n_max`` ticks of every numeric array (the text ones are lists meanwhile)."""
-    n_sets = len(robot.sets)
+def new_log(n_max: int, robot: Robot, skeleton: SkeletonFormat) -> dict[str, np.ndarray]:
+    """Room for ``n_max`` ticks of every numeric array (the text ones are lists meanwhile).
+
+    Parameters
+    ----------
+    n_max
+        Most ticks of the run.
+    robot
+        The run's robot (the sets' columns, the joint angles).
+    skeleton
+        The skeleton format of the frames the controller is given (``joints`` and
+        ``state`` have a row per joint).
+    """
+    n_sets, n_joints = len(robot.sets), skeleton.n_joints
     sets = (n_max, n_sets)
     v_repelled, v_end_effector = repulsion_keys(robot)
     return {
@@ -36,8 +48,8 @@ def new_log(n_max: int, robot: Robot) -> dict[str, np.ndarray]:
         "q": np.empty((n_max, robot.nq)),
         "dq": np.empty((n_max, robot.nv)),
         "dq_command": np.empty((n_max, robot.nv)),
-        "joints": np.empty((n_max, N_KINECT_JOINTS, 3)),
-        "state": np.empty((n_max, N_KINECT_JOINTS), dtype=np.int8),
+        "joints": np.empty((n_max, n_joints, 3)),
+        "state": np.empty((n_max, n_joints), dtype=np.int8),
         "stopped": np.empty(n_max, dtype=bool),
         "f": np.empty(n_max),
         "distance": np.empty(sets),

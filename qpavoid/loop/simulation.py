@@ -2,8 +2,8 @@
 
 Truth and perception are kept apart. The motion (a scenario, or a recording taken as
 ground truth) is where the person really is; the controller sees it only through a
-:class:`~qpavoid.loop.camera.Sensor` (30 Hz frames, a latency, noise, dropouts and faults,
-``SimConfig.sensor``), each frame with its true age: now minus its capture time. A
+:class:`~qpavoid.loop.camera.Camera` (30 Hz frames, a latency, noise, dropouts and faults,
+``SimConfig.camera``), each frame with its true age: now minus its capture time. A
 recording keeps its own frame times, so during a gap in the recording, and once it has
 ended, the frame in hand grows old and the controller stops on it (it resumes only on a
 fresh frame).
@@ -48,7 +48,7 @@ from qpavoid.core.signals import Interruption
 from qpavoid.distance.methods import distance_method
 from qpavoid.human.frames import HumanFrame, HumanMotion
 from qpavoid.human.people import People
-from qpavoid.loop.camera import Sensor, SensorConfig
+from qpavoid.loop.camera import Camera, CameraConfig
 from qpavoid.loop.metrics import end_of_run, run_metrics, truth_metrics
 from qpavoid.loop.run_log import TEXT_KEYS, finished, new_log, repulsion_keys
 from qpavoid.loop.truth import TrueClearance
@@ -62,9 +62,9 @@ class SimConfig:
     ----------
     control_rate_hz
         Control loop rate, Hz.
-    sensor
+    camera
         What the controller sees of the true motion (default: a Kinect v2, docs/safety.md);
-        ``SensorConfig.ideal()`` for the true skeleton at 30 Hz with no latency or noise.
+        ``CameraConfig.ideal()`` for the true skeleton at 30 Hz with no latency or noise.
     braking
         How the arm follows its command (default: the robot description's reaction time
         and acceleration limits, for the iiwa 14 those of docs/safety.md); None: exactly
@@ -83,7 +83,7 @@ class SimConfig:
     """
 
     control_rate_hz: float = 500.0
-    sensor: SensorConfig = field(default_factory=SensorConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
     braking: BrakingConfig | None = field(default_factory=BrakingConfig)
     max_time_s: float = 40.0
     goal_tolerance_m: float = 1e-3
@@ -133,7 +133,7 @@ def simulate(
         Called with the simulated time (s) at every new human frame, e.g. to move a
         progress bar; ``None`` for none.
     source
-        Where the controller's frames come from instead of a sensor filming ``motion``
+        Where the controller's frames come from instead of a camera filming ``motion``
         (a live source, :class:`~qpavoid.loop.live_input.LiveSource`, or fused sensors); ``motion``,
         if given, is then only the truth the run is judged against.
     watch
@@ -151,9 +151,10 @@ def simulate(
     SimResult
         ``log`` keys (row k = state at t[k] and the command computed from it, so that
         ``q[k+1] = q[k] + dq[k] · (t[k+1] − t[k])``): ``t``, ``q`` (T, nq), ``dq`` (T, nv),
-        ``joints`` (T, 25, 3), ``state`` (T, 25), ``stopped`` (T,), ``f`` (T,),
-        ``distance`` (T, S) per robot set (S of them, the description's order) of the
-        method in use, ``distance_other`` (T, S) of the other method, ``v_rep_<set>``
+        ``joints`` (T, J, 3) and ``state`` (T, J) (J the joints of the body model's
+        skeleton: 25 for the Kinect v2), ``stopped`` (T,), ``f`` (T,), ``distance``
+        (T, S) per robot set (S of them, the description's order) of the method in use,
+        ``distance_other`` (T, S) of the other method, ``v_rep_<set>``
         (T, 3) for the repelled set and the end effector (``v_rep_L2`` and ``v_rep_EE``
         for the iiwa: :func:`~qpavoid.loop.run_log.repulsion_keys`), ``ee_pos`` and
         ``ee_ref`` (T, 3),
@@ -178,11 +179,11 @@ def simulate(
     n_max = math.floor(cfg.max_time_s * cfg.control_rate_hz + 1e-9) + 1
     other_name = "capsules" if controller.config.distance == "spheres" else "spheres"
     other = distance_method(other_name, robot, controller.human)
-    sensor: FrameSource
+    feed: FrameSource
     if source is not None:
-        sensor = source
+        feed = source
     elif motion is not None:
-        sensor = Sensor(motion, cfg.sensor)
+        feed = Camera(motion, cfg.camera)
     else:
         raise InputError("simulate needs a motion or a frame source", name="motion")
     arm = (
@@ -198,7 +199,7 @@ def simulate(
     goal = path.reference(path.duration_s)[0]
     wall = WallClockArm(arm, dt, robot, record=truth is not None)  # real time only
 
-    log = new_log(n_max, robot)
+    log = new_log(n_max, robot, controller.human.skeleton)
     v_repelled, v_end_effector = repulsion_keys(robot)
     texts: dict[str, list[str]] = {key: [] for key in TEXT_KEYS}
     stop_events = []
@@ -221,8 +222,8 @@ def simulate(
                 # the run clock is the wall clock: a late tick sees the time it really is,
                 # so the frames it holds are as old as they really are
                 t = max(t, time.perf_counter() - wall0)
-            human, captured_s = sensor.frame_at(t)
-            alert = getattr(sensor, "alert", "")  # a live source's suspect input, if any
+            human, captured_s = feed.frame_at(t)
+            alert = getattr(feed, "alert", "")  # a live source's suspect input, if any
             if realtime:  # getting the frame took time too: the age is judged now
                 t = max(t, time.perf_counter() - wall0)
                 q, moved_tau = wall.advance(q, t)  # the arm kept moving until now

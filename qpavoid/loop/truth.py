@@ -17,7 +17,7 @@ import numpy as np
 
 from qpavoid.arm.model import Kinematics, Robot
 from qpavoid.distance.capsules import CapsuleDistance
-from qpavoid.human.body import KinectHuman
+from qpavoid.human.body import BodyModel
 from qpavoid.human.frames import HumanFrame, HumanMotion
 from qpavoid.loop.crowd import Crowd
 from qpavoid.sensing.recording import Recording
@@ -56,7 +56,7 @@ class TrueClearance:
         The true motion (a scenario or a recording).
     """
 
-    def __init__(self, robot: Robot, human: KinectHuman, motion: HumanMotion):
+    def __init__(self, robot: Robot, human: BodyModel, motion: HumanMotion):
         self.human, self.motion = human, motion
         self.capsules = CapsuleDistance(robot, human)
         self.n_sets = len(robot.sets)

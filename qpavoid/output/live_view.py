@@ -34,6 +34,9 @@ import numpy as np
 from qpavoid.arm.model import Robot
 from qpavoid.core.checks import is_loopback
 from qpavoid.core.errors import InputError
+from qpavoid.human.body import BodyModel, KinectHuman
+from qpavoid.human.frames import nobody
+from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.output.replay_html import encode, replay_html
 from qpavoid.output.view_data import replay_data
 from qpavoid.output.view_server import (
@@ -67,6 +70,9 @@ class LiveView:
         Connections served at once; one more is closed at once.
     request_deadline_s
         Longest time from a connection's accept to the end of its request's headers, s.
+    human
+        The run's body model (the person's shapes; default: the paper's on the Kinect v2,
+        :class:`~qpavoid.human.body.KinectHuman`).
 
     Attributes
     ----------
@@ -93,8 +99,10 @@ class LiveView:
         *,
         max_connections: int = MAX_CONNECTIONS,
         request_deadline_s: float = REQUEST_DEADLINE_S,
+        human: BodyModel | None = None,
     ):
         _check_loopback(address)
+        self.human = human or KinectHuman()
         self.robot = copy.copy(robot)
         self.robot.data = robot.model.createData()  # the server's threads compute on their own
         self.metrics = {"distance_method": method}
@@ -104,7 +112,8 @@ class LiveView:
         self._state: tuple[int, bytes] = (0, b"null")  # (ticks handed so far, its JSON)
         self._robot_lock = threading.Lock()  # self.robot (its data) and _state: one thread
         self.clear_requested = threading.Event()
-        first = replay_data(_one_tick(self.robot), self.metrics, self.robot)
+        start = _one_tick(self.robot, self.human.skeleton)
+        first = replay_data(start, self.metrics, self.robot, human=self.human)
         self.page = replay_html(first, title, live=True).encode("utf-8")
         self.token = secrets.token_urlsafe(TOKEN_BYTES)
         try:
@@ -144,7 +153,7 @@ class LiveView:
         with self._robot_lock:  # the control loop never waits on this one
             if self._state[0] != handed:
                 log = {key: np.asarray(value)[None] for key, value in row.items()}
-                data = replay_data(log, self.metrics, self.robot)
+                data = replay_data(log, self.metrics, self.robot, human=self.human)
                 self._state = (handed, json.dumps(encode(data), separators=(",", ":")).encode())
             return self._state[1]
 
@@ -161,14 +170,16 @@ class LiveView:
         self.close()
 
 
-def _one_tick(robot: Robot) -> dict[str, np.ndarray]:
-    """A log of one tick with the robot at rest and nobody in view (the page's start)."""
+def _one_tick(robot: Robot, skeleton: SkeletonFormat) -> dict[str, np.ndarray]:
+    """A log of one tick with the robot at rest and nobody of ``skeleton``'s joints in view
+    (the page's start)."""
     nan3 = np.full((1, len(robot.sets), 3), np.nan)  # no closest pair for any set
+    joints, state = nobody(skeleton)
     return {
         "t": np.zeros(1),
         "q": robot.neutral()[None],
-        "joints": np.full((1, 25, 3), np.nan),
-        "state": np.zeros((1, 25), dtype=np.int8),
+        "joints": joints[None],
+        "state": state[None],
         "stopped": np.ones(1, dtype=bool),
         "stop_reason": np.array(["waiting for the run"]),
         "f": np.zeros(1),

@@ -30,7 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from qpavoid.arm.model import ROLE_NAMES, Robot
+from qpavoid.arm.description import ROLE_NAMES
+from qpavoid.arm.model import Robot
 from qpavoid.laws.avoidance import AvoidanceConfig
 from qpavoid.output.plot_base import PATH, SCENARIO_TITLES, STOP, TRACE, Run, finish
 from qpavoid.output.plot_snapshots import BONES, VIEWS, fig_snapshots, snapshot_ticks

@@ -24,9 +24,11 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from qpavoid.arm.model import Robot, Roles
+from qpavoid.arm.description import Roles
+from qpavoid.arm.model import Robot
 from qpavoid.core.errors import InputError
-from qpavoid.human.body import KinectHuman
+from qpavoid.human.body import BodyModel, KinectHuman
+from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.laws.avoidance import AvoidanceConfig, distance_at_factor, set_stop_distances
 from qpavoid.loop.run_log import TEXT_KEYS
 
@@ -60,11 +62,11 @@ def pair_states(distance: np.ndarray, cfg: AvoidanceConfig, roles: Roles) -> np.
 
 
 #: The log arrays a replay needs, with the shape of one tick's row (``"S"``: one per robot
-#: set; ``"nq"``: one per joint angle).
+#: set; ``"nq"``: one per joint angle; ``"J"``: one per joint of the skeleton format).
 _ROWS: dict[str, tuple[int | str, ...]] = {
     "q": ("nq",),
-    "joints": (25, 3),
-    "state": (25,),
+    "joints": ("J", 3),
+    "state": ("J",),
     "stopped": (),
     "f": (),
     "distance": ("S",),
@@ -82,9 +84,12 @@ _OPTIONAL: dict[str, tuple[int | str, ...]] = {
 }
 
 
-def checked_log(log: dict[str, np.ndarray], robot: Robot) -> dict[str, np.ndarray]:
+def checked_log(
+    log: dict[str, np.ndarray], robot: Robot, skeleton: SkeletonFormat
+) -> dict[str, np.ndarray]:
     """The arrays of ``log`` a replay uses, checked: ``t`` finite and increasing, every
-    other array one row per tick of the right shape and kind.
+    other array one row per tick of the right shape and kind (the robot's sets and joint
+    angles, the skeleton format's joints).
 
     Raises
     ------
@@ -101,7 +106,7 @@ def checked_log(log: dict[str, np.ndarray], robot: Robot) -> dict[str, np.ndarra
     if not np.isfinite(t).all() or np.any(np.diff(t) <= 0):
         raise refuse("t", "must be finite and strictly increasing")
     out = {"t": t.astype(float)}
-    sizes = {"S": len(robot.sets), "nq": robot.nq}
+    sizes = {"S": len(robot.sets), "nq": robot.nq, "J": skeleton.n_joints}
     for name, shape in (_ROWS | _OPTIONAL).items():
         if name not in log:
             if name in _ROWS:
@@ -134,6 +139,7 @@ def replay_data(
     robot: Robot,
     cfg: AvoidanceConfig | None = None,
     fps: float = 30.0,
+    human: BodyModel | None = None,
 ) -> dict[str, Any]:
     """The replay of one run (module docstring): a dict of numbers, lists and arrays.
 
@@ -147,9 +153,13 @@ def replay_data(
         The avoidance constants the run used (the states of the closest pairs).
     fps
         Most scene frames per second of run time.
+    human
+        The run's body model (default: the paper's on the Kinect v2,
+        :class:`~qpavoid.human.body.KinectHuman`).
     """
     cfg = cfg or AvoidanceConfig()
-    log = checked_log(log, robot)
+    human = human or KinectHuman()
+    log = checked_log(log, robot, human.skeleton)
     n_all = len(log["t"])
     keep = np.arange(0, n_all, -(-n_all // MAX_TICKS))  # every tick, up to MAX_TICKS
     log = {key: value[keep] for key, value in log.items()}
@@ -159,7 +169,6 @@ def replay_data(
     stride = max(1, round(1.0 / (fps * dt)))
     frames = np.arange(0, n, stride)
     method = str(metrics.get("distance_method", "capsules"))
-    human = KinectHuman()
     links, robot_shapes, human_shapes = [], [], []
     for k in frames:
         kin = robot.kinematics(log["q"][k], jacobians=False)

@@ -6,12 +6,12 @@ that does not get out of the way is hit), arriving at a random path time with a 
 peak speed, holding there, then withdrawing. The targets (:func:`strike_targets`) are the
 robot description's sets by name (``L1``, ``L2``, ``EE`` for the iiwa), the ``shoulder``
 (where the scaled set's capsule starts: A2 for the iiwa) and the ``base`` column under it.
-A fault can be laid on top (:class:`~qpavoid.loop.camera.SensorFault`): the striking hand
+A fault can be laid on top (:class:`~qpavoid.loop.camera.CameraFault`): the striking hand
 ``lost`` or ``inferred`` as it arrives, a ``frozen`` sensor, a ``gap`` in the frames, or
 ``jitter`` (delayed and dropped frames all run long).
 
 :func:`strike_case` draws a case from a seed; :func:`strike_motion` and
-:func:`strike_sensor` turn it into the true motion and the sensor the controller sees.
+:func:`strike_camera` turn it into the true motion and the camera the controller sees through.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from qpavoid.arm.model import Robot, load_robot
 from qpavoid.control.task import ArcPath
 from qpavoid.core.errors import InputError
 from qpavoid.human.posture import ARM, Operator
-from qpavoid.loop.camera import SensorConfig, SensorFault
+from qpavoid.loop.camera import CameraConfig, CameraFault
 from qpavoid.scenarios.generated import ScriptedReach, nominal_configurations, reach_and_return
 
 #: Where a strike aims besides the robot's sets (:func:`strike_targets`).
@@ -153,17 +153,17 @@ def strike_motion(
     return reaches[case.side]
 
 
-def strike_sensor(case: StrikeCase, base: SensorConfig | None = None) -> SensorConfig:
-    """The sensor of ``case``: ``base`` (a Kinect v2) with the case's fault laid on."""
-    base = base or SensorConfig(seed=case.seed)
+def strike_camera(case: StrikeCase, base: CameraConfig | None = None) -> CameraConfig:
+    """The camera of ``case``: ``base`` (a Kinect v2) with the case's fault laid on."""
+    base = base or CameraConfig(seed=case.seed)
     hand = [int(j) for j in ARM[case.side][2:]]  # wrist, hand, fingers
     window = (case.arrival_s - 0.3, case.arrival_s + 0.6)
     if case.fault in ("lost", "inferred"):
-        return replace(base, faults=(SensorFault(case.fault, *window, tuple(hand)),))
+        return replace(base, faults=(CameraFault(case.fault, *window, tuple(hand)),))
     if case.fault == "frozen":
-        return replace(base, faults=(SensorFault("freeze", *window),))
+        return replace(base, faults=(CameraFault("freeze", *window),))
     if case.fault == "gap":
-        return replace(base, faults=(SensorFault("gap", *window),))
+        return replace(base, faults=(CameraFault("gap", *window),))
     if case.fault == "jitter":
         return replace(base, jitter_s=0.03, dropout_probability=0.1)
     return base
@@ -174,8 +174,8 @@ __all__ = [
     "FAULTS",
     "StrikeCase",
     "TwoHands",
+    "strike_camera",
     "strike_case",
     "strike_motion",
-    "strike_sensor",
     "strike_targets",
 ]

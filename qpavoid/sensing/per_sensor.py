@@ -52,9 +52,6 @@ __all__ = [
     "save_sensor_npz",
 ]
 
-#: Most bodies a Kinect v2 tracks at once (body ids 0-5), from its format file.
-MAX_BODIES = KINECT_V2.sensor.max_bodies
-
 SENSOR_NPZ_EXPECTED = (
     f"expected a per-sensor NPZ recording: arrays t (N,), joints (N, {KINECT_V2.n_joints}, 3) "
     f"in the camera frame, state (N, {KINECT_V2.n_joints}), sensor (a name, or N names) and "
@@ -149,12 +146,13 @@ class SensorRecording:
                 value=self.sensor,
             )
         body = as_array(self.body, (n,), "body (body ids)")
-        wrong = (body != np.round(body)) | (body < 0) | (body >= MAX_BODIES)
+        max_bodies = KINECT_V2.sensor.max_bodies  # body ids 0-5, from the format file
+        wrong = (body != np.round(body)) | (body < 0) | (body >= max_bodies)
         if np.any(wrong):
             bad = int(np.flatnonzero(wrong)[0])
             raise InputError(
                 f"body[{bad}] is {body[bad].item()!r}; a Kinect v2 body id is 0 to "
-                f"{MAX_BODIES - 1}",
+                f"{max_bodies - 1}",
                 name="body",
                 value=body,
             )

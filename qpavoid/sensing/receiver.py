@@ -18,7 +18,8 @@ before it sends, so a clock ahead of ours must not poison the order), and one no
 than its body's last (``out_of_order_or_duplicate``); the others are
 ``accepted``, and one replaced before the loop took it is counted ``superseded``:
 ``received`` is ``accepted`` plus every drop. The loop's side (:meth:`SlotTable.take`)
-costs the same whatever arrives: one lock, one copy of at most sensors × 6 slots.
+costs the same whatever arrives: one lock, one copy of at most sensors × bodies slots (the
+wire format's ``max_bodies`` a sensor, six for the Kinect v2).
 """
 
 from __future__ import annotations
@@ -37,12 +38,12 @@ from typing import Any
 import numpy as np
 
 from qpavoid.core.errors import CalibrationError
-from qpavoid.human.frames import N_KINECT_JOINTS
+from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.sensing.calibration import Calibration
 from qpavoid.sensing.calibration_file import load_calibration
-from qpavoid.sensing.per_sensor import MAX_BODIES, BodyFrame
+from qpavoid.sensing.per_sensor import BodyFrame
 from qpavoid.sensing.signing import FUTURE_TOLERANCE_S, Verifier
-from qpavoid.sensing.wire import REASONS, WireError, Workspace
+from qpavoid.sensing.wire import REASONS, SKELETON, WireError, Workspace
 
 __all__ = ["COUNTERS", "SlotTable", "serve"]
 
@@ -65,9 +66,9 @@ COUNTERS = (
 #: How often the receiver looks whether the calibration or a key file changed, s (a
 #: rotation is taken within a second, without a stop; a stat of three files costs µs).
 KEY_CHECK_S = 1.0
-_J = N_KINECT_JOINTS
-#: A slot: sequence number written, sequence number taken, t, joints (25 × 3), states (25).
-SLOT = 3 + 4 * _J
+#: A slot's values before the frame's: sequence number written, sequence number taken, t
+#: (then the joints, J × 3, and their states, J).
+SLOT_HEAD = 3
 #: Priority the receiver drops to, so that the control loop gets the CPU first.
 NICE = 10
 
@@ -76,29 +77,55 @@ NICE = 10
 class SlotTable:
     """Each (sensor, body)'s newest frame, in memory shared by the receiver and the loop.
 
-    Parameters
+    Built by :meth:`create`. A slot holds :data:`SLOT_HEAD` values, then a frame's joints
+    (``n_joints × 3``) and states (``n_joints``); each sensor has ``max_bodies`` slots.
+
+    Attributes
     ----------
-    context
-        The multiprocessing context that makes the shared arrays and the lock.
     sensors
         The sensors' names, in slot order.
+    values
+        The slots (a multiprocessing Array of doubles, sensors × max_bodies × slot width).
+    counts
+        The counters (a multiprocessing Array of int64, in :data:`COUNTERS` order).
+    lock
+        Guards both.
+    n_joints, max_bodies
+        Joints per frame and bodies per sensor of the datagrams' skeleton format.
     """
 
     sensors: tuple[str, ...]
-    values: Any  # multiprocessing Array of doubles, len(sensors) × MAX_BODIES × SLOT
-    counts: Any  # multiprocessing Array of int64, len(COUNTERS)
+    values: Any
+    counts: Any
     lock: Any
+    n_joints: int
+    max_bodies: int
 
     @classmethod
-    def create(cls, context: SpawnContext, sensors: Sequence[str]) -> SlotTable:
-        """Zeroed slots and counters for ``sensors``."""
-        n = len(sensors) * MAX_BODIES * SLOT
+    def create(
+        cls, context: SpawnContext, sensors: Sequence[str], skeleton: SkeletonFormat = SKELETON
+    ) -> SlotTable:
+        """Zeroed slots and counters for ``sensors``' bodies of ``skeleton`` (by default the
+        wire format's, :data:`~qpavoid.sensing.wire.SKELETON`).
+
+        Parameters
+        ----------
+        context
+            The multiprocessing context that makes the shared arrays and the lock.
+        sensors
+            The sensors' names, in slot order.
+        skeleton
+            The skeleton format of the frames kept (its joints and bodies per sensor).
+        """
+        n_joints, max_bodies = skeleton.n_joints, skeleton.sensor.max_bodies
+        n = len(sensors) * max_bodies * (SLOT_HEAD + 4 * n_joints)
         values = context.Array("d", n, lock=False)
         counts = context.Array("q", len(COUNTERS), lock=False)
-        return cls(tuple(sensors), values, counts, context.Lock())
+        return cls(tuple(sensors), values, counts, context.Lock(), n_joints, max_bodies)
 
     def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        rows = np.frombuffer(self.values, dtype=np.float64).reshape(-1, SLOT)
+        width = SLOT_HEAD + 4 * self.n_joints
+        rows = np.frombuffer(self.values, dtype=np.float64).reshape(-1, width)
         return rows, np.frombuffer(self.counts, dtype=np.int64)
 
     def counters(self) -> dict[str, int]:
@@ -115,13 +142,14 @@ class SlotTable:
             new = np.flatnonzero(rows[:, 0] > rows[:, 1])
             picked = rows[new].copy()
             rows[new, 1] = rows[new, 0]
+        n, bodies, states = self.n_joints, self.max_bodies, SLOT_HEAD + 3 * self.n_joints
         frames = [
             BodyFrame(
-                self.sensors[slot // MAX_BODIES],
-                int(slot % MAX_BODIES),
+                self.sensors[slot // bodies],
+                int(slot % bodies),
                 float(row[2]),
-                row[3 : 3 + 3 * _J].reshape(_J, 3),
-                row[3 + 3 * _J :].astype(np.int8),
+                row[SLOT_HEAD:states].reshape(n, 3),
+                row[states:].astype(np.int8),
             )
             for slot, row in zip(new, picked, strict=True)
         ]
@@ -246,6 +274,7 @@ def _receive(
     index = {name: i for i, name in enumerate(table.sensors)}
     code = {name: i for i, name in enumerate(COUNTERS)}
     newest = np.full(len(rows), -np.inf)
+    bodies, states = table.max_bodies, SLOT_HEAD + 3 * table.n_joints
     while not stop.is_set() and os.getppid() == parent_pid:
         reread = watch.changed()
         if reread is not None:
@@ -262,7 +291,7 @@ def _receive(
             return
         try:
             frame = verifier.decode(data)
-            slot = index[frame.sensor] * MAX_BODIES + int(frame.body)
+            slot = index[frame.sensor] * bodies + int(frame.body)
             reason = "out_of_order_or_duplicate" if frame.t <= newest[slot] else None
         except WireError as exc:
             reason = exc.reason if exc.reason in TIME_REASONS else f"dropped_{exc.reason}"
@@ -278,6 +307,6 @@ def _receive(
             counts[code["superseded"]] += row[0] > row[1]  # the last one was never taken
             row[0] += 1.0
             row[2] = frame.t
-            row[3 : 3 + 3 * _J] = np.ravel(frame.joints)
-            row[3 + 3 * _J :] = frame.state
+            row[SLOT_HEAD:states] = np.ravel(frame.joints)
+            row[states:] = frame.state
         newest[slot] = frame.t

@@ -5,7 +5,7 @@ robot base frame. Two file formats hold it (see ``docs/formats.md``):
 
 * **NPZ**: arrays ``t`` (N,) s, ``joints`` (N, 25, 3) m, ``state`` (N, 25) int.
 * **CSV**: a header row ``t`` then ``<Joint>_x,<Joint>_y,<Joint>_z,<Joint>_state`` for
-  the 25 joints in :class:`~qpavoid.human.body.JointType` order (101 columns), one row a frame.
+  the 25 joints in :class:`~qpavoid.human.kinect_v2.JointType` order (101 columns), one row a frame.
 
 The simulation samples a recording with *sample-and-hold*: at time ``t_s`` it uses the
 last frame with ``t <= t_s``, never a frame from the future, and holds the last frame
@@ -60,11 +60,11 @@ class Recording:
         (N,) frame times, s. Finite and strictly increasing (no duplicate frame).
     joints
         (N, 25, 3) joint positions in the robot base frame, m, joints in
-        :class:`~qpavoid.human.body.JointType` order. NaN marks a joint that is not usable;
+        :class:`~qpavoid.human.kinect_v2.JointType` order. NaN marks a joint that is not usable;
         infinite values are rejected.
     state
         (N, 25) tracking states: 0 not tracked, 1 inferred, 2 tracked
-        (:class:`~qpavoid.human.body.TrackingState`). A joint in state 0 is not usable
+        (:class:`~qpavoid.human.kinect_v2.TrackingState`). A joint in state 0 is not usable
         whatever its coordinates.
 
     Raises

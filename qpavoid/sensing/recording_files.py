@@ -28,6 +28,7 @@ from qpavoid.core.checks import one_line
 from qpavoid.core.errors import InputError, RecordingError
 from qpavoid.core.file_bounds import check_file_size, check_npy_headers
 from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.skeleton import SkeletonFormat
 
 T = TypeVar("T")
 
@@ -147,11 +148,17 @@ _KIND_TEXT = {
 }
 
 
-def read_npz(path: Path, names: Sequence[str] | None, expected: str) -> dict[str, np.ndarray]:
+def read_npz(
+    path: Path,
+    names: Sequence[str] | None,
+    expected: str,
+    skeleton: SkeletonFormat = KINECT_V2,
+) -> dict[str, np.ndarray]:
     """Arrays of an NPZ file by name (``names``, or all if None); no pickled objects.
 
     The file's size, the archive's declared size and every array's ``.npy`` header are
-    checked (:func:`~qpavoid.core.file_bounds.check_npy_headers`) before any array is read.
+    checked (:func:`~qpavoid.core.file_bounds.check_npy_headers`, rows as wide as frames
+    of ``skeleton``'s joints) before any array is read.
 
     Raises
     ------
@@ -182,7 +189,7 @@ def read_npz(path: Path, names: Sequence[str] | None, expected: str) -> dict[str
                     name=missing[0],
                 )
             wanted = list(names or found)
-            check_npy_headers(archive, wanted, expected)
+            check_npy_headers(archive, wanted, expected, skeleton.n_joints)
             arrays = {}
             for name in wanted:
                 with archive.open(f"{name}.npy") as member:

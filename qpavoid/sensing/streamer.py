@@ -14,10 +14,10 @@ from qpavoid.sensing.per_sensor import SensorRecording
 from qpavoid.sensing.signing import Signer
 from qpavoid.sensing.wire import encode
 
-__all__ = ["replay"]
+__all__ = ["stream"]
 
 
-def replay(
+def stream(
     recordings: Sequence[SensorRecording],
     address: tuple[str, int],
     rate_hz: float = 30.0,

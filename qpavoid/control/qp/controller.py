@@ -25,7 +25,7 @@ from qpavoid.control.task import ArcPath
 from qpavoid.control.tick import Command, ControllerConfig, Tick
 from qpavoid.core.errors import InputError
 from qpavoid.distance.methods import PointDistance
-from qpavoid.human.body import KinectHuman
+from qpavoid.human.body import BodyModel
 from qpavoid.laws.avoidance import set_stop_distances
 
 #: A solution may break a hard row by at most this much (m/s or rad/s) to be applied.
@@ -71,7 +71,7 @@ class QPController(Controller):
         robot: Robot,
         path: ArcPath | None = None,
         config: ControllerConfig | None = None,
-        human: KinectHuman | None = None,
+        human: BodyModel | None = None,
         qp: QPConfig | None = None,
     ):
         super().__init__(robot, path, config, human)
