@@ -56,7 +56,7 @@ from qpavoid.control.qp import QPConfig, QPController
 from qpavoid.control.qp.backends import WARM_START_FLOOR, PersistentOSQP
 from qpavoid.control.qp.solver_kernels import flush_tiny
 from qpavoid.control.task import ArcPath, inverse_kinematics
-from qpavoid.core.geometry import point_segment_distance
+from qpavoid.human._kernels import point_segment_distance
 from qpavoid.human.kinect_v2 import JointType
 from qpavoid.human.people import People
 from qpavoid.perception.tracker import PerceptionConfig

@@ -147,8 +147,8 @@ class Command(NamedTuple):  # as many fields as qpavoid's Command
     f: float
     distance: Any
     table: Any
-    v_rep_L2: Any
-    v_rep_EE: Any
+    v_repelled: Any
+    v_end_effector: Any
     limits: Any
     ee_pos: Any
     ee_ref: Any

@@ -2,8 +2,8 @@
 
     python benchmarks/wire.py [--n 20000] [--json FILE]
 
-The receiver's own per-datagram call (:meth:`qpavoid.sensing.wire.Verifier.decode`) on one body of
-the seated operator (about 1 kB), median and p99 over ``--n`` calls each, after warm-up:
+The receiver's own per-datagram call (:meth:`qpavoid.sensing.signing.Verifier.decode`) on
+one body of the seated operator (about 1 kB), median and p99 over ``--n`` calls each, after warm-up:
 
 * ``v1 decode``: an unsigned datagram parsed and checked (:func:`qpavoid.sensing.wire.decode`:
   what every datagram cost before issue 24, forged or not);

@@ -26,9 +26,9 @@ if TYPE_CHECKING:  # the names as type checkers and editors see them
     from .arm.description import ControlSet
     from .arm.model import Kinematics, Robot, load_robot
     from .control.analytic import AnalyticConfig, AnalyticController
-    from .control.controller import Command, ControllerConfig
     from .control.qp import QPConfig, QPController
     from .control.task import ArcPath, inverse_kinematics
+    from .control.tick import Command, ControllerConfig
     from .core.errors import (
         IKNotConvergedError,
         InputError,
@@ -37,14 +37,14 @@ if TYPE_CHECKING:  # the names as type checkers and editors see them
         RobotDescriptionError,
         SolverError,
     )
+    from .distance.capsules import CapsuleDistance
     from .distance.methods import (
-        CapsuleDistance,
-        DistanceTable,
         SphereDistance,
         capsule_distances,
         distance_method,
         sphere_distances,
     )
+    from .distance.table import DistanceTable
     from .human.body import BodyModel, BodyPart, HumanGeometry, KinectHuman
     from .human.frames import HumanFrame
     from .human.kinect_v2 import JointType, TrackingState
@@ -61,11 +61,11 @@ _LAZY = {
     "AvoidanceConfig": "laws.avoidance",
     "BodyModel": "human.body",
     "BodyPart": "human.body",
-    "CapsuleDistance": "distance.methods",
-    "Command": "control.controller",
+    "CapsuleDistance": "distance.capsules",
+    "Command": "control.tick",
     "ControlSet": "arm.description",
-    "ControllerConfig": "control.controller",
-    "DistanceTable": "distance.methods",
+    "ControllerConfig": "control.tick",
+    "DistanceTable": "distance.table",
     "HumanFrame": "human.frames",
     "HumanGeometry": "human.body",
     "IKNotConvergedError": "core.errors",

@@ -93,7 +93,9 @@ class Corrupted:
         return joints, state
 
 
-@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize(
+    "seed", [*range(3), *(pytest.param(s, marks=pytest.mark.slow) for s in range(3, 6))]
+)
 def test_invariants_over_random_approaches(robot, seed):
     rng = np.random.default_rng(seed)
     path = ArcPath()

@@ -89,7 +89,12 @@ def test_the_renamed_copy_has_no_iiwa_name_left(other, robot):
 
 @pytest.mark.parametrize(
     "controller, safety",
-    [("analytic", "paper"), ("qp", "paper"), ("qp", "ssm"), ("analytic", "ssm")],
+    [  # two in the default suite, the other two with the slow ones
+        ("analytic", "ssm"),
+        ("qp", "paper"),
+        pytest.param("qp", "ssm", marks=pytest.mark.slow),
+        pytest.param("analytic", "paper", marks=pytest.mark.slow),
+    ],
 )
 def test_renamed_joints_and_sets_give_the_same_commands(other, robot, controller, safety):
     """Test 1 until the hand is at its closest (12 s at 100 Hz): the repulsion of the
@@ -281,6 +286,28 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
             lambda t: t.replace("[roles]\n", "[roles]\nscaled_joints = []\n"),
             "roles",
             "[roles] has unknown key(s) ['scaled_joints']",
+        ),
+        (  # a misspelt top-level key would silently keep the default
+            lambda t: t.replace("locked =", "lockd =", 1),
+            "",
+            "the top level has unknown key(s) ['lockd']",
+        ),
+        (
+            lambda t: t.replace(
+                "sphere_radius_m = 0.09", "sphere_radus_m = 0.09\nsphere_radius_m = 0.09", 1
+            ),
+            "sets[0]",
+            "[[sets]] entry 0 has unknown key(s) ['sphere_radus_m']",
+        ),
+        (
+            lambda t: t.replace("capsule_radius_m = 0.07", "capsule_radius_m = -0.07", 1),
+            "sets[0].capsule.capsule_radius_m",
+            "sets[0].capsule.capsule_radius_m must be a number above 0, got -0.07",
+        ),
+        (
+            lambda t: t.replace("sphere_radius_m = 0.09", "sphere_radius_m = 0", 1),
+            "sets[0].sphere_radius_m",
+            "sets[0].sphere_radius_m must be a number above 0, got 0",
         ),
     ],
 )

@@ -42,6 +42,8 @@ LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 #: Keys of a ``[[sets]]`` entry of the control-point file and of its ``capsule`` table.
 SET_KEYS = ("name", "sphere_radius_m", "points", "capsule")
 CAPSULE_KEYS = ("from", "to", "capsule_radius_m")
+#: The control-point file's top-level keys (a misspelt one would otherwise be ignored).
+TOP_KEYS = ("urdf", "end_effector", "locked", "sets", "roles", "arm", "ik_seed")
 
 
 @dataclass(frozen=True)
@@ -253,7 +255,8 @@ def _add_point_frame(model: pin.Model, data: pin.Data, label: str, names: Sequen
 
 
 def _check_sets(set_cfgs: Any, path: Path) -> None:
-    """Raise :class:`RobotDescriptionError` unless every ``[[sets]]`` entry has its keys."""
+    """Raise :class:`RobotDescriptionError` unless every ``[[sets]]`` entry has its keys,
+    no other, and radii above 0 m."""
     for k, sc in enumerate(set_cfgs if isinstance(set_cfgs, list) else [set_cfgs]):
         sc = sc if isinstance(sc, dict) else {}
         missing = [key for key in SET_KEYS if key not in sc]
@@ -267,6 +270,18 @@ def _check_sets(set_cfgs: Any, path: Path) -> None:
                 name=f"sets[{k}]",
                 value=missing,
             )
+        _unknown_keys(sc, SET_KEYS, f"[[sets]] entry {k}", path, f"sets[{k}]")
+        if not isinstance(cap, dict):
+            raise RobotDescriptionError(
+                f"{path}: [[sets]] entry {k}: capsule must be a table "
+                '{ from = "<frame>", to = "<frame>", capsule_radius_m = <m> }',
+                path=path,
+                name=f"sets[{k}].capsule",
+                value=cap,
+            )
+        _unknown_keys(cap, CAPSULE_KEYS, f"[[sets]] entry {k}: capsule", path, f"sets[{k}].capsule")
+        _number(sc["sphere_radius_m"], f"sets[{k}].sphere_radius_m", path, 0.0, strict=True)
+        _number(cap["capsule_radius_m"], f"sets[{k}].capsule.capsule_radius_m", path, 0.0, True)
 
 
 def _read_config(folder: Path) -> tuple[dict, Path, list, str]:
@@ -283,6 +298,7 @@ def _read_config(folder: Path) -> tuple[dict, Path, list, str]:
         raise RobotDescriptionError(
             f"{path}: missing key {exc}", path=path, name=exc.args[0]
         ) from None
+    _unknown_keys(cfg, TOP_KEYS, "the top level", path, "")
     _check_sets(set_cfgs, path)
     return cfg, urdf, set_cfgs, ee_name
 
@@ -419,14 +435,17 @@ def _joint_list(value: object, where: str, path: Path, joints: Sequence[str]) ->
     return tuple(value)
 
 
-def _unknown_keys(table: Mapping[str, Any], known: Sequence[str], where: str, path: Path) -> None:
-    """Refuse keys a table does not have (a misspelt key would otherwise be ignored)."""
+def _unknown_keys(
+    table: Mapping[str, Any], known: Sequence[str], where: str, path: Path, name: str
+) -> None:
+    """Refuse keys a table does not have (a misspelt key would otherwise be ignored):
+    ``where`` as the file says it, ``name`` as the error's ``name``."""
     unknown = sorted(set(table) - set(known))
     if unknown:
         raise RobotDescriptionError(
-            f"{path}: [{where}] has unknown key(s) {unknown}; its keys are {list(known)}",
+            f"{path}: {where} has unknown key(s) {unknown}; its keys are {list(known)}",
             path=path,
-            name=where,
+            name=name,
             value=unknown,
         )
 
@@ -434,7 +453,7 @@ def _unknown_keys(table: Mapping[str, Any], known: Sequence[str], where: str, pa
 def _roles(cfg: Mapping[str, Any], path: Path, set_cfgs: list, joints: Sequence[str]) -> Roles:
     """The ``[roles]`` table: which set plays which part, and the elbow point."""
     table = _table(cfg, "roles", path, 'scaled = { set = "<set>", joints = ["<joint>", ...] }')
-    _unknown_keys(table, ROLE_KEYS, "roles", path)
+    _unknown_keys(table, ROLE_KEYS, "[roles]", path, "roles")
     names = [sc["name"] for sc in set_cfgs]
     rows: dict[str, int] = {}
     role_joints: dict[str, tuple[str, ...]] = {}
@@ -449,7 +468,7 @@ def _roles(cfg: Mapping[str, Any], path: Path, set_cfgs: list, joints: Sequence[
                 name=f"roles.{role}",
                 value=entry,
             )
-        _unknown_keys(entry, keys, f"roles.{role}", path)
+        _unknown_keys(entry, keys, f"[roles] {role}", path, f"roles.{role}")
         if entry["set"] not in names:
             raise RobotDescriptionError(
                 f"{path}: [roles] {role}: no set named {entry['set']!r}; the sets are {names}",
@@ -495,7 +514,7 @@ def _arm(cfg: Mapping[str, Any], path: Path, joints: Sequence[str]) -> ArmDynami
         "reaction_time_s = 0.005, max_acceleration_radps2 = { <joint> = 10.0, ... }, "
         "max_point_speed_mps = 3.0",
     )
-    _unknown_keys(table, (*ARM_KEYS, "sources"), "arm", path)
+    _unknown_keys(table, (*ARM_KEYS, "sources"), "[arm]", path, "arm")
     missing = [k for k in ARM_KEYS if k not in table]
     if missing:
         raise RobotDescriptionError(
@@ -540,7 +559,7 @@ def _ik_seed(cfg: Mapping[str, Any], path: Path, joints: Sequence[str]) -> IKSee
     if "ik_seed" not in cfg:
         return IKSeed()
     table = _table(cfg, "ik_seed", path, 'aim = "<joint>", angles = { <joint> = 0.5 }')
-    _unknown_keys(table, ("aim", "angles", "wrist_to_tool_m"), "ik_seed", path)
+    _unknown_keys(table, ("aim", "angles", "wrist_to_tool_m"), "[ik_seed]", path, "ik_seed")
     aim = table.get("aim")
     if aim is not None:
         (aim,) = _joint_list([aim], "ik_seed.aim", path, joints)

@@ -10,8 +10,8 @@ object::
     {"v": 1, "sensor": "kinect_left", "body": 0, "t": 1763864400.0333,
      "joints": [[x, y, z, state], ... one row per joint of the Kinect v2 format]}
 
-In both (in a signed datagram the sensor's name is in the header, and the payload is
-``{"body", "t", "joints"}``):
+In both (in a signed datagram the sensor's name and the capture time are in the header,
+and the payload is ``{"body", "joints"}``):
 
 * ``sensor``: the sensor's name, as in the calibration file.
 * ``body``: the sensor's body id, 0-5 (the format's ``max_bodies``).
