@@ -87,6 +87,9 @@ class Controller:
         self.roles = robot.roles
         self.role_names = robot.role_names
         self.scaled_cols = joint_columns(robot, self.config.scaled_joints, "scaled_joints")
+        #: The sets that play no part in the laws: the robot stops when one touches the
+        #: person (their dampers in the QP stop them at contact too).
+        self._roleless = np.setdiff1d(np.arange(len(robot.sets)), list(robot.roles.rows))
         self.perceiver = Perceiver(self.human, self.config.perception)
         ssm = self.config.ssm.resolve(robot.arm)  # the arm's reaction and accelerations
         self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, self.config.control_period_s))
@@ -132,7 +135,7 @@ class Controller:
         """
         t = finite_number(t, "t (path time, s)")
         kin = self.robot.kinematics(q)
-        people = as_people(joints, state)
+        people = as_people(joints, state, self.human.skeleton)
         self._clock_s += self.config.control_period_s
         age = frame_age_s
         if age <= self.config.max_frame_age_s and people.ids:
@@ -180,7 +183,7 @@ class Controller:
             reason = "no body part of the operator is tracked"
         else:
             d_rep, d_ee = dmin[roles.repelled], dmin[roles.end_effector]
-            reason = stop_reason(f, d_rep, d_ee, cfg, self.role_names) or ""
+            reason = stop_reason(f, d_rep, d_ee, cfg, self.role_names) or self._contact(dmin)
         return Tick(
             kin.q,
             kin,
@@ -204,6 +207,14 @@ class Controller:
             approach_limit,
             human_approach,
         )
+
+    def _contact(self, dmin: np.ndarray) -> str:
+        """Why a set that plays no part in the laws stops the robot: it touches the person
+        ("" if none does)."""
+        for i in self._roleless:
+            if dmin[i] <= 0.0:
+                return f"{self.robot.set_names[i]} touches the person (d = {dmin[i]:.3f} m)"
+        return ""
 
     def task_joint_velocities(self, tick: Tick) -> np.ndarray:
         """Eq. (8): ``q̇ = J⁻¹ (v_PL + K e + v_EE)``, damped near singularities, rad/s (nv,)."""

@@ -15,6 +15,8 @@ from typing import NamedTuple
 
 from qpavoid.core.errors import InputError
 from qpavoid.human.frames import HumanFrame, nobody
+from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.skeleton import SkeletonFormat
 
 __all__ = ["NOBODY", "People", "as_people", "same_frames"]
 
@@ -42,11 +44,30 @@ class People(NamedTuple):
         return cls(ids, tuple(HumanFrame.check(f) for f in frames))
 
 
-def as_people(joints: object, state: object = None) -> People:
-    """``joints`` as :class:`People`: itself, or one checked frame with id 0."""
-    if isinstance(joints, People):
-        return joints
-    return People((0,), (HumanFrame.check(joints, state),))
+def as_people(joints: object, state: object = None, skeleton: SkeletonFormat = KINECT_V2) -> People:
+    """``joints`` as :class:`People` of ``skeleton``: itself, or one checked frame with id 0.
+
+    Raises
+    ------
+    InputError
+        If a frame (checked before, or raw) is not one of ``skeleton``: a frame of another
+        camera's format read with this one's joint order would be another body.
+    """
+    people = (
+        joints
+        if isinstance(joints, People)
+        else People((0,), (HumanFrame.check(joints, state, skeleton),))
+    )
+    for frame in people.frames:
+        if frame.joints.shape[0] != skeleton.n_joints:
+            raise InputError(
+                f"a frame of {frame.joints.shape[0]} joints given where {skeleton.title} "
+                f"frames have {skeleton.n_joints}: the body model and the frames must be of "
+                "one skeleton format",
+                name="joints",
+                value=frame.joints.shape,
+            )
+    return people
 
 
 def same_frames(a: People, b: People) -> bool:
