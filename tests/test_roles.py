@@ -24,7 +24,7 @@ from qpavoid.arm.description import CHECK_TOLERANCE, LWA
 from qpavoid.control.analytic import AnalyticController
 from qpavoid.control.qp import QPController
 from qpavoid.control.tick import ControllerConfig
-from qpavoid.core.errors import RobotDescriptionError
+from qpavoid.core.errors import InputError, RobotDescriptionError
 from qpavoid.loop.run_log import repulsion_keys
 from qpavoid.loop.simulation import SimConfig, simulate
 from qpavoid.scenarios.generated import make_scenario
@@ -309,6 +309,103 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
             "sets[0].sphere_radius_m",
             "sets[0].sphere_radius_m must be a number above 0, got 0",
         ),
+        (  # roles would resolve to the first of two sets of one name
+            lambda t: t.replace('name = "L2"', 'name = "L1"'),
+            "sets[1].name",
+            "[[sets]] entry 1: the name 'L1' is already entry 0's; give each set a name of",
+        ),
+        (  # set names become file names (fig10_distance_<name>.png)
+            lambda t: t.replace('name = "L2"', 'name = "L/2"'),
+            "sets[1].name",
+            "name must be letters, digits, '_', '.' and '-' only",
+        ),
+        (  # A7 comes after every point of L2 in the chain
+            lambda t: t.replace('joints = ["A1", "A2", "A4"]', 'joints = ["A5", "A6", "A7"]'),
+            "roles.repelled.joints",
+            "[roles] repelled.joints: ['A7'] move no point of the set 'L2' (they come after "
+            "its points in the URDF's chain); the joints that move it are ['A1', 'A2', 'A3', "
+            "'A4', 'A5', 'A6']: name those",
+        ),
+        (
+            lambda t: t.replace('joints = ["A1", "A2", "A4"]', 'joints = ["A1", "A1", "A4"]'),
+            "roles.repelled.joints",
+            "[roles] repelled.joints lists ['A1'] more than once",
+        ),
+        (
+            lambda t: t.replace('joints = ["A1", "A2"]', "joints = []"),
+            "roles.scaled.joints",
+            "[roles] scaled.joints is empty; name each joint that moves the set 'L1' once",
+        ),
+        (
+            lambda t: t.replace('joints = ["A1", "A2", "A4"]', "joints = []"),
+            "roles.repelled.joints",
+            "[roles] repelled.joints is empty",
+        ),
+        (  # a role's joint locked by the file
+            lambda t: t.replace("locked = { A3 = 0.0 }", "locked = { A4 = 0.0 }"),
+            "roles.repelled.joints",
+            "[roles] repelled.joints: ['A4'] locked (by the file's `locked`); a role's joints "
+            "must be free",
+        ),
+        (  # nothing left to move (Pinocchio crashed on the empty model)
+            lambda t: t.replace(
+                "locked = { A3 = 0.0 }", 'locked = ["A1", "A2", "A3", "A4", "A5", "A6", "A7"]'
+            ),
+            "locked",
+            "the file's `locked` locks every joint",
+        ),
+        (
+            lambda t: t.replace("locked = { A3 = 0.0 }", "locked = { A3 = 10.0 }"),
+            "locked.A3",
+            "locked: A3 = 10.0 is not within the joint's limits [-2.96706, 2.96706] rad",
+        ),
+        (
+            lambda t: t.replace("locked = { A3 = 0.0 }", "locked = { A3 = nan }"),
+            "locked.A3",
+            "locked: A3 = nan is not within the joint's limits",
+        ),
+        (
+            lambda t: t.replace("locked = { A3 = 0.0 }", "locked = { A9 = 0 }"),
+            "locked",
+            "locked: 'A9' is not a joint of the URDF; its joints are ['A1', 'A2',",
+        ),
+        (
+            lambda t: t.replace("locked = { A3 = 0.0 }", "locked = 3"),
+            "locked",
+            "locked must be a table of angles (rad), e.g. locked = { <joint> = 0.0 }, or a list",
+        ),
+        *(
+            (
+                lambda t, bad=bad: t.replace('points = [["flange"]]', f"points = {bad}"),
+                "sets[2].points",
+                "[[sets]] entry 2: points must be a non-empty list of control points, each the "
+                'list of the frames it is the centroid of, e.g. points = [["<frame>"], '
+                '["<frame>", "<frame>"]]',
+            )
+            for bad in ("[]", "[[]]", '["flange"]')  # '["flange"]' was read letter by letter
+        ),
+        (
+            lambda t: t.replace('["A5"]', '["X"]'),
+            "sets[1].points[1]",
+            "[[sets]] entry 1 (L2) points[1]: no frame named 'X' in iiwa14.urdf; its frames "
+            "are [link_0, A1, link_1,",
+        ),
+        (
+            lambda t: t.replace('from = "A6"', 'from = "X"'),
+            "sets[2].capsule.from",
+            "[[sets]] entry 2 (EE) capsule.from: no frame named 'X' in iiwa14.urdf",
+        ),
+        (
+            lambda t: t.replace('end_effector = { set = "EE" }', 'end_effector = { set = "L1" }'),
+            "roles.end_effector.set",
+            "the end-effector set's capsule must end at the end_effector frame 'flange'; the "
+            "capsule of the set 'L1' runs from 'A2' to 'A4'",
+        ),
+        (
+            lambda t: t.replace('end_effector = "flange"', 'end_effector = "tool"'),
+            "end_effector",
+            "end_effector 'tool' is not a frame of iiwa14.urdf",
+        ),
     ],
 )
 def test_description_refusals_say_how_to_fix_the_file(tmp_path, edit, name, fix):
@@ -318,6 +415,101 @@ def test_description_refusals_say_how_to_fix_the_file(tmp_path, edit, name, fix)
     assert info.value.path == folder / "control_points.toml"
     assert info.value.name == name
     assert fix in str(info.value)
+
+
+def test_the_file_may_lock_a_list_of_joints_at_zero(tmp_path, robot):
+    """``locked = ["A3"]`` is ``locked = { A3 = 0.0 }``."""
+    folder = iiwa_copy(tmp_path / "arm", lambda t: t.replace("{ A3 = 0.0 }", '["A3"]'))
+    listed = qpavoid.load_robot(folder)
+    assert listed.locked == {"A3": 0.0} and listed.joint_names == robot.joint_names
+    q = np.linspace(-0.5, 0.5, 6)
+    np.testing.assert_array_equal(listed.control_points(q), robot.control_points(q))
+
+
+@pytest.mark.parametrize(
+    "locked, name, fix",
+    [
+        (
+            ["A1", "A2", "A3", "A4", "A5", "A6", "A7"],
+            "locked",
+            "the locked= argument locks every joint, ['A1', 'A2', 'A3', 'A4', 'A5', 'A6', "
+            "'A7']: nothing is left to move",
+        ),
+        (
+            ["A2"],
+            "roles.scaled.joints",
+            "[roles] scaled.joints: ['A2'] locked (by the locked= argument); a role's joints "
+            "must be free: unlock them, or name free joints in [roles] scaled.joints",
+        ),
+    ],
+)
+def test_locking_what_the_description_needs_is_refused(locked, name, fix):
+    """The argument ``locked`` may not take the description's role joints or every joint:
+    refused at load time (the controllers, or Pinocchio, failed later)."""
+    with pytest.raises(RobotDescriptionError) as info:
+        qpavoid.load_robot("iiwa14", locked=locked)
+    assert info.value.path == resources.files("qpavoid.robots") / "iiwa14" / "control_points.toml"
+    assert info.value.name == name
+    assert fix in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "locked, fix",
+    [
+        ({"A3": float("nan")}, "cannot lock A3 at nan rad: not within the joint's limits"),
+        ({"A3": 10.0}, "cannot lock A3 at 10.0 rad: not within the joint's limits"),
+        ("A3", "locked must be joint names or a mapping of joint names to angles (rad)"),
+    ],
+)
+def test_a_locked_argument_out_of_the_joint_limits_is_an_input_error(locked, fix):
+    with pytest.raises(InputError) as info:
+        qpavoid.load_robot("iiwa14", locked=locked)
+    assert info.value.name == "locked"
+    assert fix in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "edit, fault",
+    [
+        (
+            lambda u: u.replace('name="A7" type="revolute"', 'name="A7" type="continuous"'),
+            "it is a JointModelRUBZ (nq = 2, nv = 1)",
+        ),
+        (
+            lambda u: u.replace('name="A7" type="revolute"', 'name="A7" type="floating"'),
+            "it is a JointModelFreeFlyer (nq = 7, nv = 6)",
+        ),
+        (
+            lambda u: re.sub(
+                r'(<joint name="A7".*?<limit) lower="[^"]*" upper="[^"]*"', r"\1", u, flags=re.S
+            ),
+            "its position limits are [0, 0]",
+        ),
+        (
+            lambda u: re.sub(r'(<joint name="A7".*?velocity=")[^"]*"', r'\g<1>0"', u, flags=re.S),
+            "its velocity limit is 0",
+        ),
+    ],
+)
+def test_joints_without_one_limited_degree_of_freedom_are_refused(tmp_path, edit, fault):
+    folder = iiwa_copy(tmp_path / "arm")
+    urdf = folder / "iiwa14.urdf"
+    urdf.write_text(edit(urdf.read_text()))
+    with pytest.raises(RobotDescriptionError) as info:
+        qpavoid.load_robot(folder)
+    assert (info.value.path, info.value.name) == (urdf, "A7")
+    assert f"joint 'A7': {fault}; only revolute and prismatic joints with limits are " in str(
+        info.value
+    )
+
+
+def test_an_oversized_control_point_file_is_refused_unread(tmp_path):
+    folder = iiwa_copy(tmp_path / "arm", lambda t: t + "#" + "x" * 2**20 + "\n")
+    with pytest.raises(RobotDescriptionError) as info:
+        qpavoid.load_robot(folder)
+    assert info.value.path == folder / "control_points.toml"
+    assert "cannot read the file: 1" in str(info.value)
+    assert f"more than the {2**20} allowed" in str(info.value)
 
 
 def test_iiwa_defaults_come_from_the_description(robot):

@@ -18,6 +18,7 @@ or limit of a particular arm.
 
 from __future__ import annotations
 
+import re
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -30,6 +31,7 @@ import pinocchio as pin
 
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import InputError, RobotDescriptionError
+from qpavoid.core.file_bounds import read_bounded
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -44,6 +46,16 @@ SET_KEYS = ("name", "sphere_radius_m", "points", "capsule")
 CAPSULE_KEYS = ("from", "to", "capsule_radius_m")
 #: The control-point file's top-level keys (a misspelt one would otherwise be ignored).
 TOP_KEYS = ("urdf", "end_effector", "locked", "sets", "roles", "arm", "ik_seed")
+#: Most bytes a control-point file may have (the iiwa's has about 4 kB), and a URDF
+#: (the iiwa's has about 5 kB; a detailed arm's, without meshes, well under 1 MB):
+#: checked before they are read.
+MAX_CONFIG_BYTES = 2**20
+MAX_URDF_BYTES = 16 * 2**20
+#: What a set's name may hold: it becomes part of frame names, log keys and file names
+#: (``fig10_distance_<name>.png``).
+SET_NAME = re.compile(r"[A-Za-z0-9_.-]+")
+#: The shape of a set's ``points``, for messages.
+POINTS_SHAPE = 'points = [["<frame>"], ["<frame>", "<frame>"]]'
 
 
 @dataclass(frozen=True)
@@ -232,21 +244,55 @@ def _carriers(model: pin.Model, frame_id: int) -> set[int]:
     return carriers
 
 
-def _add_point_frame(model: pin.Model, data: pin.Data, label: str, names: Sequence[str]) -> int:
-    """Add an operational frame at the centroid of the named frames; return its id."""
+def _frame_list(model: pin.Model, count: int) -> str:
+    """The URDF's frame names (the first ``count`` frames of the model, the universe
+    aside), shortened for a message."""
+    names = [str(model.frames[i].name) for i in range(1, count)]
+    shown = names if len(names) <= 20 else [*names[:20], f"... ({len(names)} in all)"]
+    return "[" + ", ".join(shown) + "]"
+
+
+def _add_point_frame(
+    model: pin.Model,
+    data: pin.Data,
+    label: str,
+    names: Sequence[str],
+    where: tuple[str, str, Path, Path, int],
+) -> int:
+    """Add an operational frame at the centroid of the named frames; return its id.
+
+    ``where`` says where in the file the frames are named: the key as the file says it
+    (``"[[sets]] entry 0 (L1) points[2]"``), as the error's ``name``, the file, the URDF
+    and the number of the URDF's own frames (for the list in the message).
+    """
+    said, key, path, urdf, n_frames = where
     ids = []
     for n in names:
         if not model.existFrame(n):
             raise RobotDescriptionError(
-                f"{label}: no frame named {n!r} in the URDF", name=label, value=n
+                f"{path}: {said}: no frame named {n!r} in {urdf.name}; its frames are "
+                f"{_frame_list(model, n_frames)}",
+                path=path,
+                name=key,
+                value=n,
             )
         ids.append(model.getFrameId(n))
     common = set.intersection(*(_carriers(model, i) for i in ids))
     if not common:
         raise RobotDescriptionError(
-            f"{label}: frames {list(names)} are not on one rigid body",
-            name=label,
+            f"{path}: {said}: frames {list(names)} are not on one rigid body of {urdf.name}; "
+            "a point is the centroid of frames of one link (or of the joints at its ends)",
+            path=path,
+            name=key,
             value=list(names),
+        )
+    if model.existFrame(label):
+        raise RobotDescriptionError(
+            f"{path}: {said}: {urdf.name} already has a frame named {label!r}, the name "
+            "qpavoid gives this point; rename the set",
+            path=path,
+            name=key,
+            value=label,
         )
     parent = max(common)  # the deepest body carrying all of them
     centre = np.mean([data.oMf[i].translation for i in ids], axis=0)
@@ -254,10 +300,42 @@ def _add_point_frame(model: pin.Model, data: pin.Data, label: str, names: Sequen
     return model.addFrame(pin.Frame(label, parent, placement, pin.FrameType.OP_FRAME))
 
 
-def _check_sets(set_cfgs: Any, path: Path) -> None:
+def _set_error(path: Path, k: int, key: str, message: str, value: object) -> RobotDescriptionError:
+    """A :class:`RobotDescriptionError` about key ``key`` of ``[[sets]]`` entry ``k``."""
+    return RobotDescriptionError(
+        f"{path}: [[sets]] entry {k}: {message}",
+        path=path,
+        name=f"sets[{k}].{key}",
+        value=value,
+    )
+
+
+def _check_points(points: object, path: Path, k: int) -> None:
+    """Refuse a set's ``points`` unless it is a non-empty list of non-empty lists of frame
+    names (:data:`POINTS_SHAPE`)."""
+    if (
+        isinstance(points, list)
+        and points
+        and all(isinstance(p, list) and p and all(isinstance(n, str) for n in p) for p in points)
+    ):
+        return
+    raise _set_error(
+        path,
+        k,
+        "points",
+        "points must be a non-empty list of control points, each the list of the frames "
+        f"it is the centroid of, e.g. {POINTS_SHAPE}; got {points!r}",
+        points,
+    )
+
+
+def _check_sets(set_cfgs: list, path: Path) -> None:
     """Raise :class:`RobotDescriptionError` unless every ``[[sets]]`` entry has its keys,
-    no other, and radii above 0 m."""
-    for k, sc in enumerate(set_cfgs if isinstance(set_cfgs, list) else [set_cfgs]):
+    no other, a name of its own made of letters, digits, ``_``, ``.`` and ``-``, points
+    of the shape :data:`POINTS_SHAPE`, capsule ends named by frame names and radii above
+    0 m."""
+    names: list[object] = []
+    for k, sc in enumerate(set_cfgs):
         sc = sc if isinstance(sc, dict) else {}
         missing = [key for key in SET_KEYS if key not in sc]
         cap = sc.get("capsule")
@@ -271,6 +349,27 @@ def _check_sets(set_cfgs: Any, path: Path) -> None:
                 value=missing,
             )
         _unknown_keys(sc, SET_KEYS, f"[[sets]] entry {k}", path, f"sets[{k}]")
+        name = sc["name"]
+        if not isinstance(name, str) or not SET_NAME.fullmatch(name):
+            raise _set_error(
+                path,
+                k,
+                "name",
+                "name must be letters, digits, '_', '.' and '-' only (it becomes part of "
+                f"frame names, log keys and figure file names), got {name!r}",
+                name,
+            )
+        if name in names:
+            raise _set_error(
+                path,
+                k,
+                "name",
+                f"the name {name!r} is already entry {names.index(name)}'s; give each "
+                "set a name of its own",
+                name,
+            )
+        names.append(name)
+        _check_points(sc["points"], path, k)
         if not isinstance(cap, dict):
             raise RobotDescriptionError(
                 f"{path}: [[sets]] entry {k}: capsule must be a table "
@@ -280,6 +379,15 @@ def _check_sets(set_cfgs: Any, path: Path) -> None:
                 value=cap,
             )
         _unknown_keys(cap, CAPSULE_KEYS, f"[[sets]] entry {k}: capsule", path, f"sets[{k}].capsule")
+        for end in ("from", "to"):
+            if not isinstance(cap[end], str):
+                raise _set_error(
+                    path,
+                    k,
+                    f"capsule.{end}",
+                    f"capsule.{end} must be a frame name, got {cap[end]!r}",
+                    cap[end],
+                )
         _number(sc["sphere_radius_m"], f"sets[{k}].sphere_radius_m", path, 0.0, strict=True)
         _number(cap["capsule_radius_m"], f"sets[{k}].capsule.capsule_radius_m", path, 0.0, True)
 
@@ -287,75 +395,212 @@ def _check_sets(set_cfgs: Any, path: Path) -> None:
 def _read_config(folder: Path) -> tuple[dict, Path, list, str]:
     """The parsed control-point file of ``folder``, its URDF path, sets and end effector."""
     path = folder / CONFIG_NAME
-    with open(path, "rb") as fh:
-        try:
-            cfg = tomllib.load(fh)
-        except tomllib.TOMLDecodeError as exc:
-            raise RobotDescriptionError(f"{path}: {one_line(exc)}", path=path) from exc
     try:
-        urdf, set_cfgs, ee_name = folder / cfg["urdf"], cfg["sets"], cfg["end_effector"]
+        text = read_bounded(path, MAX_CONFIG_BYTES).decode("utf-8")
+    except (OSError, ValueError) as exc:  # too large, not a regular file, not UTF-8
+        raise RobotDescriptionError(
+            f"{path}: cannot read the file: {one_line(exc)}", path=path
+        ) from None
+    try:
+        cfg = tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise RobotDescriptionError(f"{path}: {one_line(exc)}", path=path) from None
+    try:
+        urdf_name, set_cfgs, ee_name = cfg["urdf"], cfg["sets"], cfg["end_effector"]
     except KeyError as exc:
         raise RobotDescriptionError(
             f"{path}: missing key {exc}", path=path, name=exc.args[0]
         ) from None
     _unknown_keys(cfg, TOP_KEYS, "the top level", path, "")
+    for key, value in (("urdf", urdf_name), ("end_effector", ee_name)):
+        if not isinstance(value, str) or not value:
+            raise RobotDescriptionError(
+                f"{path}: {key} must be a name (text), got {value!r}",
+                path=path,
+                name=key,
+                value=value,
+            )
+    if not isinstance(set_cfgs, list):
+        raise RobotDescriptionError(
+            f"{path}: sets must be an array of tables, one [[sets]] per set (docs/robot.md)",
+            path=path,
+            name="sets",
+            value=set_cfgs,
+        )
     _check_sets(set_cfgs, path)
-    return cfg, urdf, set_cfgs, ee_name
+    return cfg, folder / urdf_name, set_cfgs, ee_name
 
 
 def _build_model(urdf: Path) -> pin.Model:
-    """The Pinocchio model of a URDF, or :class:`RobotDescriptionError`."""
+    """The Pinocchio model of a URDF (read bounded to :data:`MAX_URDF_BYTES`), or
+    :class:`RobotDescriptionError`."""
     try:
-        return pin.buildModelFromUrdf(str(urdf))
-    except (ValueError, RuntimeError, OSError) as exc:  # missing or malformed URDF
+        text = read_bounded(urdf, MAX_URDF_BYTES).decode("utf-8")
+        return pin.buildModelFromXML(text)
+    except (ValueError, RuntimeError, OSError) as exc:  # missing, malformed or too large
         raise RobotDescriptionError(
             f"{urdf}: cannot build a model from this URDF: {one_line(exc)}", path=urdf
         ) from exc
 
 
+def _check_joints(model: pin.Model, urdf: Path) -> None:
+    """Refuse a model with a joint the controllers cannot drive: one that is not a single
+    revolute or prismatic degree of freedom (a continuous joint, whose angle Pinocchio
+    keeps as cos and sin, a floating or planar joint), or without finite position limits
+    (lower below upper) and a velocity limit above 0."""
+    for j in range(1, model.njoints):
+        joint, name = model.joints[j], str(model.names[j])
+        fault = ""
+        if joint.nq != 1 or joint.nv != 1:
+            fault = f"it is a {joint.shortname()} (nq = {joint.nq}, nv = {joint.nv})"
+        else:
+            low, high = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
+            speed = model.velocityLimit[joint.idx_v]
+            if not (np.isfinite(low) and np.isfinite(high) and low < high):
+                fault = f"its position limits are [{low:g}, {high:g}]"
+            elif not (np.isfinite(speed) and speed > 0.0):
+                fault = f"its velocity limit is {speed:g}"
+        if fault:
+            raise RobotDescriptionError(
+                f"{urdf}: joint {name!r}: {fault}; only revolute and prismatic joints with "
+                'limits are supported: give it type="revolute" or "prismatic" and '
+                '<limit lower="..." upper="..." velocity="..."/> with lower < upper and '
+                "velocity > 0 (a continuous joint: revolute with the range it needs), or "
+                'make it type="fixed"',
+                path=urdf,
+                name=name,
+                value=joint.shortname(),
+            )
+
+
+def _angle_fault(model: pin.Model, joint: str, angle: float) -> str:
+    """What is wrong with locking the model's joint ``joint`` at ``angle`` (rad), or ``""``."""
+    idx = model.joints[model.getJointId(joint)].idx_q
+    low, high = model.lowerPositionLimit[idx], model.upperPositionLimit[idx]
+    if not (np.isfinite(angle) and low <= angle <= high):
+        return f"not within the joint's limits [{low:g}, {high:g}] rad"
+    return ""
+
+
+def _file_locked(value: object, path: Path, model: pin.Model) -> dict[str, float]:
+    """The file's ``locked``: a table of joint angles (rad), or a list of joint names
+    (locked at 0), each a joint of the URDF locked within its limits."""
+    if value is None:
+        return {}
+    if isinstance(value, list) and all(isinstance(n, str) for n in value):
+        twice = sorted({n for n in value if value.count(n) > 1})
+        if twice:
+            raise RobotDescriptionError(
+                f"{path}: locked lists {twice} more than once",
+                path=path,
+                name="locked",
+                value=twice,
+            )
+        value = dict.fromkeys(value, 0.0)
+    if not isinstance(value, dict):
+        raise RobotDescriptionError(
+            f"{path}: locked must be a table of angles (rad), e.g. locked = {{ <joint> = 0.0 }}, "
+            f'or a list of joint names locked at 0, e.g. locked = ["<joint>"]; got {value!r}',
+            path=path,
+            name="locked",
+            value=value,
+        )
+    for joint, angle in value.items():
+        if not model.existJointName(joint):
+            raise RobotDescriptionError(
+                f"{path}: locked: {joint!r} is not a joint of the URDF; its joints are "
+                f"{list(model.names)[1:]}",
+                path=path,
+                name="locked",
+                value=joint,
+            )
+        if not isinstance(angle, (int, float)) or isinstance(angle, bool):
+            fault = "not an angle (rad)"
+        else:
+            fault = _angle_fault(model, joint, float(angle))
+        if fault:
+            raise RobotDescriptionError(
+                f"{path}: locked: {joint} = {angle!r} is {fault}; lock it at an angle (rad) "
+                "within its limits",
+                path=path,
+                name=f"locked.{joint}",
+                value=angle,
+            )
+    return {joint: float(angle) for joint, angle in value.items()}
+
+
 def _locked_angles(
-    locked: Mapping[str, float] | Sequence[str] | None, default: Mapping[str, float]
+    locked: Mapping[str, float] | Sequence[str] | None,
+    default: Mapping[str, float],
+    model: pin.Model,
 ) -> dict[str, float]:
-    """The joints to lock and their angles (rad); see :func:`read_description`."""
-    default_locked = {k: float(v) for k, v in default.items()}
+    """The joints to lock and their angles (rad); see :func:`read_description`.
+
+    ``default`` is the file's ``locked`` (already checked); a fault of the argument
+    ``locked`` alone is an :class:`InputError`.
+    """
     if locked is None:
-        locked = default_locked
-    elif not isinstance(locked, Mapping):
-        locked = {n: default_locked.get(n, 0.0) for n in locked}
+        return dict(default)
+    if isinstance(locked, (str, bytes)):
+        raise InputError(
+            f"locked must be joint names or a mapping of joint names to angles (rad), "
+            f"not the text {locked!r}",
+            name="locked",
+            value=locked,
+        )
+    if not isinstance(locked, Mapping):
+        locked = {n: default.get(n, 0.0) for n in locked}
     try:
-        return {str(k): float(v) for k, v in locked.items()}
+        angles = {str(k): float(v) for k, v in locked.items()}
     except (TypeError, ValueError) as exc:
         raise InputError(
             f"locked angles must be numbers (rad), got {dict(locked)!r}",
             name="locked",
             value=dict(locked),
         ) from exc
+    for joint, angle in angles.items():
+        if not model.existJointName(joint):
+            raise InputError(
+                f"cannot lock {joint!r}: joints are {list(model.names)[1:]}",
+                name="locked",
+                value=joint,
+            )
+        fault = _angle_fault(model, joint, angle)
+        if fault:
+            raise InputError(
+                f"cannot lock {joint} at {angle!r} rad: {fault}",
+                name="locked",
+                value={joint: angle},
+            )
+    return angles
 
 
-def _add_frames(model: pin.Model, set_cfgs: list) -> None:
+def _add_frames(model: pin.Model, set_cfgs: list, path: Path, urdf: Path) -> None:
     """Operational frames for points and capsule ends, placed at the neutral configuration."""
     data = model.createData()
     pin.framesForwardKinematics(model, data, pin.neutral(model))
-    labels: list[tuple[str, list[str]]] = []
-    for sc in set_cfgs:
-        for k, names in enumerate(sc["points"]):
-            labels.append((f"{sc['name']}_p{k}", list(names)))
-        cap = sc["capsule"]
-        labels.append((f"{sc['name']}_capsule_from", [cap["from"]]))
-        labels.append((f"{sc['name']}_capsule_to", [cap["to"]]))
-    for label, names in labels:
-        _add_point_frame(model, data, label, names)
+    n_frames = model.nframes
+    for i, sc in enumerate(set_cfgs):
+        name, cap = sc["name"], sc["capsule"]
+        entries = [
+            (f"{name}_p{k}", list(names), f"points[{k}]") for k, names in enumerate(sc["points"])
+        ]
+        entries += [
+            (f"{name}_capsule_from", [cap["from"]], "capsule.from"),
+            (f"{name}_capsule_to", [cap["to"]], "capsule.to"),
+        ]
+        for label, names, key in entries:
+            said = f"[[sets]] entry {i} ({name}) {key}"
+            _add_point_frame(
+                model, data, label, names, (said, f"sets[{i}].{key}", path, urdf, n_frames)
+            )
 
 
 def _lock(model: pin.Model, locked: Mapping[str, float]) -> pin.Model:
-    """The model with the ``locked`` joints removed at their angles (``buildReducedModel``)."""
+    """The model with the ``locked`` joints (checked) removed at their angles
+    (``buildReducedModel``)."""
     if not locked:
         return model
-    for jn in locked:
-        if not model.existJointName(jn):
-            raise InputError(
-                f"cannot lock {jn!r}: joints are {list(model.names)[1:]}", name="locked", value=jn
-            )
     q_ref = pin.neutral(model)
     for jn, angle in locked.items():
         q_ref[model.joints[model.getJointId(jn)].idx_q] = angle
@@ -478,7 +723,19 @@ def _roles(cfg: Mapping[str, Any], path: Path, set_cfgs: list, joints: Sequence[
             )
         rows[role] = names.index(entry["set"])
         if "joints" in keys:
-            role_joints[role] = _joint_list(entry["joints"], f"roles.{role}.joints", path, joints)
+            where = f"roles.{role}.joints"
+            role_joints[role] = _joint_list(entry["joints"], where, path, joints)
+            twice = sorted({n for n in role_joints[role] if role_joints[role].count(n) > 1})
+            if not role_joints[role] or twice:
+                raise RobotDescriptionError(
+                    f"{path}: [roles] {role}.joints "
+                    + (f"lists {twice} more than once" if twice else "is empty")
+                    + f"; name each joint that moves the set {entry['set']!r} once "
+                    "(docs/robot.md: Roles)",
+                    path=path,
+                    name=where,
+                    value=twice or [],
+                )
     return Roles(
         scaled=rows["scaled"],
         scaled_joints=role_joints["scaled"],
@@ -494,8 +751,10 @@ def _elbow(frames: object, path: Path, set_cfgs: list) -> int | None:
     if frames is None:
         return None
     points = [sorted(names) for sc in set_cfgs for names in sc["points"]]
-    if isinstance(frames, list) and sorted(frames) in points:
-        return points.index(sorted(frames))
+    if isinstance(frames, list) and all(isinstance(n, str) for n in frames):
+        given = sorted(str(n) for n in frames)
+        if given in points:
+            return points.index(given)
     raise RobotDescriptionError(
         f"{path}: [roles] elbow must list the frames of one control point, as in its set's "
         f"points; {frames!r} is none of {points}",
@@ -669,6 +928,84 @@ def _check_capsules(model: pin.Model, sets: Sequence[ControlSet], path: Path) ->
         )
 
 
+def _check_free(joints: Sequence[str], locked: Mapping[str, float], path: Path, by: str) -> None:
+    """Refuse locking every joint (a model with nothing to move)."""
+    if set(joints) <= set(locked):
+        raise RobotDescriptionError(
+            f"{path}: {by} locks every joint, {list(joints)}: nothing is left to move; "
+            "leave at least the joints of [roles] free",
+            path=path,
+            name="locked",
+            value=sorted(locked),
+        )
+
+
+def _check_role_joints(model: pin.Model, roles: Roles, set_cfgs: list, path: Path) -> None:
+    """Refuse a role joint that moves none of its set's points: in Pinocchio's tree
+    (``model.supports``) it must be an ancestor of at least one point's body."""
+    for role, row, role_joints in (
+        ("scaled", roles.scaled, roles.scaled_joints),
+        ("repelled", roles.repelled, roles.repelled_joints),
+    ):
+        name = set_cfgs[row]["name"]
+        bodies = {
+            model.frames[model.getFrameId(f"{name}_p{k}")].parentJoint
+            for k in range(len(set_cfgs[row]["points"]))
+        }
+        moving = sorted({j for b in bodies for j in model.supports[b] if j > 0})
+        moving_names = [str(model.names[j]) for j in moving]
+        idle = [j for j in role_joints if j not in moving_names]
+        if idle:
+            raise RobotDescriptionError(
+                f"{path}: [roles] {role}.joints: {idle} move no point of the set {name!r} "
+                f"(they come after its points in the URDF's chain); the joints that move it "
+                f"are {moving_names}: name those",
+                path=path,
+                name=f"roles.{role}.joints",
+                value=idle,
+            )
+
+
+def _check_roles_free(model: pin.Model, roles: Roles, path: Path, by: str) -> None:
+    """Refuse a role joint that is not in the reduced model (locked)."""
+    for role, role_joints in (
+        ("scaled", roles.scaled_joints),
+        ("repelled", roles.repelled_joints),
+    ):
+        locked = [j for j in role_joints if not model.existJointName(j)]
+        if locked:
+            raise RobotDescriptionError(
+                f"{path}: [roles] {role}.joints: {locked} locked (by {by}); a role's joints "
+                f"must be free: unlock them, or name free joints in [roles] {role}.joints",
+                path=path,
+                name=f"roles.{role}.joints",
+                value=locked,
+            )
+
+
+def _check_end_effector(
+    model: pin.Model, set_cfgs: list, roles: Roles, ee_name: str, path: Path
+) -> None:
+    """Refuse an end-effector set whose capsule does not end at the end-effector frame
+    (by name, or at the same place of the same body)."""
+    sc = set_cfgs[roles.end_effector]
+    end = model.frames[model.getFrameId(f"{sc['name']}_capsule_to")]
+    ee = model.frames[model.getFrameId(ee_name)]
+    same = end.parentJoint == ee.parentJoint and np.allclose(
+        end.placement.translation, ee.placement.translation, rtol=0.0, atol=1e-12
+    )
+    if sc["capsule"]["to"] != ee_name and not same:
+        raise RobotDescriptionError(
+            f"{path}: [roles] end_effector: the end-effector set's capsule must end at the "
+            f"end_effector frame {ee_name!r}; the capsule of the set {sc['name']!r} runs "
+            f"from {sc['capsule']['from']!r} to {sc['capsule']['to']!r}: name the set that ends "
+            f'there, or give this set capsule.to = "{ee_name}"',
+            path=path,
+            name="roles.end_effector.set",
+            value=sc["name"],
+        )
+
+
 def read_description(
     name: str | Path = "iiwa14", locked: Mapping[str, float] | Sequence[str] | None = None
 ) -> Description:
@@ -681,20 +1018,35 @@ def read_description(
     cfg, urdf, set_cfgs, ee_name = _read_config(folder)
     path = folder / CONFIG_NAME
     model = _build_model(urdf)
+    _check_joints(model, urdf)
     joints = tuple(str(n) for n in model.names)[1:]
+    default = _file_locked(cfg.get("locked"), path, model)
+    _check_free(joints, default, path, "the file's `locked`")
+    by = "the file's `locked`" if locked is None else "the locked= argument"
+    locked = _locked_angles(locked, default, model)
+    _check_free(joints, locked, path, by)
+    if not set_cfgs:
+        raise RobotDescriptionError(
+            f"{path}: no [[sets]]; give at least one (docs/robot.md)",
+            path=path,
+            name="sets",
+            value=set_cfgs,
+        )
     roles = _roles(cfg, path, set_cfgs, joints)
     arm = _arm(cfg, path, joints)
     ik_seed = _ik_seed(cfg, path, joints)
-    locked = _locked_angles(locked, cfg.get("locked", {}))
-    _add_frames(model, set_cfgs)
+    _add_frames(model, set_cfgs, path, urdf)
     if not model.existFrame(ee_name):
         raise RobotDescriptionError(
-            f"end_effector {ee_name!r} is not a frame of {urdf.name}",
-            path=urdf,
+            f"{path}: end_effector {ee_name!r} is not a frame of {urdf.name}",
+            path=path,
             name="end_effector",
             value=ee_name,
         )
+    _check_end_effector(model, set_cfgs, roles, ee_name, path)
+    _check_role_joints(model, roles, set_cfgs, path)
     model = _lock(model, locked)
+    _check_roles_free(model, roles, path, by)
     sets, point_frames = _control_sets(model, set_cfgs)
     _check_capsules(model, sets, path)
     return Description(

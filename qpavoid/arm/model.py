@@ -295,9 +295,10 @@ def load_robot(
         A bundled description (``"iiwa14"``), a folder holding a URDF and a
         ``control_points.toml``, or the path of such a TOML file.
     locked
-        Joints to lock: ``None`` uses the description's default (A3 at 0 for the iiwa),
-        ``()`` locks nothing, a sequence of names locks them at the description's value
-        (or 0), a mapping gives the angles (rad).
+        Joints to lock, in place of the description's ``locked``: ``None`` uses the
+        description's (A3 at 0 for the iiwa), ``()`` locks nothing, a sequence of names
+        locks them at the description's value (or 0), a mapping gives the angles (rad),
+        each within the joint's limits.
 
     Returns
     -------
@@ -306,9 +307,12 @@ def load_robot(
     Raises
     ------
     RobotDescriptionError
-        For an unknown description, a malformed file or URDF, or a frame it lacks.
+        For an unknown description, a malformed file or URDF, a frame it lacks, or
+        anything else the controllers could not use (``docs/robot.md``, "Refusals"),
+        locking every joint or a joint of the description's ``[roles]`` included.
     InputError
-        For a locked angle that is not a number or a joint the model does not have.
+        For a ``locked`` that is text, names a joint the model does not have, or gives an
+        angle that is not a number, not finite or outside the joint's limits.
     """
     return Robot(*read_description(name, locked))
 
