@@ -275,7 +275,7 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         (
             lambda t: t.replace("reaction_time_s = 0.005\n", "reaction_time_s = -1.0\n"),
             "arm.reaction_time_s",
-            "arm.reaction_time_s must be a number at least 0, got -1.0",
+            "arm.reaction_time_s must be a number at least 0 and at most 1, got -1.0",
         ),
         (
             lambda t: t.replace('aim = "A1"', 'aim = "flange"'),
@@ -286,6 +286,21 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
             lambda t: t.replace("[roles]\n", "[roles]\nscaled_joints = []\n"),
             "roles",
             "[roles] has unknown key(s) ['scaled_joints']",
+        ),
+        (  # a unit error: a reaction time in ms
+            lambda t: t.replace("reaction_time_s = 0.005", "reaction_time_s = 5.0"),
+            "arm.reaction_time_s",
+            "arm.reaction_time_s must be a number at least 0 and at most 1, got 5.0",
+        ),
+        (
+            lambda t: t.replace("A1 = 8.57", "A1 = 1e-300"),
+            "arm.max_acceleration_radps2.A1",
+            "max_acceleration_radps2.A1 must be a number at least 0.1 and at most 1000",
+        ),
+        (
+            lambda t: t.replace("max_point_speed_mps = 3.0", "max_point_speed_mps = 3000.0"),
+            "arm.max_point_speed_mps",
+            "arm.max_point_speed_mps must be a number above 0 and at most 10, got 3000.0",
         ),
         (  # a misspelt top-level key would silently keep the default
             lambda t: t.replace("locked =", "lockd =", 1),

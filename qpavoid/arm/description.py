@@ -44,6 +44,14 @@ LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 #: Keys of a ``[[sets]]`` entry of the control-point file and of its ``capsule`` table.
 SET_KEYS = ("name", "sphere_radius_m", "points", "capsule")
 CAPSULE_KEYS = ("from", "to", "capsule_radius_m")
+#: Plausible bounds of the ``[arm]`` facts (a value outside is a unit error or a typo, and
+#: would make speed and separation never move or never stop the arm in time): a reaction
+#: slower than 1 s; a joint braking below 0.1 rad/s² (10 s to stop from 1 rad/s) or above
+#: 1000 rad/s² (arms brake at 5-50: the iiwa 8.6-15.7); a point faster than 10 m/s
+#: (cobots move their tool at up to 1-5 m/s).
+MAX_REACTION_S = 1.0
+MIN_ACCEL_RADPS2, MAX_ACCEL_RADPS2 = 0.1, 1000.0
+MAX_SPEED_MPS = 10.0
 #: The control-point file's top-level keys (a misspelt one would otherwise be ignored).
 TOP_KEYS = ("urdf", "end_effector", "locked", "sets", "roles", "arm", "ik_seed")
 #: Most bytes a control-point file may have (the iiwa's has about 4 kB), and a URDF
@@ -631,13 +639,16 @@ def _control_sets(model: pin.Model, set_cfgs: list) -> tuple[list[ControlSet], l
     return sets, point_frames
 
 
-def _number(value: object, where: str, path: Path, low: float, strict: bool) -> float:
-    """``value`` as a finite float above ``low`` (at or above unless ``strict``), or a
-    :class:`RobotDescriptionError` naming ``where``."""
+def _number(
+    value: object, where: str, path: Path, low: float, strict: bool, high: float = np.inf
+) -> float:
+    """``value`` as a finite float above ``low`` (at or above unless ``strict``) and at most
+    ``high``, or a :class:`RobotDescriptionError` naming ``where``."""
     ok = isinstance(value, (int, float)) and not isinstance(value, bool)
     number = float(value) if ok else float("nan")  # type: ignore[arg-type]
-    if not (np.isfinite(number) and (number > low if strict else number >= low)):
+    if not (np.isfinite(number) and (number > low if strict else number >= low) and number <= high):
         bound = f"{'above' if strict else 'at least'} {low:g}"
+        bound += f" and at most {high:g}" if np.isfinite(high) else ""
         raise RobotDescriptionError(
             f"{path}: {where} must be a number {bound}, got {value!r}",
             path=path,
@@ -800,14 +811,17 @@ def _arm(cfg: Mapping[str, Any], path: Path, joints: Sequence[str]) -> ArmDynami
             name="arm.sources",
             value=sources,
         )
+    where = "arm.max_acceleration_radps2"
     return ArmDynamics(
-        reaction_time_s=_number(table["reaction_time_s"], "arm.reaction_time_s", path, 0.0, False),
+        reaction_time_s=_number(
+            table["reaction_time_s"], "arm.reaction_time_s", path, 0.0, False, MAX_REACTION_S
+        ),
         max_acceleration_radps2=tuple(
-            (n, _number(accel[n], f"arm.max_acceleration_radps2.{n}", path, 0.0, True))
+            (n, _number(accel[n], f"{where}.{n}", path, MIN_ACCEL_RADPS2, False, MAX_ACCEL_RADPS2))
             for n in joints
         ),
         max_point_speed_mps=_number(
-            table["max_point_speed_mps"], "arm.max_point_speed_mps", path, 0.0, True
+            table["max_point_speed_mps"], "arm.max_point_speed_mps", path, 0.0, True, MAX_SPEED_MPS
         ),
         sources=tuple((str(k), v) for k, v in sources.items()),
     )

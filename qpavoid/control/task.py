@@ -235,7 +235,7 @@ def inverse_kinematics(
     raise IKNotConvergedError(
         f"inverse kinematics did not reach the target position ({x:.4g}, {y:.4g}, {z:.4g}) m "
         f"(residual {err:.2e} > tol {tol:.0e} after {max_iter} iterations): unreachable "
-        "on this branch",
+        "on this branch (the robot description's [ik_seed] chooses the branch: docs/robot.md)",
         target=target,
         residual=float(err),
         iterations=max_iter,
