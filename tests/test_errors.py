@@ -247,7 +247,8 @@ def test_unconverged_ik(robot):
     assert re.fullmatch(
         r"inverse kinematics did not reach the target position \(1\.5, 0, 0\.5\) "
         r"m \(residual \S+ > tol 1e-10 after 50 iterations\): unreachable on "
-        r"this branch",
+        r"this branch \(the robot description's \[ik_seed\] chooses the branch: "
+        r"docs/robot\.md\)",
         one_line(err),
     )
     assert f"{err.residual:.2e}" in str(err)

@@ -285,6 +285,7 @@ def test_frames_of_other_types_fuse_as_float64_ones():
     assert got.frame.state[JointType.HandRight] == TrackingState.NotTracked
 
 
+@pytest.mark.slow  # seconds of a subprocess or a browser: with the slow suite
 def test_the_example_and_qpavoid_fuse_write_a_fused_recording(tmp_path):
     """examples/two_sensors.py, then `qpavoid fuse` as a user types them."""
     import subprocess

@@ -28,6 +28,7 @@ def source_files() -> set[str]:
     return pkg | robots
 
 
+@pytest.mark.slow  # seconds of a subprocess or a browser: with the slow suite
 def test_wheel_holds_every_module_and_robot_file(tmp_path):
     build = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(tmp_path), str(ROOT)],

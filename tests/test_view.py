@@ -101,6 +101,7 @@ def test_replay_data_is_the_log_tick_by_tick(test2_run, robot):
     np.testing.assert_allclose(data["links"][:, -1], log["ee_pos"][ticks], atol=1e-5)
 
 
+@pytest.mark.slow  # seconds of a subprocess or a browser: with the slow suite
 def test_a_30_s_run_fits_in_5_mb_and_names_no_network_address(robot):
     """A 30 s run at 500 Hz, every tick stopped with its own reason (the worst case)."""
     n = 15000
@@ -171,6 +172,7 @@ def screenshot(page) -> np.ndarray:
     return np.asarray(image).astype(int)
 
 
+@pytest.mark.slow  # seconds of a subprocess or a browser: with the slow suite
 def test_the_replay_renders_in_a_browser_and_shows_the_stop_of_test2(browser, test2_run):
     log = load_log(test2_run)
     page = browser.new_page(viewport={"width": 1000, "height": 700})

@@ -27,6 +27,7 @@ from qpavoid.core.checks import finite_number
 from qpavoid.core.compiling import kernel_input
 from qpavoid.core.errors import SolverError
 from qpavoid.distance.methods import distance_method
+from qpavoid.distance.table import DistanceTable
 from qpavoid.human.body import BodyModel, HumanGeometry, KinectHuman
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.people import NOBODY, People, as_people
@@ -126,7 +127,8 @@ class Controller:
         frame_age_s: float = 0.0,
         frame_time_s: float | None = None,
     ) -> Tick:
-        """Shared prelude: kinematics, distances, f (eq. 2), reference, stop rules.
+        """Shared prelude, one step each: the people as perceived, the distances, the laws
+        (eqs. 2-5, 7), speed and separation, the reference, the stop rules.
 
         Raises
         ------
@@ -138,17 +140,10 @@ class Controller:
         people = as_people(joints, state, self.human.skeleton)
         self._clock_s += self.config.control_period_s
         age = frame_age_s
-        if age <= self.config.max_frame_age_s and people.ids:
-            seen = self.perceive(people, age, frame_time_s)
-            percs, geos, v_people = seen.perceived, seen.geometry, seen.part_velocity
-        else:  # stale or NaN: the robot stops on it; the trackers do not learn from it
-            percs = [Perceived.untracked(f) for f in people.frames or (NOBODY,)]
-            geos = self.geometry(people)
-            v_people = np.zeros((len(percs), len(self.human.parts), 3))
+        percs, geos, v_people = self._perceived(people, age, frame_time_s)
         table, who = self.distances.closest(kin, geos)
-        cfg = self.config.avoidance
+        cfg, roles = self.config.avoidance, self.roles
         # the minima, eqs. (4)-(5) and (7) in one compiled call (laws.avoidance)
-        roles = self.roles
         dmin, j, v_repelled, v_end_effector = avoidance_terms(
             kernel_input(table.distance, np.float64),
             kernel_input(table.vector, np.float64),
@@ -161,34 +156,17 @@ class Controller:
             if len(geos) > 1 and np.isfinite(dmin).any()
             else 0
         )
-        perceived, geo = percs[nearest], geos[nearest]
         frame = self.closest_frame = people.frames[nearest] if people.ids else NOBODY
         f = float(l1_factor(dmin[roles.scaled], cfg))  # eq. (2)
         limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)  # eq. (3)
-        if self.config.safety == "ssm":
-            ssm = with_stop_time(self.ssm, self.stop_budget.budget())
-            v_parts = v_people[who, np.arange(who.shape[1])[None, :]]  # each pair's person
-            approach_limit, human_approach = separation_bounds(table, v_parts, age, ssm)
-            limits = np.minimum(limits, self.accel * ssm.stop_time_s)  # |q̇_j| ≤ a_j T_s
-        else:
-            approach_limit, human_approach = self._no_bound, self._no_approach
+        approach_limit, human_approach, limits = self._separation(table, who, v_people, age, limits)
         ref_pose, ref_twist = self.path.reference(t)
         error = pose_error(ref_pose, kin.ee_placement)
-        frozen = self.config.perception.max_identical_frames
-        if not age <= self.config.max_frame_age_s:  # NaN too
-            reason = f"human frame is stale ({age:.3f} s old, max {self.config.max_frame_age_s} s)"
-        elif frozen is not None and (repeats := min(p.identical for p in percs)) > frozen:
-            reason = f"human frame is frozen ({repeats + 1} identical skeletons in a row)"
-        elif self.config.require_human and not np.isfinite(dmin).any():
-            reason = "no body part of the operator is tracked"
-        else:
-            d_rep, d_ee = dmin[roles.repelled], dmin[roles.end_effector]
-            reason = stop_reason(f, d_rep, d_ee, cfg, self.role_names) or self._contact(dmin)
         return Tick(
             kin.q,
             kin,
             frame,
-            geo,
+            geos[nearest],
             table,
             dmin,
             f,
@@ -201,12 +179,56 @@ class Controller:
             ref_twist,
             error,
             ref_twist + self.K * error,
-            reason,
-            perceived,
+            self._stop_reason(age, percs, dmin, f),
+            percs[nearest],
             age,
             approach_limit,
             human_approach,
         )
+
+    def _perceived(
+        self, people: People, age: float, frame_time_s: float | None
+    ) -> tuple[list[Perceived], list[HumanGeometry], np.ndarray]:
+        """Everybody as perceived (the trackers' frames, the bodies, their parts' velocities
+        (P, K, 3), m/s); a stale or NaN-aged frame as it is, which the trackers do not learn
+        from (the robot stops on it)."""
+        if age <= self.config.max_frame_age_s and people.ids:
+            seen = self.perceive(people, age, frame_time_s)
+            return seen.perceived, seen.geometry, seen.part_velocity
+        percs = [Perceived.untracked(f) for f in people.frames or (NOBODY,)]
+        return percs, self.geometry(people), np.zeros((len(percs), len(self.human.parts), 3))
+
+    def _separation(
+        self,
+        table: DistanceTable,
+        who: np.ndarray,
+        v_people: np.ndarray,
+        age: float,
+        limits: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Speed and separation (``safety="ssm"``): each pair's bound on the robot's approach
+        speed and the part's own approach speed (S, K), m/s, and the joint limits within the
+        stopping-time budget (|q̇_j| ≤ a_j T_s); with the paper's rules, no bound."""
+        if self.config.safety != "ssm":
+            return self._no_bound, self._no_approach, limits
+        ssm = with_stop_time(self.ssm, self.stop_budget.budget())
+        v_parts = v_people[who, np.arange(who.shape[1])[None, :]]  # each pair's person
+        approach_limit, human_approach = separation_bounds(table, v_parts, age, ssm)
+        return approach_limit, human_approach, np.minimum(limits, self.accel * ssm.stop_time_s)
+
+    def _stop_reason(self, age: float, percs: list[Perceived], dmin: np.ndarray, f: float) -> str:
+        """Why the robot must stop this tick ("" if it may move): a stale or frozen frame,
+        nobody tracked, the paper's stop rules (Sect. 5.4), a set with no role touching."""
+        frozen = self.config.perception.max_identical_frames
+        if not age <= self.config.max_frame_age_s:  # NaN too
+            return f"human frame is stale ({age:.3f} s old, max {self.config.max_frame_age_s} s)"
+        if frozen is not None and (repeats := min(p.identical for p in percs)) > frozen:
+            return f"human frame is frozen ({repeats + 1} identical skeletons in a row)"
+        if self.config.require_human and not np.isfinite(dmin).any():
+            return "no body part of the operator is tracked"
+        d_rep, d_ee = dmin[self.roles.repelled], dmin[self.roles.end_effector]
+        cfg = self.config.avoidance
+        return stop_reason(f, d_rep, d_ee, cfg, self.role_names) or self._contact(dmin)
 
     def _contact(self, dmin: np.ndarray) -> str:
         """Why a set that plays no part in the laws stops the robot: it touches the person
