@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -17,19 +20,29 @@ from qpavoid.loop.camera import CameraConfig
 from qpavoid.perception import _kernels as perception_kernels
 from qpavoid.perception.tracker import PerceptionConfig
 
+#: The fusion's kernels compiled (or loaded) in a process of their own.
+WARM_UP_FUSION = (
+    "from qpavoid.fusion import person; from qpavoid.human.kinect_v2 import KINECT_V2; "
+    "person.warm_up(KINECT_V2)"
+)
+
 
 def pytest_configure(config):
     """Compile the numba kernels once, in the first process, before the workers and the
-    command-line subprocesses need them (a fresh install compiles for about 5 s; every
-    process after that loads them from the disk cache)."""
+    command-line subprocesses need them (a fresh install compiles for about 20 s of one
+    core, 10 s here with the fusion's beside the rest; every process after that loads them
+    from the disk cache)."""
     if not hasattr(config, "workerinput"):  # pytest-xdist's controller, or no xdist
-        fusion_person.warm_up(KINECT_V2)  # and the fusion's per-joint kernels
+        # the largest kernel (about half of a fresh install's 20 s) compiled beside the rest
+        fusion = subprocess.Popen([sys.executable, "-c", WARM_UP_FUSION])
         perception_kernels.warm_up(KINECT_V2)
         body_kernels.warm_up(KINECT_V2)
         distance_kernels.warm_up()
         qp_kernels.warm_up()
         solver_kernels.warm_up()
         law_kernels.warm_up()
+        if fusion.wait() != 0:  # compile it here, where an error shows
+            fusion_person.warm_up(KINECT_V2)
 
 
 @pytest.fixture(scope="session")

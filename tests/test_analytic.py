@@ -35,6 +35,7 @@ def runs(robot):
     return _Runs(robot)
 
 
+@pytest.mark.slow  # the QP tracks free in the default suite, equal to this one (test_qp)
 def test_free_tracks_the_path_alone(runs):
     m = runs["free"].metrics
     assert m["reached_goal"]

@@ -46,8 +46,8 @@ def _legend(ax) -> list[str]:
         ("test1", "test1"),
         ("test2", "test2"),
         ("free", "other"),
-        ("random:3", "other"),
-        ("", "other"),
+        pytest.param("random:3", "other", marks=pytest.mark.slow),  # as free's: with the slow
+        pytest.param("", "other", marks=pytest.mark.slow),
     ],
 )
 def test_each_scenario_writes_its_figures(tmp_path, log, robot, scenario, kind):
