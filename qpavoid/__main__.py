@@ -2,6 +2,6 @@
 
 import sys
 
-from qpavoid.cli.launch import main
+from qpavoid.launch import main
 
 sys.exit(main())

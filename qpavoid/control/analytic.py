@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import InitVar, dataclass
 
 import numpy as np
 
@@ -34,12 +34,25 @@ class AnalyticConfig:
         Joints of the 3×3 Jacobian of eq. (6) and of ``q̇(1:3)`` in eq. (9); None (the
         default): the robot description's (``Roles.repelled_joints``: the paper's A1, A2
         and A4 for the iiwa, A3 locked).
+    l2_joints
+        The name earlier releases gave ``repelled_joints`` (the paper's set L2), still
+        taken as a keyword; given both, they must agree.
     """
 
     limit_mode: str = "scale"
     repelled_joints: tuple[str, ...] | None = None
+    l2_joints: InitVar[tuple[str, ...] | None] = None
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, l2_joints: tuple[str, ...] | None) -> None:
+        if l2_joints is not None:
+            if self.repelled_joints is not None and tuple(self.repelled_joints) != tuple(l2_joints):
+                raise InputError(
+                    f"l2_joints {l2_joints!r} and repelled_joints {self.repelled_joints!r} "
+                    "name one setting: give one",
+                    name="l2_joints",
+                    value=l2_joints,
+                )
+            object.__setattr__(self, "repelled_joints", tuple(l2_joints))
         if self.limit_mode not in LIMIT_MODES:
             raise InputError(
                 f"limit_mode must be 'scale' or 'clip', got {self.limit_mode!r}",

@@ -2,10 +2,12 @@
 
 One file per piece, as in pink and mink, each returning full-width blocks
 (:mod:`.pieces`: ``Objective(H, c)``, ``Constraint(G, h)``, ``Bounds(lb, ub)``) over the
-named variables of :mod:`.variables`: :mod:`.ee_task` (eq. 8), :mod:`.repulsion`
-(eqs. 4-7), :mod:`.regularization`, :mod:`.elbow_task` (redundancy), :mod:`.velocity_limits`
-(eq. 3), :mod:`.position_limits`, :mod:`.velocity_damper`. :mod:`.problem` assembles them,
-:mod:`.backends` solves, :mod:`.controller` composes.
+named variables of :mod:`.variables`: the tasks :mod:`.tasks.ee` (eq. 8),
+:mod:`.tasks.regularization`, :mod:`.tasks.elbow` (redundancy); the limits
+:mod:`.limits.velocity` (eq. 3), :mod:`.limits.position`, :mod:`.limits.velocity_damper`;
+the barriers :mod:`.barriers.repulsion` (eqs. 4-7) and :mod:`.barriers.separation` (ISO/TS
+15066). :mod:`.problem` assembles them, :mod:`.backends` solves, :mod:`.controller`
+composes.
 """
 
 from qpavoid.control.qp.backends import DirectDAQP, PersistentOSQP, QPSolversBackend, make_backend

@@ -140,3 +140,7 @@ class EERepulsionTask(RepulsionTask):
     def motion(self, tick: Tick) -> tuple[np.ndarray, np.ndarray]:
         assert tick.kin.ee_jacobian is not None
         return tick.kin.ee_jacobian[:3], tick.task_twist[:3]
+
+
+#: The name earlier releases gave :class:`RepelledRepulsionTask` (the paper's set L2).
+L2RepulsionTask = RepelledRepulsionTask
