@@ -19,7 +19,6 @@ or limit of a particular arm.
 from __future__ import annotations
 
 import re
-import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from importlib import resources
@@ -31,12 +30,7 @@ import pinocchio as pin
 
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import InputError, RobotDescriptionError
-from qpavoid.core.file_bounds import read_bounded
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # Python 3.10: the same parser, as a package
-    import tomli as tomllib
+from qpavoid.core.file_bounds import NotTOMLError, read_bounded, read_toml
 
 CONFIG_NAME = "control_points.toml"
 #: Pinocchio's frame for every Jacobian of the arm: the point's velocity in base-frame axes.
@@ -404,15 +398,13 @@ def _read_config(folder: Path) -> tuple[dict, Path, list, str]:
     """The parsed control-point file of ``folder``, its URDF path, sets and end effector."""
     path = folder / CONFIG_NAME
     try:
-        text = read_bounded(path, MAX_CONFIG_BYTES).decode("utf-8")
+        cfg = read_toml(path, MAX_CONFIG_BYTES)
+    except NotTOMLError as exc:
+        raise RobotDescriptionError(f"{path}: {one_line(exc)}", path=path) from None
     except (OSError, ValueError) as exc:  # too large, not a regular file, not UTF-8
         raise RobotDescriptionError(
             f"{path}: cannot read the file: {one_line(exc)}", path=path
         ) from None
-    try:
-        cfg = tomllib.loads(text)
-    except (tomllib.TOMLDecodeError, RecursionError) as exc:
-        raise RobotDescriptionError(f"{path}: {one_line(exc)}", path=path) from None
     try:
         urdf_name, set_cfgs, ee_name = cfg["urdf"], cfg["sets"], cfg["end_effector"]
     except KeyError as exc:

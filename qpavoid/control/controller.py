@@ -88,6 +88,7 @@ class Controller:
         self.roles = robot.roles
         self.role_names = robot.role_names
         self.scaled_cols = joint_columns(robot, self.config.scaled_joints, "scaled_joints")
+        self._law_constants = law_constants(self.config.avoidance)  # eqs. (4)-(7), as floats
         #: The sets that play no part in the laws: the robot stops when one touches the
         #: person (their dampers in the QP stop them at contact too).
         self._roleless = np.setdiff1d(np.arange(len(robot.sets)), list(robot.roles.rows))
@@ -149,7 +150,7 @@ class Controller:
             kernel_input(table.vector, np.float64),
             roles.repelled,
             roles.end_effector,
-            *law_constants(cfg),
+            *self._law_constants,
         )
         nearest = (
             int(who.flat[np.argmin(table.distance)])

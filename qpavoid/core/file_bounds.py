@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import os
 import stat
+import sys
 import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -26,13 +27,20 @@ from numpy.lib import format as npy_format
 
 from qpavoid.core.errors import RecordingError
 
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
 __all__ = [
     "MAX_CSV_BYTES",
     "MAX_NPZ_BYTES",
     "MAX_ROWS",
+    "NotTOMLError",
     "check_file_size",
     "check_npy_headers",
     "read_bounded",
+    "read_toml",
     "row_values",
 ]
 
@@ -127,6 +135,32 @@ def read_bounded(path: str | Path, max_bytes: int, *, private: bool = False) -> 
     if len(data) > max_bytes:  # grew while we read
         raise ValueError(f"more than the {max_bytes} bytes allowed")
     return data
+
+
+class NotTOMLError(ValueError):
+    """A file that was read but is not TOML (its parser's message), or nests too deeply."""
+
+
+def read_toml(path: str | Path, max_bytes: int, *, private: bool = False) -> dict:
+    """The TOML file at ``path``, read as :func:`read_bounded` reads it, as a dict.
+
+    The one reader of the package's TOML files (robot descriptions, skeleton formats,
+    calibrations, keys); each caller turns the errors into its own, naming the file.
+
+    Raises
+    ------
+    OSError
+        If it cannot be opened or read.
+    NotTOMLError
+        If it is not TOML (a :class:`ValueError`; caught before the others).
+    ValueError
+        If it is not a regular file, too large, not private (``private``) or not UTF-8.
+    """
+    text = read_bounded(path, max_bytes, private=private).decode("utf-8")
+    try:
+        return tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise NotTOMLError(str(exc)) from None
 
 
 def check_file_size(path: Path, fmt: Literal["npz", "csv"]) -> None:

@@ -44,7 +44,11 @@ from qpavoid.core.checks import check_choice
 from qpavoid.core.errors import InputError
 from qpavoid.experiments.jobs import map_jobs
 from qpavoid.experiments.runs import RunResult, RunSpec, simulate_one
-from qpavoid.laws.avoidance import scaled_velocity_limits, stop_distances, stop_rule_holds
+from qpavoid.laws.avoidance import (
+    scaled_velocity_limits,
+    set_stop_distances,
+    stop_rule_holds,
+)
 from qpavoid.loop.camera import KINECT_V2_LATENCY_S, CameraConfig
 from qpavoid.scenarios.strikes import StrikeCase, strike_camera, strike_case, strike_motion
 
@@ -156,8 +160,8 @@ class ApproachCheck:
         Ticks with a non-zero command while a set's capsule distance was below its
         threshold.
     min_capsule_distance_moving_m
-        Per set that plays a part in the laws (the robot description's roles), by the
-        set's name: the smallest capsule distance over the ticks where the robot moved, m.
+        Per set, by name: the smallest capsule distance over the ticks where the robot
+        moved, m.
     stopped_s, reached_goal
         Time spent stopped, s, and whether the goal was reached.
     """
@@ -251,32 +255,30 @@ def check_log(
 
     Returns a dict with ``position_violations``, ``velocity_violations``,
     ``moving_under_stop_rule``, ``moving_below_capsule_threshold`` (tick counts) and
-    ``min_capsule_distance_moving_m`` (per set that plays a part, by name, m).
+    ``min_capsule_distance_moving_m`` (per set, by name, m).
+
+    Every set is held to its stop distance (:func:`set_stop_distances`: contact for a set
+    that plays no part in the laws, as the controller holds it).
     """
-    avo = config.avoidance
-    sets = list(robot.roles.rows)  # the scaled, repelled and end-effector sets
-    capsule = (log["distance"] if distance == "capsules" else log["distance_other"])[:, sets]
-    threshold = stop_distances(avo)
+    avo, roles = config.avoidance, robot.roles
+    capsule = log["distance"] if distance == "capsules" else log["distance_other"]
+    threshold = set_stop_distances(avo, roles, len(robot.sets))
     moving = np.any(log["dq_command"] != 0.0, axis=1)  # the controller's decisions
-    seen = log["distance"][:, sets]
-    rule = stop_rule_holds(log["f"], seen[:, 1], seen[:, 2], avo)
+    seen = log["distance"]
+    rule = stop_rule_holds(log["f"], seen[:, roles.repelled], seen[:, roles.end_effector], avo)
     cols = joint_columns(robot, config.scaled_joints, "scaled_joints")
     limits = scaled_velocity_limits(robot.dq_max, log["f"], cols)  # eq. (3)
     over = np.any(np.abs(log["dq_command"]) > limits * (1 + 1e-9) + 1e-12, axis=1)
     outside = np.any((log["q"] > robot.q_max) | (log["q"] < robot.q_min), axis=1)
     below = np.any(capsule < threshold, axis=1)
+    closest = capsule[moving].min(axis=0) if moving.any() else np.full(len(robot.sets), np.inf)
     return {
         "position_violations": int(outside.sum()),
         "velocity_violations": int(over.sum()),
         "moving_under_stop_rule": int((moving & rule).sum()),
         "moving_below_capsule_threshold": int((moving & below).sum()),
         "min_capsule_distance_moving_m": {
-            robot.set_names[i]: float(x)
-            for i, x in zip(
-                sets,
-                capsule[moving].min(axis=0) if moving.any() else np.full(len(sets), np.inf),
-                strict=True,
-            )
+            name: float(x) for name, x in zip(robot.set_names, closest, strict=True)
         },
     }
 

@@ -18,7 +18,6 @@ joints through it (:attr:`~SkeletonFormat.parent`, :attr:`~SkeletonFormat.mirror
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from functools import cached_property
@@ -29,12 +28,8 @@ import numpy as np
 
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import InputError, SkeletonFormatError
-from qpavoid.core.file_bounds import read_bounded
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
+from qpavoid.core.file_bounds import NotTOMLError
+from qpavoid.core.file_bounds import read_toml as read_toml_file
 
 __all__ = [
     "FORMATS_DIR",
@@ -462,15 +457,13 @@ def read_toml(path: str | Path) -> dict:
     """The parsed TOML file at ``path`` (bounded to :data:`MAX_FORMAT_FILE_BYTES`), or a
     :class:`SkeletonFormatError` naming the file."""
     try:
-        text = read_bounded(path, MAX_FORMAT_FILE_BYTES).decode("utf-8")
+        return read_toml_file(path, MAX_FORMAT_FILE_BYTES)
+    except NotTOMLError as exc:
+        raise SkeletonFormatError(f"{path}: not TOML: {one_line(exc)}", path=path) from None
     except (OSError, ValueError) as exc:
         raise SkeletonFormatError(
             f"{path}: cannot read the file: {one_line(exc)}", path=path
         ) from None
-    try:
-        return tomllib.loads(text)
-    except (tomllib.TOMLDecodeError, RecursionError) as exc:
-        raise SkeletonFormatError(f"{path}: not TOML: {one_line(exc)}", path=path) from None
 
 
 def _fail(message: str, name: str, value: object) -> NoReturn:

@@ -49,7 +49,9 @@ class Perceiver:
     def geometries(self, frame: HumanFrame | People) -> list[HumanGeometry]:
         """The geometries perceived for ``frame`` if it is the frame in hand, else its own
         (nothing filled in, no uncertainty; an empty frame's for nobody)."""
-        people = frame if isinstance(frame, People) else as_people(frame)
+        people = (
+            frame if isinstance(frame, People) else as_people(frame, skeleton=self.human.skeleton)
+        )
         if self._frame is not None and same_frames(people, self._frame[0]) and self.geometry:
             return self.geometry
         return [self.human.geometry(f) for f in people.frames] or [

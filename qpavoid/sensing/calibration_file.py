@@ -13,7 +13,6 @@ not turn into a scale error.
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
@@ -22,7 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import CalibrationError
-from qpavoid.core.file_bounds import read_bounded
+from qpavoid.core.file_bounds import NotTOMLError, read_toml
 from qpavoid.sensing.calibration import (
     MAX_TRANSLATION_M,
     RIGID_TOLERANCE,
@@ -32,11 +31,6 @@ from qpavoid.sensing.calibration import (
     settings_error,
 )
 from qpavoid.sensing.keys import SensorKeys, load_key_file
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # Python 3.10: the same parser, as a package
-    import tomli as tomllib
 
 __all__ = ["MAX_CALIBRATION_BYTES", "SENSOR_KEYS", "calibration_from_dict", "load_calibration"]
 
@@ -210,15 +204,13 @@ def load_calibration(path: str | Path) -> Calibration:
     """
     p = str(path)
     try:
-        text = read_bounded(p, MAX_CALIBRATION_BYTES).decode("utf-8")
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise CalibrationError(
-            f"cannot read calibration {p}: {one_line(exc)}", path=p, name="path", value=p
-        ) from None
-    try:
-        data = tomllib.loads(text)
-    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        data = read_toml(p, MAX_CALIBRATION_BYTES)
+    except NotTOMLError as exc:
         raise CalibrationError(
             f"calibration {p} is not valid TOML: {one_line(exc)}", path=p
+        ) from None
+    except (OSError, ValueError) as exc:
+        raise CalibrationError(
+            f"cannot read calibration {p}: {one_line(exc)}", path=p, name="path", value=p
         ) from None
     return calibration_from_dict(data, p)

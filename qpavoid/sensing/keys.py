@@ -26,18 +26,12 @@ from __future__ import annotations
 import os
 import re
 import secrets
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import CalibrationError
-from qpavoid.core.file_bounds import read_bounded
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # Python 3.10: the same parser, as a package
-    import tomli as tomllib
+from qpavoid.core.file_bounds import read_toml
 
 __all__ = [
     "KEY_BYTES",
@@ -185,10 +179,10 @@ def load_key_file(path: str | Path, sensor: str) -> SensorKeys:
         )
 
     try:
-        data = tomllib.loads(read_bounded(p, MAX_KEY_FILE_BYTES, private=True).decode("utf-8"))
+        data = read_toml(p, MAX_KEY_FILE_BYTES, private=True)
     except FileNotFoundError:
         raise fail("missing (write one with: qpavoid keygen " + sensor + f" --out {p})") from None
-    except (OSError, ValueError, UnicodeDecodeError, RecursionError) as exc:
+    except (OSError, ValueError) as exc:
         raise fail(one_line(exc)) from None
     unknown = sorted(set(data) - {"sensor", "key"})
     if unknown:

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import signal
 import socket
 import time
 from collections.abc import Sequence
@@ -38,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from qpavoid.core.errors import CalibrationError
+from qpavoid.core.signals import worker_process
 from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.sensing.calibration import Calibration
 from qpavoid.sensing.calibration_file import load_calibration
@@ -180,8 +180,7 @@ def serve(
     body's newest. The calibration and key files are looked at every ``key_check_s`` and
     read again when one changed (a rotated key).
     """
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked by the parent
+    worker_process()  # Ctrl-C ignored, SIGTERM ends it, both unblocked (blocked by the parent)
     with contextlib.suppress(OSError):  # not allowed here: it runs at the loop's priority
         os.nice(NICE)
     family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
