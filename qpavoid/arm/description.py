@@ -21,7 +21,7 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from importlib import resources
+from importlib import metadata, resources
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -57,7 +57,19 @@ MAX_URDF_BYTES = 16 * 2**20
 #: (``fig10_distance_<name>.png``).
 SET_NAME = re.compile(r"[A-Za-z0-9_.-]+")
 #: The shape of a set's ``points``, for messages.
-POINTS_SHAPE = 'points = [["<frame>"], ["<frame>", "<frame>"]]'
+POINTS_SHAPE = (
+    'points = [["<frame>"], ["<frame>", "<frame>"], { frame = "<frame>", xyz = [x, y, z] }]'
+)
+#: Keys of a point or capsule end given as an offset from a frame (``{ frame, xyz }``), and
+#: of a ``urdf`` given as a file of an installed Python package (``{ package, path }``).
+OFFSET_KEYS = ("frame", "xyz")
+PACKAGE_KEYS = ("package", "path")
+#: The extra of qpavoid that installs each package a bundled description takes its URDF
+#: from (the error for a missing one names it).
+EXTRAS = {"example-robot-data": "robots", "franky-sim": "robots"}
+#: How many folders above a URDF are searched for the ``package://`` of its meshes (the
+#: example-robot-data URDFs sit four below the folder their ``package://`` names).
+MESH_SEARCH_DEPTH = 6
 
 
 @dataclass(frozen=True)
@@ -202,6 +214,8 @@ class Description(NamedTuple):
     roles: Roles
     arm: ArmDynamics
     ik_seed: IKSeed
+    urdf: Path
+    mesh_dirs: tuple[Path, ...]
 
 
 def _bundled_root() -> Path:
@@ -258,16 +272,24 @@ def _add_point_frame(
     model: pin.Model,
     data: pin.Data,
     label: str,
-    names: Sequence[str],
+    spot: Sequence[str] | Mapping[str, Any],
     where: tuple[str, str, Path, Path, int],
 ) -> int:
-    """Add an operational frame at the centroid of the named frames; return its id.
+    """Add an operational frame at a spot of the file; return its id.
 
-    ``where`` says where in the file the frames are named: the key as the file says it
-    (``"[[sets]] entry 0 (L1) points[2]"``), as the error's ``name``, the file, the URDF
-    and the number of the URDF's own frames (for the list in the message).
+    A spot is the centroid of the named frames (``["A2", "A3"]``), or an offset from one
+    frame in its axes (``{ frame = "panda_link4", xyz = [0.0, 0.0, 0.1] }``, m), which
+    then moves with that frame's body. ``where`` says where in the file the spot is: the
+    key as the file says it (``"[[sets]] entry 0 (L1) points[2]"``), as the error's
+    ``name``, the file, the URDF and the number of the URDF's own frames (for the list in
+    the message).
     """
     said, key, path, urdf, n_frames = where
+    if isinstance(spot, Mapping):
+        names: Sequence[str] = [spot["frame"]]
+        offset = np.asarray(spot["xyz"], dtype=float)
+    else:
+        names, offset = spot, None
     ids = []
     for n in names:
         if not model.existFrame(n):
@@ -279,6 +301,13 @@ def _add_point_frame(
                 value=n,
             )
         ids.append(model.getFrameId(n))
+    if offset is not None:  # off the frame's origin: only the frame's own body carries it
+        _exists_free(model, label, said, key, path, urdf)
+        frame = model.frames[ids[0]]
+        placement = frame.placement * pin.SE3(np.eye(3), offset)
+        return model.addFrame(
+            pin.Frame(label, frame.parentJoint, placement, pin.FrameType.OP_FRAME)
+        )
     common = set.intersection(*(_carriers(model, i) for i in ids))
     if not common:
         raise RobotDescriptionError(
@@ -288,6 +317,15 @@ def _add_point_frame(
             name=key,
             value=list(names),
         )
+    _exists_free(model, label, said, key, path, urdf)
+    parent = max(common)  # the deepest body carrying all of them
+    centre = np.mean([data.oMf[i].translation for i in ids], axis=0)
+    placement = data.oMi[parent].actInv(pin.SE3(np.eye(3), centre))
+    return model.addFrame(pin.Frame(label, parent, placement, pin.FrameType.OP_FRAME))
+
+
+def _exists_free(model: pin.Model, label: str, said: str, key: str, path: Path, urdf: Path) -> None:
+    """Refuse a URDF that already has a frame of the name qpavoid gives a point."""
     if model.existFrame(label):
         raise RobotDescriptionError(
             f"{path}: {said}: {urdf.name} already has a frame named {label!r}, the name "
@@ -296,10 +334,6 @@ def _add_point_frame(
             name=key,
             value=label,
         )
-    parent = max(common)  # the deepest body carrying all of them
-    centre = np.mean([data.oMf[i].translation for i in ids], axis=0)
-    placement = data.oMi[parent].actInv(pin.SE3(np.eye(3), centre))
-    return model.addFrame(pin.Frame(label, parent, placement, pin.FrameType.OP_FRAME))
 
 
 def _set_error(path: Path, k: int, key: str, message: str, value: object) -> RobotDescriptionError:
@@ -312,14 +346,30 @@ def _set_error(path: Path, k: int, key: str, message: str, value: object) -> Rob
     )
 
 
+def _is_spot(spot: object, frame_name: bool = False) -> bool:
+    """Whether ``spot`` names a point: a non-empty list of frame names, an offset
+    ``{ frame = "<frame>", xyz = [x, y, z] }`` (finite, m), or with ``frame_name`` a
+    frame name alone (a capsule end)."""
+    if isinstance(spot, str):
+        return frame_name
+    if isinstance(spot, list):
+        return bool(spot) and all(isinstance(n, str) for n in spot)
+    if not isinstance(spot, dict) or set(spot) != set(OFFSET_KEYS):
+        return False
+    xyz = spot["xyz"]
+    return (
+        isinstance(spot["frame"], str)
+        and isinstance(xyz, list)
+        and len(xyz) == 3
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in xyz)
+        and bool(np.isfinite(xyz).all())
+    )
+
+
 def _check_points(points: object, path: Path, k: int) -> None:
     """Refuse a set's ``points`` unless it is a non-empty list of non-empty lists of frame
     names (:data:`POINTS_SHAPE`)."""
-    if (
-        isinstance(points, list)
-        and points
-        and all(isinstance(p, list) and p and all(isinstance(n, str) for n in p) for p in points)
-    ):
+    if isinstance(points, list) and points and all(_is_spot(p) for p in points):
         return
     raise _set_error(
         path,
@@ -382,12 +432,13 @@ def _check_sets(set_cfgs: list, path: Path) -> None:
             )
         _unknown_keys(cap, CAPSULE_KEYS, f"[[sets]] entry {k}: capsule", path, f"sets[{k}].capsule")
         for end in ("from", "to"):
-            if not isinstance(cap[end], str):
+            if not _is_spot(cap[end], frame_name=True):
                 raise _set_error(
                     path,
                     k,
                     f"capsule.{end}",
-                    f"capsule.{end} must be a frame name, got {cap[end]!r}",
+                    f"capsule.{end} must be a frame name or an offset from one, "
+                    f'{{ frame = "<frame>", xyz = [x, y, z] }} (m), got {cap[end]!r}',
                     cap[end],
                 )
         _number(sc["sphere_radius_m"], f"sets[{k}].sphere_radius_m", path, 0.0, strict=True)
@@ -413,6 +464,8 @@ def _read_config(folder: Path) -> tuple[dict, Path, list, str]:
         ) from None
     _unknown_keys(cfg, TOP_KEYS, "the top level", path, "")
     for key, value in (("urdf", urdf_name), ("end_effector", ee_name)):
+        if key == "urdf" and isinstance(value, dict):
+            continue
         if not isinstance(value, str) or not value:
             raise RobotDescriptionError(
                 f"{path}: {key} must be a name (text), got {value!r}",
@@ -428,7 +481,53 @@ def _read_config(folder: Path) -> tuple[dict, Path, list, str]:
             value=set_cfgs,
         )
     _check_sets(set_cfgs, path)
-    return cfg, folder / urdf_name, set_cfgs, ee_name
+    return cfg, _urdf_path(urdf_name, folder, path), set_cfgs, ee_name
+
+
+def _urdf_path(value: str | dict, folder: Path, path: Path) -> Path:
+    """The URDF a description names: a file beside it (``urdf = "iiwa14.urdf"``), or a
+    file of an installed Python package (``urdf = { package = "example-robot-data", path =
+    "cmeel.prefix/share/.../panda.urdf" }``), found with :mod:`importlib.metadata`.
+
+    Raises
+    ------
+    RobotDescriptionError
+        If the table has other keys, or the package is not installed (naming the extra of
+        qpavoid that installs it).
+    """
+    if isinstance(value, str):
+        return folder / value
+    _unknown_keys(value, PACKAGE_KEYS, "urdf", path, "urdf")
+    package, inner = value.get("package"), value.get("path")
+    if not isinstance(package, str) or not isinstance(inner, str) or not package or not inner:
+        raise RobotDescriptionError(
+            f"{path}: urdf must be a file name or a table "
+            '{ package = "<Python package>", path = "<file inside it>" }, '
+            f"got {value!r}",
+            path=path,
+            name="urdf",
+            value=value,
+        )
+    try:
+        dist = metadata.distribution(package)
+    except metadata.PackageNotFoundError:
+        extra = EXTRAS.get(package)
+        how = f"pip install 'qpavoid[{extra}]'" if extra else f"pip install {package}"
+        raise RobotDescriptionError(
+            f"robot {folder.name!r} takes its URDF from the package {package!r}, which is not "
+            f"installed: {how}",
+            path=path,
+            name="urdf.package",
+            value=package,
+        ) from None
+    return Path(str(dist.locate_file(inner)))
+
+
+def mesh_dirs(urdf: Path) -> tuple[Path, ...]:
+    """Folders where Pinocchio looks for the meshes a URDF names: its own and the
+    :data:`MESH_SEARCH_DEPTH` above it (a ``package://name/...`` resolves in the folder
+    that holds ``name``)."""
+    return tuple(urdf.resolve().parents[:MESH_SEARCH_DEPTH])
 
 
 def _build_model(urdf: Path) -> pin.Model:
@@ -582,17 +681,19 @@ def _add_frames(model: pin.Model, set_cfgs: list, path: Path, urdf: Path) -> Non
     n_frames = model.nframes
     for i, sc in enumerate(set_cfgs):
         name, cap = sc["name"], sc["capsule"]
-        entries = [
-            (f"{name}_p{k}", list(names), f"points[{k}]") for k, names in enumerate(sc["points"])
-        ]
+        entries = [(f"{name}_p{k}", spot, f"points[{k}]") for k, spot in enumerate(sc["points"])]
         entries += [
-            (f"{name}_capsule_from", [cap["from"]], "capsule.from"),
-            (f"{name}_capsule_to", [cap["to"]], "capsule.to"),
+            (
+                f"{name}_capsule_{end}",
+                [cap[end]] if isinstance(cap[end], str) else cap[end],
+                f"capsule.{end}",
+            )
+            for end in ("from", "to")
         ]
-        for label, names, key in entries:
+        for label, spot, key in entries:
             said = f"[[sets]] entry {i} ({name}) {key}"
             _add_point_frame(
-                model, data, label, names, (said, f"sets[{i}].{key}", path, urdf, n_frames)
+                model, data, label, spot, (said, f"sets[{i}].{key}", path, urdf, n_frames)
             )
 
 
@@ -1065,4 +1166,6 @@ def read_description(
         roles,
         arm,
         ik_seed,
+        urdf,
+        mesh_dirs(urdf),
     )

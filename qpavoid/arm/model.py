@@ -114,6 +114,10 @@ class Robot:
         The arm's reaction time, acceleration limits and fastest point speed.
     ik_seed
         Where the inverse kinematics starts.
+    urdf
+        The URDF the model was built from (its collision meshes: :mod:`qpavoid.arm.meshes`).
+    mesh_dirs
+        Folders where the URDF's ``package://`` meshes are looked for.
     """
 
     def __init__(
@@ -127,8 +131,11 @@ class Robot:
         roles: Roles,
         arm: ArmDynamics,
         ik_seed: IKSeed,
+        urdf: Path | None = None,
+        mesh_dirs: Sequence[Path] = (),
     ):
         self.model = model
+        self.urdf, self.mesh_dirs = urdf, tuple(mesh_dirs)
         self.roles, self.arm, self.ik_seed = roles, arm, ik_seed
         self.sets = tuple(sets)
         self.point_frames = tuple(point_frames)
