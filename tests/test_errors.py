@@ -82,7 +82,7 @@ EXAMPLES = [
     IKNotConvergedError(
         "unreachable", target=np.eye(4), residual=0.25, iterations=500, q=np.zeros(6)
     ),
-    RobotDescriptionError("unknown robot 'ur5'", path="ur5", name="robot", value="ur5"),
+    RobotDescriptionError("unknown robot 'ur10'", path="ur10", name="robot", value="ur10"),
     SolverError("SVD failed", solver="lapack.dgesdd", status=-4),
 ]
 
@@ -257,10 +257,10 @@ def test_unconverged_ik(robot):
 
 def test_unknown_names(robot):
     with pytest.raises(RobotDescriptionError) as info:
-        qpavoid.load_robot("ur5")
+        qpavoid.load_robot("ur10")
     err = info.value
-    assert (err.name, err.value, str(err.path)) == ("robot", "ur5", "ur5")
-    assert one_line(err).startswith("unknown robot 'ur5': not a folder with control_points.toml")
+    assert (err.name, err.value, str(err.path)) == ("robot", "ur10", "ur10")
+    assert one_line(err).startswith("unknown robot 'ur10': not a folder with control_points.toml")
     with pytest.raises(InputError) as info:
         make_scenario("test3", robot)
     assert (info.value.name, info.value.value) == ("scenario", "test3")

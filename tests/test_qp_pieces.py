@@ -8,14 +8,19 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from conftest import random_q
 
 from qpavoid.control.qp import QPConfig, QPController, QPProblem
 from qpavoid.control.qp.barriers.separation import SeparationLimit
+from qpavoid.control.qp.config import REDUNDANT
 from qpavoid.control.qp.limits.velocity_damper import VelocityDamper
 from qpavoid.control.qp.problem import Assembler
 from qpavoid.control.qp.solver_kernels import hard_excess, problem_defect
+from qpavoid.control.qp.tasks.posture import PostureTask
+from qpavoid.control.task import ArcPath, inverse_kinematics
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.core.errors import InputError
+from qpavoid.human.posture import Operator
 from qpavoid.loop.simulation import SimConfig, simulate
 from qpavoid.scenarios.generated import make_scenario
 
@@ -208,3 +213,59 @@ def test_a_damper_that_would_divide_by_zero_is_refused(robot):
     ctrl = QPController(robot, qp=QPConfig(damper_gain_mps=1, weight_position=2))  # ints
     damper = next(p for p in ctrl.assembler.pieces if p.name == VelocityDamper.name)
     assert isinstance(damper.gain, float) and ctrl.ee_task.w2.dtype == np.float64
+
+
+def test_the_posture_cost_is_its_formula_and_lives_in_the_null_space(robot7):
+    """PostureTask on the iiwa with A3 free, at random configurations: H = 2wN and
+    c = −2wN q̇* with N the projector onto the end effector's null space (JN = 0, N² = N,
+    rank 1, built here from numpy's SVD), and ½xᵀHx + cᵀx = w‖N(q̇ − q̇*)‖² − w‖Nq̇*‖²."""
+    w, k = 0.3, 0.7
+    ctrl = QPController(robot7, qp=replace(REDUNDANT, posture_weight=w, posture_gain_per_s=k))
+    posture = next(p for p in ctrl.assembler.pieces if isinstance(p, PostureTask))
+    assert posture.name in {p.name for p in ctrl.assembler.pieces}
+    rng = np.random.default_rng(2)
+    n, nv = ctrl.variables.n, robot7.nv
+    for _ in range(10):
+        q = random_q(rng, robot7)
+        tick = ctrl.measure(q, Operator().rest(), None, 0.0)
+        J = tick.kin.ee_jacobian
+        v = np.linalg.svd(J)[2][-1]  # the right singular vector of the smallest: σ = 0
+        N = np.outer(v, v)
+        np.testing.assert_allclose(posture.projector(tick), N, atol=1e-12)
+        assert np.abs(J @ N).max() < 1e-12
+        target = k * (posture.rest - q)
+        obj = posture.compute_qp_objective(tick, 0.01)
+        np.testing.assert_allclose(obj.H[:nv, :nv], 2 * w * N, atol=1e-12)
+        np.testing.assert_allclose(obj.c[:nv], -2 * w * N @ target, atol=1e-12)
+        assert not obj.H[nv:].any() and not obj.H[:, nv:].any() and not obj.c[nv:].any()
+        x = rng.normal(size=n)
+        cost = 0.5 * x @ obj.H @ x + obj.c @ x
+        by_hand = w * np.sum((N @ (x[:nv] - target)) ** 2) - w * np.sum((N @ target) ** 2)
+        assert cost == pytest.approx(by_hand, rel=1e-12, abs=1e-12)
+
+
+def test_the_posture_task_moves_only_the_null_space(robot7):
+    """One tick, nobody near, 0.3 rad off the rest posture: with the posture task the QP's
+    command moves the end effector as without it (within 1e-6 m/s, rad/s: the solver's
+    tolerance), and its component along the null space is w/(w + ε) of the pull's."""
+    path = ArcPath()
+    rest = inverse_kinematics(robot7, path.reference(0.0)[0])
+    q = inverse_kinematics(robot7, path.reference(4.0)[0], q0=rest)
+    v = np.linalg.svd(robot7.kinematics(q).ee_jacobian)[2][-1]
+    q = inverse_kinematics(robot7, path.reference(4.0)[0], q0=q + 0.3 * v)
+    cfg = ControllerConfig(distance="capsules")
+    cmds = {}
+    for w in (0.0, REDUNDANT.posture_weight):
+        qp = replace(REDUNDANT, elbow_weight=0.0, posture_weight=w)
+        ctrl = QPController(robot7, path, config=cfg, qp=qp, rest_posture=rest)
+        cmd = ctrl.step(q, Operator().rest(), None, 4.0)
+        assert not cmd.stopped
+        cmds[w] = cmd.dq
+    off, on = cmds.values()
+    J = robot7.kinematics(q).ee_jacobian
+    assert np.abs(J @ (on - off)).max() < 1e-6
+    v = np.linalg.svd(J)[2][-1]
+    w, eps = REDUNDANT.posture_weight, REDUNDANT.regularization
+    pull = REDUNDANT.posture_gain_per_s * (rest - q)
+    assert abs(v @ pull) > 0.1  # rad/s: a real pull
+    assert v @ (on - off) == pytest.approx(w / (w + eps) * (v @ pull), rel=1e-4, abs=1e-6)

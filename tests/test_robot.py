@@ -197,8 +197,8 @@ def test_point_sets(robot):
 
 
 def test_bad_inputs(robot):
-    with pytest.raises(RobotDescriptionError, match="unknown robot 'ur5'"):
-        qpavoid.load_robot("ur5")
+    with pytest.raises(RobotDescriptionError, match="unknown robot 'ur10'"):
+        qpavoid.load_robot("ur10")
     with pytest.raises(InputError, match=r"shape \(6,\), got \(7,\)"):
         robot.control_points(np.zeros(7))
     with pytest.raises(InputError, match="non-finite entry at index \\(2,\\)"):
@@ -225,3 +225,158 @@ def test_description_from_a_folder(tmp_path, robot):
     (robot_dir / "control_points.toml").write_text('urdf = "iiwa14.urdf"\n')
     with pytest.raises(RobotDescriptionError, match="missing key 'sets'"):
         qpavoid.load_robot(robot_dir)
+
+
+def test_a_joint_without_limits_is_refused_naming_it(tmp_path):
+    """A revolute joint with no <limit> (the URDF parser only says so on the console)."""
+    import shutil
+    from importlib import resources
+
+    folder = tmp_path / "arm"
+    shutil.copytree(str(resources.files("qpavoid.robots") / "iiwa14"), folder)
+    urdf = folder / "iiwa14.urdf"
+    text = urdf.read_text()
+    start = text.index("<limit", text.index('name="A4"'))
+    urdf.write_text(text[:start] + text[text.index("/>", start) + 2 :])
+    with pytest.raises(RobotDescriptionError) as info:
+        qpavoid.load_robot(folder)
+    assert info.value.path == urdf and info.value.name == "A4"
+    assert "\n" not in str(info.value)
+    assert "joint 'A4' (revolute) has no <limit>: give it <limit lower=" in str(info.value)
+
+
+#: The arms shipped beside the iiwa: the package their URDF comes from, the joints the
+#: paper's roles name, the end-effector frame.
+ARMS = {
+    "panda": ("example-robot-data", "panda_", "panda_hand"),
+    "fr3": ("franky-sim", "fr3_", "fr3_hand"),
+    "ur5": ("example-robot-data", None, "tool0"),
+}
+
+
+def _arm(name: str) -> qpavoid.Robot:
+    from importlib import metadata
+
+    try:
+        metadata.distribution(ARMS[name][0])
+    except metadata.PackageNotFoundError:
+        pytest.skip(f"{ARMS[name][0]} is not installed (the extra 'robots')")
+    return qpavoid.load_robot(name)
+
+
+@pytest.mark.parametrize("name", sorted(ARMS))
+def test_the_shipped_arms_load_with_the_paper_roles(name):
+    r = _arm(name)
+    _, prefix, ee = ARMS[name]
+    assert r.nv == 6 and r.model.frames[r.ee_frame].name == ee
+    if prefix is None:  # the UR5: six joints, nothing locked
+        assert r.role_names == ("upper_arm", "forearm", "wrist_3") and r.locked == {}
+        assert r.roles.repelled_joints == (
+            "shoulder_pan_joint",
+            "shoulder_lift_joint",
+            "elbow_joint",
+        )
+    else:  # the Franka arms: joint3 locked as the iiwa's A3, the fingers held open
+        assert r.role_names == ("link3", "link5", "hand")
+        assert r.roles.scaled_joints == (f"{prefix}joint1", f"{prefix}joint2")
+        assert r.roles.repelled_joints == tuple(f"{prefix}joint{k}" for k in (1, 2, 4))
+        fingers = {f"{prefix}finger_joint{k}": 0.04 for k in (1, 2)}
+        assert r.locked == {f"{prefix}joint3": 0.0} | fingers
+        free = qpavoid.load_robot(name, locked=())  # the redundant mode
+        assert free.nv == 7 and f"{prefix}joint3" in free.joint_names
+        assert free.locked == fingers  # held in every mode
+    assert r.arm.sources and all(text for _, text in r.arm.sources)
+
+
+@pytest.mark.parametrize("name", sorted(ARMS))
+def test_the_end_effector_frame_lies_in_its_capsule_and_the_elbow_at_the_elbow(name):
+    r = _arm(name)
+    cs = r.sets[r.roles.end_effector]
+    rng = np.random.default_rng(2)
+    for _ in range(5):
+        q = random_q(rng, r)
+        kin = r.kinematics(q, jacobians=False)
+        a, b = kin.segments[r.roles.end_effector]
+        p = kin.ee_placement[:3, 3]
+        s = np.clip((p - a) @ (b - a) / ((b - a) @ (b - a)), 0.0, 1.0)
+        assert np.linalg.norm(p - a - s * (b - a)) <= cs.capsule_radius_m
+        # the elbow point lies within 5 cm of the elbow joint's origin (on its housing)
+        elbow_joint = r.roles.repelled_joints[-1]
+        origin = r.data.oMi[r.model.getJointId(elbow_joint)].translation
+        assert np.linalg.norm(kin.points[r.roles.elbow] - origin) < 0.05
+
+
+@pytest.mark.parametrize("name", sorted(ARMS))
+def test_offset_points_have_pinocchios_jacobians(name):
+    """Points and capsule ends given as offsets from a link frame: finite differences."""
+    r = _arm(name)
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        q = random_q(rng, r)
+        kin = r.kinematics(q)
+        np.testing.assert_allclose(kin.point_jacobians, _fd(r.control_points, q), atol=1e-7)
+        np.testing.assert_allclose(kin.segment_jacobians, _fd(r.capsules, q), atol=1e-7)
+
+
+@pytest.mark.parametrize(
+    "name, targets",
+    [
+        ("panda", [(0.4, 0.2, 0.4), (0.5, 0.0, 0.3), (0.3, -0.3, 0.5)]),
+        ("fr3", [(0.4, 0.2, 0.4), (0.5, 0.0, 0.3)]),
+        ("ur5", [(0.4, 0.2, 0.3), (0.5, -0.1, 0.2), (0.3, 0.4, 0.4)]),
+    ],
+)
+def test_the_seed_reaches_targets_in_front_elbow_up_with_eq6_well_conditioned(name, targets):
+    """The hand pointing down at targets in front: the seed's branch has the elbow above
+    the shoulder, and eq. (6)'s 3x3 Jacobian (the repelled joints' columns) at the
+    forearm's points is well conditioned, but at a point on the elbow's own axis (the
+    UR5's forearm capsule runs into the elbow joint, as the iiwa's L2 capsule starts at
+    A4: the damped inverse of eq. (6) takes that one)."""
+    from qpavoid.arm.model import joint_columns
+    from qpavoid.control.task import inverse_kinematics
+
+    r = _arm(name)
+    columns = joint_columns(r, None, "repelled_joints")
+    shoulder = r.model.getJointId(r.roles.scaled_joints[-1])
+    for p in targets:
+        target = np.eye(4)
+        target[:3, :3] = np.diag([1.0, -1.0, -1.0])
+        target[:3, 3] = p
+        q = inverse_kinematics(r, target)
+        kin = r.kinematics(q)
+        np.testing.assert_allclose(kin.ee_placement[:3, 3], p, atol=1e-9)
+        assert kin.points[r.roles.elbow][2] > r.data.oMi[shoulder].translation[2] + 0.1
+        for i in r.sets[r.roles.repelled].points:
+            J = kin.point_jacobians[i][:, columns]
+            # the elbow's column is |axis x (p − o)|: the point's distance from its axis
+            if np.linalg.norm(J[:, -1]) > 0.05:
+                assert np.linalg.cond(J) < 12.0, (p, i, np.linalg.cond(J))
+
+
+def test_a_held_joint_is_locked_in_every_mode_and_not_also_locked(tmp_path):
+    """``held`` (a gripper's fingers) stays locked when ``locked=`` frees the rest."""
+    import shutil
+    from importlib import resources
+
+    folder = tmp_path / "arm"
+    shutil.copytree(str(resources.files("qpavoid.robots") / "iiwa14"), folder)
+    path = folder / "control_points.toml"
+    text = path.read_text()
+    path.write_text(
+        text.replace("locked = { A3 = 0.0 }", "locked = { A3 = 0.0 }\nheld = { A7 = 0.5 }")
+    )
+    paper, free = qpavoid.load_robot(folder), qpavoid.load_robot(folder, locked=())
+    assert paper.joint_names == ("A1", "A2", "A4", "A5", "A6") and paper.locked == {
+        "A3": 0.0,
+        "A7": 0.5,
+    }
+    assert free.joint_names == ("A1", "A2", "A3", "A4", "A5", "A6") and free.locked == {"A7": 0.5}
+    # the flange turned 0.5 rad about A7's axis (z at q = 0)
+    R = free.end_effector(np.zeros(6))[:3, :3]
+    np.testing.assert_allclose(R, pin.rpy.rpyToMatrix(0.0, 0.0, 0.5), atol=1e-12)
+    path.write_text(
+        text.replace("locked = { A3 = 0.0 }", "locked = { A3 = 0.0 }\nheld = { A3 = 0.0 }")
+    )
+    with pytest.raises(RobotDescriptionError, match=r"\['A3'\] are both held and locked") as info:
+        qpavoid.load_robot(folder)
+    assert info.value.name == "held" and info.value.path == path

@@ -260,7 +260,7 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         (
             lambda t: t.replace('elbow = ["A4"]', 'elbow = ["A9"]'),
             "roles.elbow",
-            "[roles] elbow must list the frames of one control point",
+            "[roles] elbow must be one control point as its set's points give it",
         ),
         (
             lambda t: t.replace("A7 = 15.72 }", "}").replace("A6 = 15.72, ", "A6 = 15.72 "),
@@ -395,7 +395,7 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
                 "sets[2].points",
                 "[[sets]] entry 2: points must be a non-empty list of control points, each the "
                 'list of the frames it is the centroid of, e.g. points = [["<frame>"], '
-                '["<frame>", "<frame>"]]',
+                '["<frame>", "<frame>"], { frame = "<frame>", xyz = [x, y, z] }]',
             )
             for bad in ("[]", "[[]]", '["flange"]')  # '["flange"]' was read letter by letter
         ),
@@ -413,8 +413,8 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         (
             lambda t: t.replace('end_effector = { set = "EE" }', 'end_effector = { set = "L1" }'),
             "roles.end_effector.set",
-            "the end-effector set's capsule must end at the end_effector frame 'flange'; the "
-            "capsule of the set 'L1' runs from 'A2' to 'A4'",
+            "the end_effector frame 'flange' must lie in the end-effector set's capsule; it is "
+            "on another body than the capsule (set 'L1'): name the set whose capsule holds it",
         ),
         (
             lambda t: t.replace('end_effector = "flange"', 'end_effector = "tool"'),

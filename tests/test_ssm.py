@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
+from qpavoid.arm.dynamics import ArmDynamics, StoppingData
 from qpavoid.laws.ssm import (
     SSMConfig,
     StopTimeBudget,
@@ -90,3 +93,41 @@ def test_stop_time_budget_grows_one_period_a_tick_and_remembers_the_arm_s_lag():
     assert budget.history.maxlen == 23 and budget.budget() == pytest.approx(0.1)  # remembered
     budget.record(np.zeros(2))
     assert budget.budget() == pytest.approx(0.01)  # forgotten once the arm must have followed
+
+
+def test_the_maker_s_stopping_time_is_used_where_it_is_longer():
+    """A1 may brake at 8 rad/s² but its maker measured a stop of 0.5 s from 2 rad/s (over
+    0.4 rad: 2²/0.8 = 5 rad/s² by distance, 2/0.5 = 4 by time): SSM brakes A1 at 4, so a
+    stop from 0.2 rad/s takes 0.05 s, not 0.025, and A1 is held to 4 T_s. A2's maker stop
+    (1 rad/s in 0.1 s over 0.05 rad: 10 rad/s²) is faster than its 4 rad/s²: A2 keeps 4."""
+    arm = ArmDynamics(
+        reaction_time_s=0.01,
+        max_acceleration_radps2=(("A1", 8.0), ("A2", 4.0)),
+        max_point_speed_mps=3.0,
+        stopping=(
+            StoppingData(("A1",), 0, 2.0, 0.4, 0.5, 1.0, 5.0),
+            StoppingData(("A2",), 1, 1.0, 0.05, 0.1, 1.0, 5.0),
+        ),
+    )
+    cfg = SSMConfig(stop_time_s=0.1).resolve(arm)
+    assert cfg.max_acceleration_radps2 == (("A1", 4.0), ("A2", 4.0))
+    assert cfg.reaction_time_s == 0.01  # no jerk limits: no lag
+    np.testing.assert_allclose(joint_speed_limits(cfg, ("A1", "A2")), [0.4, 0.4])
+    budget = StopTimeBudget(cfg, ("A1", "A2"), 0.01)
+    budget.record(np.array([0.2, 0.0]))
+    assert budget.budget() == pytest.approx(0.05 + 0.01)  # 0.025 + 0.01 by the limit alone
+    # the same arm without its maker's data: as computed from the accelerations
+    plain = SSMConfig(stop_time_s=0.1).resolve(replace(arm, stopping=()))
+    assert plain.max_acceleration_radps2 is arm.max_acceleration_radps2
+
+
+def test_an_arm_with_jerk_limits_adds_their_lag_to_the_reaction_time():
+    # τ = 2 max_j a_j / j_j = 2 · max(8/4000, 4/1000) = 0.008 s
+    arm = ArmDynamics(
+        reaction_time_s=0.001,
+        max_acceleration_radps2=(("A1", 8.0), ("A2", 4.0)),
+        max_point_speed_mps=3.0,
+        max_jerk_radps3=(("A1", 4000.0), ("A2", 1000.0)),
+    )
+    assert SSMConfig().resolve(arm).reaction_time_s == pytest.approx(0.009)
+    assert SSMConfig(reaction_time_s=0.02).resolve(arm).reaction_time_s == 0.02  # as given

@@ -6,15 +6,19 @@ braking) and judges the run against where the hand really is.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from qpavoid.arm.model import load_robot
+from qpavoid.control.task import BodyTarget, default_task
+from qpavoid.core.errors import InputError
 from qpavoid.experiments import sweep
 from qpavoid.experiments.runs import RunSpec, build_controller
 from qpavoid.loop.camera import CameraConfig, CameraFault
 from qpavoid.loop.simulation import SimConfig, simulate
-from qpavoid.scenarios.generated import make_scenario
+from qpavoid.scenarios.generated import make_scenario, nominal_configurations
 from qpavoid.scenarios.strikes import StrikeCase, strike_camera, strike_motion, strike_targets
 
 
@@ -142,3 +146,17 @@ def test_an_arm_never_seen_that_appears_inside_the_robot_finds_it_stationary(
     run = simulate_one(RunSpec(**{**spec.__dict__, "max_time_s": 2.5}))
     assert np.nanmin(run.sim.log["true_distance"]) < 0.0  # the arm really is inside
     assert run.metrics["ticks_moving_in_true_contact"] == 0
+
+
+def test_the_places_a_strike_aims_at_besides_the_sets_are_the_tasks(robot):
+    """The iiwa's task file names the shoulder and the base; another task names others,
+    and a strike at one of them aims at its frame (here A4, the L1 point ["A4"])."""
+    assert strike_targets(robot) == ("L1", "L2", "EE", "shoulder", "base")
+    task = replace(default_task(robot), body_targets=(BodyTarget("elbow", "A4"),))
+    assert strike_targets(robot, task) == ("L1", "L2", "EE", "elbow")
+    case = StrikeCase(2, "elbow", 1.0, "right", False, 2.5, "none")
+    aim = strike_motion(case, robot, task=task).keyframes[1][1]
+    (q,) = nominal_configurations(robot, task.path, np.array([2.5]))
+    np.testing.assert_allclose(aim, robot.control_points(q)[3], atol=1e-12)
+    with pytest.raises(InputError, match="strike target 'shoulder' is not one of"):
+        strike_motion(StrikeCase(2, "shoulder", 1.0, "right", False, 2.5, "none"), robot, task=task)

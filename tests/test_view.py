@@ -12,28 +12,35 @@ import socket
 import subprocess
 import sys
 import time
+from importlib import resources
 from pathlib import Path
 from urllib.request import urlopen
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from PIL import Image
 
+import qpavoid
 from qpavoid.arm.description import Roles
+from qpavoid.arm.meshes import collision_geometry
 from qpavoid.cli.commands import main
 from qpavoid.control.task import ArcPath
 from qpavoid.experiments.runs import RunSpec, run_one
+from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.laws.avoidance import AvoidanceConfig
 from qpavoid.output import view_data
-from qpavoid.output.live_view import LiveView
+from qpavoid.output.arm_shapes import arm_parts, reach_m
+from qpavoid.output.live_view import LiveView, _one_tick
 from qpavoid.output.replay_html import replay_html, write_replay
 from qpavoid.output.run_files import load_log
-from qpavoid.output.view_data import pair_states, replay_data
+from qpavoid.output.view_data import CAMERA_HALF_FOV_RAD, pair_states, replay_data
 from qpavoid.scenarios.generated import nominal_configurations
 from qpavoid.sensing.calibration import Calibration, SensorCalibration
 from qpavoid.sensing.synthetic_pair import look_at
 
 pytest.importorskip("meshcat", reason="the replay needs the extra 'view' (meshcat)")
+umsgpack = pytest.importorskip("umsgpack", reason="meshcat's command format")
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 #: Headless Chromium as this machine runs it: no sandbox (root), software WebGL, and no
@@ -102,7 +109,7 @@ def test_replay_data_is_the_log_tick_by_tick(test2_run, robot):
 
 
 @pytest.mark.slow  # seconds of a subprocess or a browser: with the slow suite
-def test_a_30_s_run_fits_in_5_mb_and_names_no_network_address(robot):
+def test_a_30_s_run_fits_in_4_mb_and_names_no_network_address(robot):
     """A 30 s run at 500 Hz, every tick stopped with its own reason (the worst case)."""
     n = 15000
     t = np.arange(n) / 500.0
@@ -126,8 +133,154 @@ def test_a_30_s_run_fits_in_5_mb_and_names_no_network_address(robot):
         "true_distance": rng.uniform(0, 0.5, (n, 3)),
     }
     html = replay_html(replay_data(log, {"distance_method": "capsules"}, robot), "size")
-    assert len(html.encode()) < 5e6
+    assert len(html.encode()) < 4e6  # 3.42 MB (3.21 MB before the arm's own shapes)
     assert "://" not in html and "<script src" not in html and "@import" not in html
+
+
+def scene(html: str) -> dict[str, dict]:
+    """The replay page's MeshCat commands that create objects, by path."""
+    found = re.search(r"const SCENE = (\[.*?\]);\n", html)
+    assert found is not None
+    commands = json.loads(found.group(1))
+    out = {}
+    for text in commands:
+        command = umsgpack.unpackb(base64.b64decode(text))
+        out[command["path"]] = command["object"]
+    return out
+
+
+def unpacked(array: dict) -> np.ndarray:
+    """A MeshCat buffer attribute as an (N, itemSize) array (float32 or uint32)."""
+    dtype = {0x17: np.float32, 0x16: np.uint32}[array["array"].type]
+    return np.frombuffer(array["array"].data, dtype=dtype).reshape(-1, array["itemSize"])
+
+
+def pose_matrix(pose: np.ndarray) -> np.ndarray:
+    """(4, 4) of a replay pose (quaternion x, y, z, w and translation)."""
+    x, y, z, w, *t = (float(v) for v in pose)
+    return pin.SE3(pin.Quaternion(w, x, y, z).normalized().matrix(), np.array(t)).homogeneous
+
+
+def test_the_replay_places_each_collision_object_where_pinocchio_does(
+    test2_run: Path, robot: qpavoid.Robot
+) -> None:
+    """The page puts joint j's group at the replay's pose and each object at its placement
+    in that group: their product is Pinocchio's placement of the object (oMg), and a
+    cylinder's axis (MeshCat's y) is the object's z."""
+    log = load_log(test2_run)
+    data = replay_data(log, {}, robot)
+    objects = scene(replay_html(data, "objects"))
+    geometry = collision_geometry(robot)
+    gdata = geometry.createData()
+    parts = arm_parts(robot)
+    assert [p.name for p in parts] == [o.name for o in geometry.geometryObjects]
+    mdata = robot.model.createData()
+    for j in (0, len(data["frame_tick"]) // 2, len(data["frame_tick"]) - 1):
+        q = log["q"][data["frame_tick"][j]]
+        pin.updateGeometryPlacements(robot.model, mdata, geometry, gdata, q)
+        for i, part in enumerate(parts):
+            if part.joint == 0:
+                group = np.eye(4)  # the base's objects never move
+            else:
+                group = pose_matrix(data["mesh_poses"][j, data["mesh_joints"].index(part.joint)])
+            drawn = group @ part.placement
+            np.testing.assert_allclose(drawn, gdata.oMg[i].homogeneous, atol=2e-6)
+    for part in parts:  # the iiwa's: primitive cylinders, drawn as MeshCat's
+        assert part.shape == "cylinder"
+        obj = objects[f"/qpavoid/robot/meshes/j{part.joint}/{part.name}/body"]
+        (geo,) = obj["geometries"]
+        assert geo["type"] == "CylinderGeometry"
+        assert (geo["radiusTop"], geo["height"]) == pytest.approx(part.size)
+        matrix = np.reshape(obj["object"]["matrix"], (4, 4), order="F")
+        np.testing.assert_allclose(matrix[:3, 1], part.placement[:3, 2], atol=1e-12)
+        np.testing.assert_allclose(matrix[:3, 3], part.placement[:3, 3], atol=1e-12)
+
+
+def box_stl(path: Path, half: np.ndarray) -> np.ndarray:
+    """Write a binary STL of the box of half sides ``half`` (12 triangles); its corners."""
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * half
+    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1)]
+    faces += [(2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
+    body = b"".join(
+        np.zeros(3, "<f4").tobytes() + corners[list(f)].astype("<f4").tobytes() + b"\0\0"
+        for f in faces
+    )
+    path.write_bytes(b"\0" * 80 + np.uint32(len(faces)).tobytes() + body)
+    return corners
+
+
+def test_a_description_with_a_mesh_gets_its_mesh_in_the_replay(
+    tmp_path: Path, robot: qpavoid.Robot
+) -> None:
+    """An iiwa whose link_2 is an STL box scaled by 0.5 in the URDF: the page holds that
+    mesh, its vertices the file's times 0.5, as coal loaded it (8 corners, 12 triangles)."""
+    src = resources.files("qpavoid.robots") / "iiwa14"
+    folder = tmp_path / "meshy"
+    folder.mkdir()
+    corners = box_stl(folder / "box.stl", np.array([0.1, 0.05, 0.2]))
+    urdf = (src / "iiwa14.urdf").read_text()
+    cylinder = '<cylinder radius="0.07" length="0.2045"/>'
+    assert urdf.count(cylinder) == 1
+    mesh = f'<mesh filename="{folder / "box.stl"}" scale="0.5 0.5 0.5"/>'
+    (folder / "iiwa14.urdf").write_text(urdf.replace(cylinder, mesh))
+    (folder / "control_points.toml").write_text((src / "control_points.toml").read_text())
+    meshy = qpavoid.load_robot(str(folder))
+    (part,) = [p for p in arm_parts(meshy) if p.shape == "mesh"]
+    data = replay_data(_one_tick(meshy, KINECT_V2), {}, meshy)
+    objects = scene(replay_html(data, "mesh"))
+    obj = objects[f"/qpavoid/robot/meshes/j{part.joint}/{part.name}"]
+    (geo,) = obj["geometries"]
+    assert geo["type"] == "BufferGeometry"
+    vertices = unpacked(geo["data"]["attributes"]["position"])
+    triangles = unpacked(geo["data"]["index"])
+    assert vertices.shape == (8, 3) and triangles.shape == (12, 3)
+    order = np.lexsort(vertices.T)  # the corners are distinct in every coordinate order
+    np.testing.assert_allclose(vertices[order], 0.5 * corners[np.lexsort(corners.T)], atol=1e-7)
+    assert set(triangles.ravel()) == set(range(8))
+    np.testing.assert_allclose(
+        np.reshape(obj["object"]["matrix"], (4, 4), order="F"), part.placement
+    )
+
+
+@pytest.mark.skipif(
+    not (resources.files("qpavoid.robots") / "panda" / "control_points.toml").is_file(),
+    reason="no Panda description",
+)
+def test_the_panda_replay_draws_its_own_collision_meshes() -> None:
+    """The Panda of example-robot-data (the extra ``robots``): every collision object of
+    its URDF in the page, each mesh with coal's triangles."""
+    pytest.importorskip("cmeel", reason="the Panda's URDF ships with example-robot-data")
+    panda = qpavoid.load_robot("panda")
+    parts = arm_parts(panda)
+    data = replay_data(_one_tick(panda, KINECT_V2), {}, panda, parts=parts)
+    html = replay_html(data, "panda")
+    objects = scene(html)
+    meshes = [p for p in parts if p.shape == "mesh"]
+    assert len(meshes) >= 8  # link0 to link7 and the hand
+    for part in meshes:
+        (geo,) = objects[f"/qpavoid/robot/meshes/j{part.joint}/{part.name}"]["geometries"]
+        np.testing.assert_array_equal(unpacked(geo["data"]["index"]), part.triangles)
+    assert data["set_names"] == list(panda.set_names) and len(panda.set_names) > 3
+    assert len(html.encode()) < 1.5e6  # one tick: the viewer, the meshes and little else
+
+
+def test_the_floor_holds_the_reach_and_the_camera_sees_the_whole_scene(
+    test2_run: Path, robot: qpavoid.Robot
+) -> None:
+    data = replay_data(load_log(test2_run), {}, robot)
+    x0, x1, y0, y1 = data["floor"]
+    reach = reach_m(robot)
+    assert reach == pytest.approx(1.306 + 0.09)  # base to flange (docs/robot.md), a sphere
+    assert x0 <= -reach and x1 >= reach and y0 <= -reach and y1 >= reach
+    shown = np.vstack([data["links"].reshape(-1, 3), data["human"].reshape(-1, 3)])
+    shown = shown[np.isfinite(shown).all(axis=1)]
+    assert np.all((shown[:, 0] > x0) & (shown[:, 0] < x1) & (shown[:, 1] > y0) & (shown[:, 1] < y1))
+    eye = np.array(data["camera"]["position"])
+    look = np.array(data["camera"]["target"]) - eye
+    assert eye[2] > max(shown[:, 2])  # above
+    to = shown - eye
+    cos = to @ look / np.linalg.norm(to, axis=1) / np.linalg.norm(look)
+    assert np.degrees(np.arccos(cos.min())) < np.degrees(CAMERA_HALF_FOV_RAD)  # all in view
 
 
 def test_qpavoid_view_writes_the_replay_and_refuses_a_folder_without_a_run(
@@ -184,7 +337,12 @@ def test_the_replay_renders_in_a_browser_and_shows_the_stop_of_test2(browser, te
     page.wait_for_function("window.qpavoidReplay !== undefined", timeout=30000)
     page.wait_for_timeout(300)
     assert errors == []
-    assert set(page.evaluate("window.qpavoidReplay.objects()")) >= {"robot", "human", "pairs"}
+    assert set(page.evaluate("window.qpavoidReplay.objects()")) >= {
+        "robot",
+        "human",
+        "pairs",
+        "floor",
+    }
     # the canvas is not blank, and the robot and the person are drawn on it
     assert screenshot(page).std() > 20
     assert changed_pixels(page, "robot") > 2000, "no robot drawn"
@@ -202,6 +360,25 @@ def test_the_replay_renders_in_a_browser_and_shows_the_stop_of_test2(browser, te
     assert page.inner_text("#reason") == f"stopped: {log['stop_reason'][k]}"
     for s in range(3):
         assert page.inner_text(f"#d{s}") == f"{log['distance'][k, s]:.3f} m"
+    # the arm's own cylinders, where Pinocchio puts them at the tick shown
+    robot = qpavoid.load_robot("iiwa14")
+    parts = arm_parts(robot)
+    joints = {f"j{p.joint}" for p in parts}
+    assert set(page.evaluate("window.qpavoidReplay.children('robot/meshes')")) == joints
+    data = replay_data(log, {}, robot)
+    frame = int(np.searchsorted(data["frame_tick"], k, side="right")) - 1
+    q = log["q"][data["frame_tick"][frame]]
+    geometry = collision_geometry(robot)
+    gdata = geometry.createData()
+    pin.updateGeometryPlacements(robot.model, robot.model.createData(), geometry, gdata, q)
+    for i, part in enumerate(parts):
+        path = f"robot/meshes/j{part.joint}/{part.name}/body"
+        world = np.reshape(page.evaluate(f"window.qpavoidReplay.world({path!r})"), (4, 4), "F")
+        placed = gdata.oMg[i].homogeneous
+        np.testing.assert_allclose(world[:3, 1], placed[:3, 2], atol=1e-5)  # the axis
+        np.testing.assert_allclose(world[:3, 3], placed[:3, 3], atol=1e-5)
+    assert changed_pixels(page, "robot/meshes") > 500, "no arm drawn"
+    assert changed_pixels(page, "floor") > 20000, "no floor drawn"
     assert all(u.startswith("file:") or u.startswith("data:") for u in requests), requests
     page.close()
 

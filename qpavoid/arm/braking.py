@@ -22,13 +22,28 @@ the newest target it has (a command is held until a newer one is sent); each ste
 the velocity by at most ``a_j ×`` the real time since the previous step. On ticks exactly
 one period apart both modes agree. :class:`WallClockArm` moves the arm between such ticks.
 
+Where the description gives a joint's jerk limit j_j (``[arm] max_jerk_radps3``; the Franka
+arms'), the acceleration along that line changes no faster than the jerk allows: a change is
+the time-optimal jerk-limited ramp of the fraction x ∈ [0, 1] of the change, whose rate is at
+most α = min_j a_j / |Δq̇_j| and whose rate changes at most at ι = min_j j_j / |Δq̇_j|
+(:func:`stop_time`). A stop from rest acceleration then lasts
+
+    T_s = 1/α + α/ι   if α² ≤ ι,  else  2/√ι                      (with 1/α = max_j |q̇_j| / a_j)
+
+and its deceleration profile is symmetric in time, so the velocity falls as
+``q̇(T_s − t) = q̇₀ − q̇(t)`` and a point moving at v still travels exactly ``v T_s / 2``.
+Such a stop never lasts longer, nor travels farther, than the arm waiting
+:func:`jerk_lag_s` and then braking at constant deceleration: speed and separation monitoring
+counts the lag in its reaction time and keeps its constant-deceleration terms.
+
 The values are the robot description's (``[arm]`` of its control-point file) unless a
 :class:`BrakingConfig` says otherwise; the bundled iiwa 14's, with their sources, are in
-docs/safety.md ("Robot").
+docs/safety.md ("Robot"), each arm's in docs/robot.md.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -46,7 +61,7 @@ class BrakingConfig:
     """The arm's response to a velocity command.
 
     Each value left at None is the robot description's (``[arm]`` of its control-point
-    file, :class:`~qpavoid.arm.description.ArmDynamics`: for the bundled iiwa 14 the FRI
+    file, :class:`~qpavoid.arm.dynamics.ArmDynamics`: for the bundled iiwa 14 the FRI
     period and the accelerations measured by Larsen (2019), sources in docs/safety.md);
     :meth:`resolve` fills them in.
 
@@ -58,10 +73,15 @@ class BrakingConfig:
     max_acceleration_radps2
         ``(joint name, limit)`` pairs: each joint's acceleration (and deceleration) limit,
         rad/s².
+    max_jerk_radps3
+        ``(joint name, limit)`` pairs: the joints' jerk limits, rad/s³; a joint without one
+        (and every joint, given ``()``: the iiwa's description has none) changes its
+        acceleration at once.
     """
 
     reaction_time_s: float | None = None
     max_acceleration_radps2: tuple[tuple[str, float], ...] | None = None
+    max_jerk_radps3: tuple[tuple[str, float], ...] | None = None
 
     def resolve(self, arm: ArmDynamics) -> BrakingConfig:
         """This config with every value left at None taken from the description's ``arm``."""
@@ -71,6 +91,11 @@ class BrakingConfig:
                 arm.max_acceleration_radps2
                 if self.max_acceleration_radps2 is None
                 else self.max_acceleration_radps2
+            ),
+            (
+                getattr(arm, "max_jerk_radps3", ())  # none in a description read before them
+                if self.max_jerk_radps3 is None
+                else self.max_jerk_radps3
             ),
         )
 
@@ -104,9 +129,45 @@ def per_joint(
     return np.array([table[n] for n in joint_names], dtype=float)
 
 
-def stop_time(dq: ArrayLike, max_acceleration: ArrayLike) -> float:
-    """T_s = max_j |q̇_j| / a_j: the time a path-keeping stop from ``dq`` takes, s."""
-    return float(np.max(np.abs(np.asarray(dq, dtype=float)) / np.asarray(max_acceleration)))
+def stop_time(
+    dq: ArrayLike, max_acceleration: ArrayLike, max_jerk: ArrayLike | None = None
+) -> float:
+    """The time a path-keeping stop from ``dq`` (at rest acceleration) takes, s.
+
+    Without jerk limits ``T_s = max_j |q̇_j| / a_j``. With them (``inf`` for a joint without
+    one), every joint follows ``q̇_j(t) = q̇_j σ(t)``, σ falling from 1 to 0 with
+    ``|σ'| ≤ α = min_j a_j / |q̇_j|`` and ``|σ''| ≤ ι = min_j j_j / |q̇_j|``; the fastest
+    such σ ramps its rate up at ι, holds α, ramps down at ι:
+
+        T_s = 1/α + α/ι  if α² ≤ ι  (α is reached),  else  2/√ι.
+    """
+    speed = np.abs(np.asarray(dq, dtype=float))
+    if max_jerk is None:
+        return float(np.max(speed / np.asarray(max_acceleration)))
+    rate = float(np.max(speed / np.asarray(max_acceleration)))  # 1/α
+    inv_iota = float(np.max(speed / np.asarray(max_jerk, dtype=float)))  # 1/ι
+    if rate == 0.0:
+        return 0.0
+    if inv_iota <= rate * rate:  # α² ≤ ι
+        return rate + inv_iota / rate
+    return 2.0 * math.sqrt(inv_iota)
+
+
+def jerk_lag_s(
+    max_acceleration_radps2: tuple[tuple[str, float], ...],
+    max_jerk_radps3: tuple[tuple[str, float], ...],
+) -> float:
+    """τ = 2 max_j a_j / j_j over the joints with a jerk limit (0 without any), s.
+
+    A jerk-limited stop is never slower, in time nor in distance, than waiting τ and then
+    braking at constant deceleration a_j. From rest acceleration: the stop lasts at most
+    ``v/a + a/j`` (:func:`stop_time`; ``2√(v/j) ≤ v/a + a/j``) and travels ``v T_s / 2 ≤
+    v a/(2j) + v²/(2a)``. Found accelerating at up to a (towards a target it will not
+    overshoot, so its speed stays below the last commanded one), the arm first needs a/j
+    more to bring its acceleration to zero. Both fit in τ = 2 a / j.
+    """
+    accel = dict(max_acceleration_radps2)
+    return 2.0 * max((accel[n] / j for n, j in max_jerk_radps3 if n in accel), default=0.0)
 
 
 class ArmResponse:
@@ -133,6 +194,13 @@ class ArmResponse:
 
     def __init__(self, cfg: BrakingConfig, joint_names: Sequence[str], dt: float):
         self.a_max = per_joint(cfg.max_acceleration_radps2, joint_names)
+        #: Each joint's jerk limit (inf: none), or None if no joint has one (the iiwa's).
+        self.j_max: np.ndarray | None = None
+        if cfg.max_jerk_radps3:
+            jerk = dict(cfg.max_jerk_radps3)
+            self.j_max = np.array([jerk.get(n, np.inf) for n in joint_names], dtype=float)
+        #: The joints' acceleration, rad/s² (followed only with jerk limits).
+        self.ddq = np.zeros(len(joint_names))
         if cfg.reaction_time_s is None:
             raise InputError(
                 "no reaction time: take it from the robot description first "
@@ -155,14 +223,46 @@ class ArmResponse:
     def __call__(self, command: np.ndarray) -> np.ndarray:
         """The arm's joint velocity over the coming period, given this tick's command."""
         self._pending.append(np.asarray(command, dtype=float))
-        return self._approach(self._pending.popleft(), self.a_dt)
+        return self._approach(self._pending.popleft(), self.a_dt, self.dt)
 
-    def _approach(self, target: np.ndarray, max_change: np.ndarray) -> np.ndarray:
+    def _approach(self, target: np.ndarray, max_change: np.ndarray, h: float) -> np.ndarray:
         """Move the velocity towards ``target`` along a straight line in joint-velocity
-        space, each joint by at most ``max_change``, rad/s; the new velocity."""
+        space, each joint by at most ``max_change`` (= ``a_max · h``), rad/s, or along the
+        jerk-limited ramp over ``h`` s (:meth:`_approach_jerk`); the new velocity."""
+        if self.j_max is not None:
+            return self._approach_jerk(target, h, self.j_max)
         change = target - self.dq
         worst = float((np.abs(change) / max_change).max(initial=0.0))
         self.dq = target.copy() if worst <= 1.0 else self.dq + change / worst
+        return self.dq
+
+    def _approach_jerk(self, target: np.ndarray, h: float, j_max: np.ndarray) -> np.ndarray:
+        """One step of ``h`` s along the jerk-limited ramp to ``target``; the new velocity.
+
+        The velocity moves along ``q̇ + x Δ`` (Δ = target − q̇) with x from 0 to 1 on the
+        time-optimal ramp of :func:`_ramp`: rate ẋ ≤ α = min_j a_j / |Δ_j|, its change
+        |ẍ| ≤ ι = min_j j_j / |Δ_j|, ending at rest acceleration. The ramp starts from the
+        arm's acceleration along Δ (its projection, within [0, α]): a command that turns
+        the line drops the acceleration across it at once, the only place where this model
+        is kinder than the jerk limit (the lag of :func:`jerk_lag_s` covers it).
+        """
+        change = target - self.dq
+        size = np.abs(change)
+        if not size.any():
+            self.ddq[:] = 0.0
+            return self.dq
+        moving = size > 0.0
+        alpha = float(np.min(self.a_max[moving] / size[moving]))
+        iota = float(np.min(j_max[moving] / size[moving]))
+        if math.isinf(iota):  # no moving joint has a jerk limit: a constant-rate ramp
+            x, rate = min(1.0, alpha * h), alpha
+        else:
+            rate = float(np.clip(self.ddq @ change / (change @ change), 0.0, alpha))
+            x, rate = _ramp(1.0, rate, alpha, iota, h)
+        if x >= 1.0:
+            self.dq, self.ddq = target.copy(), np.zeros_like(self.ddq)
+        else:
+            self.dq, self.ddq = self.dq + x * change, rate * change
         return self.dq
 
     def send(self, command: np.ndarray, t: float) -> np.ndarray:
@@ -188,7 +288,49 @@ class ArmResponse:
         self._stepped_at = t
         if elapsed <= 0.0:
             return self.dq
-        return self._approach(self._target, self.a_max * elapsed)
+        return self._approach(self._target, self.a_max * elapsed, elapsed)
+
+
+def _ramp(
+    remaining: float, rate: float, alpha: float, iota: float, h: float
+) -> tuple[float, float]:
+    """Advance the time-optimal jerk-limited ramp of x towards ``remaining`` for ``h`` s.
+
+    The ramp moves x at rate r ≥ 0 with r ≤ α and |ṙ| ≤ ι, arriving with r = 0: it raises
+    r at ι until the distance left equals the distance needed to bring r back to 0,
+    ``r² / (2ι)``, or r reaches α; holds α until then; lowers r at ι. While rising from
+    r₀ the switch comes after ``t = (√(r₀²/2 + ι d) − r₀) / ι`` (d: the distance left at
+    r₀), where ``d − r₀ t − ι t²/2 = (r₀ + ι t)² / (2ι)``.
+
+    Returns
+    -------
+    advance, rate
+        How far x moved (at most ``remaining``) and its rate at the end of the step.
+    """
+    x, t = 0.0, h
+    for _ in range(8):  # at most rise, hold, fall (and rounding's extra pass)
+        left = remaining - x
+        if t <= 0.0 or left <= 0.0:
+            break
+        brake = rate * rate / (2.0 * iota)
+        if brake >= left * (1.0 - 1e-12):  # fall: bring the rate to 0 (arriving)
+            tau = min(t, rate / iota)
+            x += rate * tau - iota * tau * tau / 2.0
+            rate -= iota * tau
+            t -= tau
+            if rate <= 1e-12 * alpha:  # arrived (or, found too fast, stopped at the target)
+                return remaining, 0.0
+        elif rate < alpha:  # rise, until the switch or α
+            switch = (math.sqrt(rate * rate / 2.0 + iota * left) - rate) / iota
+            tau = min(t, switch, (alpha - rate) / iota)
+            x += rate * tau + iota * tau * tau / 2.0
+            rate += iota * tau
+            t -= tau
+        else:  # hold α until the fall must start
+            tau = min(t, (left - brake) / rate)
+            x += rate * tau
+            t -= tau
+    return min(x, remaining), rate
 
 
 class WallClockArm:

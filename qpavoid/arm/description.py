@@ -24,10 +24,12 @@ from dataclasses import dataclass
 from importlib import metadata, resources
 from pathlib import Path
 from typing import Any, NamedTuple
+from xml.etree import ElementTree
 
 import numpy as np
 import pinocchio as pin
 
+from qpavoid.arm.dynamics import ArmDynamics, read_arm
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import InputError, RobotDescriptionError
 from qpavoid.core.file_bounds import NotTOMLError, read_bounded, read_toml
@@ -38,16 +40,18 @@ LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 #: Keys of a ``[[sets]]`` entry of the control-point file and of its ``capsule`` table.
 SET_KEYS = ("name", "sphere_radius_m", "points", "capsule")
 CAPSULE_KEYS = ("from", "to", "capsule_radius_m")
-#: Plausible bounds of the ``[arm]`` facts (a value outside is a unit error or a typo, and
-#: would make speed and separation never move or never stop the arm in time): a reaction
-#: slower than 1 s; a joint braking below 0.1 rad/s² (10 s to stop from 1 rad/s) or above
-#: 1000 rad/s² (arms brake at 5-50: the iiwa 8.6-15.7); a point faster than 10 m/s
-#: (cobots move their tool at up to 1-5 m/s).
-MAX_REACTION_S = 1.0
-MIN_ACCEL_RADPS2, MAX_ACCEL_RADPS2 = 0.1, 1000.0
-MAX_SPEED_MPS = 10.0
 #: The control-point file's top-level keys (a misspelt one would otherwise be ignored).
-TOP_KEYS = ("urdf", "end_effector", "locked", "sets", "roles", "arm", "ik_seed")
+TOP_KEYS = (
+    "urdf",
+    "end_effector",
+    "locked",
+    "held",
+    "sets",
+    "roles",
+    "arm",
+    "ik_seed",
+    "coverage",
+)
 #: Most bytes a control-point file may have (the iiwa's has about 4 kB), and a URDF
 #: (the iiwa's has about 5 kB; a detailed arm's, without meshes, well under 1 MB):
 #: checked before they are read.
@@ -102,8 +106,6 @@ class ControlSet:
 ROLE_NAMES = ("scaled", "repelled", "end_effector")
 #: Keys of the ``[roles]`` table: a set per part, and the elbow point.
 ROLE_KEYS = (*ROLE_NAMES, "elbow")
-#: Keys of the ``[arm]`` table (``sources`` is optional).
-ARM_KEYS = ("reaction_time_s", "max_acceleration_radps2", "max_point_speed_mps")
 
 
 @dataclass(frozen=True)
@@ -152,33 +154,6 @@ class Roles:
 
 
 @dataclass(frozen=True)
-class ArmDynamics:
-    """How the real arm follows a velocity command and how fast it can move (``[arm]``).
-
-    Used by the simulated arm (:class:`~qpavoid.arm.braking.ArmResponse`) and by speed and
-    separation monitoring (:mod:`qpavoid.laws.ssm`) unless their settings say otherwise.
-
-    Attributes
-    ----------
-    reaction_time_s
-        From a command to the arm starting to follow it, s.
-    max_acceleration_radps2
-        ``(joint name, limit)`` pairs: each joint's acceleration (and deceleration)
-        limit, rad/s², every joint of the URDF.
-    max_point_speed_mps
-        No point of the arm moves faster than this, m/s: a speed and separation bound
-        above it cannot bind, so its row is left out.
-    sources
-        ``(fact, source)`` pairs: where each value comes from (the file's ``[arm.sources]``).
-    """
-
-    reaction_time_s: float
-    max_acceleration_radps2: tuple[tuple[str, float], ...]
-    max_point_speed_mps: float
-    sources: tuple[tuple[str, str], ...] = ()
-
-
-@dataclass(frozen=True)
 class IKSeed:
     """Where the inverse kinematics of a pose starts (``[ik_seed]``, optional).
 
@@ -216,6 +191,8 @@ class Description(NamedTuple):
     ik_seed: IKSeed
     urdf: Path
     mesh_dirs: tuple[Path, ...]
+    coverage_exclude: dict[str, str]
+    path: Path
 
 
 def _bundled_root() -> Path:
@@ -225,6 +202,13 @@ def _bundled_root() -> Path:
         return Path(str(resources.files("qpavoid.robots")))
     except ModuleNotFoundError:
         return Path(__file__).resolve().parents[2] / "robots"  # qpavoid/arm/ -> the checkout
+
+
+def bundled_robots() -> tuple[str, ...]:
+    """Names of the bundled descriptions (``--robot NAME``), sorted: those whose URDF comes
+    from an extra load only once it is installed."""
+    root = _bundled_root()
+    return tuple(sorted(p.name for p in root.iterdir() if (p / CONFIG_NAME).is_file()))
 
 
 def _description_dir(name: str | Path) -> Path:
@@ -237,7 +221,7 @@ def _description_dir(name: str | Path) -> Path:
     root = _bundled_root()
     if (root / str(name) / CONFIG_NAME).is_file():
         return root / str(name)
-    available = sorted(p.name for p in root.iterdir() if (p / CONFIG_NAME).is_file())
+    available = list(bundled_robots())
     raise RobotDescriptionError(
         f"unknown robot {str(name)!r}: not a folder with {CONFIG_NAME} and not one of the "
         f"bundled descriptions {available}",
@@ -512,7 +496,7 @@ def _urdf_path(value: str | dict, folder: Path, path: Path) -> Path:
         dist = metadata.distribution(package)
     except metadata.PackageNotFoundError:
         extra = EXTRAS.get(package)
-        how = f"pip install 'qpavoid[{extra}]'" if extra else f"pip install {package}"
+        how = f'pip install "qpavoid[{extra}]"' if extra else f"pip install {package}"
         raise RobotDescriptionError(
             f"robot {folder.name!r} takes its URDF from the package {package!r}, which is not "
             f"installed: {how}",
@@ -535,11 +519,42 @@ def _build_model(urdf: Path) -> pin.Model:
     :class:`RobotDescriptionError`."""
     try:
         text = read_bounded(urdf, MAX_URDF_BYTES).decode("utf-8")
-        return pin.buildModelFromXML(text)
-    except (ValueError, RuntimeError, OSError) as exc:  # missing, malformed or too large
+    except (ValueError, OSError) as exc:  # missing, too large, not UTF-8
         raise RobotDescriptionError(
             f"{urdf}: cannot build a model from this URDF: {one_line(exc)}", path=urdf
         ) from exc
+    _check_limit_elements(text, urdf)
+    try:
+        return pin.buildModelFromXML(text)
+    except (ValueError, RuntimeError) as exc:  # malformed
+        raise RobotDescriptionError(
+            f"{urdf}: cannot build a model from this URDF: {one_line(exc)}", path=urdf
+        ) from exc
+
+
+def _check_limit_elements(text: str, urdf: Path) -> None:
+    """Refuse a revolute or prismatic joint without ``<limit>`` (or its ``velocity``), naming
+    it (the URDF parser only says so on the console): every joint the controllers drive
+    needs its position and velocity limits. A text that is not XML is left to the parser."""
+    try:
+        root = ElementTree.fromstring(text)
+    except ElementTree.ParseError:
+        return
+    for joint in root.iter("joint"):
+        if joint.get("type") not in ("revolute", "prismatic"):
+            continue
+        limit = joint.find("limit")
+        if limit is None or limit.get("velocity") is None:
+            missing = "<limit>" if limit is None else "the velocity of its <limit>"
+            name = joint.get("name", "?")
+            raise RobotDescriptionError(
+                f"{urdf}: joint {name!r} ({joint.get('type')}) has no {missing}: give it "
+                '<limit lower="..." upper="..." velocity="..."/> (rad or m, and per s), '
+                'the limits of its maker, or make it type="fixed"',
+                path=urdf,
+                name=name,
+                value="limit",
+            )
 
 
 def _check_joints(model: pin.Model, urdf: Path) -> None:
@@ -581,36 +596,39 @@ def _angle_fault(model: pin.Model, joint: str, angle: float) -> str:
     return ""
 
 
-def _file_locked(value: object, path: Path, model: pin.Model) -> dict[str, float]:
-    """The file's ``locked``: a table of joint angles (rad), or a list of joint names
-    (locked at 0), each a joint of the URDF locked within its limits."""
+def _file_locked(
+    value: object, path: Path, model: pin.Model, key: str = "locked"
+) -> dict[str, float]:
+    """The file's ``locked`` (or ``held``, as ``key`` says): a table of joint angles
+    (rad), or a list of joint names (locked at 0), each a joint of the URDF locked within
+    its limits."""
     if value is None:
         return {}
     if isinstance(value, list) and all(isinstance(n, str) for n in value):
         twice = sorted({n for n in value if value.count(n) > 1})
         if twice:
             raise RobotDescriptionError(
-                f"{path}: locked lists {twice} more than once",
+                f"{path}: {key} lists {twice} more than once",
                 path=path,
-                name="locked",
+                name=key,
                 value=twice,
             )
         value = dict.fromkeys(value, 0.0)
     if not isinstance(value, dict):
         raise RobotDescriptionError(
-            f"{path}: locked must be a table of angles (rad), e.g. locked = {{ <joint> = 0.0 }}, "
-            f'or a list of joint names locked at 0, e.g. locked = ["<joint>"]; got {value!r}',
+            f"{path}: {key} must be a table of angles (rad), e.g. {key} = {{ <joint> = 0.0 }}, "
+            f'or a list of joint names locked at 0, e.g. {key} = ["<joint>"]; got {value!r}',
             path=path,
-            name="locked",
+            name=key,
             value=value,
         )
     for joint, angle in value.items():
         if not model.existJointName(joint):
             raise RobotDescriptionError(
-                f"{path}: locked: {joint!r} is not a joint of the URDF; its joints are "
+                f"{path}: {key}: {joint!r} is not a joint of the URDF; its joints are "
                 f"{list(model.names)[1:]}",
                 path=path,
-                name="locked",
+                name=key,
                 value=joint,
             )
         if not isinstance(angle, (int, float)) or isinstance(angle, bool):
@@ -619,10 +637,10 @@ def _file_locked(value: object, path: Path, model: pin.Model) -> dict[str, float
             fault = _angle_fault(model, joint, float(angle))
         if fault:
             raise RobotDescriptionError(
-                f"{path}: locked: {joint} = {angle!r} is {fault}; lock it at an angle (rad) "
+                f"{path}: {key}: {joint} = {angle!r} is {fault}; lock it at an angle (rad) "
                 "within its limits",
                 path=path,
-                name=f"locked.{joint}",
+                name=f"{key}.{joint}",
                 value=angle,
             )
     return {joint: float(angle) for joint, angle in value.items()}
@@ -851,73 +869,32 @@ def _roles(cfg: Mapping[str, Any], path: Path, set_cfgs: list, joints: Sequence[
 
 
 def _elbow(frames: object, path: Path, set_cfgs: list) -> int | None:
-    """Index of the control point listing the frames ``frames`` (``[roles] elbow``)."""
+    """Index of the control point ``[roles] elbow`` names: the list of its frames, or its
+    offset table (``{ frame = "<frame>", xyz = [x, y, z] }``), as in its set's points."""
     if frames is None:
         return None
-    points = [sorted(names) for sc in set_cfgs for names in sc["points"]]
-    if isinstance(frames, list) and all(isinstance(n, str) for n in frames):
-        given = sorted(str(n) for n in frames)
+    points = [
+        _spot_key(spot) for sc in set_cfgs for spot in sc["points"]
+    ]  # every point, set after set
+    if _is_spot(frames):
+        given = _spot_key(frames)  # type: ignore[arg-type]
         if given in points:
             return points.index(given)
+    shown = [sorted(spot) if isinstance(spot, list) else spot for spot in points]
     raise RobotDescriptionError(
-        f"{path}: [roles] elbow must list the frames of one control point, as in its set's "
-        f"points; {frames!r} is none of {points}",
+        f"{path}: [roles] elbow must be one control point as its set's points give it (the "
+        f"list of its frames, or its {{ frame, xyz }} table); {frames!r} is none of {shown}",
         path=path,
         name="roles.elbow",
         value=frames,
     )
 
 
-def _arm(cfg: Mapping[str, Any], path: Path, joints: Sequence[str]) -> ArmDynamics:
-    """The ``[arm]`` table: reaction time, acceleration limits, fastest point speed."""
-    table = _table(
-        cfg,
-        "arm",
-        path,
-        "reaction_time_s = 0.005, max_acceleration_radps2 = { <joint> = 10.0, ... }, "
-        "max_point_speed_mps = 3.0",
-    )
-    _unknown_keys(table, (*ARM_KEYS, "sources"), "[arm]", path, "arm")
-    missing = [k for k in ARM_KEYS if k not in table]
-    if missing:
-        raise RobotDescriptionError(
-            f"{path}: [arm] is missing key(s) {', '.join(missing)} (docs/robot.md: Arm)",
-            path=path,
-            name="arm",
-            value=missing,
-        )
-    accel = table["max_acceleration_radps2"]
-    if not isinstance(accel, dict) or sorted(accel) != sorted(joints):
-        given = sorted(accel) if isinstance(accel, dict) else accel
-        raise RobotDescriptionError(
-            f"{path}: [arm] max_acceleration_radps2 must give one limit (rad/s²) for each "
-            f"joint of the URDF, {list(joints)}; it gives {given!r}",
-            path=path,
-            name="arm.max_acceleration_radps2",
-            value=given,
-        )
-    sources = table.get("sources", {})
-    if not isinstance(sources, dict) or not all(isinstance(v, str) for v in sources.values()):
-        raise RobotDescriptionError(
-            f"{path}: [arm.sources] must map each fact to the text of its source",
-            path=path,
-            name="arm.sources",
-            value=sources,
-        )
-    where = "arm.max_acceleration_radps2"
-    return ArmDynamics(
-        reaction_time_s=_number(
-            table["reaction_time_s"], "arm.reaction_time_s", path, 0.0, False, MAX_REACTION_S
-        ),
-        max_acceleration_radps2=tuple(
-            (n, _number(accel[n], f"{where}.{n}", path, MIN_ACCEL_RADPS2, False, MAX_ACCEL_RADPS2))
-            for n in joints
-        ),
-        max_point_speed_mps=_number(
-            table["max_point_speed_mps"], "arm.max_point_speed_mps", path, 0.0, True, MAX_SPEED_MPS
-        ),
-        sources=tuple((str(k), v) for k, v in sources.items()),
-    )
+def _spot_key(spot: Sequence[str] | Mapping[str, Any]) -> object:
+    """A comparable form of a point: its frames sorted, or its frame and offset."""
+    if isinstance(spot, Mapping):
+        return {"frame": spot["frame"], "xyz": [float(v) for v in spot["xyz"]]}
+    return sorted(str(n) for n in spot)
 
 
 def _ik_seed(cfg: Mapping[str, Any], path: Path, joints: Sequence[str]) -> IKSeed:
@@ -947,6 +924,28 @@ def _ik_seed(cfg: Mapping[str, Any], path: Path, joints: Sequence[str]) -> IKSee
             table.get("wrist_to_tool_m", 0.0), "ik_seed.wrist_to_tool_m", path, 0.0, False
         ),
     )
+
+
+def _coverage(cfg: Mapping[str, Any], path: Path) -> dict[str, str]:
+    """The ``[coverage]`` table's exclusions: collision object name -> the reason it may
+    lie outside the capsules and spheres (each reason required); ``{}`` without one."""
+    if "coverage" not in cfg:
+        return {}
+    table = _table(cfg, "coverage", path, 'exclude = { "<collision object>" = "<why>" }')
+    _unknown_keys(table, ("exclude",), "[coverage]", path, "coverage")
+    exclude = table.get("exclude", {})
+    if not isinstance(exclude, dict) or not all(
+        isinstance(v, str) and v.strip() for v in exclude.values()
+    ):
+        raise RobotDescriptionError(
+            f"{path}: [coverage] exclude must map each collision object it leaves out to "
+            'the reason, e.g. exclude = { "link_0_0" = "fixed to the base: never moves" }; '
+            f"got {exclude!r}",
+            path=path,
+            name="coverage.exclude",
+            value=exclude,
+        )
+    return {str(k): str(v) for k, v in exclude.items()}
 
 
 #: Where along a capsule's axis, and at how many configurations, the check of
@@ -1090,27 +1089,52 @@ def _check_roles_free(model: pin.Model, roles: Roles, path: Path, by: str) -> No
             )
 
 
+#: How far the end-effector frame may lie outside the end-effector set's capsule, m
+#: (rounding of the capsule's written ends and radius: 1 µm).
+EE_INSIDE_TOLERANCE_M = 1e-6
+
+
 def _check_end_effector(
     model: pin.Model, set_cfgs: list, roles: Roles, ee_name: str, path: Path
 ) -> None:
-    """Refuse an end-effector set whose capsule does not end at the end-effector frame
-    (by name, or at the same place of the same body)."""
+    """Refuse an end-effector set whose capsule does not hold the end-effector frame.
+
+    The laws push the end effector (eq. 7) and servo its frame (eq. 8) with the set's
+    distance, so the frame must lie on the set's body and inside its capsule: the
+    capsule ends at the frame (by name, or at the same place of the same body, the
+    paper's), or the frame lies within the capsule's radius of its axis (a capsule
+    fitted to a hand's meshes) on a body that carries both ends.
+    """
     sc = set_cfgs[roles.end_effector]
-    end = model.frames[model.getFrameId(f"{sc['name']}_capsule_to")]
+    ends = [model.frames[model.getFrameId(f"{sc['name']}_capsule_{e}")] for e in ("from", "to")]
     ee = model.frames[model.getFrameId(ee_name)]
-    same = end.parentJoint == ee.parentJoint and np.allclose(
-        end.placement.translation, ee.placement.translation, rtol=0.0, atol=1e-12
+    same = ends[1].parentJoint == ee.parentJoint and np.allclose(
+        ends[1].placement.translation, ee.placement.translation, rtol=0.0, atol=1e-12
     )
-    if sc["capsule"]["to"] != ee_name and not same:
-        raise RobotDescriptionError(
-            f"{path}: [roles] end_effector: the end-effector set's capsule must end at the "
-            f"end_effector frame {ee_name!r}; the capsule of the set {sc['name']!r} runs "
-            f"from {sc['capsule']['from']!r} to {sc['capsule']['to']!r}: name the set that ends "
-            f'there, or give this set capsule.to = "{ee_name}"',
-            path=path,
-            name="roles.end_effector.set",
-            value=sc["name"],
-        )
+    if sc["capsule"]["to"] == ee_name or same:
+        return
+    # within the capsule, on the body of both ends (so at every configuration)
+    radius = float(sc["capsule"]["capsule_radius_m"])
+    excess = np.inf
+    if ends[0].parentJoint == ends[1].parentJoint == ee.parentJoint:
+        a, b = ends[0].placement.translation, ends[1].placement.translation
+        ab, rel = b - a, ee.placement.translation - a
+        s = float(np.clip(rel @ ab / (ab @ ab), 0.0, 1.0)) if ab @ ab > 0.0 else 0.0
+        excess = float(np.linalg.norm(rel - s * ab)) - radius
+        if excess <= EE_INSIDE_TOLERANCE_M:
+            return
+    where = (
+        f"{excess:.4f} m outside it" if np.isfinite(excess) else "on another body than the capsule"
+    )
+    raise RobotDescriptionError(
+        f"{path}: [roles] end_effector: the end_effector frame {ee_name!r} must lie in the "
+        f"end-effector set's capsule; it is {where} (set {sc['name']!r}): name the set "
+        f'whose capsule holds it, give this set capsule.to = "{ee_name}", or name a frame '
+        "inside the capsule as end_effector",
+        path=path,
+        name="roles.end_effector.set",
+        value=sc["name"],
+    )
 
 
 def read_description(
@@ -1127,10 +1151,22 @@ def read_description(
     model = _build_model(urdf)
     _check_joints(model, urdf)
     joints = tuple(str(n) for n in model.names)[1:]
+    held = _file_locked(cfg.get("held"), path, model, "held")
     default = _file_locked(cfg.get("locked"), path, model)
-    _check_free(joints, default, path, "the file's `locked`")
-    by = "the file's `locked`" if locked is None else "the locked= argument"
-    locked = _locked_angles(locked, default, model)
+    both = sorted(set(held) & set(default))
+    if both:
+        raise RobotDescriptionError(
+            f"{path}: {both} are both held and locked; a joint is held (locked in every "
+            "mode) or locked (by default), not both: remove it from one",
+            path=path,
+            name="held",
+            value=both,
+        )
+    also = " and `held`" if held else ""
+    _check_free(joints, {**default, **held}, path, f"the file's `locked`{also}")
+    by = f"the file's `locked`{also}" if locked is None else "the locked= argument"
+    by += " and the file's `held`" if held and locked is not None else ""
+    locked = {**_locked_angles(locked, default, model), **held}
     _check_free(joints, locked, path, by)
     if not set_cfgs:
         raise RobotDescriptionError(
@@ -1140,8 +1176,9 @@ def read_description(
             value=set_cfgs,
         )
     roles = _roles(cfg, path, set_cfgs, joints)
-    arm = _arm(cfg, path, joints)
+    arm = read_arm(cfg, path, joints)
     ik_seed = _ik_seed(cfg, path, joints)
+    coverage_exclude = _coverage(cfg, path)
     _add_frames(model, set_cfgs, path, urdf)
     if not model.existFrame(ee_name):
         raise RobotDescriptionError(
@@ -1168,4 +1205,6 @@ def read_description(
         ik_seed,
         urdf,
         mesh_dirs(urdf),
+        coverage_exclude,
+        path,
     )

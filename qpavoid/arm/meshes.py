@@ -14,7 +14,9 @@ and by the replay (the arm drawn as it is).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Protocol
 
 import coal
 import numpy as np
@@ -23,10 +25,18 @@ import pinocchio as pin
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import RobotDescriptionError
 
-if TYPE_CHECKING:
-    from qpavoid.arm.model import Robot
+__all__ = ["RIM_SAMPLES", "ArmFiles", "collision_geometry", "object_vertices", "urdf_geometry"]
 
-__all__ = ["collision_geometry", "object_vertices", "RIM_SAMPLES"]
+
+class ArmFiles(Protocol):
+    """What :func:`collision_geometry` reads of a robot
+    (a :class:`~qpavoid.arm.model.Robot`; named here without importing it, which
+    imports this module's users)."""
+
+    model: pin.Model
+    urdf: Path | None
+    mesh_dirs: tuple[Path, ...]
+
 
 #: Points per circle where a round primitive (cylinder, sphere, capsule) stands for its
 #: surface in :func:`object_vertices`: at 64, a chord misses the circle by
@@ -34,7 +44,7 @@ __all__ = ["collision_geometry", "object_vertices", "RIM_SAMPLES"]
 RIM_SAMPLES = 64
 
 
-def collision_geometry(robot: Robot) -> pin.GeometryModel:
+def collision_geometry(robot: ArmFiles) -> pin.GeometryModel:
     """The URDF's collision objects, placed on ``robot.model``'s joints.
 
     Returns an empty model for a robot built without a URDF file. Objects on a body that
@@ -49,20 +59,7 @@ def collision_geometry(robot: Robot) -> pin.GeometryModel:
     """
     if robot.urdf is None:
         return pin.GeometryModel()
-    try:
-        full = pin.buildModelFromUrdf(str(robot.urdf))
-        geometry = pin.buildGeomFromUrdf(
-            full,
-            str(robot.urdf),
-            pin.GeometryType.COLLISION,
-            package_dirs=[str(d) for d in robot.mesh_dirs],
-        )
-    except (ValueError, RuntimeError, OSError) as exc:
-        raise RobotDescriptionError(
-            f"{robot.urdf}: cannot load its collision geometry: {one_line(exc)}",
-            path=robot.urdf,
-            name="urdf",
-        ) from exc
+    full, geometry = urdf_geometry(robot.urdf, robot.mesh_dirs)
     model = robot.model
     placed = pin.GeometryModel()
     for obj in geometry.geometryObjects:
@@ -89,6 +86,35 @@ def collision_geometry(robot: Robot) -> pin.GeometryModel:
         )
         placed.addGeometryObject(copy)
     return placed
+
+
+def urdf_geometry(
+    urdf: Path, package_dirs: Sequence[Path] = ()
+) -> tuple[pin.Model, pin.GeometryModel]:
+    """The URDF's full model (no joint locked) and its collision objects on it.
+
+    Raises
+    ------
+    RobotDescriptionError
+        If the URDF or its meshes cannot be loaded (a missing file, a ``package://`` that
+        no folder of ``package_dirs`` holds).
+    """
+    try:
+        full = pin.buildModelFromUrdf(str(urdf))
+        geometry = pin.buildGeomFromUrdf(
+            full,
+            str(urdf),
+            pin.GeometryType.COLLISION,
+            package_dirs=[str(d) for d in package_dirs],
+        )
+    except (ValueError, RuntimeError, OSError) as exc:
+        raise RobotDescriptionError(
+            f"{urdf}: cannot load its collision geometry: {one_line(exc)}; give the folders "
+            "that hold its package:// meshes",
+            path=urdf,
+            name="urdf",
+        ) from exc
+    return full, geometry
 
 
 def object_vertices(obj: pin.GeometryObject) -> np.ndarray:
@@ -121,12 +147,12 @@ def _primitive_points(geo: coal.CollisionGeometry) -> np.ndarray:
             [geo.radius * circle + [0.0, 0.0, h] for h in (-geo.halfLength, geo.halfLength)]
         )
     if isinstance(geo, (coal.Capsule, coal.Sphere)):
-        half = geo.halfLength if isinstance(geo, coal.Capsule) else 0.0
+        length: float = geo.halfLength if isinstance(geo, coal.Capsule) else 0.0
         points = []
         for end in (-1.0, 1.0):
             for lat in (0.0, np.pi / 4, np.pi / 2):
                 ring = geo.radius * np.cos(lat) * circle
-                ring[:, 2] = end * (half + geo.radius * np.sin(lat))
+                ring[:, 2] = end * (length + geo.radius * np.sin(lat))
                 points.append(ring)
         return np.concatenate(points)
     raise RobotDescriptionError(

@@ -22,6 +22,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike
 
+from qpavoid.arm.coverage import check_coverage
 from qpavoid.arm.description import (
     LWA,
     ROLE_NAMES,
@@ -118,6 +119,11 @@ class Robot:
         The URDF the model was built from (its collision meshes: :mod:`qpavoid.arm.meshes`).
     mesh_dirs
         Folders where the URDF's ``package://`` meshes are looked for.
+    coverage_exclude
+        Collision objects the description leaves outside its capsules and spheres, and
+        why (``[coverage] exclude``; :mod:`qpavoid.arm.coverage`).
+    path
+        The control-point file the robot was read from, or None.
     """
 
     def __init__(
@@ -133,9 +139,13 @@ class Robot:
         ik_seed: IKSeed,
         urdf: Path | None = None,
         mesh_dirs: Sequence[Path] = (),
+        coverage_exclude: Mapping[str, str] | None = None,
+        path: Path | None = None,
     ):
         self.model = model
         self.urdf, self.mesh_dirs = urdf, tuple(mesh_dirs)
+        self.coverage_exclude = dict(coverage_exclude or {})
+        self.path = path
         self.roles, self.arm, self.ik_seed = roles, arm, ik_seed
         self.sets = tuple(sets)
         self.point_frames = tuple(point_frames)
@@ -292,7 +302,9 @@ class Robot:
 
 
 def load_robot(
-    name: str | Path = "iiwa14", locked: Mapping[str, float] | Sequence[str] | None = None
+    name: str | Path = "iiwa14",
+    locked: Mapping[str, float] | Sequence[str] | None = None,
+    coverage: bool = True,
 ) -> Robot:
     """Load a robot description and build its (reduced) Pinocchio model.
 
@@ -306,6 +318,10 @@ def load_robot(
         description's (A3 at 0 for the iiwa), ``()`` locks nothing, a sequence of names
         locks them at the description's value (or 0), a mapping gives the angles (rad),
         each within the joint's limits.
+    coverage
+        Check that the capsules and spheres hold every collision-mesh vertex the
+        description does not exclude (:func:`qpavoid.arm.coverage.check_coverage`);
+        ``False`` only to inspect a description that fails it (``qpavoid robot check``).
 
     Returns
     -------
@@ -316,12 +332,17 @@ def load_robot(
     RobotDescriptionError
         For an unknown description, a malformed file or URDF, a frame it lacks, or
         anything else the controllers could not use (``docs/robot.md``, "Refusals"),
-        locking every joint or a joint of the description's ``[roles]`` included.
+        locking every joint or a joint of the description's ``[roles]`` included, and
+        a collision-mesh vertex outside the capsules or spheres that its ``[coverage]
+        exclude`` does not name (:func:`qpavoid.arm.coverage.check_coverage`).
     InputError
         For a ``locked`` that is text, names a joint the model does not have, or gives an
         angle that is not a number, not finite or outside the joint's limits.
     """
-    return Robot(*read_description(name, locked))
+    robot = Robot(*read_description(name, locked))
+    if coverage:
+        check_coverage(robot, robot.path or Path(str(name)))
+    return robot
 
 
 def joint_columns(robot: Robot, names: tuple[str, ...] | None, option: str) -> np.ndarray:

@@ -15,6 +15,7 @@ from importlib.metadata import PackageNotFoundError, version
 from typing import Any, NoReturn
 
 from qpavoid import __version__
+from qpavoid.arm.description import bundled_robots
 from qpavoid.core.errors import QpavoidError, Terminated
 from qpavoid.core.signals import stops_raise
 
@@ -66,6 +67,18 @@ def _positive_finite(x: float) -> bool:
 positive_float = _number(float, _positive_finite, "a positive finite number")
 count = _number(int, lambda n: n >= 0, "a whole number >= 0")
 workers = _number(int, lambda n: n >= 1, "a whole number >= 1")
+
+
+def add_robot_option(parser: argparse.ArgumentParser) -> None:
+    """``--robot NAME|PATH``, the same on every command that runs an arm."""
+    parser.add_argument(
+        "--robot",
+        default="iiwa14",
+        metavar="NAME|PATH",
+        help=f"the arm: a bundled description ({', '.join(bundled_robots())}; those whose "
+        "URDF comes from a package need the extra 'robots') or a folder holding "
+        "control_points.toml (docs/robot.md)",
+    )
 
 
 def folder(text: str) -> str:

@@ -1,6 +1,7 @@
 """``qpavoid sweep``: a randomized safety campaign, on local processes or on Ray.
 
     qpavoid sweep --n N --controller analytic|qp [--distance ...] [--safety ...] [--seed S]
+                  [--robot NAME|PATH]
                   [--workers W] [--executor local|ray] --out DIR
 
 Like :mod:`qpavoid.cli.commands` it parses, calls the library and prints.
@@ -12,7 +13,7 @@ import argparse
 import json
 from concurrent.futures import Executor
 
-from qpavoid.cli.args import HelpFormatter, count, folder, whole_number, workers
+from qpavoid.cli.args import HelpFormatter, add_robot_option, count, folder, whole_number, workers
 from qpavoid.control.tick import SAFETY_MODES
 from qpavoid.experiments.campaign import (
     MAX_RUNS,
@@ -48,6 +49,7 @@ def add_campaign_command(sub: argparse._SubParsersAction) -> None:
         "--workers", type=workers, default=None, metavar="W", help="processes (default: all cores)"
     )
     sweep.add_argument("--executor", choices=EXECUTORS, default="local")
+    add_robot_option(sweep)
     sweep.add_argument("--out", type=folder, required=True, metavar="DIR", help="output folder")
     sweep.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     sweep.set_defaults(parser=sweep, handler=sweep_command)
@@ -56,7 +58,7 @@ def add_campaign_command(sub: argparse._SubParsersAction) -> None:
 def sweep_command(args: argparse.Namespace) -> str:
     """``qpavoid sweep``: check, run, write, print the summary."""
     out = check_output_dir(args.out)
-    spec = campaign_spec(args.controller, args.distance, args.safety)
+    spec = campaign_spec(args.controller, args.distance, args.safety, robot=args.robot)
     executor: Executor | None = RayExecutor(args.workers) if args.executor == "ray" else None
     try:
         runs = run_campaign(

@@ -10,6 +10,7 @@
     qpavoid replay A.npz B.npz --to HOST:PORT [--rate 30]
     qpavoid sweep --n N --controller analytic|qp [--executor local|ray] --out DIR
     qpavoid bench [--json FILE] [--quick]
+    qpavoid robot fit URDF --out DIR | qpavoid robot check NAME|PATH
 
 Every argument is checked before any work starts; every failure is one line
 ``qpavoid: error: ...`` on standard error with exit status 2 (130 when interrupted),
@@ -27,6 +28,7 @@ from pathlib import Path
 from qpavoid.cli.args import (
     HelpFormatter,
     Parser,
+    add_robot_option,
     count,
     folder,
     package_version,
@@ -37,6 +39,7 @@ from qpavoid.cli.args import (
 )
 from qpavoid.cli.bench import add_bench_command
 from qpavoid.cli.campaign import add_campaign_command
+from qpavoid.cli.robot import add_robot_command
 from qpavoid.cli.sensors import add_sensor_commands
 from qpavoid.cli.view import add_view_command
 from qpavoid.control.tick import SAFETY_MODES
@@ -185,6 +188,7 @@ def build_parser() -> Parser:
     add_campaign_command(sub)
     add_bench_command(sub)
     add_view_command(sub)
+    add_robot_command(sub)
     return parser
 
 
@@ -214,12 +218,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--no-view", action="store_true", help="do not write the browser replay (replay.html)"
     )
-    p.add_argument(
-        "--robot",
-        default="iiwa14",
-        metavar="NAME",
-        help="robot description: a bundled name or a folder",
-    )
+    add_robot_option(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
 

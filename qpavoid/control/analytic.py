@@ -8,7 +8,7 @@ import numpy as np
 
 from qpavoid.arm.model import Robot, joint_columns
 from qpavoid.control.controller import Controller
-from qpavoid.control.task import ArcPath
+from qpavoid.control.task import PlannedPath
 from qpavoid.control.tick import Command, ControllerConfig, Tick
 from qpavoid.core.errors import InputError
 from qpavoid.human.body import BodyModel
@@ -110,7 +110,7 @@ class AnalyticController(Controller):
     def __init__(
         self,
         robot: Robot,
-        path: ArcPath | None = None,
+        path: PlannedPath | None = None,
         config: ControllerConfig | None = None,
         human: BodyModel | None = None,
         analytic: AnalyticConfig | None = None,

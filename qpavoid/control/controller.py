@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from qpavoid.arm.model import Robot, joint_columns
-from qpavoid.control.task import ArcPath, pose_error
+from qpavoid.control.task import PlannedPath, default_task, pose_error
 from qpavoid.control.tick import Command, ControllerConfig, Tick
 from qpavoid.core.checks import finite_number
 from qpavoid.core.compiling import kernel_input
@@ -61,7 +61,8 @@ class Controller:
     robot
         The arm.
     path
-        The planned end-effector path.
+        The planned end-effector path (default: the arm's own task's,
+        :func:`~qpavoid.control.task.default_task`: the paper's arc for the iiwa).
     config
         Shared settings (:class:`ControllerConfig`).
     human
@@ -74,12 +75,12 @@ class Controller:
     def __init__(
         self,
         robot: Robot,
-        path: ArcPath | None = None,
+        path: PlannedPath | None = None,
         config: ControllerConfig | None = None,
         human: BodyModel | None = None,
     ):
         self.robot = robot
-        self.path = path or ArcPath()
+        self.path = path or default_task(robot).path
         self.config = config or ControllerConfig()
         self.human = human or KinectHuman()
         self.distances = distance_method(self.config.distance, robot, self.human)

@@ -30,15 +30,29 @@ NO_POINT = np.full(3, np.nan)
 NO_POINT.setflags(write=False)
 #: The rotation of a capsule too short to have an axis (a sphere).
 NO_ROTATION = pin.Quaternion.Identity()
+#: A half turn about x: it takes +z onto −z (quaternion w = 0, x = 1).
+HALF_TURN_X = pin.Quaternion(0.0, 1.0, 0.0, 0.0)
 
 
 def axis_rotation(u: np.ndarray) -> pin.Quaternion:
-    """The smallest rotation taking +z onto the direction ``u`` (3,) (Pinocchio's
-    ``Quaternion.FromTwoVectors``; a half turn about an axis normal to z for u = −z); the
-    identity if ``‖u‖ < TINY``."""
+    """A rotation taking +z onto the unit direction ``u`` (3,); the identity if
+    ``‖u‖ < TINY``.
+
+    For ``u_z ≥ 0`` the smallest one, Pinocchio's ``Quaternion.FromTwoVectors(z, u)``. For
+    ``u_z < 0`` that quaternion is ill-conditioned: its scalar part is
+    ``√((1 + u_z)/2)``, and as ``u`` nears −z the cancellation in ``1 + u_z`` turns the
+    rounding of ``u`` into an error of order ``ε / (1 + u_z)`` in where z lands (1.3e-10
+    rad at ``1 + u_z = 9e-7``: enough to spoil a finite difference of the capsule
+    distance). There the rotation is ``FromTwoVectors(−z, u) · R_x(π)``: the half turn
+    ``R_x(π)`` takes z onto −z exactly, and ``FromTwoVectors(−z, u)`` is well conditioned
+    (``1 − u_z ≥ 1``). A capsule is symmetric about its axis, so which turn about the
+    axis either gives changes no distance.
+    """
     if float(u @ u) < TINY * TINY:
         return NO_ROTATION
-    return pin.Quaternion.FromTwoVectors(EZ, u)
+    if u[2] >= 0.0:
+        return pin.Quaternion.FromTwoVectors(EZ, u)
+    return pin.Quaternion.FromTwoVectors(-EZ, u) * HALF_TURN_X
 
 
 def axis_rotations(u: np.ndarray) -> np.ndarray:

@@ -96,7 +96,15 @@ class DistanceTable:
         """(3, nv) Jacobian of the robot point of pair (set, part) at ``kin``.
 
         For spheres, the Jacobian of the control point that realised the minimum (the
-        sphere centre, as in eq. 6); for capsules, that of the closest point on the axis.
+        sphere centre, as in eq. 6: a Pinocchio frame on the body that carries it); for
+        capsules, that of the witness point's projection on the axis, at ``robot_s``:
+        the interpolation of the ends' Jacobians, exact because one rigid body carries
+        the axis (checked when the description is read). Either is the velocity of that
+        point on its body. The witness point on the surface, ``c − r n`` with c that
+        point, moves at ``J_c q̇ − ω × r n``: the difference is normal to ``n``, so
+        ``nᵀ J`` is the exact rate of the distance, ``ḋ = nᵀ J q̇`` (the velocity
+        dampers' and speed and separation's rows; tests/test_witness_jacobians.py checks
+        both against finite differences on every arm).
         """
         return self.robot_jacobians(kin, np.array([set_index]), np.array([part]))[0]
 

@@ -85,13 +85,14 @@ def _controller(kind: str, distance: str, safety: str, **qp: Any) -> Callable[..
     return lambda robot: QPController(robot, config=config, qp=QPConfig(**qp))
 
 
-def run_bench(quick: bool = False) -> dict[str, Any]:
-    """Every timing of the module docstring (``quick``: fewer states, one repeat)."""
+def run_bench(quick: bool = False, robot: str = "iiwa14") -> dict[str, Any]:
+    """Every timing of the module docstring on ``robot`` (a bundled description's name or
+    a folder; ``quick``: fewer states, one repeat)."""
     warnings.simplefilter("ignore")
-    robot = load_robot("iiwa14")
-    motion = make_scenario("test1", robot)
+    arm = load_robot(robot)
+    motion = make_scenario("test1", arm)
     log = simulate(
-        QPController(robot, config=ControllerConfig(control_period_s=0.01, safety="ssm")),
+        QPController(arm, config=ControllerConfig(control_period_s=0.01, safety="ssm")),
         motion,
         SimConfig(control_rate_hz=100.0, max_time_s=20.0),
     ).log
@@ -105,25 +106,23 @@ def run_bench(quick: bool = False) -> dict[str, Any]:
         frame = frames.setdefault(key, HumanFrame.check(log["joints"][k], log["state"][k]))
         states.append((log["q"][k], frame, log["tau"][k]))
     human = KinectHuman()
-    result: dict[str, Any] = {"states": len(states), "repeat": repeat}
+    result: dict[str, Any] = {"robot": arm.name, "states": len(states), "repeat": repeat}
     stages: dict[str, dict[str, float]] = {}
-    kins = [robot.kinematics(s[0]) for s in states]
+    kins = [arm.kinematics(s[0]) for s in states]
     made: dict[int, Any] = {}  # one geometry per camera frame, as a controller keeps it
     geos = [made.setdefault(id(s[1]), human.geometry(s[1])) for s in states]
     idx = list(range(len(states)))
-    stages["kinematics"] = _timed(lambda k: robot.kinematics(states[k][0]), idx, repeat)
+    stages["kinematics"] = _timed(lambda k: arm.kinematics(states[k][0]), idx, repeat)
     stages["human_geometry"] = _timed(lambda k: human.geometry(states[k][1]), idx, repeat)
-    spheres, capsules = SphereDistance(robot, human), CapsuleDistance(robot, human)
+    spheres, capsules = SphereDistance(arm, human), CapsuleDistance(arm, human)
     stages["sphere_table"] = _timed(lambda k: spheres(kins[k], geos[k]), idx, repeat)
     stages["capsule_table"] = _timed(lambda k: capsules(kins[k], geos[k]), idx, repeat)
     tracker = Tracker()
     clock = iter(np.arange(0.0, 1e6, 1.0 / 30.0))
     stages["perception"] = _timed(lambda k: tracker.update(states[k][1], next(clock)), idx, repeat)
     stages["fusion"] = _fusion_timing(motion, quick)
-    qp = QPController(robot, config=ControllerConfig(control_period_s=0.01, safety="ssm"))
-    analytic = AnalyticController(
-        robot, config=ControllerConfig(control_period_s=0.01, safety="ssm")
-    )
+    qp = QPController(arm, config=ControllerConfig(control_period_s=0.01, safety="ssm"))
+    analytic = AnalyticController(arm, config=ControllerConfig(control_period_s=0.01, safety="ssm"))
     ticks = [qp.measure(s[0], s[1], None, s[2]) for s in states]
     ticks = [t for t in ticks if not t.reason]
     stages["prelude"] = _timed(partial(_measure, qp), states, repeat)
@@ -133,11 +132,11 @@ def run_bench(quick: bool = False) -> dict[str, Any]:
     stages["qp_solve/persistent_osqp"] = _timed(qp.backend.solve, problems, repeat)
     kinds = ["analytic", "qp"]
     if _has_daqp():
-        fast = QPController(robot, config=qp.config, qp=QPConfig(backend="daqp"))
+        fast = QPController(arm, config=qp.config, qp=QPConfig(backend="daqp"))
         stages["qp_solve/daqp_direct"] = _timed(fast.backend.solve, problems, repeat)
         kinds.append("qp_daqp")
     for name in sorted(qpsolvers.available_solvers):
-        other = QPController(robot, qp=QPConfig(backend="qpsolvers", solver=name))
+        other = QPController(arm, qp=QPConfig(backend="qpsolvers", solver=name))
         stages[f"qp_solve/{name}"] = _timed(other.backend.solve, problems, repeat)
     result["stages"] = stages
     result["ticks"] = {}
@@ -148,11 +147,11 @@ def run_bench(quick: bool = False) -> dict[str, Any]:
                     _controller("qp", distance, safety, backend="daqp")
                     if kind == "qp_daqp"
                     else _controller(kind, distance, safety)
-                )(robot)
+                )(arm)
                 result["ticks"][f"{kind}/{distance}/{safety}"] = _timed(
                     partial(_step, ctrl), states, repeat
                 )
-    result["scaling"] = _scaling(robot, human, states, quick)
+    result["scaling"] = _scaling(arm, human, states, quick)
     result["paper_budget_us"] = PAPER_BUDGET_US
     return result
 
@@ -226,7 +225,8 @@ def _measure(ctrl: Controller, c: tuple) -> object:
 def format_bench(result: dict[str, Any]) -> str:
     """The timings as one readable table (the JSON's keys, µs)."""
     lines = [
-        f"{result['states']} recorded states (test1, 100 Hz, real bench), "
+        f"{result.get('robot', 'iiwa14')}: {result['states']} recorded states (test1, 100 Hz, "
+        "real bench), "
         f"{result['repeat']} repeat(s); median and p99, µs",
         "",
         f"{'':44s} {'median':>9s} {'p99':>9s}",

@@ -14,7 +14,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +23,7 @@ from qpavoid.arm.model import Robot, load_robot
 from qpavoid.control.analytic import AnalyticConfig, AnalyticController
 from qpavoid.control.controller import Controller
 from qpavoid.control.qp import QPConfig, QPController
+from qpavoid.control.qp.config import REDUNDANT
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.experiments.run_spec import (
     STALE_AFTER_LATENCY_S,
@@ -39,12 +40,6 @@ from qpavoid.output.view_data import replay_data
 from qpavoid.perception.tracker import PerceptionConfig
 from qpavoid.scenarios import motions
 from qpavoid.sensing.calibration_file import load_calibration
-
-#: Redundancy mode (docs/qp.md): weight of the elbow-clearance cost, and a regularisation
-#: large enough to give the end effector's null-space direction curvature (with 1e-7
-#: OSQP cannot reach its tolerance there).
-REDUNDANT_ELBOW_WEIGHT = 0.05
-REDUNDANT_REGULARIZATION = 1e-4
 
 
 @dataclass
@@ -81,13 +76,8 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
     qp = QPConfig(
         backend="qpsolvers" if spec.solver else "persistent", solver=spec.solver or "osqp"
     )
-    if spec.redundant:
-        qp = QPConfig(
-            backend=qp.backend,
-            solver=qp.solver,
-            elbow_weight=REDUNDANT_ELBOW_WEIGHT,
-            regularization=REDUNDANT_REGULARIZATION,
-        )
+    if spec.redundant:  # the redundancy mode's weights (docs/qp.md), same solver
+        qp = replace(REDUNDANT, backend=qp.backend, solver=qp.solver)
     return QPController(robot, config=config, qp=qp)
 
 

@@ -7,8 +7,13 @@ Kinect v2 ones). Joints are placed by role (the format's groups ``spine``, ``arm
 never by index. The
 operator sits at the table facing the robot (the paper's layout, Sect. 2): the robot base
 is on the table top (z = 0), the operator's chest is ``Operator.distance_m`` in front of
-it along +y, and the arms reach with a two-link inverse kinematics so segment lengths
-stay those of the skeleton.
+it along +y and ``Operator.x_m`` along x, and the arms reach with a two-link inverse
+kinematics so segment lengths stay those of the skeleton.
+
+Where the operator sits is the arm's: its task file's ``[operator]``
+(:func:`qpavoid.control.task.default_task`) places the seat relative to the robot's base,
+scaled by the arm's reach (the defaults here are the paper's place beside the iiwa); the
+person's own sizes and the table's height do not change with the arm.
 """
 
 from __future__ import annotations
@@ -52,7 +57,8 @@ class Operator:
     Attributes
     ----------
     x_m, distance_m
-        Position of the spine along x and in front of the robot base along +y.
+        Position of the spine along x and in front of the robot base along +y (default:
+        the paper's place beside the iiwa; each arm's task file gives its own).
     upper_arm_m, forearm_m, hand_m
         Segment lengths shoulder-elbow, elbow-wrist, wrist-hand.
     shoulder_half_width_m

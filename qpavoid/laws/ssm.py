@@ -17,6 +17,18 @@ The protective separation distance at time t₀ (ISO/TS 15066, eq. 1):
   inferred joints add their own radius, :mod:`qpavoid.perception.tracker`);
 * Z_r: the uncertainty of the robot's position.
 
+T_r, T_s and so S_r and S_s come from the robot description (:meth:`SSMConfig.resolve`),
+and from its maker's data where it gives them (``[arm]``, :mod:`qpavoid.arm.dynamics`):
+
+* a_j is the **slower** of the joint's acceleration limit and the maker's stopping data:
+  a stop the maker measured from v₀ lasting T₀ over D₀ brakes at ``min(v₀/T₀, v₀²/(2D₀))``
+  (:meth:`~qpavoid.arm.dynamics.ArmDynamics.braking_deceleration_radps2`), so T_s and S_s
+  are never shorter than the maker's stop at its speed, nor than the ramp the acceleration
+  limit allows (without stopping data a_j is the acceleration limit, as before);
+* T_r is the arm's reaction plus, for an arm with jerk limits, the lag
+  ``2 max_j a_j / j_j`` (:func:`~qpavoid.arm.braking.jerk_lag_s`) after which a
+  constant-deceleration ramp bounds the jerk-limited stop in time and distance.
+
 ``S_p ≤ d`` is then linear in the robot point's approach speed v_r and
 :func:`max_approach_speed` is its bound: the fastest the robot may approach a person at
 separation d and still be stationary before contact. Where even a robot at rest is too
@@ -39,7 +51,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from qpavoid.arm.braking import per_joint, stop_time
+from qpavoid.arm.braking import jerk_lag_s, per_joint, stop_time
 from qpavoid.arm.description import ArmDynamics
 from qpavoid.core.errors import InputError
 from qpavoid.distance.table import DistanceTable
@@ -63,15 +75,17 @@ class SSMConfig:
     reaction_time_s
         T_r: from the controller's tick to the arm starting to brake: one control period
         and the arm's reaction, s. None (the default): the robot description's
-        (``[arm] reaction_time_s``; :meth:`resolve`).
+        (``[arm] reaction_time_s``, plus the jerk lag of an arm with jerk limits;
+        :meth:`resolve`).
     stop_time_s
         T_s,max: the longest stop the controllers allow, s; each tick's budget is shorter
         while the robot moves slowly (:class:`StopTimeBudget`), and every joint is kept
         within ``a_j T_s``.
     max_acceleration_radps2
-        a_j: the arm's joint deceleration limits, ``(joint name, rad/s²)`` pairs (as in
-        :class:`~qpavoid.arm.braking.BrakingConfig`). None (the default): the robot
-        description's (``[arm] max_acceleration_radps2``; :meth:`resolve`).
+        a_j: the joint decelerations a stop counts on, ``(joint name, rad/s²)`` pairs (as
+        in :class:`~qpavoid.arm.braking.BrakingConfig`). None (the default): the robot
+        description's, the slower of ``[arm] max_acceleration_radps2`` and the maker's
+        ``[[arm.stopping]]`` data (:meth:`resolve`).
     intrusion_m
         C: how far a hand reaches past its modelled capsule (the fingers beyond HandTip).
     sensing_uncertainty_m
@@ -95,14 +109,30 @@ class SSMConfig:
 
     def resolve(self, arm: ArmDynamics) -> SSMConfig:
         """This config with the arm's values left at None taken from the robot
-        description's ``arm`` (its reaction time and acceleration limits)."""
+        description's ``arm``; a value given here is used as it is.
+
+        * ``max_acceleration_radps2``: per joint the slower of the acceleration limit and
+          the maker's stopping data, ``a_j = min(a_j, v₀/T₀, v₀²/(2 D₀))``
+          (:meth:`~qpavoid.arm.dynamics.ArmDynamics.braking_deceleration_radps2`): where the
+          maker's stop is slower than the ramp the limit allows, T_s and S_s are the maker's
+          (scaled to the speed as a constant deceleration); otherwise they are as computed
+          from the limit. Without stopping data: the limits themselves.
+        * ``reaction_time_s``: the arm's reaction, plus the jerk lag ``2 max_j a_j / j_j``
+          of an arm with jerk limits (:func:`~qpavoid.arm.braking.jerk_lag_s`; none for
+          the iiwa).
+        """
+        # (getattr: a description read before the maker's data existed has neither)
+        if self.reaction_time_s is None:
+            lag = jerk_lag_s(arm.max_acceleration_radps2, getattr(arm, "max_jerk_radps3", ()))
+            reaction = arm.reaction_time_s + lag if lag > 0.0 else arm.reaction_time_s
+        else:
+            reaction = self.reaction_time_s
+        braking = getattr(arm, "braking_deceleration_radps2", None)
         return replace(
             self,
-            reaction_time_s=(
-                arm.reaction_time_s if self.reaction_time_s is None else self.reaction_time_s
-            ),
+            reaction_time_s=reaction,
             max_acceleration_radps2=(
-                arm.max_acceleration_radps2
+                (braking() if braking is not None else arm.max_acceleration_radps2)
                 if self.max_acceleration_radps2 is None
                 else self.max_acceleration_radps2
             ),

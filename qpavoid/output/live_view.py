@@ -37,7 +37,8 @@ from qpavoid.core.errors import InputError
 from qpavoid.human.body import BodyModel, KinectHuman
 from qpavoid.human.frames import nobody
 from qpavoid.human.skeleton import SkeletonFormat
-from qpavoid.output.replay_html import encode, replay_html
+from qpavoid.output.arm_shapes import arm_parts
+from qpavoid.output.replay_html import encode, page_data, replay_html
 from qpavoid.output.view_data import replay_data
 from qpavoid.output.view_server import (
     MAX_CONNECTIONS,
@@ -112,8 +113,9 @@ class LiveView:
         self._state: tuple[int, bytes] = (0, b"null")  # (ticks handed so far, its JSON)
         self._robot_lock = threading.Lock()  # self.robot (its data) and _state: one thread
         self.clear_requested = threading.Event()
+        self.parts = arm_parts(robot)  # the URDF's meshes, read once
         start = _one_tick(self.robot, self.human.skeleton)
-        first = replay_data(start, self.metrics, self.robot, human=self.human)
+        first = replay_data(start, self.metrics, self.robot, human=self.human, parts=self.parts)
         self.page = replay_html(first, title, live=True).encode("utf-8")
         self.token = secrets.token_urlsafe(TOKEN_BYTES)
         try:
@@ -153,8 +155,11 @@ class LiveView:
         with self._robot_lock:  # the control loop never waits on this one
             if self._state[0] != handed:
                 log = {key: np.asarray(value)[None] for key, value in row.items()}
-                data = replay_data(log, self.metrics, self.robot, human=self.human)
-                self._state = (handed, json.dumps(encode(data), separators=(",", ":")).encode())
+                data = replay_data(
+                    log, self.metrics, self.robot, human=self.human, parts=self.parts
+                )
+                state = json.dumps(encode(page_data(data)), separators=(",", ":"))
+                self._state = (handed, state.encode())
             return self._state[1]
 
     def close(self) -> None:

@@ -2,6 +2,12 @@
 
 The sets are taken by the part they play (the robot description's roles: ``"scaled"``,
 ``"repelled"``, ``"end_effector"``) and labelled with their names (L1, L2, EE for the iiwa).
+Every stop threshold says whose rule it is, by role (the scaled set stops on f > 0.8, the
+repelled and end-effector sets within 0.05 m: the paper's rules, Sect. 5.4), and the
+figures that show one carry all the rules as a caption
+(:func:`~qpavoid.output.plot_base.stop_rules_note`).
+Repulsive speeds below 1e-6 m/s are drawn as 0 on an axis at least 0-0.01 m/s
+(:func:`~qpavoid.output.plot_base.speed_axis`): numerical noise never looks like repulsion.
 """
 
 from __future__ import annotations
@@ -13,7 +19,18 @@ import numpy as np
 from qpavoid.arm.description import ROLE_NAMES
 from qpavoid.laws.avoidance import l1_factor, stop_distances
 from qpavoid.loop.run_log import repulsion_keys
-from qpavoid.output.plot_base import STOP, Run, finish, set_title
+from qpavoid.output.plot_base import (
+    STOP,
+    Run,
+    finish,
+    role_label,
+    set_caption,
+    set_colours,
+    set_title,
+    speed_axis,
+    speed_for_axis,
+    stop_rules_note,
+)
 
 F6_D_MAX_M = 0.25  # right end of Fig. 6's distance axis
 
@@ -46,15 +63,10 @@ def _distance_lines(ax: Any, run: Run, roles: tuple[str, ...]) -> None:
     """Stop distances and the repulsion range of the sets playing ``roles`` (the repelled
     and/or the end-effector set)."""
     by_role = dict(zip(ROLE_NAMES, stop_distances(run.cfg).tolist(), strict=True))
-    stops = {run.robot.role_name(r): by_role[r] for r in roles}
-    for d in sorted(set(stops.values())):
-        who = ", ".join(n for n in stops if stops[n] == d)
+    for d in sorted({by_role[r] for r in roles}):
+        who = " and\n".join(role_label(run.robot, r) for r in roles if by_role[r] == d)
         ax.axhline(
-            d,
-            color="r",
-            ls="--",
-            lw=0.9,
-            label=f"stop distance {d:g} m" + (f" ({who})" if len(roles) > 1 else ""),
+            d, color="r", ls="--", lw=0.9, label=f"stop distance {d:g} m\n(rule of the {who})"
         )
     ax.axhline(
         run.cfg.rho_rep_m,
@@ -68,15 +80,27 @@ def _distance_lines(ax: Any, run: Run, roles: tuple[str, ...]) -> None:
 
 
 def _speed(run: Run, role: str) -> np.ndarray:
-    """|v_rep| over time of the repelled set or the end effector (``role``), m/s."""
+    """|v_rep| over time of the repelled set or the end effector (``role``), m/s, values
+    below :data:`~qpavoid.output.plot_base.SPEED_FLOOR_MPS` as 0."""
     keys = dict(zip(("repelled", "end_effector"), repulsion_keys(run.robot), strict=True))
-    return np.linalg.norm(run.log[keys[role]], axis=1)
+    return speed_for_axis(np.linalg.norm(run.log[keys[role]], axis=1))
 
 
 def _plot_f(ax: Any, run: Run) -> None:
     ax.plot(run.log["t"], run.log["f"], color="C0", lw=1.2, label="f (eq. 2)")
-    ax.axhline(run.cfg.f_stop, color="r", ls="--", lw=0.9, label=f"stop: f > {run.cfg.f_stop:g}")
+    rule = f"stop: f > {run.cfg.f_stop:g}\n(rule of the {role_label(run.robot, 'scaled')})"
+    ax.axhline(run.cfg.f_stop, color="r", ls="--", lw=0.9, label=rule)
     ax.set_ylim(-0.03, 1.03)
+
+
+def _f_stop_label(run: Run, at: str) -> str:
+    """The scaled set's stop threshold as a distance: ``f = 0.8 at <at>0.042 m`` and whose
+    rule it is."""
+    cfg = run.cfg
+    return (
+        f"f = {cfg.f_stop:g} at {at}{cfg.d_stop_L1_m():.3f} m\n"
+        f"(rule of the {role_label(run.robot, 'scaled')})"
+    )
 
 
 def fig_f_vs_distance(run: Run) -> Any:
@@ -128,17 +152,12 @@ def fig_f_vs_distance(run: Run) -> Any:
     if not (near | far).any():
         ax.plot([], [], ls="none", label=f"this run: {name} never measured")
     ax.axhspan(cfg.f_stop, 1.05, **STOP, label=f"robot stops: f > {cfg.f_stop:g}")
-    ax.axvline(
-        cfg.d_stop_L1_m(),
-        color="r",
-        ls="--",
-        lw=0.9,
-        label=f"f = {cfg.f_stop:g} at d = {cfg.d_stop_L1_m():.3f} m",
-    )
+    ax.axvline(cfg.d_stop_L1_m(), color="r", ls="--", lw=0.9, label=_f_stop_label(run, "d = "))
     xlabel = f"{name} distance ‖d_{name},H‖ (m, {run.method})"
     ax.set(xlim=(d[0], d_max), ylim=(-0.03, 1.05), xlabel=xlabel)
     finish(ax, "f")
     set_title(fig, run, f"Fig. 6: the factor f of eq. (2) against the {name} distance")
+    set_caption(fig, stop_rules_note(run))
     return fig
 
 
@@ -151,6 +170,7 @@ def fig_distance(role: str, number: int, run: Run) -> Any:
     _distance_lines(ax, run, (role,))
     finish(ax, "distance (m)", stop, _frames_note())
     set_title(fig, run, f"Fig. {number}: distance between the operator and {name}")
+    set_caption(fig, stop_rules_note(run))
     return fig
 
 
@@ -159,9 +179,9 @@ def fig_vrep(role: str, number: int, run: Run) -> Any:
     repelled set, the end effector) against time."""
     fig, (ax,), stop = _time_axes(run, 1, 3.4)
     name = run.robot.role_name(role)
-    ax.plot(run.log["t"], _speed(run, role), color="C2", lw=1.2, label=f"|v_rep| of {name}")
-    ax.set_ylim(bottom=0.0)
-    finish(ax, "speed (m/s)", stop, _frames_note())
+    speed = _speed(run, role)
+    ax.plot(run.log["t"], speed, color="C2", lw=1.2, label=f"|v_rep| of {name}")
+    finish(ax, "speed (m/s)", stop, _frames_note(), speed_axis(ax, speed))
     set_title(fig, run, f"Fig. {number}: repulsive velocity of {name} (eqs. 4-5, norm)")
     return fig
 
@@ -172,38 +192,37 @@ def fig_f_and_l1(run: Run) -> Any:
     _plot_f(a1, run)
     name = run.robot.role_name("scaled")
     a2.plot(run.log["t"], run.column(name), color="C1", lw=1.2, label=f"distance to {name}")
-    a2.axhline(
-        run.cfg.d_stop_L1_m(),
-        color="r",
-        ls=":",
-        lw=0.9,
-        label=f"f = {run.cfg.f_stop:g} at {run.cfg.d_stop_L1_m():.3f} m",
-    )
+    a2.axhline(run.cfg.d_stop_L1_m(), color="r", ls=":", lw=0.9, label=_f_stop_label(run, ""))
     finish(a1, "f", stop)
     finish(a2, f"{name} distance (m)", stop)
     set_title(fig, run, f"Fig. 13: the factor f and the {name} distance")
+    set_caption(fig, stop_rules_note(run))
     return fig
 
 
 def fig_timeline(run: Run) -> Any:
-    """Distances per set, repulsive speeds and f against time, stacked."""
-    fig, (a1, a2, a3), stop = _time_axes(run, 3, 7.0)
+    """Distances per set, repulsive speeds and f against time, stacked (0.2 inch taller for
+    each set beyond three: room for the legend of every set)."""
+    n_sets = len(run.robot.sets)
+    fig, (a1, a2, a3), stop = _time_axes(run, 3, 7.0 + 0.2 * max(0, n_sets - 3))
+    colours = set_colours(n_sets)
     for k, name in enumerate(run.robot.set_names):
-        a1.plot(run.log["t"], run.column(name), color=f"C{k}", lw=1.1, label=name)
+        a1.plot(run.log["t"], run.column(name), color=colours[k], lw=1.1, label=name)
     roles = ("repelled", "end_effector")
     _distance_lines(a1, run, roles)
-    for role in roles:
+    speeds = [_speed(run, role) for role in roles]
+    for role, speed in zip(roles, speeds, strict=True):
         a2.plot(
             run.log["t"],
-            _speed(run, role),
+            speed,
             lw=1.1,
             label=f"|v_rep| of {run.robot.role_name(role)}",
-            color=f"C{getattr(run.robot.roles, role)}",
+            color=colours[getattr(run.robot.roles, role)],
         )
-    a2.set_ylim(bottom=0.0)
     _plot_f(a3, run)
     finish(a1, "distance (m)", stop, _frames_note())
-    finish(a2, "speed (m/s)", stop)
+    finish(a2, "speed (m/s)", stop, speed_axis(a2, *speeds))
     finish(a3, "f", stop)
     set_title(fig, run, "Distances, repulsive speeds and f over time")
+    set_caption(fig, stop_rules_note(run))
     return fig

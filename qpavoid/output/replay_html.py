@@ -2,7 +2,9 @@
 
 MeshCat (``meshcat``, the viewer of ``pinocchio.visualize.MeshcatVisualizer``) draws the
 scene: its three.js bundle is copied into the page, its Python classes build the objects
-(unit cylinders and spheres, lines) and its command format places them. Chosen over
+(unit cylinders and spheres, lines, the arm's collision objects: its meshes as the
+vertices and triangles coal loaded, its primitives as MeshCat's shapes of their size;
+the floor) and its command format places them. Chosen over
 viser because MeshCat's viewer is one JavaScript file that runs from a page with no
 server, which is what "opens offline from a file" needs; viser's client expects its
 server or a hosted build. The page adds a panel (time slider, play/pause, speed, the
@@ -27,6 +29,7 @@ import numpy as np
 
 from qpavoid.arm.model import load_robot
 from qpavoid.core.errors import InputError
+from qpavoid.output.arm_shapes import ArmPart
 from qpavoid.output.replay_page import PAGE
 from qpavoid.output.run_files import load_log
 from qpavoid.output.view_data import replay_data
@@ -34,6 +37,7 @@ from qpavoid.output.view_data import replay_data
 __all__ = [
     "available",
     "encode",
+    "page_data",
     "replay_html",
     "replay_title",
     "scene_commands",
@@ -51,9 +55,16 @@ _REWRITES = (
 #: What every network address (http://, ws://, file://, ...) contains; base64 never does.
 _ADDRESS = "://"
 
+#: Thickness of the floor's box, m (thin: a plane that MeshCat draws from both sides).
+FLOOR_THICKNESS_M = 0.01
+#: How far the floor's top lies below z = 0, m (1 mm: MeshCat's own grid, at z = 0, stays
+#: visible on top of it instead of flickering with it).
+FLOOR_BELOW_M = 0.001
 #: Colours (RGB) of the scene.
 COLOURS = {
     "link": 0x8A8F98,
+    "arm": 0xC9CDD3,
+    "floor": 0xD8C8A8,
     "robot": 0xFF8C1A,
     "human": 0x2F6FE0,
     "path": 0x20A080,
@@ -105,40 +116,90 @@ def viewer_script() -> str:
     return script
 
 
+#: MeshCat's cylinder has its axis along y (three.js), coal's along z: the rotation about x
+#: by +90° that takes y to z.
+_Y_TO_Z = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
+
+
+def _translation(z: float) -> np.ndarray:
+    """(4, 4) a translation by ``z`` along z, m."""
+    out = np.eye(4)
+    out[2, 3] = z
+    return out
+
+
+def part_objects(part: ArmPart) -> list[tuple[str, Any, np.ndarray]]:
+    """MeshCat geometries of one collision object, each with its matrix in the frame of
+    the joint that carries it (a capsule is a cylinder and two spheres): (name, geometry,
+    (4, 4) matrix)."""
+    import meshcat.geometry as g
+
+    m = part.placement
+    if part.shape == "mesh":
+        return [(part.name, g.TriangularMeshGeometry(part.vertices, part.triangles), m)]
+    if part.shape == "box":
+        return [(part.name, g.Box(list(part.size)), m)]
+    if part.shape == "sphere":
+        return [(part.name, g.Sphere(part.size[0]), m)]
+    radius, length = part.size
+    out = [(f"{part.name}/body", g.Cylinder(length, radius), m @ _Y_TO_Z)]
+    if part.shape == "capsule":
+        for end, z in (("a", -length / 2), ("b", length / 2)):
+            out.append((f"{part.name}/{end}", g.Sphere(radius), m @ _translation(z)))
+    return out
+
+
 def scene_commands(data: dict[str, Any]) -> list[str]:
     """MeshCat commands (msgpack, base64) that create every object of the replay.
 
     Shapes are unit cylinders (axis y, height 1, radius 1) and unit spheres that the page
-    scales and places each frame; the planned path and the end-effector trace are lines.
+    scales and places each frame; the arm's collision objects (``data["parts"]``) hang,
+    each at its placement in its joint's frame, under ``robot/meshes/j<joint>``, which the
+    page places at the joint's pose each frame; the floor is a thin box whose top is the
+    plane z = 0 (:data:`FLOOR_BELOW_M` below it); the planned path and the end-effector
+    trace are lines.
     """
     import meshcat.geometry as g
     import umsgpack
     from meshcat.commands import SetObject
     from meshcat.path import Path as MeshcatPath
 
-    def solid(colour: int, opacity: float = 1.0) -> Any:
-        return g.MeshLambertMaterial(color=colour, opacity=opacity)
+    def solid(colour: int, opacity: float = 1.0, **extra: Any) -> Any:
+        return g.MeshLambertMaterial(color=colour, opacity=opacity, **extra)
 
     objects: list[tuple[str, Any, Any]] = []
+    matrices: dict[str, np.ndarray] = {}
 
     def capsule(path: str, colour: int, opacity: float) -> None:
         objects.append((f"{path}/body", g.Cylinder(1.0, 1.0), solid(colour, opacity)))
         for end in ("a", "b"):
             objects.append((f"{path}/{end}", g.Sphere(1.0), solid(colour, opacity)))
 
+    x0, x1, y0, y1 = data["floor"]
+    floor = g.Box([x1 - x0, y1 - y0, FLOOR_THICKNESS_M])
+    objects.append(("floor", floor, solid(COLOURS["floor"], 0.35)))
+    matrices["floor"] = _translation(-FLOOR_THICKNESS_M / 2 - FLOOR_BELOW_M)
+    matrices["floor"][:2, 3] = [(x0 + x1) / 2, (y0 + y1) / 2]
+    # the arm's own surfaces, drawn behind a safety shape of the same radius (no flicker)
+    arm = solid(COLOURS["arm"], polygonOffset=True, polygonOffsetFactor=1, polygonOffsetUnits=1)
+    for part in data.get("parts", ()):
+        for name, geometry, matrix in part_objects(part):
+            path = f"robot/meshes/j{part.joint}/{name}"
+            objects.append((path, geometry, arm))
+            matrices[path] = matrix
     for i in range(data["links"].shape[1] - 1):
         objects.append((f"robot/link{i}", g.Cylinder(1.0, 1.0), solid(COLOURS["link"])))
     spheres = data["method"] == "spheres"
     for i in range(data["robot"].shape[1]):
         if spheres:
-            objects.append((f"robot/shape{i}", g.Sphere(1.0), solid(COLOURS["robot"], 0.45)))
+            objects.append((f"robot/shapes/{i}", g.Sphere(1.0), solid(COLOURS["robot"], 0.45)))
         else:
-            capsule(f"robot/shape{i}", COLOURS["robot"], 0.45)
+            capsule(f"robot/shapes/{i}", COLOURS["robot"], 0.45)
     for i in range(data["human"].shape[1]):
         if spheres:
-            objects.append((f"human/shape{i}", g.Sphere(1.0), solid(COLOURS["human"], 0.6)))
+            objects.append((f"human/shapes/{i}", g.Sphere(1.0), solid(COLOURS["human"], 0.6)))
         else:
-            capsule(f"human/shape{i}", COLOURS["human"], 0.6)
+            capsule(f"human/shapes/{i}", COLOURS["human"], 0.6)
     for s in range(len(data["set_names"])):
         for k, state in enumerate(data["pair_states"]):
             objects.append((f"pairs/set{s}/{k}", g.Cylinder(1.0, 1.0), solid(COLOURS[state])))
@@ -158,7 +219,10 @@ def scene_commands(data: dict[str, Any]) -> list[str]:
         for part in ("object", "geometry", "material"):
             element = obj if part == "object" else getattr(obj, part)
             element.uuid = str(uuid.uuid5(uuid.NAMESPACE_OID, f"qpavoid/{path}/{part}"))
-        out.append(base64.b64encode(umsgpack.packb(cmd.lower())).decode("ascii"))
+        lowered = cmd.lower()
+        if path in matrices:  # three.js reads a matrix column by column
+            lowered["object"]["object"]["matrix"] = matrices[path].flatten(order="F").tolist()
+        out.append(base64.b64encode(umsgpack.packb(lowered)).decode("ascii"))
     return out
 
 
@@ -181,6 +245,12 @@ def encode(value: Any) -> Any:
     return value
 
 
+def page_data(data: dict[str, Any]) -> dict[str, Any]:
+    """``data`` as the page's numbers: without the collision objects, which the page gets
+    as scene objects (:func:`scene_commands`)."""
+    return {key: value for key, value in data.items() if key != "parts"}
+
+
 def replay_html(data: dict[str, Any], title: str, live: bool = False) -> str:
     """The replay page of ``data`` (:func:`~qpavoid.output.view_data.replay_data`); ``live``: the
     page of :class:`~qpavoid.output.live_view.LiveView`, which asks its server for each tick.
@@ -190,7 +260,7 @@ def replay_html(data: dict[str, Any], title: str, live: bool = False) -> str:
     InputError
         If the page would refer to a network address (never expected: a safeguard).
     """
-    payload = json.dumps(encode(data), separators=(",", ":"), allow_nan=False)
+    payload = json.dumps(encode(page_data(data)), separators=(",", ":"), allow_nan=False)
     html = (
         PAGE.replace("{{TITLE}}", json.dumps(title)[1:-1].replace("<", "&lt;"))
         .replace("{{VIEWER}}", viewer_script())

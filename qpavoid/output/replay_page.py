@@ -4,16 +4,22 @@ fills in the viewer bundle, the scene commands and the run's arrays).
 The script keeps one tick index. The slider (``#time``, seconds) and play/pause
 (``#play``, at ``#speed`` times real time) move it; each move shows that tick's numbers
 (``#t``, ``#f``, ``#d0``, ``#s0``, ... per robot set (one row of ``#sets`` each, as many
-as the robot description has sets), ``#reason``,
-``#alert``: a suspect input, ``#safety``) and places every object from the scene frame
-at or before it. Shapes are
+as the robot description has sets), ``#reason``, ``#alert``: a suspect input,
+``#safety``) and places every object from the scene frame at or before it. Shapes are
 unit cylinders (axis y) and spheres, scaled and placed by one matrix each; a shape that
-is not seen is scaled to nothing. In live mode (``LIVE``) the controls are hidden and the
-script shows the newest tick its server gives (``state``) ten times a second, and, while
-the input is suspect, a button (``#clear``) that asks the server to clear the flagged
-people (``POST clear``).
-``window.qpavoidReplay`` exposes ``seek(t)``,
-``tick()``, ``visible(name, on)`` and ``objects()`` for tests.
+is not seen is scaled to nothing. The arm's collision objects hang on one group per joint
+(``robot/meshes/j<joint>``), placed from the joint's pose (a quaternion and a
+translation). The camera starts where ``camera`` says, looking at its ``target``
+(MeshCat's camera hangs on a frame turned +90° about x, the three.js y-up convention: a
+point (x, y, z) of the base frame is (x, z, −y) there). Check boxes (``#layers``) show or
+hide the arm's meshes, the safety shapes, the person and the floor. In live mode
+(``LIVE``) the controls are hidden and the script shows the newest tick its server gives
+(``state``) ten times a second, and, while the input is suspect, a button (``#clear``)
+that asks the server to clear the flagged people (``POST clear``).
+``window.qpavoidReplay`` exposes ``seek(t)``, ``tick()``, ``visible(name, on)``,
+``objects()``, ``children(path)`` (the names under a path) and ``world(path)`` (the
+matrix, in the base frame and column by column, of the object MeshCat keeps at
+``path/<object>``) for tests.
 """
 
 __all__ = ["PAGE"]
@@ -37,6 +43,8 @@ PAGE = r"""<!DOCTYPE html>
   #reason { color: #b00; min-height: 1.3em; }
   #alert { color: #a50; }
   #safety { color: #444; }
+  #layers { font-size: 12px; }
+  #layers label { margin-right: 2px; white-space: nowrap; }
 </style>
 </head>
 <body>
@@ -51,6 +59,13 @@ PAGE = r"""<!DOCTYPE html>
       <option value="1" selected>1×</option><option value="2">2×</option>
       <option value="4">4×</option>
     </select>
+  </div>
+  <div id="layers">show:
+    <label><input type="checkbox" data-path="robot/meshes" checked> arm</label>
+    <label><input type="checkbox" data-path="robot/shapes" checked>
+      <span id="shapes-name">safety shapes</span></label>
+    <label><input type="checkbox" data-path="human" checked> person</label>
+    <label><input type="checkbox" data-path="floor" checked> floor</label>
   </div>
   <div>t = <b id="t"></b> s &nbsp; f = <b id="f"></b> &nbsp; <span id="moving"></span></div>
   <table>
@@ -104,12 +119,22 @@ const viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
 for (const cmd of SCENE) {
   viewer.handle_command_bytearray(Uint8Array.from(atob(cmd), (c) => c.charCodeAt(0)));
 }
-// the camera: from the side and above the table (MeshCat stores it as [x, -z, y] of the
-// base frame: here x 1.6 m, y 0.1 m, z 0.9 m), looking at the robot base
-viewer.handle_command({
-  type: "set_property", path: "/Cameras/default/rotated/<object>", property: "position",
-  value: [1.6, -0.9, 0.1],
-});
+// the camera: above and in front of the arm and the person, looking at them; MeshCat's
+// camera hangs on a frame turned +90 deg about x, where the base's (x, y, z) is (x, z, -y)
+function turned(p) { return [p[0], p[2], -p[1]]; }
+viewer.camera.position.set(...turned(D.camera.position));
+viewer.controls.target.set(...turned(D.camera.target));
+viewer.controls.update();
+for (const box of document.querySelectorAll("#layers input")) {
+  box.addEventListener("change", () => {
+    viewer.handle_command({ type: "set_property", path: "/qpavoid/" + box.dataset.path,
+                            property: "visible", value: box.checked });
+  });
+}
+document.getElementById("shapes-name").textContent = D.method;
+if (D.arm_parts.length === 0) {  // a URDF without collision objects
+  document.querySelector('#layers input[data-path="robot/meshes"]').parentElement.hidden = true;
+}
 
 const ZERO = [0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1];
 function place(path, matrix) {
@@ -135,6 +160,13 @@ function cylinder(a, b, r) {  // a unit cylinder (axis y) from a to b with radiu
   return [x[0] * r, x[1] * r, x[2] * r, 0, y[0] * L, y[1] * L, y[2] * L, 0,
           z[0] * r, z[1] * r, z[2] * r, 0, m[0], m[1], m[2], 1];
 }
+function pose(a, o) {  // a quaternion (x, y, z, w) and a translation at a[o..o+7)
+  const x = a[o], y = a[o + 1], z = a[o + 2], w = a[o + 3];
+  return [1 - 2 * (y * y + z * z), 2 * (x * y + z * w), 2 * (x * z - y * w), 0,
+          2 * (x * y - z * w), 1 - 2 * (x * x + z * z), 2 * (y * z + x * w), 0,
+          2 * (x * z + y * w), 2 * (y * z - x * w), 1 - 2 * (x * x + y * y), 0,
+          a[o + 4], a[o + 5], a[o + 6], 1];
+}
 function capsule(path, a, b, r) {
   place(path + "/body", cylinder(a, b, r));
   place(path + "/a", sphere(a, r));
@@ -153,15 +185,19 @@ function showFrame(j) {
     place("robot/link" + i, cylinder(vec(D.links, o), vec(D.links, o + 3), 0.035));
   }
   place("robot/ee", sphere(vec(D.links, (j * nl + nl - 1) * 3), 0.02));
+  const nm = D.mesh_joints.length;
+  for (let m = 0; m < nm; m++) {
+    place("robot/meshes/j" + D.mesh_joints[m], pose(D.mesh_poses, (j * nm + m) * 7));
+  }
   const groups = [["robot", D.robot, D.robot_radii], ["human", D.human, D.human_radii]];
   for (const [who, shapes, radii] of groups) {
     const n = shapes.shape[1];
     for (let i = 0; i < n; i++) {
       if (spheres) {
-        place(who + "/shape" + i, sphere(vec(shapes, (j * n + i) * 3), radii[i]));
+        place(who + "/shapes/" + i, sphere(vec(shapes, (j * n + i) * 3), radii[i]));
       } else {
         const o = (j * n + i) * 6;
-        capsule(who + "/shape" + i, vec(shapes, o), vec(shapes, o + 3), radii[i]);
+        capsule(who + "/shapes/" + i, vec(shapes, o), vec(shapes, o + 3), radii[i]);
       }
     }
   }
@@ -283,9 +319,15 @@ window.qpavoidReplay = {
   tick: () => tick,
   visible: (name, on) => viewer.handle_command(
     { type: "set_property", path: "/qpavoid/" + name, property: "visible", value: on }),
-  objects: () => {
-    const root = viewer.scene_tree.find(["qpavoid"]);
-    return Object.keys(root.children);
+  objects: () => Object.keys(viewer.scene_tree.find(["qpavoid"]).children),
+  children: (path) => Object.keys(viewer.scene_tree.find(["qpavoid", ...path.split("/")]).children),
+  world: (path) => {  // relative to /qpavoid: MeshCat turns the whole scene to y-up
+    const root = viewer.scene_tree.find(["qpavoid"]).object;
+    const node = viewer.scene_tree.find(["qpavoid", ...path.split("/")]);
+    const object = ("<object>" in node.children ? node.children["<object>"] : node).object;
+    object.updateWorldMatrix(true, false);
+    const matrix = root.matrixWorld.clone().invert().multiply(object.matrixWorld);
+    return Array.from(matrix.elements);
   },
 };
 </script>

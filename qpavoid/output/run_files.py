@@ -87,7 +87,11 @@ def load_log(path: str | Path) -> dict[str, np.ndarray]:
     p = Path(path)
     if p.is_dir():
         p = p / "log.npz"
-    expected = f"expected the log.npz of a run, with arrays {', '.join(LOG_KEYS)}"
+    named = [k for k in LOG_KEYS if not k.startswith("v_rep_")]  # the iiwa's sets' names
+    expected = (
+        f"expected the log.npz of a run, with arrays {', '.join(named)} and v_rep_<set> "
+        "of the repelled and end-effector sets"
+    )
     return read_file(p, lambda f: read_npz(f, None, expected), "run log")
 
 

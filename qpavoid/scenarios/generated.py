@@ -15,17 +15,27 @@ at the camera rate (sample and hold).
 
 Targets are placed against the robot's *nominal* motion (the path tracked with nobody
 near, :func:`nominal_configurations`), so they stay right if the path or radii change.
+The path, where the operator sits and the sets aimed at are the arm's own: its task file
+(:func:`~qpavoid.control.task.default_task`, the paper's for the iiwa, scaled by the reach
+for the other arms) and its description's sets and roles.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import pairwise
 
 import numpy as np
 
 from qpavoid.arm.model import Robot
-from qpavoid.control.task import ArcPath, inverse_kinematics, smoothstep
+from qpavoid.control.task import (
+    ArcPath,
+    PlannedPath,
+    Task,
+    default_task,
+    inverse_kinematics,
+    smoothstep,
+)
 from qpavoid.core.errors import InputError
 from qpavoid.core.geometry import unit
 from qpavoid.distance.methods import distance_method
@@ -106,7 +116,7 @@ def _hand_joint(operator: Operator, side: str) -> int:
     return operator.skeleton.group(f"arm_{side}")["hand"]
 
 
-def nominal_configurations(robot: Robot, path: ArcPath, times: np.ndarray) -> np.ndarray:
+def nominal_configurations(robot: Robot, path: PlannedPath, times: np.ndarray) -> np.ndarray:
     """Joint angles (len(times), nq) tracking the path exactly, by IK from the start."""
     q = inverse_kinematics(robot, path.reference(0.0)[0])
     out = []
@@ -119,7 +129,7 @@ def nominal_configurations(robot: Robot, path: ArcPath, times: np.ndarray) -> np
 def _clearance_target(
     robot: Robot,
     human: KinectHuman,
-    path: ArcPath,
+    path: PlannedPath,
     operator: Operator,
     side: str,
     anchor: np.ndarray,
@@ -154,26 +164,35 @@ def _clearance_target(
 def make_scenario(
     name: str,
     robot: Robot,
-    path: ArcPath | None = None,
+    path: PlannedPath | None = None,
     human: KinectHuman | None = None,
     operator: Operator | None = None,
+    task: Task | None = None,
 ) -> ScriptedReach | Working:
-    """The generated motion called ``name`` (``free``, ``test1``, ``test2``, ``random:SEED``)."""
-    path = path or ArcPath()
+    """The generated motion called ``name`` (``free``, ``test1``, ``test2``, ``random:SEED``).
+
+    ``task`` (default: the arm's, :func:`~qpavoid.control.task.default_task`) gives the
+    path and where the operator sits, unless ``path`` and ``operator`` are given.
+    """
+    task = task or default_task(robot)
+    path = path or task.path
     human = human or KinectHuman()
-    op = operator or Operator()
+    op = operator or task.operator
     if name == "free":
         return Working(op)
     if name == "test1":
         # Beside the wrist of the nominal motion at 60 % of the path: from the point half-way
-        # between the wrist centre A6 (the last L2 point) and the flange (the EE point),
-        # square to that axis, towards the operator, so that L2 and EE come equally close: the
-        # nominal motion's closest approach to them is 0.04 m, and the repulsion has to
-        # deflect the robot to keep it beyond the 0.05 m stop distance.
+        # between the wrist (the end of the repelled set's capsule nearer the end effector:
+        # the iiwa's A6) and the end-effector frame (the flange), square to that axis,
+        # towards the operator, so that the sets there come equally close: the nominal
+        # motion's closest approach to every set but the scaled one (the iiwa's L2 and EE) is
+        # 0.04 m, and the repulsion has to deflect the robot to keep it beyond the 0.05 m
+        # stop distance.
         tc = 0.6 * path.duration_s
-        P = robot.control_points(nominal_configurations(robot, path, np.array([tc]))[0])
-        wrist = P[robot.sets[robot.roles.repelled].points[-1]]
-        flange = P[robot.sets[robot.roles.end_effector].points[-1]]
+        kin = robot.kinematics(nominal_configurations(robot, path, np.array([tc]))[0], False)
+        flange = kin.ee_placement[:3, 3]
+        ends = kin.segments[robot.roles.repelled]
+        wrist = ends[np.argmin(np.linalg.norm(ends - flange, axis=1))]
         axis = unit(flange - wrist)
         towards = np.array([0.0, 1.0, 0.3])  # the operator's side, above
         target = _clearance_target(
@@ -185,7 +204,7 @@ def make_scenario(
             0.5 * (wrist + flange),
             unit(towards - (towards @ axis) * axis),
             0.04,
-            (robot.role_name("repelled"), robot.role_name("end_effector")),
+            tuple(n for n in robot.set_names if n != robot.role_name("scaled")),
         )
         return reach_and_return(op, "right", target, (2.0, 5.0, 11.0, 14.0))
     if name == "test2":
@@ -193,9 +212,9 @@ def make_scenario(
         # operator's right and below L2 (which lies between the operator and L1), to
         # 0.02 m by spheres and by capsules (f = 0.96): the robot must stop, whichever
         # distance method it uses.
-        # The operator sits 0.4 m further to -x, so that leaning in keeps the head clear of
-        # the end effector.
-        op = operator or Operator(x_m=-0.25)
+        # The operator sits where the task says (for the iiwa 0.4 m further to -x), so
+        # that leaning in keeps the head clear of the end effector.
+        op = operator or task.test2_operator
         q0 = inverse_kinematics(robot, path.reference(0.0)[0])
         anchor = robot.control_points(q0)[robot.sets[robot.roles.scaled].points[1]]
         target = _clearance_target(
@@ -211,7 +230,8 @@ def make_scenario(
             ("spheres", "capsules"),
         )
         return reach_and_return(op, "right", target, (1.0, 4.0, 9.0, 11.0))
-    return random_approach(np.random.default_rng(check_scenario_name(name)), robot, path)
+    rng = np.random.default_rng(check_scenario_name(name))
+    return random_approach(rng, robot, path, operator, task=task)
 
 
 def check_scenario_name(name: str) -> int | None:
@@ -241,20 +261,26 @@ SCENARIOS = ("test1", "test2", "free")
 def random_approach(
     rng: np.random.Generator,
     robot: Robot,
-    path: ArcPath | None = None,
+    path: PlannedPath | None = None,
     operator: Operator | None = None,
     max_speed_mps: float = 1.6,
     nominal: np.ndarray | None = None,
+    task: Task | None = None,
 ) -> ScriptedReach:
     """A hand approaching a random robot set from a random direction at a random time.
 
     The target is a random control point of the robot's nominal configuration at a random
-    path time, shifted 0-0.1 m along a random direction on the operator's side; the hand
-    travels there at a random peak speed up to ``max_speed_mps`` (the quintic law peaks at
-    1.875 times the mean speed), holds 1-4 s, and withdraws.
+    path time (a point of any of the description's sets, each point as likely), shifted
+    0-0.1 m along a random direction on the operator's side; the hand travels there at a
+    random peak speed up to ``max_speed_mps`` (the quintic law peaks at 1.875 times the
+    mean speed), holds 1-4 s, and withdraws. The path and the operator are the ``task``'s
+    (default: the arm's, :func:`~qpavoid.control.task.default_task`), the operator moved
+    by up to 0.2 m either way along x, unless ``path`` and ``operator`` are given.
     """
-    path = path or ArcPath()
-    op = operator or Operator(x_m=0.15 + rng.uniform(-0.2, 0.2))
+    task = task or default_task(robot)
+    path = path or task.path
+    seat = task.operator
+    op = operator or replace(seat, x_m=seat.x_m + rng.uniform(-0.2, 0.2))
     times = np.linspace(0, path.duration_s, 31)
     if nominal is None:
         nominal = nominal_configurations(robot, path, times)

@@ -4,8 +4,10 @@ A :class:`StrikeCase` is one randomized attack on the controller: one or both ha
 from rest straight *into* a robot set (the target is on the set's capsule axis, so a robot
 that does not get out of the way is hit), arriving at a random path time with a chosen
 peak speed, holding there, then withdrawing. The targets (:func:`strike_targets`) are the
-robot description's sets by name (``L1``, ``L2``, ``EE`` for the iiwa), the ``shoulder``
-(where the scaled set's capsule starts: A2 for the iiwa) and the ``base`` column under it.
+robot description's sets by name (``L1``, ``L2``, ``EE`` for the iiwa), then the places
+its task file's ``[strikes]`` names (:func:`~qpavoid.control.task.default_task`; for the
+iiwa the ``shoulder``, A2, and the ``base`` column 0.1 m under it). The operator sits where
+the task file places it, moved by up to 0.15 m either way along x.
 A fault can be laid on top (:class:`~qpavoid.loop.camera.CameraFault`): the striking hand
 ``lost`` or ``inferred`` as it arrives, a ``frozen`` sensor, a ``gap`` in the frames, or
 ``jitter`` (delayed and dropped frames all run long).
@@ -20,16 +22,15 @@ import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
+import pinocchio as pin
 
 from qpavoid.arm.model import Robot, load_robot
-from qpavoid.control.task import ArcPath
+from qpavoid.control.task import PlannedPath, Task, default_task
 from qpavoid.core.errors import InputError
-from qpavoid.human.posture import ARM, Operator
+from qpavoid.human.posture import ARM
 from qpavoid.loop.camera import CameraConfig, CameraFault
 from qpavoid.scenarios.generated import ScriptedReach, nominal_configurations, reach_and_return
 
-#: Where a strike aims besides the robot's sets (:func:`strike_targets`).
-BODY_TARGETS = ("shoulder", "base")
 #: Faults a case may carry ("none" for a clean sensor).
 FAULTS = ("none", "lost", "inferred", "frozen", "gap", "jitter")
 
@@ -70,10 +71,12 @@ class StrikeCase:
         return self.arrival_s + 2.0
 
 
-def strike_targets(robot: Robot) -> tuple[str, ...]:
-    """Where a strike may aim on ``robot``: each of its sets by name, then
-    :data:`BODY_TARGETS`."""
-    return (*robot.set_names, *BODY_TARGETS)
+def strike_targets(robot: Robot, task: Task | None = None) -> tuple[str, ...]:
+    """Where a strike may aim on ``robot``: each of its sets by name, then the places its
+    ``task`` names (default: the arm's task file's ``[strikes]``,
+    :func:`~qpavoid.control.task.default_task`)."""
+    task = task or default_task(robot)
+    return (*robot.set_names, *(target.name for target in task.body_targets))
 
 
 @functools.cache
@@ -82,10 +85,13 @@ def _default_robot() -> Robot:
     return load_robot()
 
 
-def strike_case(seed: int, max_speed_mps: float = 2.0, robot: Robot | None = None) -> StrikeCase:
+def strike_case(
+    seed: int, max_speed_mps: float = 2.0, robot: Robot | None = None, task: Task | None = None
+) -> StrikeCase:
     """The strike of ``seed`` on ``robot`` (default: the default robot description): target
-    (:func:`strike_targets`), speed (0.5 to ``max_speed_mps``), fault, timing."""
-    targets = strike_targets(robot or _default_robot())
+    (:func:`strike_targets` of ``task``, default the arm's), speed (0.5 to
+    ``max_speed_mps``), fault, timing."""
+    targets = strike_targets(robot or _default_robot(), task)
     rng = np.random.default_rng([seed, 9])
     return StrikeCase(
         seed,
@@ -98,15 +104,18 @@ def strike_case(seed: int, max_speed_mps: float = 2.0, robot: Robot | None = Non
     )
 
 
-def _aim(robot: Robot, q: np.ndarray, target: str, rng: np.random.Generator) -> np.ndarray:
-    """A point inside the robot at joint angles ``q``: on the named capsule's axis."""
-    seg = robot.capsules(q)
-    shoulder = seg[robot.roles.scaled, 0]  # where the scaled set's capsule starts
-    if target == "shoulder":
-        return shoulder.copy()
-    if target == "base":
-        return shoulder - np.array([0.0, 0.0, 0.1])
-    a, b = seg[robot.set_index(target)]
+def _aim(
+    robot: Robot, q: np.ndarray, target: str, rng: np.random.Generator, task: Task
+) -> np.ndarray:
+    """A point inside the robot at joint angles ``q``: on the named set's capsule axis, at
+    ``a + u (b − a)``, u uniform in [0.2, 1]; or the place of the task's ``[strikes]``
+    called ``target``: its frame's placement applied to its offset (Pinocchio)."""
+    for body in task.body_targets:
+        if body.name == target:
+            data = robot.model.createData()
+            pin.framesForwardKinematics(robot.model, data, q)
+            return data.oMf[robot.model.getFrameId(body.frame)].act(np.array(body.xyz_m))
+    a, b = robot.capsules(q)[robot.set_index(target)]
     return a + rng.uniform(0.2, 1.0) * (b - a)
 
 
@@ -123,16 +132,21 @@ class TwoHands:
 
 
 def strike_motion(
-    case: StrikeCase, robot: Robot, path: ArcPath | None = None
+    case: StrikeCase, robot: Robot, path: PlannedPath | None = None, task: Task | None = None
 ) -> ScriptedReach | TwoHands:
-    """The true motion of ``case``: hands from rest into their targets, held 1.5 s, back."""
-    path = path or ArcPath()
+    """The true motion of ``case``: hands from rest into their targets, held 1.5 s, back.
+
+    The path (unless ``path`` is given), the operator's seat and the targets besides the
+    sets are the ``task``'s (default: the arm's, :func:`~qpavoid.control.task.default_task`).
+    """
+    task = task or default_task(robot)
+    path = path or task.path
     rng = np.random.default_rng([case.seed, 11])
     (q,) = nominal_configurations(robot, path, np.array([min(case.arrival_s, path.duration_s)]))
-    op = Operator(x_m=0.15 + rng.uniform(-0.15, 0.15))
+    op = replace(task.operator, x_m=task.operator.x_m + rng.uniform(-0.15, 0.15))
     reaches = {}
     sides = ("right", "left") if case.both_hands else (case.side,)
-    targets = strike_targets(robot)
+    targets = strike_targets(robot, task)
     if case.target not in targets:
         raise InputError(
             f"strike target {case.target!r} is not one of {targets}",
@@ -141,7 +155,7 @@ def strike_motion(
         )
     for n, side in enumerate(sides):
         target = targets[(targets.index(case.target) + n) % len(targets)]
-        aim = _aim(robot, q, target, rng)
+        aim = _aim(robot, q, target, rng, task)
         start = op.reach(op.rest(), side, aim)[ARM[side][3]]  # where the hand can get to
         rest = op.rest()[ARM[side][3]]
         travel = float(np.linalg.norm(start - rest)) * 1.875 / case.speed_mps
@@ -170,7 +184,6 @@ def strike_camera(case: StrikeCase, base: CameraConfig | None = None) -> CameraC
 
 
 __all__ = [
-    "BODY_TARGETS",
     "FAULTS",
     "StrikeCase",
     "TwoHands",

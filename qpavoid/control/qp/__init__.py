@@ -3,7 +3,8 @@
 One file per piece, as in pink and mink, each returning full-width blocks
 (:mod:`.pieces`: ``Objective(H, c)``, ``Constraint(G, h)``, ``Bounds(lb, ub)``) over the
 named variables of :mod:`.variables`: the tasks :mod:`.tasks.ee` (eq. 8),
-:mod:`.tasks.regularization`, :mod:`.tasks.elbow` (redundancy); the limits
+:mod:`.tasks.regularization`, :mod:`.tasks.elbow` and :mod:`.tasks.posture`
+(redundancy); the limits
 :mod:`.limits.velocity` (eq. 3), :mod:`.limits.position`, :mod:`.limits.velocity_damper`;
 the barriers :mod:`.barriers.repulsion` (eqs. 4-7) and :mod:`.barriers.separation` (ISO/TS
 15066). :mod:`.problem` assembles them, :mod:`.backends` solves, :mod:`.controller`

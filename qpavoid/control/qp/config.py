@@ -35,6 +35,17 @@ class QPConfig:
         ``[roles] elbow``; A4 for the iiwa) to move away from the closest person point at
         ``elbow_speed_mps`` times eq. (4)'s shape with ρ = ``elbow_influence_m``; 0
         disables it.
+    posture_weight, posture_gain_per_s
+        Redundancy mode: a cost (:class:`~qpavoid.control.qp.tasks.posture.PostureTask`)
+        pulling q towards the rest posture at ``posture_gain_per_s × (q_rest − q)``, only in
+        the end effector's null space (it never moves the end effector); 0 (the default)
+        disables it, as a 6-joint arm has no null space. The rest posture is the start
+        configuration (:class:`~qpavoid.control.qp.controller.QPController`). w = 1e-3 per
+        (rad/s)² (the redundancy mode's, ``REDUNDANT.posture_weight``) is ten times the
+        redundancy mode's regularisation, so the null-space motion is 91 % of the pull,
+        and a third of the elbow cost's curvature along the swivel (0.05 × (0.25 m/rad)²),
+        so a person near the elbow still pushes it away; k = 0.5 /s returns a posture in
+        about 2 s (time constant) at no more than 0.5 rad/s per rad of error.
     backend
         ``"persistent"`` (the default): one ``osqp.OSQP`` problem set up once and updated
         each tick (warm started); ``"daqp"``: daqp called directly each tick, cold
@@ -60,9 +71,18 @@ class QPConfig:
     elbow_weight: float = 0.0
     elbow_influence_m: float = 0.4
     elbow_speed_mps: float = 0.1
+    posture_weight: float = 0.0
+    posture_gain_per_s: float = 0.5
     backend: str = "persistent"
     solver: str = "osqp"
     eps_abs: float = 1e-7
     eps_rel: float = 1e-7
     max_iter: int = 4000
     polish: bool = False
+
+
+#: The redundancy mode (``qpavoid run ... --controller qp --redundant``, docs/qp.md): the
+#: elbow kept away from the person (weight 0.05) and the posture task (weight 1e-3), both
+#: in the null space of a redundant arm's end effector, with a regularisation large enough
+#: to give that direction curvature (with 1e-7 OSQP cannot reach its tolerance there).
+REDUNDANT = QPConfig(elbow_weight=0.05, regularization=1e-4, posture_weight=1e-3)

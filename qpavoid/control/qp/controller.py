@@ -19,9 +19,10 @@ from qpavoid.control.qp.problem import Assembler, QPProblem
 from qpavoid.control.qp.solver_kernels import hard_excess
 from qpavoid.control.qp.tasks.ee import EndEffectorTask
 from qpavoid.control.qp.tasks.elbow import ElbowClearanceTask
+from qpavoid.control.qp.tasks.posture import PostureTask
 from qpavoid.control.qp.tasks.regularization import Regularization
 from qpavoid.control.qp.variables import Variables
-from qpavoid.control.task import ArcPath
+from qpavoid.control.task import PlannedPath, inverse_kinematics
 from qpavoid.control.tick import Command, ControllerConfig, Tick
 from qpavoid.core.errors import InputError
 from qpavoid.distance.methods import PointDistance
@@ -42,6 +43,7 @@ class QPController(Controller):
                   + w (s_L2² + s_EE²)                          eqs. (4)-(7), repulsion
                   + ε ‖q̇‖²                                       Regularization
                   [+ w_el (nᵀ J_p q̇ − v_el)²]                    ElbowClearanceTask (7 joints)
+                  [+ w_po ‖N (q̇ − k (q_rest − q))‖²]             PostureTask (7 joints)
         subject to  u_L2ᵀ J_L2 q̇ + s_L2 ≥ u_L2ᵀ J_L2 q̇₈ + |v_rep,L2|     RepelledRepulsionTask
                     u_EEᵀ J_EE q̇ + s_EE ≥ u_EEᵀ (v_PL + K e) + |v_EE|  EERepulsionTask
                     s_L2, s_EE ≥ 0
@@ -62,6 +64,26 @@ class QPController(Controller):
         As for :class:`~qpavoid.control.controller.Controller`.
     qp
         The QP's weights, gains and solver settings.
+    rest_posture
+        (nq,) the posture task's rest posture, rad (used with ``qp.posture_weight > 0``);
+        None (the default): the start configuration, the inverse kinematics of the path's
+        start pose, as :func:`~qpavoid.loop.simulation.simulate` starts a run. The start,
+        rather than the middle of the joint ranges: it is the posture the description's
+        IK seed chose for the task (the branch, the elbow up), where the arm starts
+        collision-free beside the person's table, so the task only undoes the drift of
+        the null space (minimum-norm steps are not cyclic) and returns the elbow after the
+        elbow task has pushed it away; the middle of the ranges would swing the elbow away
+        from the chosen posture at the first tick, and the position limits are already
+        the QP's bounds.
+
+    Raises
+    ------
+    InputError
+        If ``qp.elbow_weight > 0`` and the description names no elbow, or
+        ``rest_posture`` is not a finite (nq,) array.
+    IKNotConvergedError
+        If the posture task needs the start configuration and the path's start pose is
+        out of reach.
     """
 
     name = "qp"
@@ -69,10 +91,11 @@ class QPController(Controller):
     def __init__(
         self,
         robot: Robot,
-        path: ArcPath | None = None,
+        path: PlannedPath | None = None,
         config: ControllerConfig | None = None,
         human: BodyModel | None = None,
         qp: QPConfig | None = None,
+        rest_posture: np.ndarray | None = None,
     ):
         super().__init__(robot, path, config, human)
         self.qp = qp or QPConfig()
@@ -107,6 +130,13 @@ class QPController(Controller):
                     w.elbow_speed_mps,
                 )
             )
+        if w.posture_weight > 0:
+            rest = (
+                inverse_kinematics(robot, self.path.reference(0.0)[0])
+                if rest_posture is None
+                else robot.check_q(rest_posture)
+            )
+            pieces.append(PostureTask(x, rest, w.posture_weight, w.posture_gain_per_s))
         pieces += [
             VelocityDamper(
                 x, d_stop, w.damper_influence_m, w.damper_gain_mps, len(self.human.parts)

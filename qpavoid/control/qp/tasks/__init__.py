@@ -1,1 +1,1 @@
-"""The QP's tasks: costs it minimises (end-effector path, elbow, regularisation)."""
+"""The QP's tasks: costs it minimises (end-effector path, elbow, posture, regularisation)."""
