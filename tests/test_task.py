@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import shutil
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pytest
 
+import qpavoid
 from qpavoid.control.task import (
     A_FIN,
     A_IN,
@@ -289,3 +293,17 @@ def test_rpy_is_roll_pitch_yaw_about_the_fixed_axes(tmp_path, robot):
     text = POSE + SECOND.replace("rpy_rad = [0, 0, 0]", f"rpy_rad = [{r}, {p}, {y}]")
     task = load_task(write_task(tmp_path, text), robot)
     np.testing.assert_allclose(task.path.reference(1.0)[0][:3, :3], Rz @ Ry @ Rx, atol=1e-12)
+
+
+def test_a_description_loaded_from_a_folder_takes_that_folders_task(tmp_path):
+    """The task of a robot is the task.toml beside the control-point file it was read
+    from, wherever that folder is."""
+    source = Path(__file__).resolve().parents[1] / "robots" / "iiwa14"
+    folder = tmp_path / "myarm"
+    shutil.copytree(source, folder)
+    text = (folder / "task.toml").read_text().replace("x_m = 0.15", "x_m = 0.05")
+    (folder / "task.toml").write_text(text)
+    task = default_task(qpavoid.load_robot(folder))
+    assert task.file == folder / "task.toml" and task.operator.x_m == 0.05
+    (folder / "task.toml").unlink()
+    assert default_task(qpavoid.load_robot(folder)).file is None  # the paper's

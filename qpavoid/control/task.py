@@ -74,7 +74,6 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass, field, replace
-from importlib import resources
 from os import PathLike
 from pathlib import Path
 from typing import Any, Protocol
@@ -504,29 +503,20 @@ def default_task(robot: Robot, folder: str | PathLike[str] | None = None) -> Tas
     robot
         The arm.
     folder
-        Its description folder (default: the robot's, ``robot.folder``, or the bundled
-        description of its name).
+        Its description folder (default: the folder of the control-point file it was read
+        from, ``robot.path``; a robot made in code, without one, gets the paper's task).
 
     Raises
     ------
     RobotDescriptionError
         As :func:`load_task`.
     """
-    if folder is None:
-        folder = getattr(robot, "folder", None) or _bundled_folder(robot.name)
+    if folder is None and robot.path is not None:
+        folder = robot.path.parent
     file = Path(folder) / TASK_FILE if folder is not None else None
     if file is None or not file.exists():
         return Task()
     return load_task(file, robot)
-
-
-def _bundled_folder(name: str) -> Path | None:
-    """The bundled description folder called ``name`` (``qpavoid.robots``), if any."""
-    try:
-        folder = Path(str(resources.files("qpavoid.robots"))) / name
-    except ModuleNotFoundError:  # a source checkout without the package installed
-        return None
-    return folder if folder.is_dir() else None
 
 
 def load_task(file: str | PathLike[str], robot: Robot) -> Task:

@@ -214,10 +214,12 @@ def compare(
         for name, (data, title) in replays.items():
             view_html.write_html(stage / name, view_html.replay_html(data, title))
         if plots and plotting.available():
+            arm = load_robot(robot)
             for label in named:
                 plotting.write_comparison(
                     stage / f"compare_{label}.png",
                     label,
                     {(c, d): series[(label, c, d)] for c in CONTROLLERS for d in DISTANCES},
+                    arm,
                 )
     return table

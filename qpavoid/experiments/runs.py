@@ -221,6 +221,7 @@ def write_outputs(run: RunResult, out: str | Path, plots: bool = True, view: boo
                 run.spec.distance,
                 scenario=run.spec.label,
                 controller=run.spec.controller,
+                human=run.controller.human,
             )
             extra["plots"] = [p.name for p in figures]
         write_run(stage, run.sim, {**run.metrics, **extra})

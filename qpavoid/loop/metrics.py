@@ -170,6 +170,12 @@ def describe(m: dict[str, Any]) -> str:
     if len(events) > STOPS_SHOWN:
         stops += f"; and {len(events) - STOPS_SHOWN} more (metrics.json: stop_events)"
     md = m["min_distance_m"]
+    sphere_note = (
+        "\n  (spheres below 0: the conservative spheres of eq. 1, larger than the links, "
+        "overlap the person; not contact)"
+        if md["spheres"] < 0
+        else ""
+    )
     return (
         f"{m['scenario']}: controller {m['controller']}, distances {m['distance_method']}\n"
         f"  reached goal {m['reached_goal']} in {m['duration_s']:.2f} s: {_ending(m)} "
@@ -177,7 +183,7 @@ def describe(m: dict[str, Any]) -> str:
         f"  path error rms {m['rms_path_error_m'] * 1e3:.3f} mm, "
         f"max {m['max_path_error_m'] * 1e3:.3f} mm\n"
         f"  min distance spheres {md['spheres']:.4f} m, capsules {md['capsules']:.4f} m, "
-        f"max f {m['max_f']:.3f}\n"
+        f"max f {m['max_f']:.3f}{sphere_note}\n"
         f"  stopped {m['stopped_s']:.2f} s, stops: {stops}\n"
         f"  tick {m['tick_us']['median']:.0f} us median, {m['tick_us']['p99']:.0f} us p99; "
         f"limit violations: velocity {m['joint_velocity_limit_violations']}, "
