@@ -37,6 +37,7 @@ paper's: :class:`Task`'s defaults). Everything is in the robot's base frame, m a
 
     [test2]
     operator_x_m = -0.25          # the operator of test 2, along x, m
+    operator_distance_m = 1.05    # and along +y (default: [operator]'s), m
 
     [strikes]                     # where strikes aim besides the sets: a frame's origin,
     shoulder = "A2"               # or an offset in its axes (moving with its body)
@@ -406,7 +407,7 @@ MAX_TASK_BYTES = 2**20
 TASK_KEYS = ("waypoints", "operator", "test2", "strikes", "scaling")
 WAYPOINT_KEYS = ("position_m", "rotation", "rpy_rad", "joints_rad", "duration_s", "sagitta_m")
 OPERATOR_KEYS = ("x_m", "distance_m")
-TEST2_KEYS = ("operator_x_m",)
+TEST2_KEYS = ("operator_x_m", "operator_distance_m")
 SCALING_KEYS = ("reference", "shoulder", "reach_m", "scale")
 #: How far a written rotation matrix may be from a rotation, ``‖RᵀR − I‖`` (Frobenius):
 #: the paper prints its matrices to 3-4 digits (8e-5 for its poses); beyond 0.01 it is a
@@ -577,10 +578,13 @@ def load_task(file: str | PathLike[str], robot: Robot) -> Task:
     )
     test2 = reader.table(data, "test2", TEST2_KEYS)
     test2_x = reader.number(test2, "operator_x_m", "test2", default=default.test2_operator.x_m)
+    test2_distance = reader.number(
+        test2, "operator_distance_m", "test2", low=0.0, strict=True, default=operator.distance_m
+    )
     return Task(
         WaypointPath(tuple(segments)),
         operator,
-        replace(operator, x_m=test2_x),
+        replace(operator, x_m=test2_x, distance_m=test2_distance),
         reader.body_targets(data.get("strikes", {})),
         reader.scaling(data),
         path,
