@@ -18,7 +18,7 @@ person's own sizes and the table's height do not change with the arm.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -77,13 +77,23 @@ class Operator:
     shoulder_half_width_m: float = 0.18
     max_lean_m: float = 0.35
     skeleton: SkeletonFormat = KINECT_V2
+    _rest: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        # the rest pose once (every generated frame starts from it: 0.24 ms each time)
+        object.__setattr__(self, "_rest", self._rest_pose())
 
     def arm(self, side: str) -> tuple[int, ...]:
         """The ``side`` arm's joint ids (:func:`arm`)."""
         return arm(self.skeleton, side)
 
     def rest(self) -> np.ndarray:
-        """(J, 3) skeleton at rest: seated upright, forearms on the table, hands in front."""
+        """(J, 3) skeleton at rest: seated upright, forearms on the table, hands in front
+        (a copy: the caller may move it)."""
+        return self._rest.copy()
+
+    def _rest_pose(self) -> np.ndarray:
+        """:meth:`rest`, computed."""
         x, y = self.x_m, self.distance_m
         spine = self.skeleton.group("spine")
         j = np.zeros((self.skeleton.n_joints, 3))

@@ -100,14 +100,19 @@ class MeshClearance:
         self.request, self.result = coal.DistanceRequest(), coal.DistanceResult()
 
     def __call__(self, q: np.ndarray, capsule: np.ndarray, geo: HumanGeometry) -> np.ndarray:
-        """(S,) each set's true distance, m: its objects' where a set's ``capsule`` (S,)
-        distance is under the margin, the capsule's (a lower bound) elsewhere."""
-        if not self.has_mesh or float((capsule - self.excess).min()) > self.margin_m:
+        """(S,) each set's true distance, m: its objects' where the set's lower bound (its
+        ``capsule`` (S,) distance less :attr:`excess`) is under the margin, the capsule's
+        (a lower bound of its objects') elsewhere."""
+        if not self.has_mesh:
+            return capsule
+        near = (capsule - self.excess <= self.margin_m) & self.on_set.any(axis=1)
+        if not near.any():
             return capsule
         pin.forwardKinematics(self.robot.model, self.data, q)
         person = self._person(geo)
         distance = np.full(len(self.objects), np.inf)
-        for k, obj in enumerate(self.objects):
+        for k in np.flatnonzero(self.on_set[near].any(axis=0)):
+            obj = self.objects[k]
             placement = self.data.oMi[obj.parentJoint] * obj.placement
             tf = coal.Transform3s(placement.rotation, placement.translation)
             for shape, tf_h in person:
@@ -115,7 +120,7 @@ class MeshClearance:
                 d = coal.distance(obj.geometry, tf, shape, tf_h, self.request, self.result)
                 distance[k] = min(distance[k], d)
         per_set = np.where(self.on_set, distance[None, :], np.inf).min(axis=1)
-        return np.where(self.on_set.any(axis=1), per_set, capsule)
+        return np.where(near, per_set, capsule)
 
     @staticmethod
     def _gap(robot: Robot, s: int, obj: pin.GeometryObject, body: int) -> float:
