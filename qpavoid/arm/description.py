@@ -30,6 +30,9 @@ import numpy as np
 import pinocchio as pin
 
 from qpavoid.arm.dynamics import ArmDynamics, read_arm
+from qpavoid.arm.fields import number as _number
+from qpavoid.arm.fields import table as _table
+from qpavoid.arm.fields import unknown_keys as _unknown_keys
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import InputError, RobotDescriptionError
 from qpavoid.core.file_bounds import NotTOMLError, read_bounded, read_toml
@@ -750,38 +753,6 @@ def _control_sets(model: pin.Model, set_cfgs: list) -> tuple[list[ControlSet], l
     return sets, point_frames
 
 
-def _number(
-    value: object, where: str, path: Path, low: float, strict: bool, high: float = np.inf
-) -> float:
-    """``value`` as a finite float above ``low`` (at or above unless ``strict``) and at most
-    ``high``, or a :class:`RobotDescriptionError` naming ``where``."""
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-    number = float(value) if ok else float("nan")  # type: ignore[arg-type]
-    if not (np.isfinite(number) and (number > low if strict else number >= low) and number <= high):
-        bound = f"{'above' if strict else 'at least'} {low:g}"
-        bound += f" and at most {high:g}" if np.isfinite(high) else ""
-        raise RobotDescriptionError(
-            f"{path}: {where} must be a number {bound}, got {value!r}",
-            path=path,
-            name=where,
-            value=value,
-        )
-    return number
-
-
-def _table(cfg: Mapping[str, Any], key: str, path: Path, example: str) -> dict:
-    """The table ``[key]`` of the file, or a :class:`RobotDescriptionError` showing one."""
-    table = cfg.get(key)
-    if not isinstance(table, dict):
-        raise RobotDescriptionError(
-            f"{path}: no [{key}] table; add one, e.g. {example} (docs/robot.md)",
-            path=path,
-            name=key,
-            value=table,
-        )
-    return table
-
-
 def _joint_list(value: object, where: str, path: Path, joints: Sequence[str]) -> tuple[str, ...]:
     """``value`` as a tuple of joint names of the URDF, or a :class:`RobotDescriptionError`."""
     if not isinstance(value, list) or not all(isinstance(n, str) for n in value):
@@ -800,21 +771,6 @@ def _joint_list(value: object, where: str, path: Path, joints: Sequence[str]) ->
             value=missing,
         )
     return tuple(value)
-
-
-def _unknown_keys(
-    table: Mapping[str, Any], known: Sequence[str], where: str, path: Path, name: str
-) -> None:
-    """Refuse keys a table does not have (a misspelt key would otherwise be ignored):
-    ``where`` as the file says it, ``name`` as the error's ``name``."""
-    unknown = sorted(set(table) - set(known))
-    if unknown:
-        raise RobotDescriptionError(
-            f"{path}: {where} has unknown key(s) {unknown}; its keys are {list(known)}",
-            path=path,
-            name=name,
-            value=unknown,
-        )
 
 
 def _roles(cfg: Mapping[str, Any], path: Path, set_cfgs: list, joints: Sequence[str]) -> Roles:

@@ -43,7 +43,6 @@ naming the file, the key and the fix.
 
 from __future__ import annotations
 
-import contextlib
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -52,6 +51,9 @@ from typing import Any
 
 import numpy as np
 
+from qpavoid.arm.fields import number as _number
+from qpavoid.arm.fields import table as _table
+from qpavoid.arm.fields import unknown_keys as _unknown_keys
 from qpavoid.core.errors import RobotDescriptionError
 
 #: Plausible bounds of the ``[arm]`` facts (a value outside is a unit error or a typo, and
@@ -519,55 +521,5 @@ def _check_joints(names: Sequence[str], where: str, path: Path, joints: Sequence
             f"{path}: {where}: {unknown} are not joints of the URDF; its joints are {list(joints)}",
             path=path,
             name=where,
-            value=unknown,
-        )
-
-
-def _number(
-    value: object, where: str, path: Path, low: float, strict: bool, high: float = math.inf
-) -> float:
-    """``value`` as a finite float above ``low`` (at or above unless ``strict``) and at most
-    ``high``, or a :class:`RobotDescriptionError` naming ``where``."""
-    number = math.nan
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        with contextlib.suppress(OverflowError):  # an integer beyond any float stays nan
-            number = float(value)
-    if not (
-        math.isfinite(number) and (number > low if strict else number >= low) and number <= high
-    ):
-        bound = f"{'above' if strict else 'at least'} {low:g}"
-        bound += f" and at most {high:g}" if math.isfinite(high) else ""
-        raise RobotDescriptionError(
-            f"{path}: {where} must be a number {bound}, got {value!r}",
-            path=path,
-            name=where,
-            value=value,
-        )
-    return number
-
-
-def _table(cfg: Mapping[str, Any], key: str, path: Path, example: str) -> dict:
-    """The table ``[key]`` of the file, or a :class:`RobotDescriptionError` showing one."""
-    table = cfg.get(key)
-    if not isinstance(table, dict):
-        raise RobotDescriptionError(
-            f"{path}: no [{key}] table; add one, e.g. {example} (docs/robot.md)",
-            path=path,
-            name=key,
-            value=table,
-        )
-    return table
-
-
-def _unknown_keys(
-    table: Mapping[str, Any], known: Sequence[str], where: str, path: Path, name: str
-) -> None:
-    """Refuse keys a table does not have (a misspelt key would otherwise be ignored)."""
-    unknown = sorted(set(table) - set(known))
-    if unknown:
-        raise RobotDescriptionError(
-            f"{path}: {where} has unknown key(s) {unknown}; its keys are {list(known)}",
-            path=path,
-            name=name,
             value=unknown,
         )
