@@ -4,6 +4,8 @@ missing extra named in one line, the truth against the arm's collision meshes.""
 from __future__ import annotations
 
 import importlib.metadata
+import re
+import shutil
 from pathlib import Path
 
 import coal
@@ -11,6 +13,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from qpavoid.arm.description import description_reference
 from qpavoid.arm.meshes import collision_geometry, object_vertices
 from qpavoid.arm.model import load_robot
 from qpavoid.cli.commands import build_parser, main
@@ -195,3 +198,107 @@ def test_a_capsule_that_misses_part_of_the_arm_shows_up_as_contact():
     # bound of the meshes', are the answer and no mesh is measured
     beyond = np.full(len(robot.sets), clearance.margin_m + 0.01)
     assert clearance(q, beyond, geo) is beyond
+
+
+# ----------------------------------------------------------------- the adversary's findings
+
+
+def _copy(src: str, dst: Path, edit) -> Path:
+    """A copy of the bundled description ``src`` in ``dst``, its file passed through ``edit``
+    (a URDF beside it is copied too)."""
+    shutil.copytree(ROBOTS / src, dst)
+    file = dst / "control_points.toml"
+    file.write_text(edit(file.read_text()))
+    return dst
+
+
+@needs_erd
+def test_a_moving_link_cannot_be_excluded_from_the_capsules(tmp_path):
+    """The Panda's forearm excluded 'because x' and its capsule shrunk to 1 cm: refused, as
+    the controller would be blind to it; the base's exclusion stays allowed."""
+
+    def edit(text: str) -> str:
+        text = text.replace(
+            "exclude = { panda_link0_0 = ", 'exclude = { panda_link5_0 = "x", panda_link0_0 = '
+        )
+        start = text.index('name = "link5"')
+        end = text.index("[[sets]]", start)
+        return (
+            text[:start]
+            + re.sub(r"capsule_radius_m = [0-9.]+", "capsule_radius_m = 0.01", text[start:end])
+            + text[end:]
+        )
+
+    folder = _copy("panda", tmp_path / "p", edit)
+    with pytest.raises(RobotDescriptionError) as err:
+        load_robot(folder)
+    message = str(err.value)
+    assert "panda_link5_0" in message and "only an object on the base" in message
+    assert err.value.name == "coverage.exclude" and "\n" not in message
+
+
+@pytest.mark.parametrize(
+    "old, new, key",
+    [
+        ("max_point_speed_mps = 3.0", "max_point_speed_mps = 0.05", "arm.max_point_speed_mps"),
+        ("A1 = 8.57", "A1 = 491.0", "arm.max_acceleration_radps2.A1"),  # 8.57 rad/s² in °/s²
+        ("reaction_time_s = 0.005", "reaction_time_s = 1", "arm.reaction_time_s"),  # 1 ms
+    ],
+)
+def test_unit_errors_in_arm_are_refused(tmp_path, old, new, key):
+    folder = _copy("iiwa14", tmp_path / "a", lambda t: t.replace(old, new))
+    with pytest.raises(RobotDescriptionError) as err:
+        load_robot(folder)
+    assert err.value.name == key and "\n" not in str(err.value)
+
+
+def test_a_bundled_name_wins_over_a_local_folder_of_that_name(tmp_path, monkeypatch):
+    _copy(
+        "iiwa14",
+        tmp_path / "iiwa14",
+        lambda t: t.replace("sphere_radius_m = 0.09", "sphere_radius_m = 0.1", 1),
+    )
+    monkeypatch.chdir(tmp_path)
+    assert load_robot("iiwa14").sets[0].sphere_radius_m == 0.09  # the bundled one
+    assert load_robot("./iiwa14").sets[0].sphere_radius_m == 0.1  # the folder, by path
+    assert description_reference("iiwa14") == "iiwa14"
+    assert description_reference("./iiwa14") == str(tmp_path / "iiwa14")
+
+
+@needs_erd
+def test_redundant_on_an_arm_that_locks_nothing_is_refused(tmp_path, capsys):
+    out = tmp_path / "x"
+    argv = ["run", "free", "--robot", "ur5", "--controller", "qp", "--redundant", "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "locks none" in err and err.count("\n") == 1 and not out.exists()
+
+
+def test_a_fitted_file_left_unfinished_names_its_first_to_do(tmp_path):
+    folder = tmp_path / "fitted"
+    assert main(["robot", "fit", str(ROBOTS / "iiwa14" / "iiwa14.urdf"), "--out", str(folder)]) == 0
+    with pytest.raises(RobotDescriptionError) as err:
+        load_robot(folder)
+    assert err.value.name == "end_effector" and "as `qpavoid robot fit` wrote it" in str(err.value)
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["README.md"], "cannot build a model from this URDF"),
+        (
+            [str(ROBOTS / "iiwa14" / "iiwa14.urdf"), "--lock", "A4=90"],
+            "not within the joint's limits",
+        ),
+        (
+            [str(ROBOTS / "iiwa14" / "iiwa14.urdf"), "--lock", *(f"A{k}=0" for k in range(1, 8))],
+            "nothing would move",
+        ),
+    ],
+)
+def test_robot_fit_refuses_what_the_loader_would_in_one_line(tmp_path, capsys, args, words):
+    readme = ROBOTS.parent / "README.md"
+    args = [str(readme) if a == "README.md" else a for a in args]
+    assert main(["robot", "fit", *args, "--out", str(tmp_path / "f")]) == 2
+    err = capsys.readouterr().err
+    assert words in err and err.strip().count("\n") == 0 and "internal error" not in err

@@ -77,6 +77,7 @@ def test_a_campaign_is_the_same_on_one_or_two_workers_and_its_worst_runs_replay(
     summary = write_campaign(tmp_path / "c", spec, 3, 11, one)
     assert summary["settings"] == {
         "n": 3,
+        "robot": "iiwa14",
         "controller": "qp",
         "distance": "spheres",
         "safety": "ssm",

@@ -290,12 +290,12 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         (  # a unit error: a reaction time in ms
             lambda t: t.replace("reaction_time_s = 0.005", "reaction_time_s = 5.0"),
             "arm.reaction_time_s",
-            "arm.reaction_time_s must be a number at least 0 and at most 1, got 5.0",
+            "arm.reaction_time_s must be a number at least 0 and at most 0.1, got 5.0",
         ),
         (
             lambda t: t.replace("A1 = 8.57", "A1 = 1e-300"),
             "arm.max_acceleration_radps2.A1",
-            "max_acceleration_radps2.A1 must be a number at least 0.1 and at most 1000",
+            "max_acceleration_radps2.A1 must be a number at least 0.1 and at most 100,",
         ),
         (
             lambda t: t.replace("max_point_speed_mps = 3.0", "max_point_speed_mps = 3000.0"),

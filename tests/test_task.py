@@ -20,6 +20,7 @@ from qpavoid.control.task import (
     default_task,
     inverse_kinematics,
     load_task,
+    orthonormalize,
     quintic,
 )
 from qpavoid.core.errors import InputError, RobotDescriptionError
@@ -285,12 +286,14 @@ def test_a_bad_task_file_is_one_line_naming_the_file_and_the_key(tmp_path, robot
 
 def test_rpy_is_roll_pitch_yaw_about_the_fixed_axes(tmp_path, robot):
     """``rpy_rad = [r, p, y]`` is R_z(y) R_y(p) R_x(r), written out by hand."""
-    r, p, y = 0.1, 0.2, 0.3
+    # the paper's orientation as roll, pitch, yaw (a pose the arm reaches), to 4 digits
+    r, p, y = (round(float(v), 4) for v in pin.rpy.matrixToRpy(orthonormalize(A_IN[:3, :3])))
     c, s = np.cos, np.sin
     Rx = np.array([[1, 0, 0], [0, c(r), -s(r)], [0, s(r), c(r)]])
     Ry = np.array([[c(p), 0, s(p)], [0, 1, 0], [-s(p), 0, c(p)]])
     Rz = np.array([[c(y), -s(y), 0], [s(y), c(y), 0], [0, 0, 1]])
-    text = POSE + SECOND.replace("rpy_rad = [0, 0, 0]", f"rpy_rad = [{r}, {p}, {y}]")
+    second = SECOND.replace("position_m = [0, 0.6, 0.6]", "position_m = [-0.0476, 0.6105, 0.6779]")
+    text = POSE + second.replace("rpy_rad = [0, 0, 0]", f"rpy_rad = [{r}, {p}, {y}]")
     task = load_task(write_task(tmp_path, text), robot)
     np.testing.assert_allclose(task.path.reference(1.0)[0][:3, :3], Rz @ Ry @ Rx, atol=1e-12)
 
@@ -307,3 +310,13 @@ def test_a_description_loaded_from_a_folder_takes_that_folders_task(tmp_path):
     assert task.file == folder / "task.toml" and task.operator.x_m == 0.05
     (folder / "task.toml").unlink()
     assert default_task(qpavoid.load_robot(folder)).file is None  # the paper's
+
+
+def test_a_waypoint_out_of_reach_is_refused_naming_it(tmp_path, robot):
+    """A goal 2.5 m away (or written in mm) is refused when the file is read, not found
+    out by a run that cannot track it."""
+    far = SECOND.replace("position_m = [0, 0.6, 0.6]", "position_m = [0, 2.5, 0.6]")
+    with pytest.raises(RobotDescriptionError) as err:
+        load_task(write_task(tmp_path, POSE + far), robot)
+    assert err.value.name == "waypoints[1]" and "cannot reach this pose" in str(err.value)
+    assert "\n" not in str(err.value)

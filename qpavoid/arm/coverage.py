@@ -92,6 +92,8 @@ class CoverageRow:
     excluded
         The description's reason for leaving the object out (``[coverage] exclude``), or
         ``""``.
+    moved_by
+        The joints that move the object's body, base first (none for the base).
     """
 
     object_name: str
@@ -100,6 +102,7 @@ class CoverageRow:
     covered: int
     worst_excess_m: float
     excluded: str = ""
+    moved_by: tuple[str, ...] = ()
 
     @property
     def complete(self) -> bool:
@@ -203,6 +206,9 @@ def coverage(
                     covered=checked - int(outside[m][mine].sum()),
                     worst_excess_m=float(worst[m][mine].max()),
                     excluded=str(exclude.get(str(obj.name), "")),
+                    moved_by=tuple(
+                        str(robot.model.names[j]) for j in robot.model.supports[obj.parentJoint][1:]
+                    ),
                 )
             )
     return tuple(rows)
@@ -233,6 +239,25 @@ def check_coverage(
             name="coverage.exclude",
             value=unknown,
         )
+    moving = [
+        r
+        for r in rows
+        if r.method == "capsules" and r.excluded and not r.complete and len(r.moved_by) > 1
+    ]
+    if moving:
+        row = max(moving, key=lambda r: r.worst_excess_m)
+        raise RobotDescriptionError(
+            f"{path}: [coverage] exclude: {row.object_name!r} moves with the joints "
+            f"{list(row.moved_by)} and lies up to {row.worst_excess_m * 1e3:.2f} mm outside "
+            "the capsules: only an object on the base, or on a link that only turns about "
+            "the first joint, may be left out of the capsules (the distance method and the "
+            "truth of every run); fit the sets to the meshes (`qpavoid robot fit "
+            f"{robot.urdf} --out DIR`) or give the set that carries it a larger "
+            "capsule_radius_m",
+            path=path,
+            name="coverage.exclude",
+            value=row.object_name,
+        )
     bad = [r for r in rows if not r.complete and not r.excluded]
     if bad:
         row = max(bad, key=lambda r: r.worst_excess_m)
@@ -241,7 +266,7 @@ def check_coverage(
             f"{path}: collision object {row.object_name!r} of {urdf} is not inside the "
             f"{row.method}: {row.vertices - row.covered} of {row.vertices} vertex checks "
             f"outside, the worst by {row.worst_excess_m * 1e3:.2f} mm; fit the sets to the "
-            f"meshes (`qpavoid robot fit {robot.urdf}`), give the set that carries it a "
+            f"meshes (`qpavoid robot fit {robot.urdf} --out DIR`), give the set that carries it a "
             f"larger {radius}, or leave it out with its reason: [coverage] exclude = "
             f'{{ {row.object_name} = "<why>" }}',
             path=path,

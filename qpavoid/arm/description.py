@@ -215,15 +215,17 @@ def bundled_robots() -> tuple[str, ...]:
 
 
 def _description_dir(name: str | Path) -> Path:
-    """Folder of a robot description: a path, or the name of a bundled description."""
+    """Folder of a robot description: the name of a bundled description (a bare name, as
+    text: it wins over a folder of that name in the working directory, which ``./name``
+    reaches), or a path."""
+    root = _bundled_root()
+    if isinstance(name, str) and SET_NAME.fullmatch(name) and (root / name / CONFIG_NAME).is_file():
+        return root / name
     path = Path(name)
     if path.suffix == ".toml" and path.is_file():
         return path.parent
     if path.is_dir() and (path / CONFIG_NAME).is_file():
         return path
-    root = _bundled_root()
-    if (root / str(name) / CONFIG_NAME).is_file():
-        return root / str(name)
     available = list(bundled_robots())
     raise RobotDescriptionError(
         f"unknown robot {str(name)!r}: not a folder with {CONFIG_NAME} and not one of the "
@@ -232,6 +234,15 @@ def _description_dir(name: str | Path) -> Path:
         name="robot",
         value=str(name),
     )
+
+
+def description_reference(name: str | Path) -> str:
+    """How a run records the robot it ran: a bundled description's name, or the absolute
+    folder of any other (so that ``qpavoid view`` finds the same arm from anywhere)."""
+    folder = _description_dir(name)
+    if isinstance(name, str) and folder == _bundled_root() / name:
+        return name
+    return str(folder.resolve())
 
 
 def _carriers(model: pin.Model, frame_id: int) -> set[int]:
@@ -450,6 +461,7 @@ def _read_config(folder: Path) -> tuple[dict, Path, list, str]:
             f"{path}: missing key {exc}", path=path, name=exc.args[0]
         ) from None
     _unknown_keys(cfg, TOP_KEYS, "the top level", path, "")
+    _check_finished(cfg, path)
     for key, value in (("urdf", urdf_name), ("end_effector", ee_name)):
         if key == "urdf" and isinstance(value, dict):
             continue
@@ -469,6 +481,29 @@ def _read_config(folder: Path) -> tuple[dict, Path, list, str]:
         )
     _check_sets(set_cfgs, path)
     return cfg, _urdf_path(urdf_name, folder, path), set_cfgs, ee_name
+
+
+#: What ``qpavoid robot fit`` writes where the user has to fill something in.
+TO_DO = "TO DO"
+
+
+def _check_finished(value: object, path: Path, key: str = "") -> None:
+    """Refuse a file that still holds a :data:`TO_DO` of ``qpavoid robot fit`` (a role, a
+    frame or a source left as written), naming the first such key."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _check_finished(v, path, f"{key}.{k}" if key else str(k))
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _check_finished(v, path, f"{key}[{i}]")
+    elif isinstance(value, str) and TO_DO in value:
+        raise RobotDescriptionError(
+            f"{path}: {key} is still {value!r}, as `qpavoid robot fit` wrote it: fill it in "
+            "(docs/robot.md, Adding an arm)",
+            path=path,
+            name=key,
+            value=value,
+        )
 
 
 def _urdf_path(value: str | dict, folder: Path, path: Path) -> Path:
@@ -517,7 +552,7 @@ def mesh_dirs(urdf: Path) -> tuple[Path, ...]:
     return tuple(urdf.resolve().parents[:MESH_SEARCH_DEPTH])
 
 
-def _build_model(urdf: Path) -> pin.Model:
+def build_urdf_model(urdf: Path) -> pin.Model:
     """The Pinocchio model of a URDF (read bounded to :data:`MAX_URDF_BYTES`), or
     :class:`RobotDescriptionError`."""
     try:
@@ -560,7 +595,7 @@ def _check_limit_elements(text: str, urdf: Path) -> None:
             )
 
 
-def _check_joints(model: pin.Model, urdf: Path) -> None:
+def check_urdf_joints(model: pin.Model, urdf: Path) -> None:
     """Refuse a model with a joint the controllers cannot drive: one that is not a single
     revolute or prismatic degree of freedom (a continuous joint, whose angle Pinocchio
     keeps as cos and sin, a floating or planar joint), or without finite position limits
@@ -590,7 +625,7 @@ def _check_joints(model: pin.Model, urdf: Path) -> None:
             )
 
 
-def _angle_fault(model: pin.Model, joint: str, angle: float) -> str:
+def angle_fault(model: pin.Model, joint: str, angle: float) -> str:
     """What is wrong with locking the model's joint ``joint`` at ``angle`` (rad), or ``""``."""
     idx = model.joints[model.getJointId(joint)].idx_q
     low, high = model.lowerPositionLimit[idx], model.upperPositionLimit[idx]
@@ -637,7 +672,7 @@ def _file_locked(
         if not isinstance(angle, (int, float)) or isinstance(angle, bool):
             fault = "not an angle (rad)"
         else:
-            fault = _angle_fault(model, joint, float(angle))
+            fault = angle_fault(model, joint, float(angle))
         if fault:
             raise RobotDescriptionError(
                 f"{path}: {key}: {joint} = {angle!r} is {fault}; lock it at an angle (rad) "
@@ -685,7 +720,7 @@ def _locked_angles(
                 name="locked",
                 value=joint,
             )
-        fault = _angle_fault(model, joint, angle)
+        fault = angle_fault(model, joint, angle)
         if fault:
             raise InputError(
                 f"cannot lock {joint} at {angle!r} rad: {fault}",
@@ -990,6 +1025,40 @@ def _check_capsules(model: pin.Model, sets: Sequence[ControlSet], path: Path) ->
         )
 
 
+def _check_point_speed(
+    model: pin.Model, point_frames: Sequence[int], bound_mps: float, path: Path
+) -> None:
+    """Refuse an ``[arm] max_point_speed_mps`` that some control point exceeds: with one
+    joint alone at its URDF velocity limit, a point moves at ``‖J_p[:, j]‖ q̇_max,j``, a
+    lower bound of its fastest speed, checked at the zero configuration and at
+    :data:`CHECK_CONFIGURATIONS` others (speed and separation leaves out the rows whose
+    bound exceeds ``max_point_speed_mps``: too low a value would drop rows that bind)."""
+    data = model.createData()
+    rng = np.random.default_rng(0)
+    configurations = [pin.neutral(model)] + [
+        pin.integrate(model, pin.neutral(model), rng.uniform(-1.0, 1.0, model.nv))
+        for _ in range(CHECK_CONFIGURATIONS)
+    ]
+    fastest, where = 0.0, ""
+    for q in configurations:
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        for f in point_frames:
+            J = pin.getFrameJacobian(model, data, f, LWA)[:3]
+            speeds = np.linalg.norm(J, axis=0) * model.velocityLimit
+            if speeds.max() > fastest:
+                fastest, where = float(speeds.max()), str(model.frames[f].name)
+    if fastest > bound_mps:
+        raise RobotDescriptionError(
+            f"{path}: [arm] max_point_speed_mps = {bound_mps:g} m/s, but the control point "
+            f"{where} moves at {fastest:.2f} m/s with a single joint at its URDF speed limit: "
+            "give a bound no point of the arm reaches (docs/robot.md, Arm)",
+            path=path,
+            name="arm.max_point_speed_mps",
+            value=bound_mps,
+        )
+
+
 def _check_free(joints: Sequence[str], locked: Mapping[str, float], path: Path, by: str) -> None:
     """Refuse locking every joint (a model with nothing to move)."""
     if set(joints) <= set(locked):
@@ -1104,8 +1173,8 @@ def read_description(
     folder = _description_dir(name)
     cfg, urdf, set_cfgs, ee_name = _read_config(folder)
     path = folder / CONFIG_NAME
-    model = _build_model(urdf)
-    _check_joints(model, urdf)
+    model = build_urdf_model(urdf)
+    check_urdf_joints(model, urdf)
     joints = tuple(str(n) for n in model.names)[1:]
     held = _file_locked(cfg.get("held"), path, model, "held")
     default = _file_locked(cfg.get("locked"), path, model)
@@ -1149,6 +1218,7 @@ def read_description(
     _check_roles_free(model, roles, path, by)
     sets, point_frames = _control_sets(model, set_cfgs)
     _check_capsules(model, sets, path)
+    _check_point_speed(model, point_frames, arm.max_point_speed_mps, path)
     return Description(
         model,
         sets,

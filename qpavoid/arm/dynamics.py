@@ -58,11 +58,13 @@ from qpavoid.core.errors import RobotDescriptionError
 
 #: Plausible bounds of the ``[arm]`` facts (a value outside is a unit error or a typo, and
 #: would make speed and separation never move or never stop the arm in time): a reaction
-#: slower than 1 s; a joint braking below 0.1 rad/s² (10 s to stop from 1 rad/s) or above
-#: 1000 rad/s² (arms brake at 5-50: the iiwa 8.6-15.7, the Panda 7.5-20); a point faster
-#: than 10 m/s (cobots move their tool at up to 1-5 m/s).
-MAX_REACTION_S = 1.0
-MIN_ACCEL_RADPS2, MAX_ACCEL_RADPS2 = 0.1, 1000.0
+#: slower than 0.1 s (arms react within one period of their real-time interface, 1-8 ms
+#: for the arms here: 1 meant as 1 ms is refused); a joint braking below 0.1 rad/s² (10 s
+#: to stop from 1 rad/s) or above 100 rad/s² (arms brake at 5-50: the iiwa 8.6-15.7, the
+#: Panda 7.5-20, the UR5's elbow 19.5; in degrees, 5 rad/s² would read 286 and is
+#: refused); a point faster than 10 m/s (cobots move their tool at up to 1-5 m/s).
+MAX_REACTION_S = 0.1
+MIN_ACCEL_RADPS2, MAX_ACCEL_RADPS2 = 0.1, 100.0
 MAX_SPEED_MPS = 10.0
 #: A joint's jerk: at least 1 rad/s³ (10 s to reach 10 rad/s²: a typo) and at most 10⁶ rad/s³
 #: (1000 rad/s² within 1 ms: indistinguishable from no limit; Franka's are 3750-10000).

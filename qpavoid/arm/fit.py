@@ -19,6 +19,7 @@ import pinocchio as pin
 from scipy.optimize import minimize
 from scipy.spatial import ConvexHull, QhullError
 
+from qpavoid.arm.description import angle_fault, build_urdf_model, check_urdf_joints
 from qpavoid.arm.meshes import object_vertices, urdf_geometry
 from qpavoid.core.errors import InputError
 
@@ -421,7 +422,8 @@ def fit_description(
     RobotDescriptionError
         If the URDF or its meshes cannot be loaded.
     """
-    model = pin.buildModelFromUrdf(str(urdf))
+    model = build_urdf_model(urdf)
+    check_urdf_joints(model, urdf)
     locked = dict(locked or {})
     joints = [str(n) for n in model.names[1:]]
     fixed = [str(f.name) for f in model.frames if f.type == pin.FrameType.FIXED_JOINT]
@@ -436,6 +438,20 @@ def fit_description(
     for joint in merge:
         if model.existJointName(joint):  # a moving joint merged: locked
             locked.setdefault(joint, 0.0)
+    for joint, angle in locked.items():
+        fault = angle_fault(model, joint, angle)
+        if fault:
+            raise InputError(
+                f"cannot lock {joint} at {angle!r} rad: {fault}",
+                name="locked",
+                value={joint: angle},
+            )
+    if set(joints) <= set(locked):
+        raise InputError(
+            f"locked: every joint of {urdf.name} would be locked, {joints}: nothing would move",
+            name="locked",
+            value=sorted(locked),
+        )
     sets = fit_sets(urdf, package_dirs, merge, locked, config)
     free = [j for j in joints if j not in locked or j not in merge]
     lines = [

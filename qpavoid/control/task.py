@@ -552,6 +552,7 @@ def load_task(file: str | PathLike[str], robot: Robot) -> Task:
             waypoints,
         )
     poses = [reader.pose(w, k) for k, w in enumerate(waypoints)]
+    _check_reachable(poses, robot, reader)
     segments = []
     for k in range(1, len(poses)):
         where = f"waypoints[{k}]"
@@ -589,6 +590,26 @@ def load_task(file: str | PathLike[str], robot: Robot) -> Task:
         reader.scaling(data),
         path,
     )
+
+
+def _check_reachable(poses: list[np.ndarray], robot: Robot, reader: _TaskReader) -> None:
+    """Refuse a waypoint the arm cannot reach: the inverse kinematics of each, from the
+    description's seed for the first and from the one before's solution for the others
+    (the branch the arm tracks along), must converge within the joint limits."""
+    q = None
+    for k, pose in enumerate(poses):
+        target = pose.copy()
+        target[:3, :3] = orthonormalize(pose[:3, :3])  # as the path takes it
+        try:
+            q = inverse_kinematics(robot, target, q)
+        except IKNotConvergedError as exc:
+            raise reader.error(
+                f"waypoints[{k}]",
+                f"the arm cannot reach this pose from the one before ({one_line(exc)}); "
+                "move it within the arm's reach, or give the description an [ik_seed] "
+                "on the branch that reaches it",
+                [round(float(v), 4) for v in pose[:3, 3]],
+            ) from None
 
 
 class _TaskReader:

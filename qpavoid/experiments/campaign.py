@@ -31,6 +31,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from qpavoid.arm.description import description_reference
 from qpavoid.arm.model import load_robot
 from qpavoid.core.errors import InputError, Terminated
 from qpavoid.core.signals import handled_by
@@ -86,9 +87,12 @@ def campaign_spec(
 
 def campaign_settings(spec: SweepSpec, n: int, seed: int) -> dict[str, Any]:
     """The ``settings`` of ``summary.json``: what a campaign of ``n`` runs of ``spec``
-    from seed ``seed`` on was (the robot and the cap, fixed on the command line, aside)."""
+    from seed ``seed`` on was, on which arm (a bundled description's name or the absolute
+    folder of another: :func:`~qpavoid.arm.description.description_reference`); the cap,
+    fixed on the command line, aside."""
     return {
         "n": n,
+        "robot": description_reference(spec.robot),
         "controller": spec.controller,
         "distance": spec.distance,
         "safety": spec.safety,
@@ -219,7 +223,8 @@ def rerun_command(run: StrikeCheck, spec: SweepSpec) -> str:
     motion (from inside ``worst/``; a worst case's ``"replay"`` key). Its camera faults
     are not in the recording: the rerun sees the person through ``run``'s ordinary Kinect
     (``--bench real``)."""
-    robot = "" if spec.robot == RunSpec.robot else f" --robot {shlex.quote(spec.robot)}"
+    reference = description_reference(spec.robot)  # a folder absolute: runs from worst/
+    robot = "" if reference == RunSpec.robot else f" --robot {shlex.quote(reference)}"
     return (
         f"qpavoid run --human seed{run.seed}.npz --controller {spec.controller} "
         f"--distance {spec.distance} --safety {spec.safety} --bench real "

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from qpavoid.arm.description import description_reference
 from qpavoid.arm.model import load_robot
 from qpavoid.core.errors import InputError
 from qpavoid.experiments.jobs import map_jobs
@@ -207,7 +208,8 @@ def compare(
     with staged_output(out) as stage:
         (stage / "compare.json").write_text(json.dumps(metrics, indent=2) + "\n")
         (stage / "compare.md").write_text(
-            "# qpavoid compare\n\nEvery input run with both controllers and both distance "
+            f"# qpavoid compare\n\nOn the arm {description_reference(robot)}: every input "
+            "run with both controllers and both distance "
             f"methods ({rate_hz:g} Hz control, {max_time_s:g} s cap). Limit violations: ticks "
             "over a joint velocity / position limit.\n\n" + table + "\n"
         )

@@ -19,12 +19,14 @@ from pathlib import Path
 from typing import Any
 
 from qpavoid.arm.braking import BrakingConfig
+from qpavoid.arm.description import description_reference
 from qpavoid.arm.model import Robot, load_robot
 from qpavoid.control.analytic import AnalyticConfig, AnalyticController
 from qpavoid.control.controller import Controller
 from qpavoid.control.qp import QPConfig, QPController
 from qpavoid.control.qp.config import REDUNDANT
 from qpavoid.control.tick import ControllerConfig
+from qpavoid.core.errors import InputError
 from qpavoid.experiments.run_spec import (
     STALE_AFTER_LATENCY_S,
     RunSpec,
@@ -97,8 +99,26 @@ def live_source(spec: RunSpec, clear: threading.Event | None = None) -> Iterator
 
 
 def spec_robot(spec: RunSpec) -> Robot:
-    """The robot ``spec`` names (A3 free with ``redundant``)."""
-    return load_robot(spec.robot, locked=() if spec.redundant else None)
+    """The robot ``spec`` names (with ``redundant``, the joints its description locks
+    freed: the iiwa's A3).
+
+    Raises
+    ------
+    InputError
+        For ``redundant`` on a description that locks no joint (nothing to free).
+    """
+    robot = load_robot(spec.robot)
+    if not spec.redundant:
+        return robot
+    freed = load_robot(spec.robot, locked=())
+    if freed.nv == robot.nv:
+        raise InputError(
+            f"--redundant frees the joints a description locks; {robot.name!r} locks none "
+            f"(its {robot.nv} joints all move already)",
+            name="redundant",
+            value=spec.robot,
+        )
+    return freed
 
 
 @contextmanager
@@ -180,7 +200,7 @@ def simulate_one(
         bench=spec.bench,
         latency_s=spec.latency_s if spec.bench == "real" and not live else 0.0,
         redundant=bool(spec.redundant),
-        robot=spec.robot,
+        robot=description_reference(spec.robot),
         solver=getattr(getattr(controller, "backend", None), "name", None),
     )
     return RunResult(spec, sim, robot, controller, metrics)
