@@ -234,12 +234,12 @@ def edit(old: str, new: str):
         (
             edit("reaction_time_s = 0.008", "reaction_time_s = 8"),
             "arm.reaction_time_s",
-            "arm.reaction_time_s must be a number at least 0 and at most 1, got 8",
+            "arm.reaction_time_s must be a number at least 0 and at most 0.1, got 8",
         ),
         (
             edit("reaction_time_s = 0.008", "reaction_time_s = 1" + "0" * 400),
             "arm.reaction_time_s",
-            "arm.reaction_time_s must be a number at least 0 and at most 1",
+            "arm.reaction_time_s must be a number at least 0 and at most 0.1",
         ),
     ],
 )

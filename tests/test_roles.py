@@ -275,7 +275,7 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         (
             lambda t: t.replace("reaction_time_s = 0.005\n", "reaction_time_s = -1.0\n"),
             "arm.reaction_time_s",
-            "arm.reaction_time_s must be a number at least 0 and at most 1, got -1.0",
+            "arm.reaction_time_s must be a number at least 0 and at most 0.1, got -1.0",
         ),
         (
             lambda t: t.replace('aim = "A1"', 'aim = "flange"'),

@@ -33,7 +33,7 @@ import numpy as np
 
 from qpavoid.arm.description import description_reference
 from qpavoid.arm.model import load_robot
-from qpavoid.core.errors import InputError, Terminated
+from qpavoid.core.errors import InputError, RobotDescriptionError, Terminated
 from qpavoid.core.signals import handled_by
 from qpavoid.experiments.run_spec import RunSpec
 from qpavoid.experiments.sweep import StrikeCheck, SweepSpec, summarize, sweep
@@ -223,7 +223,10 @@ def rerun_command(run: StrikeCheck, spec: SweepSpec) -> str:
     motion (from inside ``worst/``; a worst case's ``"replay"`` key). Its camera faults
     are not in the recording: the rerun sees the person through ``run``'s ordinary Kinect
     (``--bench real``)."""
-    reference = description_reference(spec.robot)  # a folder absolute: runs from worst/
+    try:  # a folder absolute: the line runs from inside worst/
+        reference = description_reference(spec.robot)
+    except RobotDescriptionError:  # no such robot: the line says what the spec said
+        reference = spec.robot
     robot = "" if reference == RunSpec.robot else f" --robot {shlex.quote(reference)}"
     return (
         f"qpavoid run --human seed{run.seed}.npz --controller {spec.controller} "
