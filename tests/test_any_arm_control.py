@@ -96,7 +96,7 @@ def free_run(robot: qpavoid.Robot, controller, path: PlannedPath, q0=None, max_t
     "name",
     [
         # the iiwa's twin, test_qp's, runs by default; the FR3 is a Panda on other URDF
-        pytest.param(name, marks=pytest.mark.slow) if name in ("iiwa14", "fr3") else name
+        pytest.param(name, marks=pytest.mark.slow) if name in ("iiwa14", "fr3", "ur5") else name
         for name in ARMS
     ],
 )

@@ -121,7 +121,7 @@ def test_the_fifth_arm_loads_with_its_own_geometry(ur10):
     assert np.all((q0 >= robot.q_min) & (q0 <= robot.q_max))
 
 
-@pytest.mark.parametrize("controller", ["analytic", "qp"])
+@pytest.mark.parametrize("controller", [pytest.param("analytic", marks=pytest.mark.slow), "qp"])
 def test_the_fifth_arm_runs_free_to_its_goal(ur10, controller):
     spec = RunSpec(
         scenario="free", controller=controller, robot=str(ur10), rate_hz=100.0, max_time_s=16.0
@@ -139,6 +139,7 @@ def task_goal(folder: Path) -> np.ndarray:
     return path.reference(path.duration_s)[0][:3, 3]
 
 
+@pytest.mark.slow
 def test_a_strike_at_the_fifth_arm_never_finds_it_moving_in_contact(ur10):
     spec = campaign_spec("qp", robot=str(ur10))
     check = run_case(spec, 0)
