@@ -13,7 +13,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from qpavoid.arm.description import description_reference
+from qpavoid.arm.description import description_reference, package_entry
 from qpavoid.arm.meshes import collision_geometry, object_vertices
 from qpavoid.arm.model import load_robot
 from qpavoid.cli.commands import build_parser, main
@@ -302,3 +302,14 @@ def test_robot_fit_refuses_what_the_loader_would_in_one_line(tmp_path, capsys, a
     assert main(["robot", "fit", *args, "--out", str(tmp_path / "f")]) == 2
     err = capsys.readouterr().err
     assert words in err and err.strip().count("\n") == 0 and "internal error" not in err
+
+
+@needs_erd
+def test_a_package_urdf_is_named_by_its_package_and_a_wrong_path_by_its_key(tmp_path):
+    panda = load_robot("panda")
+    assert package_entry(panda.urdf) == {"package": "example-robot-data", "path": PANDA_URDF}
+    assert package_entry(ROBOTS / "iiwa14" / "iiwa14.urdf") is None  # not an installed file
+    folder = _iiwa_with_urdf(tmp_path, 'urdf = { package = "example-robot-data", path = "x.urdf" }')
+    with pytest.raises(RobotDescriptionError) as err:
+        load_robot(folder)
+    assert err.value.name == "urdf.path" and "\n" not in str(err.value)

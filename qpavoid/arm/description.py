@@ -542,7 +542,30 @@ def _urdf_path(value: str | dict, folder: Path, path: Path) -> Path:
             name="urdf.package",
             value=package,
         ) from None
-    return Path(str(dist.locate_file(inner)))
+    found = Path(str(dist.locate_file(inner)))
+    if not found.is_file():
+        raise RobotDescriptionError(
+            f"{path}: urdf.path {inner!r} is not a file of the installed package {package!r} "
+            f"(looked for {found}); give the path of its URDF inside the package",
+            path=path,
+            name="urdf.path",
+            value=inner,
+        )
+    return found
+
+
+def package_entry(urdf: Path) -> dict[str, str] | None:
+    """The ``urdf = { package, path }`` entry naming ``urdf`` as a file of an installed
+    Python distribution (what ``qpavoid robot fit`` writes for a package's URDF), or None
+    if no installed distribution lists it."""
+    target = urdf.resolve()
+    for dist in metadata.distributions():
+        if dist.metadata["Name"] == "qpavoid":  # its own robots are folders, not packages
+            continue
+        for file in dist.files or ():
+            if file.name == target.name and Path(str(dist.locate_file(file))).resolve() == target:
+                return {"package": str(dist.metadata["Name"]), "path": str(file)}
+    return None
 
 
 def mesh_dirs(urdf: Path) -> tuple[Path, ...]:

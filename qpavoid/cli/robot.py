@@ -14,7 +14,7 @@ import math
 from pathlib import Path
 
 from qpavoid.arm.coverage import check_coverage, coverage, coverage_table
-from qpavoid.arm.description import CONFIG_NAME, mesh_dirs
+from qpavoid.arm.description import CONFIG_NAME, mesh_dirs, package_entry
 from qpavoid.arm.fit import fit_description
 from qpavoid.arm.model import load_robot
 from qpavoid.cli.args import HelpFormatter, Parser
@@ -115,7 +115,8 @@ def fit_command(args: argparse.Namespace) -> str:
             value=args.out,
         )
     dirs = [Path(d) for d in args.mesh_dir] or list(mesh_dirs(urdf))
-    text = fit_description(urdf.resolve(), str(urdf.resolve()), dirs, args.merge, dict(args.lock))
+    entry = package_entry(urdf) or str(urdf.resolve())  # an installed package's: by name
+    text = fit_description(urdf.resolve(), entry, dirs, args.merge, dict(args.lock))
     out.mkdir(parents=True, exist_ok=True)
     target.write_text(text, encoding="utf-8")
     sets = text.count("[[sets]]")
