@@ -212,7 +212,9 @@ def strike(robot: qpavoid.Robot, target: str, controller: str) -> None:
     )
     log = sim.log
     assert np.any(log["dq"][log["t"] < 1.0] != 0.0)  # it worked before the strike
-    assert np.nanmin(log["true_distance"]) < 0.03  # the hand got there
+    # the hand got there: within 5 cm of the set's surface (the UR5's shoulder turret, 9 cm
+    # above the table, is as near as a seated person's hand gets to it: 4 cm)
+    assert np.nanmin(log["true_distance"]) < 0.05
     assert sim.metrics["ticks_moving_in_true_contact"] == 0
 
 

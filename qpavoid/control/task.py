@@ -34,6 +34,7 @@ paper's: :class:`Task`'s defaults). Everything is in the robot's base frame, m a
     [operator]                    # the seated operator (qpavoid.human.posture.Operator)
     x_m = 0.15                    # spine along x, m
     distance_m = 1.05             # in front of the base along +y, m
+    max_lean_m = 0.35             # how far the upper body leans towards a target out of reach
 
     [test2]
     operator_x_m = -0.25          # the operator of test 2, along x, m
@@ -406,7 +407,7 @@ MAX_TASK_BYTES = 2**20
 #: (a misspelt one would otherwise be ignored).
 TASK_KEYS = ("waypoints", "operator", "test2", "strikes", "scaling")
 WAYPOINT_KEYS = ("position_m", "rotation", "rpy_rad", "joints_rad", "duration_s", "sagitta_m")
-OPERATOR_KEYS = ("x_m", "distance_m")
+OPERATOR_KEYS = ("x_m", "distance_m", "max_lean_m")
 TEST2_KEYS = ("operator_x_m", "operator_distance_m")
 SCALING_KEYS = ("reference", "shoulder", "reach_m", "scale")
 #: How far a written rotation matrix may be from a rotation, ``‖RᵀR − I‖`` (Frobenius):
@@ -575,6 +576,9 @@ def load_task(file: str | PathLike[str], robot: Robot) -> Task:
         x_m=reader.number(op, "x_m", "operator", default=default.operator.x_m),
         distance_m=reader.number(
             op, "distance_m", "operator", low=0.0, strict=True, default=default.operator.distance_m
+        ),
+        max_lean_m=reader.number(
+            op, "max_lean_m", "operator", low=0.0, default=default.operator.max_lean_m
         ),
     )
     test2 = reader.table(data, "test2", TEST2_KEYS)
