@@ -95,8 +95,10 @@ def free_run(robot: qpavoid.Robot, controller, path: PlannedPath, q0=None, max_t
 @pytest.mark.parametrize(
     "name",
     [
-        # the iiwa's twin, test_qp's, runs by default; the FR3 is a Panda on other URDF
-        pytest.param(name, marks=pytest.mark.slow) if name in ("iiwa14", "fr3", "ur5") else name
+        # the Panda by default (the iiwa's twin is test_qp's); the other arms slow
+        pytest.param(name, marks=pytest.mark.slow)
+        if name in ("iiwa14", "fr3", "ur5", "six_sets")
+        else name
         for name in ARMS
     ],
 )

@@ -274,6 +274,7 @@ def test_redundant_on_an_arm_that_locks_nothing_is_refused(tmp_path, capsys):
     assert "locks none" in err and err.count("\n") == 1 and not out.exists()
 
 
+@pytest.mark.slow
 def test_a_fitted_file_left_unfinished_names_its_first_to_do(tmp_path):
     folder = tmp_path / "fitted"
     assert main(["robot", "fit", str(ROBOTS / "iiwa14" / "iiwa14.urdf"), "--out", str(folder)]) == 0

@@ -121,7 +121,8 @@ def test_the_fifth_arm_loads_with_its_own_geometry(ur10):
     assert np.all((q0 >= robot.q_min) & (q0 <= robot.q_max))
 
 
-@pytest.mark.parametrize("controller", [pytest.param("analytic", marks=pytest.mark.slow), "qp"])
+@pytest.mark.slow
+@pytest.mark.parametrize("controller", ["analytic", "qp"])
 def test_the_fifth_arm_runs_free_to_its_goal(ur10, controller):
     spec = RunSpec(
         scenario="free", controller=controller, robot=str(ur10), rate_hz=100.0, max_time_s=16.0

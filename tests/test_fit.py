@@ -297,6 +297,7 @@ def test_robot_fit_writes_a_file_and_refuses_to_overwrite_it(tmp_path, capsys):
     assert "no such file" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_joint_the_urdf_lacks_is_an_input_error(capsys, tmp_path):
     assert main(["robot", "fit", str(IIWA_URDF), "--out", str(tmp_path), "--lock", "A9=0.1"]) == 2
     err = capsys.readouterr().err

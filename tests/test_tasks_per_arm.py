@@ -262,6 +262,7 @@ def rest_gap(robot: Robot, task: Task) -> float:
     return float(min(gaps))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("controller", ["analytic", "qp"])
 def test_free_reaches_the_goal_in_its_time(arm_loop, controller):
     robot, task = arm_loop
@@ -273,6 +274,7 @@ def test_free_reaches_the_goal_in_its_time(arm_loop, controller):
     np.testing.assert_allclose(robot.end_effector(sim.log["q"][-1])[:3, 3], goal[:3, 3], atol=1e-3)
 
 
+@pytest.mark.slow
 def test_test1_the_hand_waits_beside_the_path_ahead_of_the_robot(arm_loop):
     """Designed against the nominal motion: the hand, at its target from 5 s (before the
     robot's wrist gets there at 9 s), is 0.04 m from the path's closest approach (spheres;
