@@ -648,6 +648,15 @@ def check_urdf_joints(model: pin.Model, urdf: Path) -> None:
             )
 
 
+def check_lock_angle(model: pin.Model, joint: str, angle: float) -> None:
+    """Raise :class:`InputError` if ``joint`` cannot be locked at ``angle`` (rad)."""
+    fault = angle_fault(model, joint, angle)
+    if fault:
+        raise InputError(
+            f"cannot lock {joint} at {angle!r} rad: {fault}", name="locked", value={joint: angle}
+        )
+
+
 def angle_fault(model: pin.Model, joint: str, angle: float) -> str:
     """What is wrong with locking the model's joint ``joint`` at ``angle`` (rad), or ``""``."""
     idx = model.joints[model.getJointId(joint)].idx_q
@@ -743,13 +752,7 @@ def _locked_angles(
                 name="locked",
                 value=joint,
             )
-        fault = angle_fault(model, joint, angle)
-        if fault:
-            raise InputError(
-                f"cannot lock {joint} at {angle!r} rad: {fault}",
-                name="locked",
-                value={joint: angle},
-            )
+        check_lock_angle(model, joint, angle)
     return angles
 
 

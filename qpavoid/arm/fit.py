@@ -19,7 +19,7 @@ import pinocchio as pin
 from scipy.optimize import minimize
 from scipy.spatial import ConvexHull, QhullError
 
-from qpavoid.arm.description import angle_fault, build_urdf_model, check_urdf_joints
+from qpavoid.arm.description import build_urdf_model, check_lock_angle, check_urdf_joints
 from qpavoid.arm.meshes import object_vertices, urdf_geometry
 from qpavoid.core.errors import InputError
 
@@ -439,13 +439,7 @@ def fit_description(
         if model.existJointName(joint):  # a moving joint merged: locked
             locked.setdefault(joint, 0.0)
     for joint, angle in locked.items():
-        fault = angle_fault(model, joint, angle)
-        if fault:
-            raise InputError(
-                f"cannot lock {joint} at {angle!r} rad: {fault}",
-                name="locked",
-                value={joint: angle},
-            )
+        check_lock_angle(model, joint, angle)
     if set(joints) <= set(locked):
         raise InputError(
             f"locked: every joint of {urdf.name} would be locked, {joints}: nothing would move",
