@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from conftest import ideal_sim, paper_config
 
+from qpavoid.arm.braking import per_joint, stop_time
 from qpavoid.control.analytic import AnalyticController, enforce_limits
 from qpavoid.control.task import ArcPath, inverse_kinematics
 from qpavoid.control.tick import ControllerConfig
@@ -33,6 +36,34 @@ class _Runs(dict):
 @pytest.fixture(scope="module")
 def runs(robot):
     return _Runs(robot)
+
+
+def assert_stops_are_ramps(log, ctrl):
+    """Every stop is the controller's braking ramp (category 2), then a hold: from the first
+    stopped tick each command is the previous one scaled by a factor in [0, 1) (the same line
+    in joint-velocity space, slower), exactly zero within the stop time from the last moving
+    command at the braking decelerations (:func:`~qpavoid.arm.braking.stop_time`) + 2 ticks,
+    and exactly zero from then on while the stop lasts."""
+    robot, dt = ctrl.robot, ctrl.config.control_period_s
+    braking = per_joint(ctrl.ssm.max_acceleration_radps2, robot.joint_names)
+    jerks = dict(robot.arm.max_jerk_radps3)
+    jerk = np.array([jerks.get(n, np.inf) for n in robot.joint_names]) if jerks else None
+    u, stopped = log["dq_command"], log["stopped"]
+    starts = np.flatnonzero(stopped & ~np.r_[False, stopped[:-1]])
+    for k in starts:
+        end = k + int(np.argmin(stopped[k:])) if not stopped[k:].all() else len(stopped)
+        at_stop = u[k - 1] if k > 0 else np.zeros(robot.nv)
+        ramp_ticks = math.floor(stop_time(at_stop, braking, jerk) / dt + 1e-9) + 2
+        prev = at_stop
+        for i in range(k, end):
+            if not prev.any():  # at rest: held exactly
+                np.testing.assert_array_equal(u[i], 0.0)
+                continue
+            assert i - k < ramp_ticks, (k, i, at_stop, u[i])  # zero by the ramp's end
+            c = float(u[i] @ prev / (prev @ prev))
+            assert 0.0 <= c < 1.0, (i, c)
+            np.testing.assert_allclose(u[i], c * prev, rtol=0, atol=1e-12)
+            prev = u[i]
 
 
 @pytest.mark.slow  # the QP tracks free in the default suite, equal to this one (test_qp)
@@ -72,7 +103,11 @@ def test_test2_stops_when_f_exceeds_08_and_holds_still(runs, robot):
     assert hold.sum() > 1000
     assert (log["q"][hold] == log["q"][hold][0]).all()
     assert (log["distance"][hold, 0] == log["distance"][hold][0, 0]).all()
-    np.testing.assert_array_equal(log["dq_command"][log["stopped"]], 0.0)
+    # The stop is a braking ramp within the arm's limits, then exactly zero (the hold).
+    assert_stops_are_ramps(log, AnalyticController(robot, config=paper_config()))
+    np.testing.assert_array_equal(log["dq_command"][hold], 0.0)
+    assert log["dq_command"][k - 1].any()  # it was moving: a real ramp
+    assert all(n == 0 for n in m["command_limit_violations"].values())
     assert m["reached_goal"]  # resumes after withdrawal
 
 
@@ -105,13 +140,15 @@ def test_invariants_over_random_approaches(robot, seed):
     if seed % 2:
         motion = Corrupted(motion, seed)
     ctrl = AnalyticController(robot, path, ControllerConfig(control_period_s=0.01))
-    log = simulate(ctrl, motion, SimConfig(control_rate_hz=100, max_time_s=20)).log
+    run = simulate(ctrl, motion, SimConfig(control_rate_hz=100, max_time_s=20))
+    log = run.log
     assert np.isfinite(log["dq"]).all() and np.isfinite(log["q"]).all()
     checks = check_log(log, robot, ctrl.config, "spheres")
     assert checks["moving_under_stop_rule"] == 0  # a stop rule: exactly zero
     assert checks["velocity_violations"] == 0  # eq. (3) and nominal limits
     assert checks["position_violations"] == 0
-    np.testing.assert_array_equal(log["dq_command"][log["stopped"]], 0.0)
+    assert_stops_are_ramps(log, ctrl)
+    assert all(n == 0 for n in run.metrics["command_limit_violations"].values())
 
 
 def test_whole_body_lost_stops_with_a_reason(robot):
@@ -139,7 +176,7 @@ def test_stale_frame_stops(robot):
 
 def test_nobody_near_is_eq8(robot):
     """Far from the operator the command is J^-1 (v_PL + K e + v_EE), v_EE ~ 1e-7 m/s."""
-    ctrl = AnalyticController(robot)
+    ctrl = AnalyticController(robot, config=ControllerConfig(smooth=False))  # the law itself
     path = ctrl.path
     q = inverse_kinematics(robot, path.reference(5.0)[0]) + 0.01
     cmd = ctrl.step(q, Operator().rest(), None, 5.0)

@@ -247,13 +247,14 @@ def test_the_posture_cost_is_its_formula_and_lives_in_the_null_space(robot7):
 def test_the_posture_task_moves_only_the_null_space(robot7):
     """One tick, nobody near, 0.3 rad off the rest posture: with the posture task the QP's
     command moves the end effector as without it (within 1e-6 m/s, rad/s: the solver's
-    tolerance), and its component along the null space is w/(w + ε) of the pull's."""
+    tolerance), and its component along the null space is w/(w + ε) of the pull's (the QP's
+    own command: one tick from rest, not yet bounded by the arm's acceleration)."""
     path = ArcPath()
     rest = inverse_kinematics(robot7, path.reference(0.0)[0])
     q = inverse_kinematics(robot7, path.reference(4.0)[0], q0=rest)
     v = np.linalg.svd(robot7.kinematics(q).ee_jacobian)[2][-1]
     q = inverse_kinematics(robot7, path.reference(4.0)[0], q0=q + 0.3 * v)
-    cfg = ControllerConfig(distance="capsules")
+    cfg = ControllerConfig(distance="capsules", smooth=False)
     cmds = {}
     for w in (0.0, REDUNDANT.posture_weight):
         qp = replace(REDUNDANT, elbow_weight=0.0, posture_weight=w)

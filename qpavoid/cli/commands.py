@@ -97,6 +97,13 @@ def build_parser() -> Parser:
         "(docs/sensors.md), with --sensors; Ctrl-C ends the run and writes it",
     )
     run.add_argument(
+        "--arm",
+        metavar="ARM",
+        help="drive an arm in real time: sim (the simulated arm on the wall clock) or "
+        "franka:HOST (a Franka FR3/Panda, or franky-sim, through franky-control: pip install "
+        '"qpavoid[franka]"; docs/real-robot.md); Ctrl-C ramps it to rest and writes the run',
+    )
+    run.add_argument(
         "--sensors",
         metavar="TOML",
         help="calibration of the sensors (docs/sensors.md), for per-sensor --human files "
@@ -233,6 +240,7 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
         sensors=args.sensors,
         listen=args.listen,
         allow_unauthenticated=args.allow_unauthenticated,
+        arm=args.arm,
         controller=args.controller,
         distance=args.distance,
         safety=args.safety,

@@ -15,17 +15,19 @@ joint angle or path time) raise :class:`~qpavoid.core.errors.InputError` before 
 
 from __future__ import annotations
 
+from collections.abc import Hashable
 from dataclasses import replace
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from qpavoid.arm.model import Robot, joint_columns
+from qpavoid.control.smoothing import CommandRamp
 from qpavoid.control.task import PlannedPath, default_task, pose_error
 from qpavoid.control.tick import Command, ControllerConfig, Tick
 from qpavoid.core.checks import finite_number
 from qpavoid.core.compiling import kernel_input
-from qpavoid.core.errors import SolverError
+from qpavoid.core.errors import InputError, SolverError
 from qpavoid.distance.methods import distance_method
 from qpavoid.distance.table import DistanceTable
 from qpavoid.human.body import BodyModel, HumanGeometry, KinectHuman
@@ -47,6 +49,7 @@ from qpavoid.laws.ssm import (
     separation_bounds,
     with_stop_time,
 )
+from qpavoid.perception.freshness import FrameClock
 from qpavoid.perception.perceiver import Perceiver
 from qpavoid.perception.tracker import Perceived
 
@@ -94,27 +97,73 @@ class Controller:
         #: person (their dampers in the QP stop them at contact too).
         self._roleless = np.setdiff1d(np.arange(len(robot.sets)), list(robot.roles.rows))
         self.perceiver = Perceiver(self.human, self.config.perception)
+        self.frames = FrameClock()  # which frame is new, and the age of the one in hand
         ssm = self.config.ssm.resolve(robot.arm)  # the arm's reaction and accelerations
         self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, self.config.control_period_s))
         self.stop_budget = StopTimeBudget(self.ssm, robot.joint_names, self.config.control_period_s)
         self.accel = joint_speed_limits(replace(ssm, stop_time_s=1.0), robot.joint_names)  # a_j
+        #: (nv,) the joints' velocity limits, rad/s: the description's (tighter with
+        #: :meth:`accept_limits`).
+        self.dq_max = np.array(robot.dq_max, dtype=float)
         # the paper's rules: no separation bound, no part's own speed (read-only, shared)
         shape = (len(robot.sets), len(self.human.parts))
         self._no_bound, self._no_approach = np.full(shape, np.inf), np.zeros(shape)
         for a in (self._no_bound, self._no_approach):
             a.setflags(write=False)
         warm_up()  # law_kernels, before the first tick
-        self._clock_s = 0.0  # the controller's own clock: control periods since it started
+        #: The commands so far and the reach of the next (None: the paper's steps).
+        self.ramp = (
+            CommandRamp(robot, self.config.control_period_s, self._braking())
+            if self.config.smooth
+            else None
+        )
+        self._scale_at_stop = 0.0  # the path clock's rate when a stop ramp began
+        self._ticks = 0  # the controller's own clock: control periods since it started
+        self._clock_s = 0.0  # = _ticks × control_period_s, s
         self.closest_frame: HumanFrame | None = None  # the closest person's, last tick
+        self._last: Command | None = None  # the last command returned
+
+    def _braking(self) -> tuple[tuple[str, float], ...]:
+        """``(joint, b_j)``: the braking deceleration of a stop (speed and separation's,
+        resolved from the description), rad/s²."""
+        braking = self.ssm.max_acceleration_radps2
+        assert braking is not None  # resolved in __init__
+        return braking
+
+    def accept_limits(
+        self,
+        velocity_radps: np.ndarray,
+        acceleration_radps2: np.ndarray,
+        jerk_radps3: np.ndarray,
+    ) -> None:
+        """Command only what an arm's interface accepts, where it is tighter than the
+        description ((nv,) each; franky-control caps an FR3 at the Panda's limits,
+        :attr:`~qpavoid.drive.franka.FrankaArm.limits`): the velocity and the reach of each
+        command (:meth:`~qpavoid.control.smoothing.CommandRamp.tighten`), and the braking
+        deceleration speed and separation counts on, ``b_j ≤ a_j``. Call it before the
+        first tick."""
+        names = self.robot.joint_names
+        a = dict(zip(names, np.asarray(acceleration_radps2, dtype=float), strict=True))
+        braking = tuple((n, min(b, a.get(n, b))) for n, b in self._braking())
+        self.ssm = replace(self.ssm, max_acceleration_radps2=braking)
+        self.stop_budget = StopTimeBudget(self.ssm, names, self.config.control_period_s)
+        self.accel = joint_speed_limits(replace(self.ssm, stop_time_s=1.0), names)
+        self.dq_max = np.minimum(self.dq_max, velocity_radps)
+        if self.ramp is not None:
+            self.ramp.tighten(velocity_radps, acceleration_radps2, jerk_radps3, braking)
 
     def perceive(
-        self, people: People, frame_age_s: float, frame_time_s: float | None = None
+        self,
+        people: People,
+        frame_age_s: float,
+        frame_time_s: float | None = None,
+        new: bool = True,
     ) -> Perceiver:
-        """Everybody as the trackers see them (:class:`~qpavoid.human.people.Perceiver`), updated
-        once per new frame; captured at ``frame_time_s`` or, without one, the
+        """Everybody as the trackers see them (:class:`~qpavoid.perception.perceiver.Perceiver`),
+        updated once per ``new`` frame; captured at ``frame_time_s`` or, without one, the
         controller's clock minus ``frame_age_s``."""
         captured = self._clock_s - frame_age_s if frame_time_s is None else frame_time_s
-        return self.perceiver.update(people, frame_time_s, captured)
+        return self.perceiver.update(people, captured, new)
 
     def geometry(self, frame: HumanFrame | People) -> list[HumanGeometry]:
         """The geometries used for ``frame`` if last perceived, else its own (raw)."""
@@ -126,8 +175,9 @@ class Controller:
         joints: object,
         state: object,
         t: float,
-        frame_age_s: float = 0.0,
+        frame_age_s: float | None = None,
         frame_time_s: float | None = None,
+        frame_id: Hashable | None = None,
     ) -> Tick:
         """Shared prelude, one step each: the people as perceived, the distances, the laws
         (eqs. 2-5, 7), speed and separation, the reference, the stop rules.
@@ -140,9 +190,12 @@ class Controller:
         t = finite_number(t, "t (path time, s)")
         kin = self.robot.kinematics(q)
         people = as_people(joints, state, self.human.skeleton)
-        self._clock_s += self.config.control_period_s
-        age = frame_age_s
-        percs, geos, v_people = self._perceived(people, age, frame_time_s)
+        self._ticks += 1
+        self._clock_s = self._ticks * self.config.control_period_s
+        if frame_age_s is not None:
+            frame_age_s = float(frame_age_s)  # NaN allowed: a frame of unknown age is stale
+        new, age = self.frames.observe(people, self._clock_s, frame_age_s, frame_time_s, frame_id)
+        percs, geos, v_people = self._perceived(people, age, frame_time_s, new)
         table, who = self.distances.closest(kin, geos)
         cfg, roles = self.config.avoidance, self.roles
         # the minima, eqs. (4)-(5) and (7) in one compiled call (laws.avoidance)
@@ -160,7 +213,7 @@ class Controller:
         )
         frame = self.closest_frame = people.frames[nearest] if people.ids else NOBODY
         f = float(l1_factor(dmin[roles.scaled], cfg))  # eq. (2)
-        limits = scaled_velocity_limits(self.robot.dq_max, f, self.scaled_cols)  # eq. (3)
+        limits = scaled_velocity_limits(self.dq_max, f, self.scaled_cols)  # eq. (3)
         approach_limit, human_approach, limits = self._separation(table, who, v_people, age, limits)
         ref_pose, ref_twist = self.path.reference(t)
         error = pose_error(ref_pose, kin.ee_placement)
@@ -186,16 +239,17 @@ class Controller:
             age,
             approach_limit,
             human_approach,
+            None if self.ramp is None else self.ramp.box(kin.q),
         )
 
     def _perceived(
-        self, people: People, age: float, frame_time_s: float | None
+        self, people: People, age: float, frame_time_s: float | None, new: bool
     ) -> tuple[list[Perceived], list[HumanGeometry], np.ndarray]:
         """Everybody as perceived (the trackers' frames, the bodies, their parts' velocities
         (P, K, 3), m/s); a stale or NaN-aged frame as it is, which the trackers do not learn
         from (the robot stops on it)."""
         if age <= self.config.max_frame_age_s and people.ids:
-            seen = self.perceive(people, age, frame_time_s)
+            seen = self.perceive(people, age, frame_time_s, new)
             return seen.perceived, seen.geometry, seen.part_velocity
         percs = [Perceived.untracked(f) for f in people.frames or (NOBODY,)]
         return percs, self.geometry(people), np.zeros((len(percs), len(self.human.parts), 3))
@@ -291,15 +345,24 @@ class Controller:
                     f"(q = {tick.q[k]:.4f} rad)"
                 )
         stopped = bool(reason) or dq is None
-        applied = np.zeros(self.robot.nv) if stopped or dq is None else dq
+        if self.ramp is None:  # the paper's: a step
+            applied = np.zeros(self.robot.nv) if stopped or dq is None else dq
+        elif stopped or dq is None:  # a braking ramp from the last command
+            applied = self.ramp.brake()
+            time_scale = self._scale_at_stop * self.ramp.commit(applied, stopping=True)
+        else:  # as far towards dq as the arm may go this tick
+            assert tick.command_box is not None
+            applied = self.ramp.limit(dq, *tick.command_box)
+            self.ramp.commit(applied, stopping=False)
+            self._scale_at_stop = float(time_scale)
         if self.config.safety == "ssm":
             self.stop_budget.record(applied)
         zero3 = np.zeros(3)
-        return Command(
+        self._last = Command(
             dq=applied,
             stopped=stopped,
             reason=reason if stopped else "",
-            time_scale=0.0 if stopped else float(time_scale),
+            time_scale=float(time_scale) if self.ramp is not None or not stopped else 0.0,
             f=tick.f,
             distance=tick.distance,
             table=tick.table,
@@ -310,6 +373,37 @@ class Controller:
             ee_ref=tick.ref_pose[:3, 3].copy(),
             info=info or {},
         )
+        return self._last
+
+    def brake(self, reason: str, instead: bool = False) -> Command:
+        """A stop decided outside the controller (a missed deadline, Ctrl-C, the end of a
+        run): the next command of the braking ramp from the last command (zero with
+        ``smooth=False``), as a stopped :class:`Command` with ``reason``; the rest of it
+        (distances, limits) is the last tick's. ``instead``: the last command was never
+        sent, and this one replaces it (the ramp starts from the one before).
+
+        Raises
+        ------
+        InputError
+            Before the first tick (there is nothing to brake from).
+        """
+        last = self._last
+        if last is None:
+            raise InputError(
+                "brake before any tick: nothing to brake from", name="reason", value=reason
+            )
+        if self.ramp is None:
+            applied = np.zeros(self.robot.nv)
+            time_scale = 0.0
+        else:
+            if instead:
+                self.ramp.undo()
+            applied = self.ramp.brake()
+            time_scale = self._scale_at_stop * self.ramp.commit(applied, stopping=True)
+        if self.config.safety == "ssm":
+            self.stop_budget.record(applied)
+        self._last = replace(last, dq=applied, stopped=True, reason=reason, time_scale=time_scale)
+        return self._last
 
     def step(
         self,
@@ -317,8 +411,9 @@ class Controller:
         joints: object,
         state: object = None,
         t: float = 0.0,
-        frame_age_s: float = 0.0,
+        frame_age_s: float | None = None,
         frame_time_s: float | None = None,
+        frame_id: Hashable | None = None,
     ) -> Command:
         """One control tick: :meth:`measure`, then (unless a stop rule holds) :meth:`act`.
 
@@ -335,11 +430,22 @@ class Controller:
         t
             Path time, s (the clock of the planned path, which waits while stopped).
         frame_age_s
-            Age of the human frame, s (now minus its capture time); too old, or NaN, stops
-            the robot.
+            Age of the human frame, s (now minus its capture time); too old
+            (``config.max_frame_age_s``), or NaN, stops the robot. None (the default): the
+            controller measures it on its own clock (``config.control_period_s`` per call)
+            from the tick the frame first arrived.
         frame_time_s
-            The frame's capture time on any clock, s, if the caller has it (the tracker's
-            velocities use it); without it the controller's own clock minus the age.
+            The frame's capture time on any clock, s, if the caller has it: a frame with the
+            time of the frame in hand is that frame, held (the tracker's velocities use it
+            too); without it the controller's own clock minus the age.
+        frame_id
+            The caller's id of the frame (a camera's frame counter), if it has one: a frame
+            with the id of the frame in hand is that frame, held. Without an id or a time, a
+            frame is new when its content (any joint or state) changes
+            (:class:`~qpavoid.perception.freshness.FrameClock`).
+
+        A held frame is never a frozen sensor, whatever the number of calls; the same
+        skeleton under new ids or times is (``config.perception.max_identical_frames``).
 
         Raises
         ------
@@ -347,7 +453,7 @@ class Controller:
             On malformed inputs (see :meth:`measure`). A numerical failure while computing
             the command is not raised: the robot stops with it as the reason.
         """
-        tick = self.measure(q, joints, state, t, frame_age_s, frame_time_s)
+        tick = self.measure(q, joints, state, t, frame_age_s, frame_time_s, frame_id)
         if tick.reason:
             return self.command(tick, None)
         try:

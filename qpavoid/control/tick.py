@@ -65,6 +65,12 @@ class ControllerConfig:
     perception
         How frames are judged: lost and inferred joints, frozen frames, the person's
         velocity (:mod:`qpavoid.perception.tracker`).
+    smooth
+        Commands a real arm accepts (:mod:`qpavoid.control.smoothing`; the default): each
+        command within the arm's acceleration (and jerk) limits of the last, starting from
+        rest, with room to brake before a joint limit, and a stop commanded as a braking
+        ramp (category 2). False: the paper's commands as published, where a stop is a
+        step to zero; a real arm faults on them (for checking the laws tick by tick).
     """
 
     distance: str = "capsules"
@@ -80,6 +86,7 @@ class ControllerConfig:
     safety: str = "paper"
     ssm: SSMConfig = field(default_factory=SSMConfig)
     perception: PerceptionConfig = field(default_factory=PerceptionConfig)
+    smooth: bool = True
 
     def __post_init__(self) -> None:
         if self.safety not in SAFETY_MODES:
@@ -97,9 +104,10 @@ class Command:
     Attributes
     ----------
     dq
-        (nv,) commanded joint velocities, rad/s; exactly zero when stopped.
+        (nv,) commanded joint velocities, rad/s. While stopped: the braking ramp, exactly
+        zero once at rest (at once with ``ControllerConfig.smooth=False``).
     stopped
-        True if a stop rule (or the last-resort layer) holds.
+        True if a stop rule (or the last-resort layer) holds: the arm brakes to rest.
     reason
         Why the robot stops ("" while it moves).
     time_scale
@@ -184,6 +192,9 @@ class Tick:
         (S, K) each part's own speed towards each set, m/s (≥ 0; 0 with ``"paper"``).
     reason
         Why a stop rule holds ("" if none).
+    command_box
+        ``(lo, hi)`` (nv,) each the reachable box of this tick's command, rad/s
+        (:meth:`~qpavoid.control.smoothing.CommandRamp.box`), or None (``smooth=False``).
     """
 
     q: np.ndarray
@@ -207,6 +218,7 @@ class Tick:
     frame_age_s: float
     approach_limit: np.ndarray
     human_approach: np.ndarray
+    command_box: tuple[np.ndarray, np.ndarray] | None = None
 
     def separation_reason(self) -> str:
         """Why speed and separation monitoring stops the robot: the tightest pair."""

@@ -20,6 +20,7 @@ import pickle
 from pathlib import Path
 
 __all__ = [
+    "ArmError",
     "CalibrationError",
     "DataFileError",
     "IKNotConvergedError",
@@ -219,6 +220,33 @@ class SolverError(QpavoidError):
     def __init__(self, message: str, *, solver: str | None = None, status: object = None):
         super().__init__(message)
         self.solver, self.status = solver, status
+
+
+class ArmError(QpavoidError):
+    """The arm cannot be driven: unreachable, refusing the connection, its state stalled,
+    a command it rejected, or a fault it reports.
+
+    Attributes
+    ----------
+    arm
+        Which arm (e.g. ``"franka:127.0.0.1"``), if known.
+    reason
+        A short machine-readable cause (``"unreachable"``, ``"stalled"``, ``"rejected"``,
+        ``"fault"``, ``"limit"``), if known.
+    value
+        The offending value (a command, a state's age), if any.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        arm: str | None = None,
+        reason: str | None = None,
+        value: object = None,
+    ):
+        super().__init__(message)
+        self.arm, self.reason, self.value = arm, reason, value
 
 
 class Terminated(KeyboardInterrupt):

@@ -16,6 +16,7 @@ from qpavoid.control.qp.backends import check_solver
 from qpavoid.control.tick import SAFETY_MODES
 from qpavoid.core.checks import check_choice, check_range
 from qpavoid.core.errors import InputError
+from qpavoid.drive.connect import parse_arm
 from qpavoid.loop.camera import KINECT_V2_LATENCY_S
 from qpavoid.loop.live_input import parse_address
 from qpavoid.scenarios import motions
@@ -93,6 +94,11 @@ class RunSpec:
     allow_unauthenticated
         With ``listen`` on a loopback address: also accept unsigned (version 1)
         datagrams (docs/security.md).
+    arm
+        The arm to drive in real time instead of the offline simulation
+        (:func:`~qpavoid.drive.connect.open_arm`): ``"sim"`` (the kinematic arm on the wall
+        clock) or ``"franka:HOST"`` (a Franka, or franky-sim, through franky-control);
+        None: the offline simulation (a live run's: the simulated arm in real time).
     """
 
     scenario: str | None = None
@@ -114,6 +120,7 @@ class RunSpec:
     sensors: str | None = None
     listen: str | None = None
     allow_unauthenticated: bool = False
+    arm: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sensor_files", tuple(str(f) for f in self.sensor_files))
@@ -172,6 +179,15 @@ class RunSpec:
             check_solver(self.solver)
         if self.listen is None:
             motions.check_human_files(self.sensor_files, self.sensors)
+        if self.arm is not None:
+            parse_arm(self.arm)
+            if self.bench == "ideal":
+                raise InputError(
+                    "--arm drives a real arm (or the simulated one in real time): the "
+                    "ideal bench's arm is the offline simulation's",
+                    name="--arm",
+                    value=self.arm,
+                )
 
     @property
     def human_files(self) -> tuple[str, ...]:

@@ -11,6 +11,7 @@ The names a run can take live in :mod:`qpavoid.experiments.run_spec`, with :clas
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -25,8 +26,10 @@ from qpavoid.control.analytic import AnalyticConfig, AnalyticController
 from qpavoid.control.controller import Controller
 from qpavoid.control.qp import QPConfig, QPController
 from qpavoid.control.qp.config import REDUNDANT
+from qpavoid.control.task import inverse_kinematics
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.core.errors import InputError
+from qpavoid.drive.connect import open_arm
 from qpavoid.experiments.run_spec import (
     STALE_AFTER_LATENCY_S,
     RunSpec,
@@ -174,7 +177,12 @@ def simulate_one(
             if spec.bench == "ideal"
             else CameraConfig(latency_s=spec.latency_s)
         )
-    with live_source(spec, clear) as source:
+    with contextlib.ExitStack() as stack:
+        source = stack.enter_context(live_source(spec, clear))
+        arm = None
+        if spec.arm is not None:  # at the path's start, as the offline simulation starts
+            q0 = inverse_kinematics(robot, controller.path.reference(0.0)[0])
+            arm = stack.enter_context(open_arm(spec.arm, robot, q0, 1.0 / spec.rate_hz))
         sim = simulate(
             controller,
             motion,
@@ -190,6 +198,7 @@ def simulate_one(
             source=source,
             realtime=live,
             watch=watch,
+            arm=arm,
         )
         metrics = dict(sim.metrics)
         if source is not None:
@@ -201,6 +210,7 @@ def simulate_one(
         latency_s=spec.latency_s if spec.bench == "real" and not live else 0.0,
         redundant=bool(spec.redundant),
         robot=description_reference(spec.robot),
+        arm=spec.arm or "offline simulation",
         solver=getattr(getattr(controller, "backend", None), "name", None),
     )
     return RunResult(spec, sim, robot, controller, metrics)

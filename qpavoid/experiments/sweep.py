@@ -155,15 +155,19 @@ class ApproachCheck:
     position_violations, velocity_violations
         Ticks with a joint outside its position limits / over its scaled velocity limit.
     moving_under_stop_rule
-        Ticks with a non-zero command while a stop rule held.
+        Ticks with a non-zero command while a stop rule held, other than a braking ramp's
+        (:func:`braking_ticks`).
     moving_below_capsule_threshold
         Ticks with a non-zero command while a set's capsule distance was below its
-        threshold.
+        threshold, other than a braking ramp's.
     min_capsule_distance_moving_m
         Per set, by name: the smallest capsule distance over the ticks where the robot
         moved, m.
     stopped_s, reached_goal
         Time spent stopped, s, and whether the goal was reached.
+    command_limit_violations
+        Commands beyond the arm's velocity, acceleration or jerk limits
+        (:class:`~qpavoid.drive.limits.CommandCheck`).
     """
 
     kind: ClassVar[str] = "approach"
@@ -179,12 +183,14 @@ class ApproachCheck:
     min_capsule_distance_moving_m: dict[str, float]
     stopped_s: float
     reached_goal: bool
+    command_limit_violations: int = 0
 
     @property
     def safe(self) -> bool:
         """True if no invariant was broken."""
         return not (
-            self.position_violations
+            self.command_limit_violations
+            or self.position_violations
             or self.velocity_violations
             or self.moving_under_stop_rule
             or self.moving_below_capsule_threshold
@@ -217,6 +223,8 @@ class StrikeCheck:
         Whether the path's goal was reached, and when the run ended, s.
     limit_violations
         Ticks over a joint's velocity or position limit.
+    command_limit_violations
+        Commands beyond the arm's velocity, acceleration or jerk limits.
     tick_us_median, tick_us_p99
         The controller's time per tick, µs (measured: not reproducible).
     """
@@ -242,10 +250,25 @@ class StrikeCheck:
     limit_violations: int = 0
     tick_us_median: float = 0.0
     tick_us_p99: float = 0.0
+    command_limit_violations: int = 0
 
 
 #: What a sweep's run gives: an approach's or a strike's check.
 Check: TypeAlias = ApproachCheck | StrikeCheck
+
+
+def braking_ticks(dq_command: np.ndarray) -> np.ndarray:
+    """(T,) the ticks whose command brakes: every joint as fast as the tick before or slower,
+    in the same direction (``u_k,j u_{k−1},j ≥ 0`` and ``|u_k,j| ≤ |u_{k−1},j|``), and the
+    command no longer the same (a hold is not braking) or zero. A stop ramp
+    (:meth:`~qpavoid.control.smoothing.CommandRamp.brake`) is braking at every tick; so is
+    the slowing that a lowered velocity limit (eq. 3) asks for, which the arm cannot do at
+    once. A zero command always is (and is not moving)."""
+    u = np.asarray(dq_command, dtype=float)
+    before = np.vstack([np.zeros((1, u.shape[1])), u[:-1]])
+    slower = np.all((u * before >= 0.0) & (np.abs(u) <= np.abs(before) + 1e-12), axis=1)
+    changed = np.any(u != before, axis=1)
+    return (slower & changed) | ~np.any(u != 0.0, axis=1)
 
 
 def check_log(
@@ -264,19 +287,20 @@ def check_log(
     capsule = log["distance"] if distance == "capsules" else log["distance_other"]
     threshold = set_stop_distances(avo, roles, len(robot.sets))
     moving = np.any(log["dq_command"] != 0.0, axis=1)  # the controller's decisions
+    braking = braking_ticks(log["dq_command"])
     seen = log["distance"]
     rule = stop_rule_holds(log["f"], seen[:, roles.repelled], seen[:, roles.end_effector], avo)
     cols = joint_columns(robot, config.scaled_joints, "scaled_joints")
     limits = scaled_velocity_limits(robot.dq_max, log["f"], cols)  # eq. (3)
-    over = np.any(np.abs(log["dq_command"]) > limits * (1 + 1e-9) + 1e-12, axis=1)
+    over = np.any(np.abs(log["dq_command"]) > limits * (1 + 1e-9) + 1e-12, axis=1) & ~braking
     outside = np.any((log["q"] > robot.q_max) | (log["q"] < robot.q_min), axis=1)
     below = np.any(capsule < threshold, axis=1)
     closest = capsule[moving].min(axis=0) if moving.any() else np.full(len(robot.sets), np.inf)
     return {
         "position_violations": int(outside.sum()),
         "velocity_violations": int(over.sum()),
-        "moving_under_stop_rule": int((moving & rule).sum()),
-        "moving_below_capsule_threshold": int((moving & below).sum()),
+        "moving_under_stop_rule": int((moving & rule & ~braking).sum()),
+        "moving_below_capsule_threshold": int((moving & below & ~braking).sum()),
         "min_capsule_distance_moving_m": {
             name: float(x) for name, x in zip(robot.set_names, closest, strict=True)
         },
@@ -309,6 +333,7 @@ def _approach_check(seed: int, run: RunResult) -> ApproachCheck:
         **check_log(run.sim.log, run.robot, run.config, spec.distance),
         stopped_s=run.metrics["stopped_s"],
         reached_goal=run.metrics["reached_goal"],
+        command_limit_violations=sum(run.metrics["command_limit_violations"].values()),
     )
 
 
@@ -336,6 +361,7 @@ def _strike_check(case: StrikeCase, run: RunResult) -> StrikeCheck:
         int(m["joint_velocity_limit_violations"] + m["joint_position_limit_violations"]),
         float(m["tick_us"]["median"]),
         float(m["tick_us"]["p99"]),
+        sum(m["command_limit_violations"].values()),
     )
 
 
@@ -400,6 +426,7 @@ def _approach_totals(checks: Sequence[ApproachCheck]) -> dict[str, Any]:
         "position_violations": sum(c.position_violations for c in checks),
         "velocity_violations": sum(c.velocity_violations for c in checks),
         "moving_under_stop_rule": sum(c.moving_under_stop_rule for c in checks),
+        "command_limit_violations": sum(c.command_limit_violations for c in checks),
         "moving_below_capsule_threshold": sum(c.moving_below_capsule_threshold for c in checks),
         "min_capsule_distance_moving_m": {
             name: min(c.min_capsule_distance_moving_m[name] for c in checks)
@@ -432,6 +459,7 @@ def _strike_totals(runs: Sequence[StrikeCheck]) -> dict[str, Any]:
         "mean_time_stopped_s": round(float(np.mean([r.stopped_s for r in runs])), 6),
         "mean_duration_s": round(float(np.mean([r.duration_s for r in runs])), 6),
         "runs_with_limit_violations": sum(r.limit_violations > 0 for r in runs),
+        "runs_with_command_limit_violations": sum(r.command_limit_violations > 0 for r in runs),
         "timing": {
             "tick_us_median": float(np.median([r.tick_us_median for r in runs])),
             "tick_us_p99": float(np.percentile([r.tick_us_p99 for r in runs], 99)),

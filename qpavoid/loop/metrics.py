@@ -56,14 +56,44 @@ def end_of_run(
     return {"end_reason": reason, "held_by_person": None}
 
 
+#: A measured arm moves when a control point moves faster than this between two ticks, m/s:
+#: above franky-sim's creep of a stopped wrist (1.5 mm/s: its velocity loop holds no
+#: position) and the noise of its joint angles; a person at 5 mm/s is not struck.
+MOVING_MPS = 0.005
+#: Over this long, s (ten of franky's 1 ms states, five 500 Hz ticks).
+MOVING_WINDOW_S = 0.01
+
+
+def measured_motion(robot: Robot, q: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(T,) the ticks in which a measured arm moved: some control point's displacement over
+    the next :data:`MOVING_WINDOW_S` (the last ticks: the window before them), over the
+    time it took, above :data:`MOVING_MPS`. A window, not one tick: an arm's states come
+    with its own timing (franky's at 1 ms), so one tick's step may hold two of them."""
+    n = len(t)
+    if n < 2:
+        return np.zeros(n, dtype=bool)
+    points = np.array([robot.control_points(qk) for qk in q])  # (T, P, 3)
+    end = np.minimum(np.searchsorted(t, t + MOVING_WINDOW_S), n - 1)
+    start = np.where(end > np.arange(n), np.arange(n), np.searchsorted(t, t - MOVING_WINDOW_S))
+    end = np.where(end > np.arange(n), end, np.arange(n))
+    span = np.maximum(t[end] - t[start], 1e-9)
+    speed = np.linalg.norm(points[end] - points[start], axis=2).max(axis=1) / span
+    return speed > MOVING_MPS
+
+
 def truth_metrics(
     log: dict[str, np.ndarray],
     robot: Robot,
     avoidance: AvoidanceConfig,
     stop_events: list[dict[str, Any]],
     dt: float,
+    moving: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """Safety judged against where the person really is (``log["true_distance"]``).
+
+    ``moving`` (T,) says which ticks the arm moved in; by default those with a non-zero
+    velocity ``log["dq"]`` (the simulated arm's, exact); a real arm's measured velocity is
+    never exactly zero (:func:`measured_motion`).
 
     Returns ``min_true_clearance_moving_m`` (smallest true capsule distance over the ticks
     with a non-zero command, m; None if never measured or never moving),
@@ -74,12 +104,15 @@ def truth_metrics(
     tick before it).
     """
     true = log["true_distance"]
-    moving = np.any(log["dq"] != 0.0, axis=1)
+    if moving is None:
+        moving = np.any(log["dq"] != 0.0, axis=1)
     for event in stop_events:
-        k = int(np.searchsorted(log["t"], event["t"] - 1e-9))
+        # (event times are rounded to 1 µs: a real-time tick's may round past its own)
+        k = min(int(np.searchsorted(log["t"], event["t"] - 1e-6)), len(log["t"]) - 1)
         if k > 0:
             step = robot.control_points(log["q"][k]) - robot.control_points(log["q"][k - 1])
-            event["robot_speed_mps"] = float(np.linalg.norm(step, axis=1).max() / dt)
+            elapsed = float(log["t"][k] - log["t"][k - 1]) or dt  # a late tick's real gap
+            event["robot_speed_mps"] = float(np.linalg.norm(step, axis=1).max() / elapsed)
         else:
             event["robot_speed_mps"] = 0.0
     if np.isnan(true).all():

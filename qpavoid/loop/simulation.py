@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -43,14 +43,18 @@ import pinocchio as pin
 from qpavoid.arm.braking import ArmResponse, BrakingConfig, WallClockArm
 from qpavoid.control.controller import Controller
 from qpavoid.control.task import inverse_kinematics
-from qpavoid.core.errors import InputError
+from qpavoid.core.errors import ArmError, InputError
 from qpavoid.core.signals import Interruption
 from qpavoid.distance.methods import distance_method
+from qpavoid.drive.interface import Arm
+from qpavoid.drive.limits import CommandCheck, CommandLimits
+from qpavoid.drive.watchdog import Watchdog
 from qpavoid.human.frames import HumanFrame, HumanMotion
 from qpavoid.human.people import People
 from qpavoid.loop.camera import Camera, CameraConfig
-from qpavoid.loop.metrics import end_of_run, run_metrics, truth_metrics
+from qpavoid.loop.metrics import end_of_run, measured_motion, run_metrics, truth_metrics
 from qpavoid.loop.run_log import TEXT_KEYS, finished, new_log, repulsion_keys
+from qpavoid.loop.timing import LoopTiming, StallCheck
 from qpavoid.loop.truth import TrueClearance
 
 
@@ -80,6 +84,17 @@ class SimConfig:
         ``true_*`` metrics. Off by default here because it doubles a simulation's time
         (the true person and a capsule table every tick, about 1.5 ms); runs made through
         :mod:`qpavoid.experiments.runs` (the command line, ``compare``) turn it on.
+    deadline_s
+        Real time only: a tick whose command is ready later than this after the tick's
+        due time missed its deadline; its command becomes the next step of a braking ramp
+        (counted: ``deadline_misses``; logged as its stop reason). None (the default): one
+        control period.
+    stall_timeout_s
+        With an arm (``arm=``): its state may stand still this long, s, before the arm
+        counts as stalled (the run stops and ends with ``end_reason`` "arm stalled: ...").
+    watchdog_s
+        With an arm: a loop that sends no command for this long, s, has the arm stopped
+        from a watchdog thread (:class:`~qpavoid.drive.watchdog.Watchdog`).
     """
 
     control_rate_hz: float = 500.0
@@ -89,6 +104,9 @@ class SimConfig:
     goal_tolerance_m: float = 1e-3
     goal_tolerance_rad: float = 1e-2
     measure_truth: bool = False
+    deadline_s: float | None = None
+    stall_timeout_s: float = 0.05
+    watchdog_s: float = 0.1
 
 
 @dataclass
@@ -116,6 +134,7 @@ def simulate(
     source: FrameSource | None = None,
     realtime: bool = False,
     watch: Callable[[dict[str, Any]], None] | None = None,
+    arm: Arm | None = None,
 ) -> SimResult:
     """Run the controller in closed loop against ``motion`` along ``controller.path``.
 
@@ -145,6 +164,16 @@ def simulate(
         executing its last command until the next tick, however late; τ advances by
         ``time_scale ×`` that real time too, so the reference keeps up with the arm; Ctrl-C
         ends the run, which is summed up as usual with ``end_reason`` "interrupted".
+    arm
+        An arm to drive instead of the kinematic simulation (:class:`~qpavoid.drive.
+        interface.Arm`: a Franka through :class:`~qpavoid.drive.franka.FrankaArm`): the run
+        is then real time; each tick reads the arm's state (the joint angles the
+        controller and the truth are given are the arm's, its physics' lag included),
+        checks the command against the arm's limits and sends it. A missed deadline
+        brakes for a tick (``deadline_misses``), a stalled state or an arm error ends the
+        run (``end_reason`` "arm ..."), a loop that stops sending has the arm stopped by
+        the watchdog; however the run ends (goal, time cap, Ctrl-C, SIGTERM, an error),
+        the controller's braking ramp brings the arm to rest before :meth:`Arm.stop`.
 
     Returns
     -------
@@ -180,15 +209,18 @@ def simulate(
     other_name = "capsules" if controller.config.distance == "spheres" else "spheres"
     other = distance_method(other_name, robot, controller.human)
     feed: FrameSource
+    realtime = realtime or arm is not None
+    if arm is not None:
+        q = arm.read().q.copy()  # the arm is where it is
     if source is not None:
         feed = source
     elif motion is not None:
         feed = Camera(motion, cfg.camera)
     else:
         raise InputError("simulate needs a motion or a frame source", name="motion")
-    arm = (
+    arm_model = (
         None
-        if cfg.braking is None
+        if cfg.braking is None or arm is not None
         else ArmResponse(cfg.braking.resolve(robot.arm), robot.joint_names, dt)
     )
     truth = (
@@ -197,7 +229,13 @@ def simulate(
         else None
     )
     goal = path.reference(path.duration_s)[0]
-    wall = WallClockArm(arm, dt, robot, record=truth is not None)  # real time only
+    wall = WallClockArm(arm_model, dt, robot, record=truth is not None and arm is None)
+    if arm is not None:  # what the arm's interface accepts, if tighter
+        lim = arm.limits
+        controller.accept_limits(lim.velocity_radps, lim.acceleration_radps2, lim.jerk_radps3)
+    checked = CommandCheck(  # every command vs the arm's limits
+        CommandLimits.of(robot, dt) if arm is None else replace(arm.limits, dt_s=dt)
+    )
 
     log = new_log(n_max, robot, controller.human.skeleton)
     v_repelled, v_end_effector = repulsion_keys(robot)
@@ -207,14 +245,28 @@ def simulate(
     tau, was_stopped, last_progress, last_watch = 0.0, False, -1.0, -1.0
     reached, overruns, n = False, 0, 0
     interrupt = Interruption(realtime)
+    deadline_s = dt if cfg.deadline_s is None else cfg.deadline_s
+    timing = LoopTiming(dt, deadline_s)
+    ended_by = ""  # an arm's error, if one ended the run
+    measured = np.zeros(robot.nv)  # the arm's reported velocity
+    stall = StallCheck(cfg.stall_timeout_s)
+    dog = Watchdog(cfg.watchdog_s, arm.stop) if arm is not None else None
     wall0 = time.perf_counter()
     try:
+        if dog is not None:
+            dog.__enter__()
+        began = -math.inf
         for k in range(n_max):
             t = k * dt
             if realtime:
                 if interrupt.requested and k > 0:
                     break
-                wait = wall0 + t - time.perf_counter()
+                due = wall0 + t
+                if arm is not None:  # never two commands within a period: a late loop
+                    due = max(due, began + dt)  # skips ticks rather than bursting them
+                    if due - wall0 > cfg.max_time_s:
+                        break
+                wait = due - time.perf_counter()
                 if wait > 0:
                     time.sleep(wait)
                 else:
@@ -222,11 +274,22 @@ def simulate(
                 # the run clock is the wall clock: a late tick sees the time it really is,
                 # so the frames it holds are as old as they really are
                 t = max(t, time.perf_counter() - wall0)
+            began = time.perf_counter()
+            if arm is not None:
+                try:
+                    state = stall(arm.read(), began)
+                except ArmError as exc:
+                    ended_by = f"arm {exc.reason or 'error'}: {exc}"
+                    break
+                q, measured = state.q, state.dq
             human, captured_s = feed.frame_at(t)
             alert = getattr(feed, "alert", "")  # a live source's suspect input, if any
             if realtime:  # getting the frame took time too: the age is judged now
                 t = max(t, time.perf_counter() - wall0)
-                q, moved_tau = wall.advance(q, t)  # the arm kept moving until now
+                if arm is None:
+                    q, moved_tau = wall.advance(q, t)  # the arm kept moving until now
+                else:
+                    moved_tau = wall.path_advance(t)
                 tau = min(tau + moved_tau, path.duration_s)
             if progress is not None and t - last_progress >= 1.0 / 30.0:
                 progress(t)
@@ -234,12 +297,30 @@ def simulate(
             t0 = time.perf_counter_ns()
             cmd = controller.step(q, human, None, tau, t - captured_s, captured_s)
             tick_us = (time.perf_counter_ns() - t0) / 1e3
+            if arm is not None and (late := timing.late(began, time.perf_counter())) is not None:
+                cmd = controller.brake(f"missed deadline ({late * 1e3:.1f} ms late)", instead=True)
+            if checked(cmd.dq) and arm is not None:  # never sent (the arm would fault); logged
+                ended_by = f"command beyond the arm's limits: {checked.last}"
+            elif arm is not None:
+                try:
+                    arm.send(cmd.dq)
+                except ArmError as exc:
+                    ended_by = f"arm {exc.reason or 'error'}: {exc}"
+                    break
+                timing.sent(time.perf_counter() - wall0, captured_s)
+                assert dog is not None
+                dog.kick()
             kin = robot.kinematics(q, jacobians=False)
             other_table = other.closest(kin, controller.geometry(human))[0]
-            if truth is not None:
+            if truth is not None and arm is None:  # (an arm's: after the run, off its loop)
                 log["true_distance"][k] = truth(kin, t)
 
-            dq = wall.command(cmd.dq, t) if realtime else cmd.dq if arm is None else arm(cmd.dq)
+            if arm is not None:
+                dq = measured  # what the arm reports
+            elif realtime:
+                dq = wall.command(cmd.dq, t)
+            else:
+                dq = cmd.dq if arm_model is None else arm_model(cmd.dq)
             if np.any(np.abs(dq) > robot.dq_max * (1 + 1e-9)):
                 vel_violations += 1
                 dq = np.clip(dq, -robot.dq_max, robot.dq_max)
@@ -268,6 +349,8 @@ def simulate(
                 )
                 last_watch = t
             n = k + 1
+            if ended_by:
+                break
 
             if tau >= path.duration_s and not cmd.stopped:
                 T = robot.end_effector(q)
@@ -282,19 +365,40 @@ def simulate(
                 q = q + dq * dt
                 tau = min(tau + cmd.time_scale * dt, path.duration_s)
 
+        if arm is not None and not ended_by:  # however it ended: a ramp to rest, on time
+            ended_by = _ramp_down(controller, arm, checked, dt)
     finally:
         interrupt.restore()
+        if dog is not None:
+            dog.__exit__(None, None, None)
+        if arm is not None:
+            try:
+                arm.stop()
+            except ArmError as exc:
+                ended_by = ended_by or f"arm {exc.reason or 'error'}: {exc}"
     log = finished(log, n, texts)
+    if truth is not None and arm is not None:  # where the arm really was, when it was there
+        kinematics = robot.kinematics
+        for k in range(n):
+            log["true_distance"][k] = truth(kinematics(log["q"][k], jacobians=False), log["t"][k])
     if watch is not None and n:  # the last tick too, whenever it came
         watch({key: v[n - 1].copy() for key, v in log.items()})
     avoidance = controller.config.avoidance
     ending = end_of_run(reached, cmd, robot, avoidance, log, goal)
     if interrupt.requested:
         ending["end_reason"] = "interrupted"
+    if ended_by and ended_by != "at rest":
+        ending["end_reason"] = ended_by
     if realtime:
         ending["realtime_overruns"] = int(overruns)
         ending["min_true_clearance_in_gaps_m"] = wall.least_clearance(truth)
-    ending |= truth_metrics(log, robot, avoidance, stop_events, dt)
+        ending["loop"] = timing.report()
+    if dog is not None and dog.fired:
+        ending["watchdog_fired"] = True
+    moving = None if arm is None else measured_motion(robot, log["q"], log["t"])
+    ending |= truth_metrics(log, robot, avoidance, stop_events, dt, moving)
+    ending["command_limit_violations"] = dict(checked.counts)
+    ending["command_limit_worst_ratio"] = {k: round(v, 6) for k, v in checked.worst.items()}
     return SimResult(
         log,
         run_metrics(
@@ -311,6 +415,26 @@ def simulate(
         )
         | ending,
     )
+
+
+def _ramp_down(controller: Controller, arm: Arm, checked: CommandCheck, dt: float) -> str:
+    """The controller's braking ramp sent to ``arm`` once a period until it commands rest
+    (at most 10 s); "at rest", or why it could not finish."""
+    start = time.perf_counter()
+    for k in range(1, int(10.0 / dt) + 1):
+        cmd = controller.brake("end of run")
+        if checked(cmd.dq):
+            return f"command beyond the arm's limits: {checked.last}"
+        try:
+            arm.send(cmd.dq)
+        except ArmError as exc:
+            return f"arm {exc.reason or 'error'}: {exc}"
+        if not np.any(cmd.dq):
+            return "at rest"
+        wait = start + k * dt - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+    return "at rest"
 
 
 def _rot_err(A: np.ndarray, B: np.ndarray) -> float:

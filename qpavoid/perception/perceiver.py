@@ -18,9 +18,9 @@ class Perceiver:
 
     One :class:`~qpavoid.perception.tracker.Tracker` per person id
     (:class:`~qpavoid.perception.tracker.PeopleTracker`), each person's geometry (widened by the
-    uncertainty of lost joints) and part velocities (K, 3), kept until the frame changes:
-    new frame objects (:func:`same_frames`) or a new capture time. The frames are of the
-    body model's skeleton format.
+    uncertainty of lost joints) and part velocities (K, 3), kept until a new frame comes
+    (the caller says which is new: :class:`~qpavoid.perception.freshness.FrameClock`). The
+    frames are of the body model's skeleton format.
     """
 
     def __init__(self, human: BodyModel, cfg: PerceptionConfig | None = None):
@@ -30,12 +30,13 @@ class Perceiver:
         self.perceived: list[Perceived] = []
         self.geometry: list[HumanGeometry] = []
         self.part_velocity = np.zeros((0, len(human.parts), 3))
-        self._frame: tuple[People, float | None] | None = None
+        self._frame: People | None = None
 
-    def update(self, people: People, frame_time_s: float | None, captured_s: float) -> Perceiver:
-        """Take ``people`` (captured at ``captured_s``) unless it is the frame in hand."""
-        last = self._frame
-        if last is None or not same_frames(people, last[0]) or frame_time_s != last[1]:
+    def update(self, people: People, captured_s: float, new: bool = True) -> Perceiver:
+        """Take ``people``, captured at ``captured_s`` (s), if it is a ``new`` frame (or the
+        first); a frame held from an earlier tick (:class:`~qpavoid.perception.freshness.
+        FrameClock`) only becomes the frame in hand, which the trackers saw already."""
+        if new or self._frame is None:
             self.perceived = self.trackers.update(people.ids, people.frames, captured_s)
             bodies = [
                 self.human.tracked_geometry(p.frame, p.joint_radius, p.joint_velocity)
@@ -43,7 +44,7 @@ class Perceiver:
             ]
             self.geometry = [geometry for geometry, _ in bodies]
             self.part_velocity = np.array([velocity for _, velocity in bodies])
-            self._frame = (people, frame_time_s)
+        self._frame = people
         return self
 
     def geometries(self, frame: HumanFrame | People) -> list[HumanGeometry]:
@@ -52,7 +53,7 @@ class Perceiver:
         people = (
             frame if isinstance(frame, People) else as_people(frame, skeleton=self.human.skeleton)
         )
-        if self._frame is not None and same_frames(people, self._frame[0]) and self.geometry:
+        if self._frame is not None and same_frames(people, self._frame) and self.geometry:
             return self.geometry
         return [self.human.geometry(f) for f in people.frames] or [
             self.human.geometry(self._nobody)

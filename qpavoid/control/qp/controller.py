@@ -11,6 +11,7 @@ from qpavoid.control.qp.barriers.repulsion import EERepulsionTask, RepelledRepul
 from qpavoid.control.qp.barriers.separation import SeparationLimit
 from qpavoid.control.qp.config import QPConfig
 from qpavoid.control.qp.kernels import warm_up
+from qpavoid.control.qp.limits.acceleration import AccelerationLimit
 from qpavoid.control.qp.limits.position import PositionLimit
 from qpavoid.control.qp.limits.velocity import VelocityLimit
 from qpavoid.control.qp.limits.velocity_damper import VelocityDamper
@@ -51,6 +52,7 @@ class QPController(Controller):
                    [−nᵀ J_p q̇ ≤ v_max(d)                         SeparationLimit, ssm only]
                     |q̇| ≤ q̇_max, scaled joints × (1 − f)          VelocityLimit, eq. (3)
                     γ (q_min − q)/dt ≤ q̇ ≤ γ (q_max − q)/dt      PositionLimit
+                    lo ≤ q̇ ≤ hi, within reach of the last command AccelerationLimit
 
     (q̇₈: eq. (8)'s joint velocities; :mod:`qpavoid.control.qp.barriers.repulsion` explains the
     repulsion
@@ -153,6 +155,7 @@ class QPController(Controller):
             ),
             VelocityLimit(x),
             PositionLimit(x, robot.q_min, robot.q_max, w.position_limit_gain),
+            AccelerationLimit(x),  # last: the others' bounds projected into its box
         ]
         warm_up()  # the QP's compiled pieces, before the first tick (the backend warms its own)
         self.assembler = Assembler(x.n, pieces)

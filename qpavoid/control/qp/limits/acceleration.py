@@ -1,0 +1,35 @@
+"""The reach of the next command: the arm's acceleration and jerk limits around the last one."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from qpavoid.control.qp.pieces import QPPiece
+from qpavoid.control.qp.variables import Variables
+from qpavoid.control.tick import Tick
+
+
+class AccelerationLimit(QPPiece[Tick]):
+    """Bounds ``lo ≤ q̇ ≤ hi``, the reachable box of :mod:`qpavoid.control.smoothing`:
+
+        max(u₁ − a dt, u₁ + (u₁ − u₂) − j dt²) ≤ q̇ ≤ min(u₁ + a dt, u₁ + (u₁ − u₂) + j dt²)
+
+    (u₁, u₂ the last two commands, a and j each joint's acceleration and jerk limits), with
+    room to brake before each joint limit. It comes after every other bound: the bounds so
+    far are projected into the box, so that a velocity or position bound the arm cannot
+    reach this tick becomes the box's nearest end (slow down as fast as the arm may),
+    never an infeasible problem.
+    """
+
+    name = "acceleration_limits"
+
+    def __init__(self, variables: Variables):
+        self.variables = variables
+
+    def tighten_qp_bounds(self, tick: Tick, dt: float, lb: np.ndarray, ub: np.ndarray) -> None:
+        if tick.command_box is None:  # the paper's steps (ControllerConfig.smooth=False)
+            return
+        lo, hi = tick.command_box
+        x_lo, x_hi = lb[self.variables.dq], ub[self.variables.dq]
+        np.clip(x_lo, lo, hi, out=x_lo)
+        np.clip(x_hi, lo, hi, out=x_hi)

@@ -1,0 +1,179 @@
+"""Commands a real arm accepts: each tick's command within reach of the last one, stops as ramps.
+
+A real arm faults on a command it cannot follow (libfranka's ``joint_motion_generator_*``
+reflexes, a UR protective stop). :class:`CommandRamp` keeps the controller's commands
+``u_k`` (one per control period dt, from rest: ``u_{-1} = u_{-2} = 0``) within the arm's
+limits, per joint j:
+
+    |u_k|                    ≤ v_j                       velocity (the arm's; eq. 3's below)
+    |u_k − u_{k−1}|          ≤ a_j dt                    acceleration
+    |u_k − 2u_{k−1} + u_{k−2}| ≤ j_j dt²                   jerk, where the arm publishes one
+    |u_k| (dt + T/2) ≤ the room to q_min, q_max          room to brake before the limit
+
+(a_j the acceleration limit, b_j ≤ a_j the braking deceleration of speed and separation
+monitoring, j_j the jerk limit, T the longest a stop begun after u_k may last,
+:meth:`CommandRamp.stop_time_bound`: the description's ``[arm]``, or tighter ones an arm's
+interface imposes, :meth:`CommandRamp.tighten`). These rows form the *reachable box*
+``lo ≤ u_k ≤ hi`` of :meth:`CommandRamp.box`: the
+QP takes it as bounds (:class:`~qpavoid.control.qp.limits.acceleration.AccelerationLimit`);
+where a limit (a velocity limit eq. 3 just lowered, a joint limit) lies outside the box, the
+box's nearest end holds: the arm slows as fast as it may, never faster. The analytic
+controller's command is moved towards along a straight line from ``u_{k−1}``, as far as the
+box allows (:meth:`CommandRamp.limit`), which keeps its direction.
+
+A stop is a ramp, commanded here (IEC 60204-1 category 2: the arm brakes under control and
+stays powered): from the last command, every joint along the same line in joint-velocity
+space to rest, at the braking deceleration b_j of the slowest joint and the jerk limits
+(:class:`~qpavoid.arm.braking.ArmResponse` with no reaction time), which is the stop speed
+and separation monitoring counts on (its T_s and S_s; the arm's reaction time is added there).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from qpavoid.arm.braking import ArmResponse, BrakingConfig, per_joint
+from qpavoid.arm.model import Robot
+
+__all__ = ["CommandRamp"]
+
+
+class CommandRamp:
+    """The commands so far, and what the next may be (one per controller).
+
+    Parameters
+    ----------
+    robot
+        The arm: its acceleration and jerk limits (``[arm]``) and joint limits.
+    dt
+        The control period, s.
+    braking_radps2
+        ``(joint, b_j)`` pairs: the braking deceleration of a stop, rad/s² (speed and
+        separation monitoring's, :meth:`~qpavoid.laws.ssm.SSMConfig.resolve`).
+    """
+
+    def __init__(
+        self, robot: Robot, dt: float, braking_radps2: tuple[tuple[str, float], ...]
+    ) -> None:
+        names = robot.joint_names
+        self.dt = dt
+        self.a_dt = per_joint(robot.arm.max_acceleration_radps2, names) * dt
+        self.brake_radps2 = per_joint(braking_radps2, names)
+        jerk = dict(robot.arm.max_jerk_radps3)
+        self.j_dt2 = np.array([jerk.get(n, np.inf) for n in names]) * dt * dt
+        self.q_min, self.q_max = robot.q_min, robot.q_max
+        self.v_max = np.array(robot.dq_max, dtype=float)
+        self.names = tuple(names)
+        jerks = tuple((n, j) for n, j in robot.arm.max_jerk_radps3 if n in names)
+        self._ramp = ArmResponse(BrakingConfig(0.0, braking_radps2, jerks), names, dt)
+        self.u1 = np.zeros(robot.nv)  # the last command, rad/s
+        self.u2 = np.zeros(robot.nv)  # the one before
+        self.at_stop: float | None = None  # the speed (∞-norm) the ramp started from
+        self._before: tuple[np.ndarray, np.ndarray, float | None] | None = None
+
+    def tighten(
+        self,
+        velocity_radps: np.ndarray,
+        acceleration_radps2: np.ndarray,
+        jerk_radps3: np.ndarray,
+        braking_radps2: tuple[tuple[str, float], ...],
+    ) -> None:
+        """Keep within an arm's tighter limits (nv,) each (what its interface accepts:
+        franky-control's, :attr:`~qpavoid.drive.franka.FrankaArm.limits`), braking at
+        ``braking_radps2``."""
+        dt = self.dt
+        self.v_max = np.minimum(self.v_max, velocity_radps)
+        self.a_dt = np.minimum(self.a_dt, np.asarray(acceleration_radps2) * dt)
+        self.j_dt2 = np.minimum(self.j_dt2, np.asarray(jerk_radps3) * dt * dt)
+        self.brake_radps2 = per_joint(braking_radps2, self.names)
+        jerks = tuple(
+            (n, float(j))
+            for n, j in zip(self.names, self.j_dt2 / dt / dt, strict=True)
+            if j < np.inf
+        )
+        self._ramp = ArmResponse(BrakingConfig(0.0, braking_radps2, jerks), self.names, dt)
+
+    def undo(self) -> None:
+        """Forget the last :meth:`commit`: its command was never sent (a tick that missed
+        its deadline is replaced by a braking one)."""
+        if self._before is not None:
+            self.u1, self.u2, self.at_stop = self._before
+            self._before = None
+
+    def reset(self) -> None:
+        """Forget the commands: the arm is at rest."""
+        self.u1[:], self.u2[:], self.at_stop = 0.0, 0.0, None
+
+    def box(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The reachable box ``(lo, hi)`` of the next command (nv,), rad/s, at joint angles
+        ``q``: acceleration, jerk and room to brake before the joint limits."""
+        lo, hi = self._reach()
+        # room to brake: a stop begun after this command lasts at most T (every joint on
+        # one line, at the pace of the slowest, the jerk's lag included), in which a joint
+        # at u travels at most u T / 2:  |u| (dt + T/2) ≤ the room to its limit
+        horizon = self.dt + 0.5 * self.stop_time_bound()
+        room_hi = np.maximum(self.q_max - q, 0.0) / horizon
+        room_lo = -np.maximum(q - self.q_min, 0.0) / horizon
+        v = self.v_max
+        return np.clip(np.maximum(room_lo, -v), lo, hi), np.clip(np.minimum(room_hi, v), lo, hi)
+
+    def stop_time_bound(self) -> float:
+        """T, s: no stop begun after the next command lasts longer,
+
+            T = max_j (|u₁,j| + a_j dt) / b_j + 2 max_j a_j / j_j
+
+        (the next command is within ``a_j dt`` of the last; a line-keeping ramp from it
+        lasts ``max_j |u_j| / b_j`` at constant deceleration, and at most the jerk lag of
+        :func:`~qpavoid.arm.braking.jerk_lag_s` more with jerk limits)."""
+        speed = np.abs(self.u1) + self.a_dt
+        lag = 2.0 * float(np.max(self.a_dt / self.j_dt2 * self.dt, initial=0.0))
+        return float(np.max(speed / self.brake_radps2, initial=0.0)) + lag
+
+    def _reach(self) -> tuple[np.ndarray, np.ndarray]:
+        """The acceleration and jerk rows of the box alone (nv,) each, rad/s."""
+        u1, step = self.u1, self.u1 - self.u2
+        lo = np.maximum(u1 - self.a_dt, u1 + step - self.j_dt2)
+        hi = np.minimum(u1 + self.a_dt, u1 + step + self.j_dt2)
+        return lo, hi
+
+    def limit(self, dq: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """``dq`` moved towards from the last command along a straight line, as far as the
+        box ``[lo, hi]`` allows (all of the way if it lies inside), rad/s (nv,)."""
+        change = dq - self.u1
+        with np.errstate(divide="ignore", invalid="ignore"):
+            room = np.where(change > 0, (hi - self.u1) / change, (lo - self.u1) / change)
+        room = np.where(change == 0.0, np.inf, room)
+        s = float(np.clip(np.min(room, initial=1.0), 0.0, 1.0))
+        return np.clip(self.u1 + s * change, lo, hi)
+
+    def brake(self) -> np.ndarray:
+        """The next command of a stop ramp from the last command (rad/s, nv)."""
+        ramp = self._ramp
+        ramp.dq, ramp.ddq = self.u1.copy(), (self.u1 - self.u2) / self.dt
+        if self.at_stop is None:
+            self.at_stop = float(np.max(np.abs(self.u1), initial=0.0))
+        u = ramp(np.zeros_like(self.u1))
+        # The ramp's fraction s of u₁ (u = s u₁), kept within this tick's reach: the ramp
+        # drops an acceleration away from rest at once, which a sampled jerk limit forbids
+        moving = self.u1 != 0.0
+        if not moving.any():
+            return np.zeros_like(self.u1)
+        lo, hi = self._reach()
+        a, b = lo[moving] / self.u1[moving], hi[moving] / self.u1[moving]
+        s_lo, s_hi = float(np.max(np.minimum(a, b))), float(np.min(np.maximum(a, b)))
+        j = int(np.argmax(np.abs(self.u1)))
+        s = float(u[j] / self.u1[j])
+        if s_lo <= s_hi:
+            s = min(max(s, s_lo), s_hi)
+        return max(s, 0.0) * self.u1
+
+    def commit(self, u: np.ndarray, stopping: bool) -> float:
+        """``u`` is the command sent; the fraction of the stop's start speed it keeps
+        (1 while not ``stopping``, falling to 0 along a stop ramp)."""
+        self._before = (self.u1, self.u2, self.at_stop)
+        self.u2, self.u1 = self.u1, np.array(u, dtype=float)
+        if not stopping:
+            self.at_stop = None
+            return 1.0
+        start = self.at_stop or 0.0
+        return float(np.max(np.abs(u), initial=0.0)) / start if start > 0.0 else 0.0

@@ -1,0 +1,56 @@
+"""A watchdog: the arm is stopped when the loop stops sending commands."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+
+__all__ = ["Watchdog"]
+
+
+class Watchdog:
+    """Calls ``on_timeout`` once if :meth:`kick` is not called for ``timeout_s`` s.
+
+    The loop kicks it after every command it sends; a loop stuck anywhere (a tick that
+    never returns, a blocked call) is then stopped from this thread within ``timeout_s``
+    plus one poll (``timeout_s / 4``). Use it as a context manager.
+
+    Attributes
+    ----------
+    fired
+        Whether it called ``on_timeout``.
+    error
+        What ``on_timeout`` raised, if it did.
+    """
+
+    def __init__(self, timeout_s: float, on_timeout: Callable[[], None]):
+        self.timeout_s, self.on_timeout = float(timeout_s), on_timeout
+        self.fired = False
+        self.error: Exception | None = None  # what on_timeout raised, if anything
+        self._last = time.monotonic()
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._watch, name="qpavoid-watchdog", daemon=True)
+
+    def __enter__(self) -> Watchdog:
+        self._last = time.monotonic()
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._done.set()
+        self._thread.join()
+
+    def kick(self) -> None:
+        """A command was sent now."""
+        self._last = time.monotonic()
+
+    def _watch(self) -> None:
+        while not self._done.wait(self.timeout_s / 4.0):
+            if time.monotonic() - self._last > self.timeout_s:
+                self.fired = True
+                try:
+                    self.on_timeout()
+                except Exception as exc:  # reported by the loop, never a thread's traceback
+                    self.error = exc
+                return

@@ -1,0 +1,189 @@
+"""The loop on an arm (issue 27 item 3): the same ``simulate`` driving an Arm in real time,
+its deadlines, a stalled or failing arm, the watchdog, Ctrl-C, and the ramp to rest."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from qpavoid.control.analytic import AnalyticController
+from qpavoid.control.qp import QPController
+from qpavoid.control.task import inverse_kinematics
+from qpavoid.core.errors import ArmError
+from qpavoid.drive.interface import Arm, ArmState
+from qpavoid.drive.limits import CommandCheck, CommandLimits
+from qpavoid.drive.simulated import SimulatedArm
+from qpavoid.drive.watchdog import Watchdog
+from qpavoid.loop.simulation import SimConfig, simulate
+from qpavoid.loop.timing import LoopTiming, StallCheck
+from qpavoid.scenarios.generated import make_scenario
+
+
+class RecordingArm(SimulatedArm):
+    """A simulated arm that keeps every command it was sent, and may fail on cue."""
+
+    def __init__(self, robot, q0, *, stall_after_s=None, fail_after=None):
+        super().__init__(robot, q0)
+        self.sent: list[np.ndarray] = []
+        self.stopped = 0
+        self.stall_after_s, self.fail_after = stall_after_s, fail_after
+        self._start = time.perf_counter()
+        self._frozen: ArmState | None = None
+
+    def read(self) -> ArmState:
+        state = super().read()
+        if (
+            self.stall_after_s is not None
+            and time.perf_counter() - self._start > self.stall_after_s
+        ):
+            self._frozen = self._frozen or state
+            return self._frozen  # the same state again: its clock stands still
+        return state
+
+    def send(self, dq: np.ndarray) -> None:
+        if self.fail_after is not None and len(self.sent) >= self.fail_after:
+            raise ArmError("reflex: cartesian_reflex", arm=self.name, reason="fault")
+        self.sent.append(np.array(dq))
+        super().send(dq)
+
+    def stop(self) -> None:
+        self.stopped += 1
+        super().stop()
+
+
+def start(robot, controller_kind=AnalyticController):
+    ctrl = controller_kind(robot)
+    return ctrl, inverse_kinematics(robot, ctrl.path.reference(0.0)[0])
+
+
+def within_limits(robot, commands) -> CommandCheck:
+    check = CommandCheck(CommandLimits.of(robot, 0.002))
+    for u in commands:
+        check(u)
+    return check
+
+
+@pytest.mark.parametrize("kind", [AnalyticController, QPController])
+def test_the_loop_drives_an_arm_and_leaves_it_at_rest(robot, kind):
+    ctrl, q0 = start(robot, kind)
+    arm = RecordingArm(robot, q0)
+    assert isinstance(arm, Arm)
+    cfg = SimConfig(max_time_s=2.0, measure_truth=True)
+    m = simulate(ctrl, make_scenario("test1", robot), cfg, arm=arm).metrics
+    assert m["end_reason"] == "time cap"
+    assert m["loop"]["commands_sent"] > 100
+    assert set(m["loop"]) >= {"deadline_misses", "longest_gap_s", "frame_to_command_s"}
+    # the run ended mid-motion: the controller's ramp brought the arm to rest, then stop()
+    moving = [u for u in arm.sent if np.any(u)]
+    assert moving and not np.any(arm.sent[-1])
+    assert arm.stopped == 1
+    check = within_limits(robot, arm.sent)
+    assert check.total() == 0, check.counts
+    assert m["command_limit_violations"] == {"velocity": 0, "acceleration": 0, "jerk": 0}
+    # the truth is that of the arm's own states (measured after the run)
+    assert np.isfinite(m["min_true_clearance_moving_m"])
+
+
+def test_a_stalled_arm_ends_the_run(robot):
+    ctrl, q0 = start(robot)
+    arm = RecordingArm(robot, q0, stall_after_s=0.3)
+    m = simulate(ctrl, make_scenario("free", robot), SimConfig(max_time_s=3.0), arm=arm).metrics
+    assert m["end_reason"].startswith("arm stalled: the arm's state has not changed for")
+    assert m["duration_s"] < 1.5  # ended on the stall, not the time cap
+    assert arm.stopped == 1
+
+
+def test_an_arm_fault_ends_the_run_in_one_line(robot):
+    ctrl, q0 = start(robot)
+    arm = RecordingArm(robot, q0, fail_after=50)
+    m = simulate(ctrl, make_scenario("free", robot), SimConfig(max_time_s=3.0), arm=arm).metrics
+    assert m["end_reason"] == "arm fault: reflex: cartesian_reflex"
+    assert len(arm.sent) == 50 and arm.stopped == 1
+
+
+def test_a_missed_deadline_brakes_for_that_tick(robot):
+    ctrl, q0 = start(robot)
+    step, calls = ctrl.step, []
+
+    def slow_step(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 200:
+            time.sleep(0.02)  # one tick takes ten periods
+        return step(*args, **kwargs)
+
+    ctrl.step = slow_step
+    arm = RecordingArm(robot, q0)
+    res = simulate(ctrl, make_scenario("free", robot), SimConfig(max_time_s=0.8), arm=arm)
+    assert res.metrics["loop"]["deadline_misses"] >= 1
+    reasons = res.log["stop_reason"]
+    assert reasons[199].startswith("missed deadline (")
+    k = 199
+    assert np.all(np.abs(arm.sent[k]) <= np.abs(arm.sent[k - 1]) + 1e-12)  # it braked
+    assert within_limits(robot, arm.sent).total() == 0
+
+
+def test_ctrl_c_mid_motion_ramps_the_arm_to_rest(robot):
+    ctrl, q0 = start(robot)
+    arm = RecordingArm(robot, q0)
+    timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        m = simulate(
+            ctrl, make_scenario("test1", robot), SimConfig(max_time_s=5.0), arm=arm
+        ).metrics
+    finally:
+        timer.cancel()
+    assert m["end_reason"] == "interrupted"
+    assert m["duration_s"] < 2.0
+    assert np.abs(np.array(arm.sent)).sum(axis=1).max() > 5e-3  # it was moving
+    assert not np.any(arm.sent[-1]) and arm.stopped == 1
+    assert within_limits(robot, arm.sent).total() == 0
+
+
+def test_the_watchdog_fires_only_when_not_kicked():
+    fired = threading.Event()
+    with Watchdog(0.05, fired.set) as dog:
+        for _ in range(20):
+            dog.kick()
+            time.sleep(0.005)
+        assert not dog.fired
+        assert fired.wait(5.0)
+    assert dog.fired and dog.error is None
+    with Watchdog(0.01, lambda: 1 / 0) as dog:
+        deadline = time.monotonic() + 5.0
+        while not dog.fired and time.monotonic() < deadline:
+            time.sleep(0.01)
+    assert isinstance(dog.error, ZeroDivisionError)  # kept, not a thread's traceback
+
+
+def test_loop_timing_by_hand():
+    timing = LoopTiming(0.002, 0.002)
+    assert timing.late(1.000, 1.0015) is None
+    assert timing.late(1.000, 1.0030) == pytest.approx(0.003)
+    for now, captured in [(0.010, 0.0), (0.012, 0.0), (0.020, 0.0), (0.022, 0.015)]:
+        timing.sent(now, captured)
+    r = timing.report()
+    assert r["deadline_misses"] == 1 and r["commands_sent"] == 4
+    assert r["longest_gap_s"] == pytest.approx(0.008)
+    # each frame's first command: 10 ms after the first capture, 7 ms after the second
+    assert r["frame_to_command_s"]["max"] == pytest.approx(0.010)
+    assert r["frame_to_command_s"]["median"] == pytest.approx(0.0085)
+
+
+def test_stall_check_by_hand():
+    check = StallCheck(0.05)
+    state = ArmState(10.0, np.zeros(2), np.zeros(2))
+    check(state, 0.0)
+    check(state, 0.04)  # the same state within the timeout: fine
+    check(ArmState(10.001, np.zeros(2), np.zeros(2)), 0.06)  # a new one resets it
+    check(ArmState(10.001, np.zeros(2), np.zeros(2)), 0.10)
+    with pytest.raises(ArmError, match=r"has not changed for 0\.05") as err:
+        check(ArmState(10.001, np.zeros(2), np.zeros(2)), 0.111)
+    assert err.value.reason == "stalled"
+    with pytest.raises(ArmError, match="ran backwards"):
+        check(ArmState(9.0, np.zeros(2), np.zeros(2)), 0.112)
