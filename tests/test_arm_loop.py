@@ -112,17 +112,17 @@ def test_a_missed_deadline_brakes_for_that_tick(robot):
 
     def slow_step(*args, **kwargs):
         calls.append(1)
-        if len(calls) == 200:
+        if len(calls) == 50:
             time.sleep(0.02)  # one tick takes ten periods
         return step(*args, **kwargs)
 
     ctrl.step = slow_step
     arm = RecordingArm(robot, q0)
-    res = simulate(ctrl, make_scenario("free", robot), SimConfig(max_time_s=0.8), arm=arm)
+    res = simulate(ctrl, make_scenario("free", robot), SimConfig(max_time_s=2.0), arm=arm)
     assert res.metrics["loop"]["deadline_misses"] >= 1
     reasons = res.log["stop_reason"]
-    assert reasons[199].startswith("missed deadline (")
-    k = 199
+    assert reasons[49].startswith("missed deadline (")
+    k = 49
     assert np.all(np.abs(arm.sent[k]) <= np.abs(arm.sent[k - 1]) + 1e-12)  # it braked
     assert within_limits(robot, arm.sent).total() == 0
 

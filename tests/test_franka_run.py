@@ -9,18 +9,25 @@ angles the simulator reports, its physics' lag included, against the collision m
 
 from __future__ import annotations
 
+import json
 import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from qpavoid.experiments.run_spec import RunSpec
-from qpavoid.experiments.runs import simulate_one, spec_robot
+from qpavoid.experiments.runs import build_controller, simulate_one, spec_robot
 from qpavoid.scenarios.strikes import StrikeCase, strike_camera, strike_motion
 
 pytest.importorskip("franky")
 pytest.importorskip("franky_sim")
 FrankySim = pytest.importorskip("qpavoid.drive.franka_sim").FrankySim
+FrankaArm = pytest.importorskip("qpavoid.drive.franka").FrankaArm
 
 pytestmark = pytest.mark.slow
 
@@ -71,3 +78,76 @@ def test_fr3_in_franky_sim_keeps_clear_of_a_strike_and_reaches_its_goal(controll
     # speed and separation stopped (or slowed) the arm for the strike
     stops = [e["reason"] for e in m["stop_events"]]
     assert any(r.startswith("speed and separation") for r in stops), stops
+
+
+def test_sigterm_mid_motion_ramps_the_fr3_to_rest_and_writes_the_run(tmp_path):
+    """SIGTERM 3 s into the motion (on a tick, not a timer): the controller's ramp brings
+    the FR3 to rest within its limits, and the run ends as "interrupted"."""
+    address = host(2)
+    spec = RunSpec(scenario="free", robot="fr3", max_time_s=40.0, arm=f"franka:{address}")
+    robot = spec_robot(spec)
+    controller = build_controller(spec, robot)
+    step, ticks = controller.step, []
+
+    def step_then_term(*args, **kwargs):
+        ticks.append(1)
+        if len(ticks) == 1500:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return step(*args, **kwargs)
+
+    controller.step = step_then_term
+    with FrankySim(address):
+        run = simulate_one(spec, robot=robot, controller=controller)
+        log, m = run.sim.log, run.metrics
+        after = joint_angles_for(robot, address, 0.5)  # the simulator's arm, after the run
+    assert m["end_reason"] == "interrupted"
+    moving = np.abs(log["dq_command"]).max(axis=1)
+    assert moving[-1] > 0.01, (moving[-10:], log["stop_reason"][-10:])  # moving at the signal
+    assert m["command_limit_violations"] == {"velocity": 0, "acceleration": 0, "jerk": 0}
+    assert np.ptp(after, axis=0).max() < 0.01  # at rest (the wrist's creep: < 2 mrad/0.1 s)
+
+
+def test_the_command_line_on_franky_sim_ends_cleanly_on_sigterm(tmp_path):
+    """`qpavoid run test1 --robot fr3 --arm franka:HOST`, SIGTERM while it runs: one line,
+    no traceback, the run written (or, before the loop began, nothing), no process left."""
+    address, out = host(3), tmp_path / "run"
+    cmd = [sys.executable, "-m", "qpavoid", "run", "test1", "--robot", "fr3"]
+    cmd += ["--arm", f"franka:{address}", "--out", str(out), "--no-plots", "--no-view", "-q"]
+    with FrankySim(address):
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(15.0)  # startup, the slow move to the start, then some of the path
+        proc.send_signal(signal.SIGTERM)
+        stdout, stderr = proc.communicate(timeout=60)
+        assert not psutil_children(proc.pid)
+        after = joint_angles_for(spec_robot(RunSpec(scenario="free", robot="fr3")), address, 0.5)
+    assert "Traceback" not in stderr and len(stderr.strip().splitlines()) <= 1, stderr
+    assert np.ptp(after, axis=0).max() < 0.01
+    if proc.returncode == 0:  # the loop was running: the run is written
+        m = json.loads((out / "metrics.json").read_text())
+        assert m["end_reason"] in ("interrupted", "goal reached"), m["end_reason"]
+        assert "loop on franka:" in stdout
+    else:  # it came before the loop: nothing written
+        assert proc.returncode == 143 and not out.exists(), (proc.returncode, stderr)
+
+
+def joint_angles_for(robot, address: str, seconds: float) -> np.ndarray:
+    """(N, nv) the arm's joint angles read every 10 ms for ``seconds`` s (a new client)."""
+    with FrankaArm(robot, address) as arm:
+        angles = []
+        for _ in range(round(seconds / 0.01)):
+            angles.append(arm.read().q)
+            time.sleep(0.01)
+    return np.array(angles)
+
+
+def psutil_children(pid: int) -> list[int]:
+    """Processes whose parent is ``pid`` (from /proc)."""
+    kids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            kids.append(int(stat.parent.name))
+    return kids

@@ -99,7 +99,8 @@ class Controller:
         self.perceiver = Perceiver(self.human, self.config.perception)
         self.frames = FrameClock()  # which frame is new, and the age of the one in hand
         ssm = self.config.ssm.resolve(robot.arm)  # the arm's reaction and accelerations
-        self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, self.config.control_period_s))
+        period, compute = self.config.control_period_s, self.config.compute_budget_s
+        self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, period, compute))
         self.stop_budget = StopTimeBudget(self.ssm, robot.joint_names, self.config.control_period_s)
         self.accel = joint_speed_limits(replace(ssm, stop_time_s=1.0), robot.joint_names)  # a_j
         #: (nv,) the joints' velocity limits, rad/s: the description's (tighter with

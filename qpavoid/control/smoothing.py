@@ -8,11 +8,12 @@ limits, per joint j:
     |u_k|                    ≤ v_j                       velocity (the arm's; eq. 3's below)
     |u_k − u_{k−1}|          ≤ a_j dt                    acceleration
     |u_k − 2u_{k−1} + u_{k−2}| ≤ j_j dt²                   jerk, where the arm publishes one
-    |u_k| (dt + T/2) ≤ the room to q_min, q_max          room to brake before the limit
+    |u_k| H ≤ the room to q_min, q_max                  room to brake before the limit
 
 (a_j the acceleration limit, b_j ≤ a_j the braking deceleration of speed and separation
-monitoring, j_j the jerk limit, T the longest a stop begun after u_k may last,
-:meth:`CommandRamp.stop_time_bound`: the description's ``[arm]``, or tighter ones an arm's
+monitoring, j_j the jerk limit, H the time over which a stop begun after u_k may carry a
+joint at its speed, :meth:`CommandRamp.braking_horizon`: the description's ``[arm]``, or
+tighter ones an arm's
 interface imposes, :meth:`CommandRamp.tighten`). These rows form the *reachable box*
 ``lo ≤ u_k ≤ hi`` of :meth:`CommandRamp.box`: the
 QP takes it as bounds (:class:`~qpavoid.control.qp.limits.acceleration.AccelerationLimit`);
@@ -108,26 +109,31 @@ class CommandRamp:
         """The reachable box ``(lo, hi)`` of the next command (nv,), rad/s, at joint angles
         ``q``: acceleration, jerk and room to brake before the joint limits."""
         lo, hi = self._reach()
-        # room to brake: a stop begun after this command lasts at most T (every joint on
-        # one line, at the pace of the slowest, the jerk's lag included), in which a joint
-        # at u travels at most u T / 2:  |u| (dt + T/2) ≤ the room to its limit
-        horizon = self.dt + 0.5 * self.stop_time_bound()
+        # room to brake: a stop begun after this command (every joint on one line, at the
+        # pace of the slowest, the jerk's lag included) carries a joint at u at most u H
+        horizon = self.braking_horizon()
         room_hi = np.maximum(self.q_max - q, 0.0) / horizon
         room_lo = -np.maximum(q - self.q_min, 0.0) / horizon
         v = self.v_max
         return np.clip(np.maximum(room_lo, -v), lo, hi), np.clip(np.minimum(room_hi, v), lo, hi)
 
-    def stop_time_bound(self) -> float:
-        """T, s: no stop begun after the next command lasts longer,
+    def braking_horizon(self) -> float:
+        """H, s: a joint at speed |u| after the next command travels at most |u| H until
+        the arm is at rest, if a stop begins then:
 
-            T = max_j (|u₁,j| + a_j dt) / b_j + 2 max_j a_j / j_j
+            H = dt + T / 2 + max_j (a_j + b_j)² / (2 j_j b_j),   T = max_j (|u₁,j| + a_j dt) / b_j
 
-        (the next command is within ``a_j dt`` of the last; a line-keeping ramp from it
-        lasts ``max_j |u_j| / b_j`` at constant deceleration, and at most the jerk lag of
-        :func:`~qpavoid.arm.braking.jerk_lag_s` more with jerk limits)."""
+        (this tick at u; then a line-keeping ramp, whose constant-deceleration part lasts
+        at most T, the next command being within ``a_j dt`` of the last, and travels u T/2;
+        with jerk limits the ramp first holds its speed while the joint's acceleration
+        turns from +a_j to −b_j, at most ``(a_j + b_j) / j_j``, which costs at most the last
+        term more; 0 without jerk limits)."""
         speed = np.abs(self.u1) + self.a_dt
-        lag = 2.0 * float(np.max(self.a_dt / self.j_dt2 * self.dt, initial=0.0))
-        return float(np.max(speed / self.brake_radps2, initial=0.0)) + lag
+        a = self.a_dt / self.dt
+        b = self.brake_radps2
+        j = self.j_dt2 / (self.dt * self.dt)
+        lag = float(np.max((a + b) ** 2 / (2.0 * j * b), initial=0.0))
+        return self.dt + 0.5 * float(np.max(speed / b, initial=0.0)) + lag
 
     def _reach(self) -> tuple[np.ndarray, np.ndarray]:
         """The acceleration and jerk rows of the box alone (nv,) each, rad/s."""

@@ -46,6 +46,11 @@ class ControllerConfig:
     control_period_s
         Period of the control loop, s: a command that would carry a joint past its
         position limit within one period stops the robot instead.
+    compute_budget_s
+        In a real-time loop, the longest a tick may take from reading the arm's state to
+        sending its command, s (the loop's deadline: a later command is replaced by a
+        braking step); speed and separation counts it in its reaction time. 0 (the
+        default): offline, where computing takes no simulated time.
     scaled_joints
         Joints whose limits eq. (3) scales by (1 − f); None (the default): the robot
         description's, the joints that move its scaled set (``Roles.scaled_joints``).
@@ -80,6 +85,7 @@ class ControllerConfig:
     sigma_min: float = 0.02
     lambda_max: float = 0.05
     control_period_s: float = 0.002
+    compute_budget_s: float = 0.0
     scaled_joints: tuple[str, ...] | None = None
     require_human: bool = True
     max_frame_age_s: float = 0.1

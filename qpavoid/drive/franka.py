@@ -27,6 +27,7 @@ description's (``CommandLimits.of``) and franky's maxima (:attr:`FrankaArm.limit
 from __future__ import annotations
 
 import dataclasses
+import ipaddress
 import re
 import threading
 import time
@@ -50,8 +51,13 @@ __all__ = ["LOCK_TOLERANCE_RAD", "FrankaArm", "FrankaJoints"]
 
 #: How far the arm's locked joint may be from its lock angle for streaming to start, rad.
 LOCK_TOLERANCE_RAD = 1e-3
-#: Joint speed below which the arm counts as at rest, rad/s.
-REST_RADPS = 5e-3
+#: Joint speed below which the arm counts as at rest, rad/s, judged from its joint angles
+#: over :data:`REST_WINDOW_S` (not its reported velocities: franky-sim's wrist, stopped after
+#: moving, sticks and slips, reporting ±0.06-0.1 rad/s while it creeps at up to 0.016 rad/s;
+#: a real arm holds still).
+REST_RADPS = 0.02
+#: Over this long, s.
+REST_WINDOW_S = 0.1
 #: The name of a Franka arm joint: ``<arm>_joint<k>``, k = 1..7 (not a finger's).
 _ARM_JOINT = re.compile(r"(?P<arm>[A-Za-z0-9]+)_joint(?P<k>[1-7])")
 #: The pause between reads while waiting for rest, s.
@@ -159,6 +165,14 @@ def _require_franky() -> Any:
     return franky
 
 
+def _is_loopback(host: str) -> bool:
+    """Whether ``host`` is a loopback address (a simulator's, on this machine)."""
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return host == "localhost"
+
+
 def _connect(host: str, timeout_s: float, realtime: bool, arm: str) -> Any:
     """``franky.Robot(host)`` within ``timeout_s`` s, or :class:`ArmError` "unreachable".
 
@@ -233,7 +247,8 @@ class FrankaArm:
         and jerk).
     realtime
         Require a real-time kernel (libfranka's ``RealtimeConfig.Enforce``); off, it runs
-        on any kernel (franky-sim, tests), with less timing margin on a real arm.
+        on any kernel, with less timing margin on a real arm. None (the default): required
+        for every address but a loopback one (franky-sim on this machine).
 
     Raises
     ------
@@ -256,7 +271,7 @@ class FrankaArm:
         watchdog_s: float = 0.1,
         stop_timeout_s: float = 5.0,
         move_dynamics_factor: float = 0.2,
-        realtime: bool = False,
+        realtime: bool | None = None,
     ):
         fk = _require_franky()
         self.name = f"franka:{host}"
@@ -271,6 +286,8 @@ class FrankaArm:
         self._q_min, self._q_max = robot.q_min.copy(), robot.q_max.copy()
         self._failure: ArmError | None = None
         self._streaming = False
+        if realtime is None:  # a real arm needs a real-time kernel; franky-sim on loopback not
+            realtime = not _is_loopback(host)
         self._robot: Any = _connect(host, float(connect_timeout_s), realtime, self.name)
         try:
             self.limits = self._set_limits(robot)
@@ -463,12 +480,18 @@ class FrankaArm:
         """Wait (at most ``stop_timeout_s``) until every joint is slower than
         :data:`REST_RADPS`; the check's history is then rest."""
         t_end = time.monotonic() + self.stop_timeout_s
+        seen: list[tuple[float, np.ndarray]] = []  # (wall time, the joint angles)
         while True:
             state = self._state()
-            speed = float(np.max(np.abs(state.dq)))
-            if speed < REST_RADPS:
+            now, q7 = time.monotonic(), np.array(state.q, dtype=float)
+            seen.append((now, q7))
+            while len(seen) > 1 and seen[1][0] <= now - REST_WINDOW_S:
+                seen.pop(0)
+            span = now - seen[0][0]
+            speed = float(np.max(np.abs(q7 - seen[0][1]))) / span if span > 0 else np.inf
+            if span >= REST_WINDOW_S * 0.9 and speed < REST_RADPS:
                 break
-            if time.monotonic() > t_end:
+            if now > t_end:
                 raise ArmError(
                     f"{self.name}: not at rest {self.stop_timeout_s:g} s after {what} "
                     f"(a joint at {speed:.4f} rad/s)",

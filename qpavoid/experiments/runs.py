@@ -63,11 +63,19 @@ class RunResult:
         return self.controller.config
 
 
+#: With ``--arm``: how long a tick may take from reading the arm to sending its command, s
+#: (the loop's deadline, counted in speed and separation's reaction time: 2.0 m/s × 10 ms
+#: = 20 mm more protective distance). On 2 loaded cores a 500 Hz tick's p99 reached 10 ms;
+#: a deadline of one period (2 ms) braked most ticks there.
+ARM_COMPUTE_BUDGET_S = 0.01
+
+
 def build_controller(spec: RunSpec, robot: Robot) -> Controller:
     """The controller ``spec`` names, on ``robot``, at the spec's control rate."""
     config = ControllerConfig(
         distance=spec.distance,
         control_period_s=1.0 / spec.rate_hz,
+        compute_budget_s=ARM_COMPUTE_BUDGET_S if spec.arm is not None else 0.0,
         max_frame_age_s=spec.latency_s + STALE_AFTER_LATENCY_S,
         safety=spec.safety,
         perception=PerceptionConfig(max_identical_frames=None)
@@ -142,6 +150,7 @@ def simulate_one(
     *,
     robot: Robot | None = None,
     camera: CameraConfig | None = None,
+    controller: Controller | None = None,
 ) -> RunResult:
     """Build the robot, controller and motion of ``spec`` and simulate them.
 
@@ -165,9 +174,12 @@ def simulate_one(
     camera
         What the controller sees, if not the camera of ``spec``'s bench (a strike's faulty
         Kinect).
+    controller
+        The controller, if not the one ``spec`` names (:func:`build_controller`): one built
+        with other settings (``benchmarks/smooth_stops.py``: the paper's steps).
     """
     robot = spec_robot(spec) if robot is None else robot
-    controller = build_controller(spec, robot)
+    controller = build_controller(spec, robot) if controller is None else controller
     live = spec.listen is not None
     if motion is None and not live:
         motion = motions.load_motion(robot, spec.scenario, spec.human_files, spec.sensors)

@@ -291,12 +291,13 @@ def _body_mask(part_names: tuple[str, ...], body_parts: tuple[str, ...]) -> np.n
     return mask
 
 
-def reaction_time(cfg: SSMConfig, control_period_s: float) -> float:
+def reaction_time(cfg: SSMConfig, control_period_s: float, compute_s: float = 0.0) -> float:
     """T_r of a controller ticking every ``control_period_s``: a decision waits up to one
-    period to be revised, then the arm's reaction, in whole periods (as the simulation's
-    arm, :class:`~qpavoid.arm.braking.ArmResponse`), s."""
+    period to be revised, up to ``compute_s`` more to be computed and sent (a real-time
+    loop's deadline; 0 offline), then the arm's reaction, in whole periods (as the
+    simulation's arm, :class:`~qpavoid.arm.braking.ArmResponse`), s."""
     periods = math.ceil(_t_r(cfg) / control_period_s - 1e-9)
-    return control_period_s * (1 + periods)
+    return control_period_s * (1 + periods) + compute_s
 
 
 class StopTimeBudget:

@@ -210,18 +210,41 @@ def describe(m: dict[str, Any]) -> str:
         else ""
     )
     return (
-        f"{m['scenario']}: controller {m['controller']}, distances {m['distance_method']}\n"
-        f"  reached goal {m['reached_goal']} in {m['duration_s']:.2f} s: {_ending(m)} "
-        f"(final error {m['final_position_error_m'] * 1e3:.3f} mm)\n"
-        f"  path error rms {m['rms_path_error_m'] * 1e3:.3f} mm, "
-        f"max {m['max_path_error_m'] * 1e3:.3f} mm\n"
-        f"  min distance spheres {md['spheres']:.4f} m, capsules {md['capsules']:.4f} m, "
-        f"max f {m['max_f']:.3f}{sphere_note}\n"
-        f"  stopped {m['stopped_s']:.2f} s, stops: {stops}\n"
-        f"  tick {m['tick_us']['median']:.0f} us median, {m['tick_us']['p99']:.0f} us p99; "
-        f"limit violations: velocity {m['joint_velocity_limit_violations']}, "
-        f"position {m['joint_position_limit_violations']}"
-    ) + (_input_line(m["input"]) if "input" in m else "")
+        (
+            f"{m['scenario']}: controller {m['controller']}, distances {m['distance_method']}\n"
+            f"  reached goal {m['reached_goal']} in {m['duration_s']:.2f} s: {_ending(m)} "
+            f"(final error {m['final_position_error_m'] * 1e3:.3f} mm)\n"
+            f"  path error rms {m['rms_path_error_m'] * 1e3:.3f} mm, "
+            f"max {m['max_path_error_m'] * 1e3:.3f} mm\n"
+            f"  min distance spheres {md['spheres']:.4f} m, capsules {md['capsules']:.4f} m, "
+            f"max f {m['max_f']:.3f}{sphere_note}\n"
+            f"  stopped {m['stopped_s']:.2f} s, stops: {stops}\n"
+            f"  tick {m['tick_us']['median']:.0f} us median, {m['tick_us']['p99']:.0f} us p99; "
+            f"limit violations: velocity {m['joint_velocity_limit_violations']}, "
+            f"position {m['joint_position_limit_violations']}"
+        )
+        + (_input_line(m["input"]) if "input" in m else "")
+        + _loop_line(m)
+    )
+
+
+def _loop_line(m: dict[str, Any]) -> str:
+    """A real-time run's loop (the arm it drove, its deadlines, its latency) and commands."""
+    line = ""
+    if "loop" in m:
+        lp, lat = m["loop"], m["loop"]["frame_to_command_s"]
+        line += (
+            f"\n  loop on {m.get('arm', 'the simulated arm')}: {lp['commands_sent']} commands, "
+            f"{lp['deadline_misses']} missed deadlines, longest gap "
+            f"{lp['longest_gap_s'] * 1e3:.1f} ms; frame to command {lat['median'] * 1e3:.1f} ms "
+            f"median, {lat['p99'] * 1e3:.1f} ms p99"
+        )
+    broken = {k: n for k, n in m.get("command_limit_violations", {}).items() if n}
+    if broken:
+        line += "\n  commands beyond the arm's limits: " + ", ".join(
+            f"{k} {n}" for k, n in broken.items()
+        )
+    return line
 
 
 #: What a live run's drops most likely mean, for the one that dominates.

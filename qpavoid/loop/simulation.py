@@ -85,10 +85,11 @@ class SimConfig:
         (the true person and a capsule table every tick, about 1.5 ms); runs made through
         :mod:`qpavoid.experiments.runs` (the command line, ``compare``) turn it on.
     deadline_s
-        Real time only: a tick whose command is ready later than this after the tick's
-        due time missed its deadline; its command becomes the next step of a braking ramp
-        (counted: ``deadline_misses``; logged as its stop reason). None (the default): one
-        control period.
+        With an arm: a tick whose command is ready later than this after it read the arm's
+        state missed its deadline; its command becomes the next step of a braking ramp
+        (counted: ``deadline_misses``; logged as its stop reason). None (the default): the
+        controller's ``compute_budget_s`` (the time speed and separation counted for it),
+        or one control period if that is 0.
     stall_timeout_s
         With an arm (``arm=``): its state may stand still this long, s, before the arm
         counts as stalled (the run stops and ends with ``end_reason`` "arm stalled: ...").
@@ -245,7 +246,8 @@ def simulate(
     tau, was_stopped, last_progress, last_watch = 0.0, False, -1.0, -1.0
     reached, overruns, n = False, 0, 0
     interrupt = Interruption(realtime)
-    deadline_s = dt if cfg.deadline_s is None else cfg.deadline_s
+    budget = controller.config.compute_budget_s  # what speed and separation counted
+    deadline_s = cfg.deadline_s if cfg.deadline_s is not None else budget if budget > 0 else dt
     timing = LoopTiming(dt, deadline_s)
     ended_by = ""  # an arm's error, if one ended the run
     measured = np.zeros(robot.nv)  # the arm's reported velocity
@@ -278,6 +280,7 @@ def simulate(
             if arm is not None:
                 try:
                     state = stall(arm.read(), began)
+                    began = time.perf_counter()  # the command's deadline runs from its state
                 except ArmError as exc:
                     ended_by = f"arm {exc.reason or 'error'}: {exc}"
                     break
