@@ -12,10 +12,12 @@ import qpavoid
 from qpavoid.control.qp import kernels as qp_kernels
 from qpavoid.control.qp import solver_kernels
 from qpavoid.distance import _kernels as distance_kernels
+from qpavoid.drive.limits import CommandCheck
 from qpavoid.fusion import person as fusion_person
 from qpavoid.human import _kernels as body_kernels
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.laws import _kernels as law_kernels
+from qpavoid.loop import simulation
 from qpavoid.loop.camera import CameraConfig
 from qpavoid.perception import _kernels as perception_kernels
 from qpavoid.perception.tracker import PerceptionConfig
@@ -43,6 +45,26 @@ def pytest_configure(config):
         law_kernels.warm_up()
         if fusion.wait() != 0:  # compile it here, where an error shows
             fusion_person.warm_up(KINECT_V2)
+
+
+@pytest.fixture(autouse=True)
+def every_command_within_the_arms_limits(request, monkeypatch):
+    """Every command of every run a test makes (through ``simulate``) is within the arm's
+    velocity, acceleration and jerk limits (issue 27): the run's own check is recorded and
+    the test fails on any broken limit. A test that runs the paper's steps on purpose
+    (``ControllerConfig(smooth=False)``) says so with ``@pytest.mark.paper_steps``."""
+    checks: list[CommandCheck] = []
+
+    class Recorded(CommandCheck):
+        def __post_init__(self) -> None:
+            super().__post_init__()
+            checks.append(self)
+
+    monkeypatch.setattr(simulation, "CommandCheck", Recorded)
+    yield
+    if request.node.get_closest_marker("paper_steps") is None:
+        broken = [c.counts for c in checks if c.total()]
+        assert not broken, f"commands beyond the arm's limits in {len(broken)} run(s): {broken}"
 
 
 @pytest.fixture(scope="session")

@@ -14,6 +14,7 @@ import time
 from typing import Any
 
 import numpy as np
+import pytest
 
 from qpavoid.arm.braking import ArmResponse, BrakingConfig, per_joint
 from qpavoid.arm.model import Robot
@@ -34,6 +35,11 @@ FRAMES = [
     HumanFrame.check(Operator(distance_m=3.0).rest() + noise)
     for noise in np.random.default_rng(0).normal(0.0, 0.002, (8, 25, 3))
 ]
+
+
+#: ``Constant`` commands a step to ``V`` on purpose: the arm model's response to it is what
+#: these tests measure (the controllers' own commands never step: tests/test_smoothing.py).
+pytestmark = pytest.mark.paper_steps
 
 
 class Constant(QPController):
