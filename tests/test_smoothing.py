@@ -676,6 +676,7 @@ def came_to_rest(result: SimResult) -> bool:
 STOPPED_BY = {"ssm": 2.9, "paper": 3.8}
 
 
+@pytest.mark.slow  # (every run of the default suite is checked by conftest's fixture)
 @pytest.mark.paper_steps  # its second run (checked here, as the first)
 def test_the_franka_stops_within_its_limits() -> None:
     """fr3 (jerk limits), QP, speed and separation: test2 up to its stop (2.63 s) and rest

@@ -1,0 +1,60 @@
+"""The real-time loop on franky-sim's FR3: its timing at several avoidance rates.
+
+    python benchmarks/arm_loop.py [--rates 500 250 100] [--seconds 10] [--out FILE.json]
+
+For each rate: franky-sim started headless on a loopback address, the FR3 moved to its
+task's start, then ``--seconds`` of the ``free`` scenario (nobody near: the loop's own
+cost) and of Test 1 through the loop of every run (``simulate`` with ``arm=``); reported:
+the controller's time per tick, the loop's missed deadlines, the longest gap between two
+commands, the command period and the time from a frame's capture to its first command
+(the simulated Kinect's 60 ms latency included). libfranka's own loop runs at 1 kHz and
+franky ramps the arm to each new command within its limits: the interpolation between
+qpavoid's commands. The numbers of docs/real-robot.md §3.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+from qpavoid.drive.franka_sim import FrankySim
+from qpavoid.experiments.runs import RunSpec, simulate_one
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rates", type=float, nargs="+", default=[500.0, 250.0, 100.0])
+    ap.add_argument("--seconds", type=float, default=10.0)
+    ap.add_argument("--out", default="benchmarks/results/arm_loop.json")
+    args = ap.parse_args()
+    pid = os.getpid()
+    out: dict = {"load_average": os.getloadavg(), "cpus": os.cpu_count()}
+    for n, rate in enumerate(args.rates):
+        for scenario in ("free", "test1"):
+            host = f"127.{(pid >> 8) % 256}.{pid % 256}.{10 + 2 * n + (scenario == 'test1')}"
+            spec = RunSpec(
+                scenario=scenario,
+                robot="fr3",
+                rate_hz=rate,
+                max_time_s=args.seconds,
+                arm=f"franka:{host}",
+            )
+            with FrankySim(host):
+                m = simulate_one(spec).metrics
+            key = f"{scenario}/{rate:.0f}hz"
+            out[key] = {
+                "tick_us": m["tick_us"],
+                "loop": m["loop"],
+                "command_limit_violations": m["command_limit_violations"],
+                "end_reason": m["end_reason"],
+            }
+            print(key, json.dumps(out[key]), flush=True)
+    out["load_average_after"] = os.getloadavg()
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(out, indent=1))
+
+
+if __name__ == "__main__":
+    main()
