@@ -187,3 +187,46 @@ def test_stall_check_by_hand():
     assert err.value.reason == "stalled"
     with pytest.raises(ArmError, match="ran backwards"):
         check(ArmState(9.0, np.zeros(2), np.zeros(2)), 0.112)
+
+
+def test_a_loop_that_stalls_restarts_the_arm_from_rest(robot):
+    """The loop stands still for 0.5 s (paused, starved): the watchdog stops the arm, the
+    path clock does not run ahead by the stall, and the next commands start from rest."""
+    ctrl, q0 = start(robot)
+    step, calls = ctrl.step, []
+
+    def stalling_step(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 300:
+            time.sleep(0.5)
+        return step(*args, **kwargs)
+
+    ctrl.step = stalling_step
+    arm = RecordingArm(robot, q0)
+    res = simulate(ctrl, make_scenario("free", robot), SimConfig(max_time_s=3.0), arm=arm)
+    m, log = res.metrics, res.log
+    assert m["watchdog_fired"] and m["loop"]["loop_stalls"] == 1
+    assert m["loop"]["longest_stall_s"] >= 0.5
+    k = 300  # the first tick after the stall
+    assert abs(log["tau"][k] - log["tau"][k - 1]) <= 0.1 + 1e-9  # at most the arm's hold
+    a_dt = np.array([dict(robot.arm.max_acceleration_radps2)[n] for n in robot.joint_names])
+    assert np.all(np.abs(arm.sent[k]) <= a_dt * 0.002 * (1 + 1e-9))  # from rest
+    assert within_limits(robot, arm.sent).total() == 0
+
+
+def test_an_arm_reporting_nan_is_ramped_to_rest_and_named(robot):
+    ctrl, q0 = start(robot)
+
+    class NaNArm(RecordingArm):
+        def read(self) -> ArmState:
+            state = super().read()
+            if len(self.sent) >= 400:
+                return ArmState(state.time_s, np.full_like(state.q, np.nan), state.dq)
+            return state
+
+    arm = NaNArm(robot, q0)
+    m = simulate(ctrl, make_scenario("test1", robot), SimConfig(max_time_s=3.0), arm=arm).metrics
+    assert m["end_reason"].startswith("input error: ")
+    assert np.abs(arm.sent[399]).max() > 1e-3  # it was moving
+    assert not np.any(arm.sent[-1]) and len(arm.sent) >= 401  # then a ramp to rest
+    assert within_limits(robot, arm.sent).total() == 0

@@ -12,6 +12,7 @@ from qpavoid import ControllerConfig
 from qpavoid.control.analytic import AnalyticController
 from qpavoid.control.qp import QPController
 from qpavoid.control.task import inverse_kinematics
+from qpavoid.core.errors import InputError
 from qpavoid.human.people import as_people
 from qpavoid.human.posture import Operator
 from qpavoid.perception.freshness import FrameClock
@@ -98,8 +99,53 @@ def test_frame_clock_keys_and_ages():
     assert clock.observe(pb, 0.7, 0.25, None, None) == (False, 0.25)  # the caller's age wins
     assert clock.observe(pb, 0.8, None, 3.0, None)[0]  # a time: new
     assert not clock.observe(pa, 0.9, None, 3.0, None)[0]  # same time, other content: held
-    assert clock.observe(pa, 1.0, None, 3.0, 7)[0]  # an id: new
+    assert not clock.observe(pa, 1.0, None, 3.0, 7)[0]  # a new id at the same time: held
+    assert clock.observe(pa, 1.05, None, 3.5, 7)[0]  # a new id, later: new
     assert not clock.observe(pb, 1.1, None, 4.0, 7)[0]  # same id: held, whatever the time
+    assert clock.observe(pb, 1.2, None, 2.0, 8) == (False, pytest.approx(0.15))  # earlier
+    assert clock.observe(pb, 1.3, 0.01, 2.0, 9) == (False, pytest.approx(0.25))  # held: aging
+
+
+@pytest.mark.parametrize(
+    "times",
+    [
+        lambda f: (f if f < 15 else f - 15) / 30.0,  # the sensor's clock restarts at 0.5 s
+        lambda f: 100.0 - f / 30.0,  # counting down
+        lambda f: 1e9 if f == 15 else f / 30.0,  # one frame stamped far ahead
+        lambda f: 1.0,  # a frame counter over a frozen clock
+    ],
+    ids=["restart", "backwards", "glitch-ahead", "frozen-clock"],
+)
+def test_a_frame_not_later_than_the_newest_is_held_and_goes_stale(robot, times):
+    """Frames whose capture time does not advance never refresh the frame in hand: the robot
+    stops on it once it is older than max_frame_age_s, however the ids or contents run."""
+    ctrl = AnalyticController(robot, config=ControllerConfig(control_period_s=DT))
+    q = inverse_kinematics(robot, ctrl.path.reference(0.0)[0])
+    reasons = []
+    for k in range(1000):  # 1 s at 1 kHz, 30 frames
+        f = int(k * DT * 30.0)
+        joints = far_person(f)
+        reasons.append(ctrl.step(q, joints, None, 0.0, frame_time_s=times(f), frame_id=f).reason)
+    stale = [r for r in reasons[700:] if "stale" in r]
+    assert len(stale) == 300, sorted(set(reasons[700:]))  # stopped, and stays stopped
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [
+        ("frame_time_s", float("nan")),
+        ("frame_time_s", "1.0"),
+        ("frame_time_s", np.array([1.0])),
+        ("frame_time_s", 1j),
+        ("frame_age_s", -0.01),
+        ("frame_age_s", "0.01"),
+    ],
+)
+def test_bad_frame_times_are_refused(robot, key, value):
+    ctrl = AnalyticController(robot)
+    q = inverse_kinematics(robot, ctrl.path.reference(0.0)[0])
+    with pytest.raises(InputError, match=key):
+        ctrl.step(q, far_person(0), None, 0.0, **{key: value})
 
 
 @pytest.mark.slow

@@ -390,10 +390,11 @@ class WallClockArm:
         path clock at rate ``time_scale``."""
         self._t, self._dq, self._scale = t, dq, time_scale
 
-    def path_advance(self, t: float) -> float:
+    def path_advance(self, t: float, max_gap_s: float = math.inf) -> float:
         """How far the path clock advanced from the last tick to tick time ``t`` (s) at the
-        held rate (0 at the first tick): for an arm that moves on its own."""
-        return 0.0 if self._t is None else self._scale * (t - self._t)
+        held rate (0 at the first tick): for an arm that moves on its own, and holds a
+        command at most ``max_gap_s`` s (then brakes to rest by itself)."""
+        return 0.0 if self._t is None else self._scale * min(t - self._t, max_gap_s)
 
     def advance(self, q: np.ndarray, t: float) -> tuple[np.ndarray, float]:
         """The joint angles at tick time ``t`` (s), from ``q`` at the last tick's, and how far

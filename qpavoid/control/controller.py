@@ -15,6 +15,7 @@ joint angle or path time) raise :class:`~qpavoid.core.errors.InputError` before 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Hashable
 from dataclasses import replace
 
@@ -54,6 +55,34 @@ from qpavoid.perception.perceiver import Perceiver
 from qpavoid.perception.tracker import Perceived
 
 __all__ = ["Controller"]
+
+
+def _frame_times(frame_age_s: object, frame_time_s: object) -> tuple[float | None, float | None]:
+    """The frame's age (a real number ≥ 0; NaN or +inf: unknown, stale) and capture time (a
+    real number; -inf: no frame yet), as floats, or None where not given.
+
+    Raises
+    ------
+    InputError
+        For anything else (a string, an array, a complex number, a negative age, a NaN
+        time).
+    """
+    age = None if frame_age_s is None else _real(frame_age_s, "frame_age_s")
+    if age is not None and age < 0.0:
+        raise InputError(f"frame_age_s must be >= 0 s, got {age}", name="frame_age_s", value=age)
+    time_s = None if frame_time_s is None else _real(frame_time_s, "frame_time_s")
+    if time_s is not None and math.isnan(time_s):
+        raise InputError("frame_time_s is NaN", name="frame_time_s", value=time_s)
+    return age, time_s
+
+
+def _real(value: object, name: str) -> float:
+    """``value`` as a float if it is a real number (NaN included), else InputError."""
+    if isinstance(value, (bool, str, bytes)) or not isinstance(value, (int, float, np.number)):
+        raise InputError(f"{name} must be a number, got {value!r}", name=name, value=value)
+    if isinstance(value, complex | np.complexfloating):
+        raise InputError(f"{name} must be a real number, got {value!r}", name=name, value=value)
+    return float(value)
 
 
 class Controller:
@@ -193,8 +222,7 @@ class Controller:
         people = as_people(joints, state, self.human.skeleton)
         self._ticks += 1
         self._clock_s = self._ticks * self.config.control_period_s
-        if frame_age_s is not None:
-            frame_age_s = float(frame_age_s)  # NaN allowed: a frame of unknown age is stale
+        frame_age_s, frame_time_s = _frame_times(frame_age_s, frame_time_s)
         new, age = self.frames.observe(people, self._clock_s, frame_age_s, frame_time_s, frame_id)
         percs, geos, v_people = self._perceived(people, age, frame_time_s, new)
         table, who = self.distances.closest(kin, geos)
@@ -375,6 +403,12 @@ class Controller:
             info=info or {},
         )
         return self._last
+
+    def at_rest(self) -> None:
+        """The arm stopped on its own (its loop stalled past the arm's hold of a command):
+        the next command starts again from rest."""
+        if self.ramp is not None:
+            self.ramp.reset()
 
     def brake(self, reason: str, instead: bool = False) -> Command:
         """A stop decided outside the controller (a missed deadline, Ctrl-C, the end of a

@@ -36,7 +36,18 @@ import numpy as np
 from qpavoid.arm.braking import ArmResponse, BrakingConfig, per_joint
 from qpavoid.arm.model import Robot
 
-__all__ = ["CommandRamp"]
+__all__ = ["CommandRamp", "smooth_rate_limit_hz"]
+
+
+def smooth_rate_limit_hz(robot: Robot) -> float:
+    """The highest control rate at which every stop ramp keeps the arm's jerk limits
+    tick by tick, Hz: ``min_j j_j / a_j`` over the joints with a jerk limit (inf without any;
+    500 Hz for the FR3 and the Panda). Above it a tick's jerk allows less than its
+    acceleration (``j dt² < a dt``) and the end of a ramp can break the jerk limit between
+    ticks (a known limit: docs/real-robot.md)."""
+    accel = dict(robot.arm.max_acceleration_radps2)
+    rates = [j / accel[n] for n, j in robot.arm.max_jerk_radps3 if n in robot.joint_names]
+    return min(rates, default=float("inf"))
 
 
 class CommandRamp:
@@ -171,7 +182,10 @@ class CommandRamp:
         s = float(u[j] / self.u1[j])
         if s_lo <= s_hi:
             s = min(max(s, s_lo), s_hi)
-        return max(s, 0.0) * self.u1
+        # where no point of the line is within reach (joints accelerating unevenly, jerk
+        # tighter than a tick's acceleration: 1 kHz on a Franka), the nearest reachable
+        # command, off the line for a tick: the limits come first
+        return np.clip(max(s, 0.0) * self.u1, lo, hi)
 
     def commit(self, u: np.ndarray, stopping: bool) -> float:
         """``u`` is the command sent; the fraction of the stop's start speed it keeps

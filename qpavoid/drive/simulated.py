@@ -34,6 +34,10 @@ class SimulatedArm:
         None: exactly and at once.
     clock
         Its clock, s (default: ``time.perf_counter``).
+    hold_s
+        How long it follows a command with no newer one before it brakes to rest on its own,
+        s (as franky holds a Franka's: :class:`~qpavoid.drive.franka.FrankaArm`'s
+        ``watchdog_s``).
     """
 
     name = "simulation"
@@ -45,6 +49,7 @@ class SimulatedArm:
         period_s: float = 0.002,
         braking: BrakingConfig | None = None,
         clock: Callable[[], float] = time.perf_counter,
+        hold_s: float = 0.1,
     ):
         self.joint_names = tuple(robot.joint_names)
         self.limits = CommandLimits.of(robot, period_s)
@@ -56,6 +61,8 @@ class SimulatedArm:
         self._command = np.zeros(robot.nv)
         self._t = clock()
         self.closed = False
+        self.hold_s = hold_s
+        self._expires: float | None = None  # when the held command runs out
 
     @classmethod
     def ideal(cls, robot: Robot, q0: np.ndarray, period_s: float = 0.002) -> SimulatedArm:
@@ -68,6 +75,14 @@ class SimulatedArm:
         now = self.clock()
         while now - self._t > 1e-12:
             h = min(self.period_s, now - self._t)
+            if self._expires is not None and self._t + h >= self._expires:
+                h = max(self._expires - self._t, 0.0)  # up to the expiry, then rest
+                if h <= 1e-12:
+                    self._command = np.zeros_like(self._command)
+                    if self._model is not None:
+                        self._model.send(self._command, self._t)
+                    self._expires = None
+                    continue
             v = self._command if self._model is None else self._model.step(self._t)
             self.q = self.q + v * h
             self.dq, self._t = v.copy(), self._t + h
@@ -81,6 +96,7 @@ class SimulatedArm:
         """Follow ``dq`` (rad/s) from now."""
         self._advance()
         self._command = np.array(dq, dtype=float)
+        self._expires = self._t + self.hold_s if np.any(self._command) else None
         if self._model is not None:
             self._model.send(self._command, self._t)
 

@@ -26,6 +26,7 @@ from qpavoid.control.analytic import AnalyticConfig, AnalyticController
 from qpavoid.control.controller import Controller
 from qpavoid.control.qp import QPConfig, QPController
 from qpavoid.control.qp.config import REDUNDANT
+from qpavoid.control.smoothing import smooth_rate_limit_hz
 from qpavoid.control.task import inverse_kinematics
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.core.errors import InputError
@@ -179,6 +180,14 @@ def simulate_one(
         with other settings (``benchmarks/smooth_stops.py``: the paper's steps).
     """
     robot = spec_robot(spec) if robot is None else robot
+    if spec.arm is not None and spec.rate_hz > (top := smooth_rate_limit_hz(robot)) + 1e-9:
+        raise InputError(
+            f"--arm at {spec.rate_hz:g} Hz: above {top:g} Hz the stop ramps of "
+            f"{robot.name!r} can break its jerk limits between ticks (docs/real-robot.md); "
+            f"use --rate {top:g} or lower (the arm's own loop interpolates between commands)",
+            name="--rate",
+            value=spec.rate_hz,
+        )
     controller = build_controller(spec, robot) if controller is None else controller
     live = spec.listen is not None
     if motion is None and not live:

@@ -257,7 +257,7 @@ def simulate(
     try:
         if dog is not None:
             dog.__enter__()
-        began = -math.inf
+        began, last_began = -math.inf, math.inf  # (no tick yet)
         for k in range(n_max):
             t = k * dt
             if realtime:
@@ -281,6 +281,10 @@ def simulate(
                 try:
                     state = stall(arm.read(), began)
                     began = time.perf_counter()  # the command's deadline runs from its state
+                    if began - last_began > cfg.watchdog_s:  # the loop itself stalled: the
+                        controller.at_rest()  # arm stopped on its own; start from rest
+                        timing.stalled(began - last_began)
+                    last_began = began
                 except ArmError as exc:
                     ended_by = f"arm {exc.reason or 'error'}: {exc}"
                     break
@@ -291,14 +295,20 @@ def simulate(
                 t = max(t, time.perf_counter() - wall0)
                 if arm is None:
                     q, moved_tau = wall.advance(q, t)  # the arm kept moving until now
-                else:
-                    moved_tau = wall.path_advance(t)
+                else:  # the arm held the last command at most watchdog_s
+                    moved_tau = wall.path_advance(t, cfg.watchdog_s)
                 tau = min(tau + moved_tau, path.duration_s)
             if progress is not None and t - last_progress >= 1.0 / 30.0:
                 progress(t)
                 last_progress = t
             t0 = time.perf_counter_ns()
-            cmd = controller.step(q, human, None, tau, t - captured_s, captured_s)
+            try:
+                cmd = controller.step(q, human, None, tau, t - captured_s, captured_s)
+            except InputError as exc:  # (a real arm reporting NaN): stop it, then say why
+                if arm is None:
+                    raise
+                ended_by = f"input error: {exc}"
+                break
             tick_us = (time.perf_counter_ns() - t0) / 1e3
             if arm is not None and (late := timing.late(began, time.perf_counter())) is not None:
                 cmd = controller.brake(f"missed deadline ({late * 1e3:.1f} ms late)", instead=True)

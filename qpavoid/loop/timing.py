@@ -31,6 +31,7 @@ class LoopTiming:
     def __init__(self, period_s: float, deadline_s: float):
         self.period_s, self.deadline_s = period_s, deadline_s
         self.misses = 0
+        self.stalls: list[float] = []  # the loop's own stalls (gaps past the arm's hold), s
         self._sent: list[float] = []  # when each command was sent, run clock, s
         self._latency: list[float] = []  # a frame's capture to its first command, s
         self._captured = -math.inf
@@ -43,6 +44,11 @@ class LoopTiming:
             self.misses += 1
             return late
         return None
+
+    def stalled(self, gap_s: float) -> None:
+        """The loop itself stood still for ``gap_s`` s (paused, starved of the CPU), longer
+        than the arm holds a command: counted."""
+        self.stalls.append(gap_s)
 
     def sent(self, now_s: float, captured_s: float) -> None:
         """A command went to the arm at ``now_s``, computed from the frame captured at
@@ -61,6 +67,8 @@ class LoopTiming:
         lat = np.asarray(self._latency) if self._latency else np.full(1, np.nan)
         return {
             "deadline_misses": int(self.misses),
+            "loop_stalls": len(self.stalls),
+            "longest_stall_s": max(self.stalls, default=0.0),
             "commands_sent": len(self._sent),
             "longest_gap_s": float(gaps.max()),
             "command_period_s": {

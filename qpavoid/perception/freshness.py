@@ -8,10 +8,13 @@ in hand by, in order of preference,
 2. the frame's capture time ``frame_time_s``, if given;
 3. its content: the people's ids and every joint and tracking state, bit for bit.
 
-Only a new frame reaches the trackers, so a frame held for many ticks is never taken for a
-frozen sensor; a frozen sensor, one that keeps sending the same skeleton under new ids or
-times, still is (``PerceptionConfig.max_identical_frames``), and a frame held with no new
-one behind it grows old until it is stale (``ControllerConfig.max_frame_age_s``).
+A frame whose capture time is not later than the newest taken is never new, whatever its id
+or content (out of order, a sensor's clock restarted, a counter over a frozen clock): the
+frame in hand keeps aging. Only a new frame reaches the trackers, so a frame held for many
+ticks is never taken for a frozen sensor; a frozen sensor, one that keeps sending the same
+skeleton under new ids or times, still is (``PerceptionConfig.max_identical_frames``), and
+a frame held with no new one behind it grows old until it is stale
+(``ControllerConfig.max_frame_age_s``).
 
 The frame's age is the caller's ``frame_age_s`` (now minus the capture time) when given; if
 not, it is measured on the controller's clock: the time since the frame first arrived.
@@ -19,6 +22,7 @@ not, it is measured on the controller's clock: the time since the frame first ar
 
 from __future__ import annotations
 
+import math
 from collections.abc import Hashable
 
 from qpavoid.human.people import People
@@ -33,6 +37,7 @@ class FrameClock:
         self._key: Hashable | None = None
         self._people: People | None = None
         self._arrived_s = 0.0
+        self._newest_s = -math.inf  # the newest capture time taken, s
 
     def observe(
         self,
@@ -57,11 +62,17 @@ class FrameClock:
         """
         key = self._key_of(people, frame_time_s, frame_id)
         new = self._people is None or key != self._key
+        if new and frame_time_s is not None:  # a time at or before the newest: not new
+            new = frame_time_s > self._newest_s
         if new:
             self._key, self._arrived_s = key, clock_s
+            if frame_time_s is not None:
+                self._newest_s = frame_time_s
         self._people = people
-        age = clock_s - self._arrived_s if frame_age_s is None else frame_age_s
-        return new, age
+        held = clock_s - self._arrived_s  # how long the frame in hand has been held
+        if frame_age_s is None:
+            return new, held
+        return new, frame_age_s if new else max(frame_age_s, held)
 
     def _key_of(
         self, people: People, frame_time_s: float | None, frame_id: Hashable | None
