@@ -13,7 +13,7 @@ from qpavoid.control.analytic import AnalyticController
 from qpavoid.control.qp import QPController
 from qpavoid.control.task import inverse_kinematics
 from qpavoid.core.errors import InputError
-from qpavoid.human.people import as_people
+from qpavoid.human.people import People, as_people
 from qpavoid.human.posture import Operator
 from qpavoid.perception.freshness import FrameClock
 
@@ -155,3 +155,17 @@ def test_the_example_loop_runs_the_whole_of_test1():
     stops, reached = runpy.run_path(str(EXAMPLE))["run"]()
     assert reached
     assert not [s for s in stops if "frozen" in s or "stale" in s], stops
+
+
+def test_one_frozen_person_beside_a_moving_one_stops_the_robot(robot):
+    """Two people, one of them bit-identical frame after frame (a frozen track) while the
+    other moves: any frozen person is a frozen sensor for the robot."""
+    ctrl = AnalyticController(robot, config=ControllerConfig(control_period_s=DT))
+    q = inverse_kinematics(robot, ctrl.path.reference(0.0)[0])
+    still = far_person(0)
+    reasons = []
+    for k in range(300):
+        f = int(k * DT * 30.0)
+        people = People.check((1, 2), (still, far_person(f) + [0.0, 0.5, 0.0]))
+        reasons.append(ctrl.step(q, people, None, 0.0, frame_time_s=f / 30.0).reason)
+    assert any("frozen" in r for r in reasons), sorted(set(reasons))

@@ -307,7 +307,7 @@ class Controller:
         frozen = self.config.perception.max_identical_frames
         if not age <= self.config.max_frame_age_s:  # NaN too
             return f"human frame is stale ({age:.3f} s old, max {self.config.max_frame_age_s} s)"
-        if frozen is not None and (repeats := min(p.identical for p in percs)) > frozen:
+        if frozen is not None and (repeats := max(p.identical for p in percs)) > frozen:
             return f"human frame is frozen ({repeats + 1} identical skeletons in a row)"
         if self.config.require_human and not np.isfinite(dmin).any():
             return "no body part of the operator is tracked"

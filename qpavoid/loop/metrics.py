@@ -182,14 +182,18 @@ def run_metrics(
 
 
 def _ending(m: dict[str, Any]) -> str:
-    """How a run ended, in words."""
+    """How a run ended, in words: why it ended early (Ctrl-C, an arm's error) before who
+    held it."""
+    reason = str(m.get("end_reason", "goal reached" if m["reached_goal"] else "time cap"))
     held = m.get("held_by_person")
+    if reason not in ("goal reached", "time cap") and not reason.startswith("held"):
+        return reason
     if held:
         return (
             f"held by person: {held['part']} {held['distance_m']:.3f} m from {held['set']}, "
             f"{held['remaining_error_m'] * 1e3:.1f} mm from the goal"
         )
-    return str(m.get("end_reason", "goal reached" if m["reached_goal"] else "time cap"))
+    return reason
 
 
 #: Stop events :func:`describe` lists (the rest are counted).
