@@ -166,6 +166,6 @@ def test_one_frozen_person_beside_a_moving_one_stops_the_robot(robot):
     reasons = []
     for k in range(300):
         f = int(k * DT * 30.0)
-        people = People.check((1, 2), (still, far_person(f) + [0.0, 0.5, 0.0]))
+        people = People.check((1, 2), (still, far_person(f) + np.array([0.0, 0.5, 0.0])))
         reasons.append(ctrl.step(q, people, None, 0.0, frame_time_s=f / 30.0).reason)
     assert any("frozen" in r for r in reasons), sorted(set(reasons))
