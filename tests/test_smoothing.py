@@ -333,8 +333,24 @@ def room_to_brake_sweep(name: str, dt: float, cases: int, seed: int) -> dict[str
     return out
 
 
-@pytest.mark.parametrize("name", ARMS)
-@pytest.mark.parametrize("dt", [0.001, 0.002, 0.008])  # j dt² > a dt at 8 ms: no jerk binds
+#: Above smooth_rate_limit_hz (500 Hz for the Franka arms: j dt² < a dt), where --arm is
+#: refused: a stop's command is clipped into its reach off the line, and a joint at its
+#: box's end can pass its limit by a fraction of a mrad (0.19 and 0.63 mrad measured).
+BEYOND_THE_SMOOTH_RATE = pytest.mark.xfail(
+    strict=True, reason="1 kHz on a Franka: above smooth_rate_limit_hz (docs/real-robot.md)"
+)
+
+
+@pytest.mark.parametrize(
+    ("name", "dt"),
+    [
+        pytest.param(name, dt, marks=BEYOND_THE_SMOOTH_RATE)
+        if dt == 0.001 and name in ("panda", "fr3")
+        else (name, dt)
+        for name in ARMS
+        for dt in (0.001, 0.002, 0.008)  # j dt² > a dt at 8 ms: no jerk binds
+    ],
+)
 def test_the_boxs_end_leaves_room_to_brake(name: str, dt: float) -> None:
     """:func:`room_to_brake_sweep`, 16 cases (the big sweep: marked slow, below): no joint
     whose command keeps the room row passes its limit on any tick, and the row is not
@@ -475,11 +491,6 @@ def test_a_stop_is_a_straight_ramp_within_the_limits(name: str, dt: float, scale
         assert check.worst["acceleration"] > 0.99 * scale  # braking at b
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug: at 1 kHz a jerk-limited stop at full deceleration ends with a jerk above "
-    "the limit (the ramp is re-planned each tick from the sampled commands)",
-)
 @pytest.mark.parametrize("name", ["panda", "fr3"])
 def test_a_stop_at_1khz_keeps_the_jerk_limit(name: str) -> None:
     """Panda and FR3 at libfranka's 1 kHz braking at their acceleration limits, from 4 random
