@@ -254,10 +254,9 @@ def simulate(
     stall = StallCheck(cfg.stall_timeout_s)
     dog = Watchdog(cfg.watchdog_s, arm.stop) if arm is not None else None
     wall0 = time.perf_counter()
+    watching = False  # the watchdog starts with the first command (not the warm-up tick)
     try:
-        if dog is not None:
-            dog.__enter__()
-        began, last_began = -math.inf, math.inf  # (no tick yet)
+        began, last_began, tick_start = -math.inf, math.inf, -math.inf  # (no tick yet)
         for k in range(n_max):
             t = k * dt
             if realtime:
@@ -265,7 +264,7 @@ def simulate(
                     break
                 due = wall0 + t
                 if arm is not None:  # never two commands within a period: a late loop
-                    due = max(due, began + dt)  # skips ticks rather than bursting them
+                    due = max(due, tick_start + dt)  # skips ticks rather than bursting them
                     if due - wall0 > cfg.max_time_s:
                         break
                 wait = due - time.perf_counter()
@@ -276,7 +275,7 @@ def simulate(
                 # the run clock is the wall clock: a late tick sees the time it really is,
                 # so the frames it holds are as old as they really are
                 t = max(t, time.perf_counter() - wall0)
-            began = time.perf_counter()
+            began = tick_start = time.perf_counter()
             if arm is not None:
                 try:
                     state = stall(arm.read(), began)
@@ -322,6 +321,9 @@ def simulate(
                     break
                 timing.sent(time.perf_counter() - wall0, captured_s)
                 assert dog is not None
+                if not watching:
+                    dog.__enter__()
+                    watching = True
                 dog.kick()
             kin = robot.kinematics(q, jacobians=False)
             other_table = other.closest(kin, controller.geometry(human))[0]
@@ -379,10 +381,11 @@ def simulate(
                 tau = min(tau + cmd.time_scale * dt, path.duration_s)
 
         if arm is not None and not ended_by:  # however it ended: a ramp to rest, on time
-            ended_by = _ramp_down(controller, arm, checked, dt)
+            assert dog is not None
+            ended_by = _ramp_down(controller, arm, checked, dt, dog.kick)
     finally:
         interrupt.restore()
-        if dog is not None:
+        if dog is not None and watching:
             dog.__exit__(None, None, None)
         if arm is not None:
             try:
@@ -430,7 +433,9 @@ def simulate(
     )
 
 
-def _ramp_down(controller: Controller, arm: Arm, checked: CommandCheck, dt: float) -> str:
+def _ramp_down(
+    controller: Controller, arm: Arm, checked: CommandCheck, dt: float, kick: Callable[[], None]
+) -> str:
     """The controller's braking ramp sent to ``arm`` once a period until it commands rest
     (at most 10 s); "at rest", or why it could not finish."""
     start = time.perf_counter()
@@ -442,6 +447,7 @@ def _ramp_down(controller: Controller, arm: Arm, checked: CommandCheck, dt: floa
             arm.send(cmd.dq)
         except ArmError as exc:
             return f"arm {exc.reason or 'error'}: {exc}"
+        kick()  # (the watchdog, if it runs)
         if not np.any(cmd.dq):
             return "at rest"
         wait = start + k * dt - time.perf_counter()
