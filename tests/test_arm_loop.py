@@ -68,7 +68,9 @@ def within_limits(robot, commands) -> CommandCheck:
     return check
 
 
-@pytest.mark.parametrize("kind", [AnalyticController, QPController])
+@pytest.mark.parametrize(
+    "kind", [AnalyticController, pytest.param(QPController, marks=pytest.mark.slow)]
+)
 def test_the_loop_drives_an_arm_and_leaves_it_at_rest(robot, kind):
     ctrl, q0 = start(robot, kind)
     arm = RecordingArm(robot, q0)
@@ -106,6 +108,7 @@ def test_an_arm_fault_ends_the_run_in_one_line(robot):
     assert len(arm.sent) == 50 and arm.stopped == 1
 
 
+@pytest.mark.slow  # real time: seconds of wall clock
 def test_a_missed_deadline_brakes_for_that_tick(robot):
     ctrl, q0 = start(robot)
     step, calls = ctrl.step, []
@@ -127,6 +130,7 @@ def test_a_missed_deadline_brakes_for_that_tick(robot):
     assert within_limits(robot, arm.sent).total() == 0
 
 
+@pytest.mark.slow  # real time: seconds of wall clock
 def test_ctrl_c_mid_motion_ramps_the_arm_to_rest(robot):
     ctrl, q0 = start(robot)
     arm = RecordingArm(robot, q0)
@@ -189,6 +193,7 @@ def test_stall_check_by_hand():
         check(ArmState(9.0, np.zeros(2), np.zeros(2)), 0.112)
 
 
+@pytest.mark.slow  # real time: seconds of wall clock
 def test_a_loop_that_stalls_restarts_the_arm_from_rest(robot):
     """The loop stands still for 0.5 s (paused, starved): the watchdog stops the arm, the
     path clock does not run ahead by the stall, and the next commands start from rest."""
@@ -230,3 +235,16 @@ def test_an_arm_reporting_nan_is_ramped_to_rest_and_named(robot):
     assert np.abs(arm.sent[399]).max() > 1e-3  # it was moving
     assert not np.any(arm.sent[-1]) and len(arm.sent) >= 401  # then a ramp to rest
     assert within_limits(robot, arm.sent).total() == 0
+
+
+def test_a_stream_is_checked_as_its_commands_one_by_one(robot):
+    """CommandCheck.stream (an offline run's, vectorised) counts as the per-command check."""
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        commands = np.cumsum(rng.normal(0, 0.01, (40, robot.nv)), axis=0) * rng.uniform(0.5, 3)
+        one, whole = (CommandCheck(CommandLimits.of(robot, 0.002)) for _ in range(2))
+        for u in commands:
+            one(u)
+        whole.stream(commands)
+        assert one.counts == whole.counts
+        assert one.worst == pytest.approx(whole.worst, abs=1e-12)

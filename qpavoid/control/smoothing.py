@@ -78,6 +78,7 @@ class CommandRamp:
         self.names = tuple(names)
         jerks = tuple((n, j) for n, j in robot.arm.max_jerk_radps3 if n in names)
         self._ramp = ArmResponse(BrakingConfig(0.0, braking_radps2, jerks), names, dt)
+        self._constants()
         self.u1 = np.zeros(robot.nv)  # the last command, rad/s
         self.u2 = np.zeros(robot.nv)  # the one before
         self.at_stop: float | None = None  # the speed (∞-norm) the ramp started from
@@ -104,6 +105,15 @@ class CommandRamp:
             if j < np.inf
         )
         self._ramp = ArmResponse(BrakingConfig(0.0, braking_radps2, jerks), self.names, dt)
+        self._constants()
+
+    def _constants(self) -> None:
+        """What every tick's box uses and only the limits change: 1/b_j and the jerk lag
+        ``max_j (a_j + b_j)² / (2 j_j b_j)`` of :meth:`braking_horizon` (0 without jerk)."""
+        a, b = self.a_dt / self.dt, self.brake_radps2
+        j = self.j_dt2 / (self.dt * self.dt)
+        self._inv_b = 1.0 / b
+        self._lag = float(np.max((a + b) ** 2 / (2.0 * j * b), initial=0.0))
 
     def undo(self) -> None:
         """Forget the last :meth:`commit`: its command was never sent (a tick that missed
@@ -122,11 +132,10 @@ class CommandRamp:
         lo, hi = self._reach()
         # room to brake: a stop begun after this command (every joint on one line, at the
         # pace of the slowest, the jerk's lag included) carries a joint at u at most u H
-        horizon = self.braking_horizon()
-        room_hi = np.maximum(self.q_max - q, 0.0) / horizon
-        room_lo = -np.maximum(q - self.q_min, 0.0) / horizon
-        v = self.v_max
-        return np.clip(np.maximum(room_lo, -v), lo, hi), np.clip(np.minimum(room_hi, v), lo, hi)
+        inv_h = 1.0 / self.braking_horizon()
+        up = np.minimum((self.q_max - q).clip(0.0) * inv_h, self.v_max)
+        down = np.minimum((q - self.q_min).clip(0.0) * inv_h, self.v_max)
+        return (-down).clip(lo, hi), up.clip(lo, hi)
 
     def braking_horizon(self) -> float:
         """H, s: a joint at speed |u| after the next command travels at most |u| H until
@@ -140,11 +149,7 @@ class CommandRamp:
         turns from +a_j to −b_j, at most ``(a_j + b_j) / j_j``, which costs at most the last
         term more; 0 without jerk limits)."""
         speed = np.abs(self.u1) + self.a_dt
-        a = self.a_dt / self.dt
-        b = self.brake_radps2
-        j = self.j_dt2 / (self.dt * self.dt)
-        lag = float(np.max((a + b) ** 2 / (2.0 * j * b), initial=0.0))
-        return self.dt + 0.5 * float(np.max(speed / b, initial=0.0)) + lag
+        return self.dt + 0.5 * float((speed * self._inv_b).max()) + self._lag
 
     def _reach(self) -> tuple[np.ndarray, np.ndarray]:
         """The acceleration and jerk rows of the box alone (nv,) each, rad/s."""
@@ -156,11 +161,12 @@ class CommandRamp:
     def limit(self, dq: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """``dq`` moved towards from the last command along a straight line, as far as the
         box ``[lo, hi]`` allows (all of the way if it lies inside), rad/s (nv,)."""
+        if (dq >= lo).all() and (dq <= hi).all():  # within reach: all of the way
+            return np.array(dq, dtype=float)
         change = dq - self.u1
-        with np.errstate(divide="ignore", invalid="ignore"):
-            room = np.where(change > 0, (hi - self.u1) / change, (lo - self.u1) / change)
-        room = np.where(change == 0.0, np.inf, room)
-        s = float(np.clip(np.min(room, initial=1.0), 0.0, 1.0))
+        room = np.where(change > 0, hi, lo) - self.u1
+        fraction = np.divide(room, change, out=np.full_like(change, np.inf), where=change != 0)
+        s = min(max(float(fraction.min(initial=1.0)), 0.0), 1.0)
         return np.clip(self.u1 + s * change, lo, hi)
 
     def brake(self) -> np.ndarray:

@@ -311,7 +311,7 @@ def simulate(
             tick_us = (time.perf_counter_ns() - t0) / 1e3
             if arm is not None and (late := timing.late(began, time.perf_counter())) is not None:
                 cmd = controller.brake(f"missed deadline ({late * 1e3:.1f} ms late)", instead=True)
-            if checked(cmd.dq) and arm is not None:  # never sent (the arm would fault); logged
+            if arm is not None and checked(cmd.dq):  # never sent (the arm would fault); logged
                 ended_by = f"command beyond the arm's limits: {checked.last}"
             elif arm is not None:
                 try:
@@ -413,6 +413,8 @@ def simulate(
         ending["watchdog_fired"] = True
     moving = None if arm is None else measured_motion(robot, log["q"], log["t"])
     ending |= truth_metrics(log, robot, avoidance, stop_events, dt, moving)
+    if arm is None:  # offline: the whole stream at once, after the run
+        checked.stream(log["dq_command"])
     ending["command_limit_violations"] = dict(checked.counts)
     ending["command_limit_worst_ratio"] = {k: round(v, 6) for k, v in checked.worst.items()}
     return SimResult(
