@@ -219,6 +219,7 @@ def test_a_loop_that_stalls_restarts_the_arm_from_rest(robot):
     assert within_limits(robot, arm.sent).total() == 0
 
 
+@pytest.mark.slow  # real time: seconds of wall clock
 def test_an_arm_reporting_nan_is_ramped_to_rest_and_named(robot):
     ctrl, q0 = start(robot)
 

@@ -40,7 +40,9 @@ def loop(ctrl, ticks: int, **keys) -> list[str]:
     return reasons
 
 
-@pytest.mark.parametrize("kind", [AnalyticController, QPController])
+@pytest.mark.parametrize(
+    "kind", [AnalyticController, pytest.param(QPController, marks=pytest.mark.slow)]
+)
 @pytest.mark.parametrize(
     "keys",
     [
@@ -110,8 +112,10 @@ def test_frame_clock_keys_and_ages():
     "times",
     [
         lambda f: (f if f < 15 else f - 15) / 30.0,  # the sensor's clock restarts at 0.5 s
-        lambda f: 100.0 - f / 30.0,  # counting down
-        lambda f: 1e9 if f == 15 else f / 30.0,  # one frame stamped far ahead
+        pytest.param(lambda f: 100.0 - f / 30.0, marks=pytest.mark.slow),  # counting down
+        pytest.param(  # one frame stamped far ahead
+            lambda f: 1e9 if f == 15 else f / 30.0, marks=pytest.mark.slow
+        ),
         lambda f: 1.0,  # a frame counter over a frozen clock
     ],
     ids=["restart", "backwards", "glitch-ahead", "frozen-clock"],

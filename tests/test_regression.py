@@ -51,7 +51,9 @@ def assert_same_commands(scenario: str, distance: str, rate_hz: float) -> None:
     assert worst <= TOL, f"{scenario}/{distance}: {worst:.3e} rad/s"
 
 
-@pytest.mark.parametrize("scenario", ["free", "test1", "test2"])
+@pytest.mark.parametrize(
+    "scenario", ["free", "test1", pytest.param("test2", marks=pytest.mark.slow)]
+)
 def test_qp_commands_unchanged_100hz_spheres(scenario):
     assert_same_commands(scenario, "spheres", 100.0)
 

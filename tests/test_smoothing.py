@@ -155,7 +155,14 @@ def random_states(
 
 
 @pytest.mark.parametrize("name", ["iiwa14", "fr3"])  # no jerk limits, jerk limits
-@pytest.mark.parametrize("dt", [0.001, 0.002, 0.008])
+@pytest.mark.parametrize(
+    "dt",
+    [
+        pytest.param(0.001, marks=pytest.mark.slow),
+        0.002,
+        pytest.param(0.008, marks=pytest.mark.slow),
+    ],
+)
 def test_the_box_is_the_per_joint_computation(name: str, dt: float) -> None:
     robot = arm(name)
     a = per_joint(robot.arm.max_acceleration_radps2, robot.joint_names)
@@ -347,6 +354,8 @@ BEYOND_THE_SMOOTH_RATE = pytest.mark.xfail(
         pytest.param(name, dt, marks=BEYOND_THE_SMOOTH_RATE)
         if dt == 0.001 and name in ("panda", "fr3")
         else (name, dt)
+        if dt == 0.002
+        else pytest.param(name, dt, marks=pytest.mark.slow)
         for name in ARMS
         for dt in (0.001, 0.002, 0.008)  # j dt² > a dt at 8 ms: no jerk binds
     ],
@@ -473,7 +482,12 @@ def stop_from_steady(
 @pytest.mark.parametrize("name", ARMS)
 @pytest.mark.parametrize(
     ("dt", "scale"),
-    [(0.002, 1.0), (0.002, 0.5), (0.004, 1.0), (0.001, 0.5)],  # 1 kHz at full braking: below
+    [
+        (0.002, 1.0),
+        pytest.param(0.002, 0.5, marks=pytest.mark.slow),
+        pytest.param(0.004, 1.0, marks=pytest.mark.slow),
+        pytest.param(0.001, 0.5, marks=pytest.mark.slow),
+    ],  # 1 kHz at full braking: below
 )
 def test_a_stop_is_a_straight_ramp_within_the_limits(name: str, dt: float, scale: float) -> None:
     """From steady motion, brake() + commit(stopping=True) reach exactly zero along the line
@@ -504,7 +518,7 @@ def test_a_stop_at_1khz_keeps_the_jerk_limit(name: str) -> None:
 
 
 @pytest.mark.parametrize("name", ["iiwa14", "panda", "fr3"])
-@pytest.mark.parametrize("dt", [0.001, 0.002])
+@pytest.mark.parametrize("dt", [pytest.param(0.001, marks=pytest.mark.slow), 0.002])
 def test_a_stop_begun_while_accelerating_keeps_the_limits(name: str, dt: float) -> None:
     """Speeding up at the acceleration limit when a stop comes: the ramp stays on the line
     and within the limits; where the jerk limit allows the acceleration to drop to zero in
