@@ -68,9 +68,8 @@ def within_limits(robot, commands) -> CommandCheck:
     return check
 
 
-@pytest.mark.parametrize(
-    "kind", [AnalyticController, pytest.param(QPController, marks=pytest.mark.slow)]
-)
+@pytest.mark.slow  # real time: seconds of wall clock (the default suite: the stall, the fault)
+@pytest.mark.parametrize("kind", [AnalyticController, QPController])
 def test_the_loop_drives_an_arm_and_leaves_it_at_rest(robot, kind):
     ctrl, q0 = start(robot, kind)
     arm = RecordingArm(robot, q0)
