@@ -171,6 +171,9 @@ class CommandRamp:
 
     def brake(self) -> np.ndarray:
         """The next command of a stop ramp from the last command (rad/s, nv)."""
+        if not self.u1.any() and not self.u2.any():  # at rest: it stays there
+            self.at_stop = 0.0 if self.at_stop is None else self.at_stop
+            return np.zeros_like(self.u1)
         ramp = self._ramp
         ramp.dq, ramp.ddq = self.u1.copy(), (self.u1 - self.u2) / self.dt
         if self.at_stop is None:
