@@ -48,8 +48,11 @@ def loop(ctrl, ticks: int, **keys) -> list[str]:
     [
         None,  # the README's call: nothing but the joints
         lambda k, f: {"frame_time_s": f / 30.0},  # the camera's capture time
-        lambda k, f: {"frame_id": f},  # the camera's frame counter
-        lambda k, f: {"frame_time_s": f / 30.0, "frame_age_s": k * DT - f / 30.0},
+        pytest.param(lambda k, f: {"frame_id": f}, marks=pytest.mark.slow),  # a counter
+        pytest.param(
+            lambda k, f: {"frame_time_s": f / 30.0, "frame_age_s": k * DT - f / 30.0},
+            marks=pytest.mark.slow,
+        ),
     ],
     ids=["joints-only", "frame-time", "frame-id", "time-and-age"],
 )
@@ -116,7 +119,7 @@ def test_frame_clock_keys_and_ages():
         pytest.param(  # one frame stamped far ahead
             lambda f: 1e9 if f == 15 else f / 30.0, marks=pytest.mark.slow
         ),
-        lambda f: 1.0,  # a frame counter over a frozen clock
+        pytest.param(lambda f: 1.0, marks=pytest.mark.slow),  # a counter over a frozen clock
     ],
     ids=["restart", "backwards", "glitch-ahead", "frozen-clock"],
 )
