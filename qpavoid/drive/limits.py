@@ -96,32 +96,19 @@ class CommandCheck:
 
         Each limit broken is counted once per command; the stream moves on either way.
         """
-        lim, dt = self.limits, self.limits.dt_s
-        u = np.asarray(dq, dtype=float)
-        ratios = {
-            "velocity": np.abs(u) / lim.velocity_radps,
-            "acceleration": np.abs(u - self._u1) / (lim.acceleration_radps2 * dt),
-            "jerk": np.abs(u - 2.0 * self._u1 + self._u2) / (lim.jerk_radps3 * dt * dt),
-        }
-        self._u2, self._u1 = self._u1, u.copy()
-        why = ""
-        for kind, ratio in ratios.items():
-            j = int(np.argmax(ratio))
-            self.worst[kind] = max(self.worst[kind], float(ratio[j]))
-            if not ratio[j] <= 1.0 + TOLERANCE:  # NaN too
-                self.counts[kind] += 1
-                why = why or (
-                    f"{kind} limit of {lim.joint_names[j]} broken ({ratio[j]:.3f} times the limit)"
-                )
-        self.last = why
-        return why
+        self.last = self._check(np.asarray(dq, dtype=float)[None, :])
+        return self.last
 
     def stream(self, commands: np.ndarray) -> None:
         """Check a whole stream of commands (T, nv) at once, as :meth:`__call__` one by one
         (an offline run's, after it: the same counts and ratios, vectorised)."""
         u = np.asarray(commands, dtype=float)
-        if not len(u):
-            return
+        if len(u):
+            self.last = self.last or self._check(u)
+
+    def _check(self, u: np.ndarray) -> str:
+        """Count the limits the commands ``u`` (T, nv) break, following the stream so far;
+        why the first broken one breaks ("" if none)."""
         lim, dt = self.limits, self.limits.dt_s
         full = np.vstack([self._u2, self._u1, u])
         ratios = {
@@ -130,18 +117,20 @@ class CommandCheck:
             "jerk": np.abs(np.diff(full, 2, axis=0)) / (lim.jerk_radps3 * dt * dt),
         }
         self._u2, self._u1 = full[-2].copy(), full[-1].copy()
+        why = ""
         for kind, ratio in ratios.items():
             worst = ratio.max(axis=1)
             self.worst[kind] = max(self.worst[kind], float(np.nanmax(worst, initial=0.0)))
             broken = ~(worst <= 1.0 + TOLERANCE)  # NaN too
             self.counts[kind] += int(broken.sum())
-            if broken.any() and not self.last:
+            if broken.any() and not why:
                 k = int(np.argmax(broken))
                 j = int(np.nanargmax(ratio[k])) if np.isfinite(ratio[k]).any() else 0
-                self.last = (
+                why = (
                     f"{kind} limit of {lim.joint_names[j]} broken "
                     f"({ratio[k, j]:.3f} times the limit)"
                 )
+        return why
 
     def total(self) -> int:
         """Commands counted beyond any limit (a command breaking two counts twice)."""
