@@ -12,7 +12,8 @@ from qpavoid.human.alpha_beta import alpha_beta_step
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.perception._kernels import BONE_GROW, BONE_SHRINK
 
-PARENT = KINECT_V2.parent
+#: Writeable copies, as the fusion passes them (a read-only array is another compile).
+PARENT = np.array(KINECT_V2.parent)
 N = KINECT_V2.n_joints
 
 

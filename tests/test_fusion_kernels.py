@@ -12,7 +12,8 @@ from qpavoid.fusion.person import BONE_GAIN
 from qpavoid.human.alpha_beta import alpha_beta_step
 from qpavoid.human.kinect_v2 import KINECT_V2
 
-PARENT = KINECT_V2.parent
+#: Writeable copies, as the fusion passes them (a read-only array is another compile).
+PARENT = np.array(KINECT_V2.parent)
 
 
 def update_track(positions, velocity, last_seen, bone, parent, z, state, t, alpha, beta, gap):

@@ -9,7 +9,8 @@ from qpavoid.fusion.person import MIRROR_CHECK_M, fuse_person, mirror_costs
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.sensing.calibration import SensorCalibration
 
-PARENT, MIRROR, SIDED = KINECT_V2.parent, KINECT_V2.mirror, KINECT_V2.sided
+#: Writeable copies, as the fusion passes them (a read-only array is another compile).
+PARENT, MIRROR, SIDED = (np.array(a) for a in (KINECT_V2.parent, KINECT_V2.mirror, KINECT_V2.sided))
 STATE_WEIGHT = np.array([0.0, 0.2, 1.0])
 STATE_CONFIDENCE = np.array([0.0, 0.15, 0.5])
 
@@ -29,7 +30,7 @@ def test_ingest_is_the_calibration_transform_with_unusable_joints_masked(seed):
     joints = rng.normal(size=(25, 3))
     state = rng.integers(0, 3, size=25).astype(np.int8)
     joints[rng.uniform(size=(25, 3)) < 0.05] = np.nan  # one coordinate alone may be NaN
-    out, usable = ingest(joints, state, T[:3, :3], T[:3, 3])
+    out, usable = ingest(joints, state, T[:3, :3].copy(), T[:3, 3].copy())
     ok = (state > 0) & np.isfinite(joints).all(axis=1)
     np.testing.assert_allclose(out[ok], cal.to_base(joints)[ok], atol=1e-12)
     assert np.isnan(out[~ok]).all()
