@@ -30,6 +30,7 @@ from qpavoid.core.checks import one_line
 from qpavoid.core.errors import InputError, SkeletonFormatError
 from qpavoid.core.file_bounds import NotTOMLError
 from qpavoid.core.file_bounds import read_toml as read_toml_file
+from qpavoid.human.conversion import Confidence, LandmarkRule, parse_rule
 
 __all__ = [
     "FORMATS_DIR",
@@ -65,7 +66,24 @@ _TOP_KEYS = (
     "mirror_pairs",
     "torso",
     "groups",
+    "units",
+    "axes",
+    "confidence",
+    "body",
+    "landmarks",
+    "simulate",
 )
+#: A format's length units: metres per unit.
+UNITS_M = {"m": 1.0, "mm": 0.001}
+#: The directions a camera's axes may point, as seen from the camera.
+AXIS_DIRECTIONS = {
+    "right": (1.0, 0.0, 0.0),
+    "left": (-1.0, 0.0, 0.0),
+    "down": (0.0, 1.0, 0.0),
+    "up": (0.0, -1.0, 0.0),
+    "forward": (0.0, 0.0, 1.0),
+    "backward": (0.0, 0.0, -1.0),
+}
 _JOINT_KEYS = ("id", "name", "parent", "max_bone_m")
 
 
@@ -164,8 +182,25 @@ class SkeletonFormat:
     sensor
         The camera's numbers (:class:`CameraSpec`, the file's ``[sensor]`` table).
     tracking_states
-        ``(state, code)`` pairs; they must be the library's :data:`TRACKING_STATES` (a
-        sensor with other codes is translated by its streamer).
+        ``(state, code)`` pairs; they must be the library's :data:`TRACKING_STATES` (the
+        states of the library's frames; a camera's own confidence is :attr:`confidence`).
+    unit_m
+        Metres per unit of the camera's joint positions (``units``: 1 for m, 0.001 for mm).
+    axes
+        Where the camera's x, y and z axes point, seen from the camera (``"left"``,
+        ``"down"``, ``"forward"``, ...): the frame its joints are given in, which the
+        calibration file's transform for a sensor of the format starts from.
+    confidence
+        What a joint's confidence value is and the state it gives (``[confidence]``).
+    body
+        The body format whose landmarks ``landmarks`` gives (``""``: the format is the
+        body's own, its joints are the landmarks).
+    landmarks
+        ``((landmark, rule), ...)``: each of the body's landmarks from this format's
+        joints (:class:`~qpavoid.human.conversion.LandmarkRule`).
+    simulate
+        ``((joint, rule), ...)``: each joint of this format from the body's landmarks, for
+        the format's simulated camera.
 
     Raises
     ------
@@ -183,6 +218,12 @@ class SkeletonFormat:
     groups: tuple[tuple[str, tuple[tuple[str, str], ...]], ...]
     sensor: CameraSpec
     tracking_states: tuple[tuple[str, int], ...] = TRACKING_STATES
+    unit_m: float = 1.0
+    axes: tuple[str, str, str] = ("left", "up", "forward")
+    confidence: Confidence = Confidence()
+    body: str = ""
+    landmarks: tuple[tuple[str, LandmarkRule], ...] = ()
+    simulate: tuple[tuple[str, LandmarkRule], ...] = ()
 
     def __post_init__(self) -> None:
         for key in ("name", "title"):
@@ -209,6 +250,51 @@ class SkeletonFormat:
                 "tracking_states",
                 dict(self.tracking_states),
             )
+        self._check_camera()
+
+    def _check_camera(self) -> None:
+        if self.unit_m not in UNITS_M.values():
+            _fail(f"units must be one of {list(UNITS_M)}", "units", self.unit_m)
+        axes = self.axes
+        if (
+            len(axes) != 3
+            or not all(a in AXIS_DIRECTIONS for a in axes)
+            or abs(np.linalg.det(np.array([AXIS_DIRECTIONS[a] for a in axes]))) != 1.0
+        ):
+            _fail(
+                f"axes must be three perpendicular directions of {list(AXIS_DIRECTIONS)}, "
+                f"got {list(axes)!r}",
+                "axes",
+                axes,
+            )
+        if bool(self.body) != bool(self.landmarks):
+            _fail(
+                "a camera format names its body format and maps its landmarks (body and "
+                "[landmarks] together), or neither (a body format)",
+                "body",
+                self.body,
+            )
+        for key, rules in (("landmarks", self.landmarks), ("simulate", self.simulate)):
+            names = [name for name, _ in rules]
+            if len(set(names)) != len(names):
+                _fail(f"{key} names a point twice", key, names)
+            if key == "simulate":
+                for name in names:
+                    self._known(name, f"simulate.{name}")
+                continue
+            for name, rule in rules:
+                for joint in rule.sources:
+                    self._known(joint, f"landmarks.{name}")
+        if self.simulate and set(n for n, _ in self.simulate) != set(self.joints):
+            missing = [j for j in self.joints if j not in dict(self.simulate)]
+            _fail(f"simulate must place every joint; it lacks {missing}", "simulate", missing)
+
+    @cached_property
+    def axes_matrix(self) -> np.ndarray:
+        """(3, 3) the camera's axes in the optical frame (x right, y down, z forward):
+        column ``k`` is where its axis ``k`` points; ``axes_matrix @ p`` turns a point of
+        the camera's frame into the optical frame (read-only)."""
+        return _frozen(np.array([AXIS_DIRECTIONS[a] for a in self.axes]).T, np.float64)
 
     def _check_joints(self) -> None:
         joints = self.joints
@@ -436,7 +522,24 @@ class SkeletonFormat:
         missing = [k for k in CameraSpec.__dataclass_fields__ if k not in sensor]
         if missing:
             _fail(f"sensor has no key {missing[0]!r}", f"sensor.{missing[0]}", None)
-        states = _require(data, "tracking_states", dict, "a table")
+        states = data.get("tracking_states", dict(TRACKING_STATES))
+        if not isinstance(states, dict):
+            _fail(f"tracking_states must be a table, got {states!r}", "tracking_states", states)
+        units = data.get("units", "m")
+        if units not in UNITS_M:
+            _fail(f"units must be one of {list(UNITS_M)}, got {units!r}", "units", units)
+        axes = data.get("axes", ["left", "up", "forward"])
+        if not isinstance(axes, list):
+            _fail(f"axes must be three directions, got {axes!r}", "axes", axes)
+        tables = {}
+        for key in ("landmarks", "simulate"):
+            table = data.get(key, {})
+            if not isinstance(table, dict):
+                _fail(f"{key} must be a table, got {table!r}", key, table)
+            tables[key] = tuple((k, parse_rule(v, f"{key}.{k}")) for k, v in table.items())
+        body = data.get("body", "")
+        if not isinstance(body, str):
+            _fail(f"body must be a format's name, got {body!r}", "body", body)
         return cls(
             name=_require(data, "name", str, "a string"),
             title=_require(data, "title", str, "a string"),
@@ -450,6 +553,12 @@ class SkeletonFormat:
                 **{k: tuple(v) if isinstance(v, list) else v for k, v in sensor.items()}  # type: ignore[arg-type]
             ),
             tracking_states=tuple(states.items()),
+            unit_m=UNITS_M[units],
+            axes=tuple(axes),  # type: ignore[arg-type]
+            confidence=Confidence.from_mapping(data.get("confidence", {})),
+            body=body,
+            landmarks=tables["landmarks"],
+            simulate=tables["simulate"],
         )
 
 
