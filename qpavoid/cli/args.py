@@ -18,6 +18,7 @@ from qpavoid import __version__
 from qpavoid.arm.description import bundled_robots
 from qpavoid.core.errors import QpavoidError, Terminated
 from qpavoid.core.signals import stops_raise
+from qpavoid.human.landmarks import FORMAT_NAMES
 
 
 class Parser(argparse.ArgumentParser):
@@ -78,6 +79,17 @@ def add_robot_option(parser: argparse.ArgumentParser) -> None:
         help=f"the arm: a bundled description ({', '.join(bundled_robots())}; those whose "
         "URDF comes from a package need the extra 'robots') or a folder holding "
         "control_points.toml (docs/robot.md)",
+    )
+
+
+def add_camera_option(parser: argparse.ArgumentParser) -> None:
+    """``--camera FORMAT``, the simulated camera of every command that simulates one."""
+    parser.add_argument(
+        "--camera",
+        choices=FORMAT_NAMES,
+        default=FORMAT_NAMES[0],
+        help="the simulated camera's skeleton format, with its latency, noise, joints and "
+        "failure modes (docs/sensors.md)",
     )
 
 

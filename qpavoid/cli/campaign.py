@@ -13,7 +13,15 @@ import argparse
 import json
 from concurrent.futures import Executor
 
-from qpavoid.cli.args import HelpFormatter, add_robot_option, count, folder, whole_number, workers
+from qpavoid.cli.args import (
+    HelpFormatter,
+    add_camera_option,
+    add_robot_option,
+    count,
+    folder,
+    whole_number,
+    workers,
+)
 from qpavoid.control.tick import SAFETY_MODES
 from qpavoid.experiments.campaign import (
     MAX_RUNS,
@@ -50,6 +58,7 @@ def add_campaign_command(sub: argparse._SubParsersAction) -> None:
     )
     sweep.add_argument("--executor", choices=EXECUTORS, default="local")
     add_robot_option(sweep)
+    add_camera_option(sweep)
     sweep.add_argument("--out", type=folder, required=True, metavar="DIR", help="output folder")
     sweep.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     sweep.set_defaults(parser=sweep, handler=sweep_command)
@@ -58,7 +67,9 @@ def add_campaign_command(sub: argparse._SubParsersAction) -> None:
 def sweep_command(args: argparse.Namespace) -> str:
     """``qpavoid sweep``: check, run, write, print the summary."""
     out = check_output_dir(args.out)
-    spec = campaign_spec(args.controller, args.distance, args.safety, robot=args.robot)
+    spec = campaign_spec(
+        args.controller, args.distance, args.safety, robot=args.robot, camera=args.camera
+    )
     executor: Executor | None = RayExecutor(args.workers) if args.executor == "ray" else None
     try:
         runs = run_campaign(

@@ -28,6 +28,7 @@ from pathlib import Path
 from qpavoid.cli.args import (
     HelpFormatter,
     Parser,
+    add_camera_option,
     add_robot_option,
     count,
     folder,
@@ -47,7 +48,6 @@ from qpavoid.experiments.compare import compare
 from qpavoid.experiments.jobs import progress_bar
 from qpavoid.experiments.run_spec import BENCHES, CONTROLLERS, DISTANCES, LIMIT_MODES
 from qpavoid.experiments.runs import RunSpec, live_view, run_one
-from qpavoid.loop.camera import KINECT_V2_LATENCY_S
 from qpavoid.loop.live_input import check_listening, parse_address
 from qpavoid.loop.metrics import describe
 from qpavoid.output.run_files import check_output_dir
@@ -127,8 +127,13 @@ def build_parser() -> Parser:
         ("--limit-mode", LIMIT_MODES, "analytic only: enforce eq. (3) by scaling or clipping"),
     ):
         run.add_argument(flag, choices=choices, default=choices[0], help=help_text)
+    add_camera_option(run)
     run.add_argument(
-        "--latency", type=float, default=KINECT_V2_LATENCY_S, metavar="S", help="sensor latency, s"
+        "--latency",
+        type=float,
+        default=None,
+        metavar="S",
+        help="sensor latency, s (default: the camera's, from its format file)",
     )
     run.add_argument(
         "--solver",
@@ -246,6 +251,7 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
         safety=args.safety,
         bench=args.bench,
         latency_s=args.latency,
+        camera=args.camera,
         max_time_s=args.max_time,
         rate_hz=args.rate,
         limit_mode=args.limit_mode,

@@ -33,7 +33,9 @@ from qpavoid.distance.methods import distance_method
 from qpavoid.distance.table import DistanceTable
 from qpavoid.human.body import BodyModel, HumanGeometry, KinectHuman
 from qpavoid.human.frames import HumanFrame
+from qpavoid.human.landmarks import landmark_map, skeleton_format
 from qpavoid.human.people import NOBODY, People, as_people
+from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.laws._kernels import NOT_FINITE, limit_crossed, warm_up
 from qpavoid.laws.avoidance import (
     avoidance_terms,
@@ -151,6 +153,10 @@ class Controller:
         self._ticks = 0  # the controller's own clock: control periods since it started
         self._clock_s = 0.0  # = _ticks × control_period_s, s
         self.closest_frame: HumanFrame | None = None  # the closest person's, last tick
+        # the last camera frame of another format and its body (the same frame object held
+        # over ticks maps once), and that format's landmark uncertainty, m
+        self._mapped: tuple[object, object, People] | None = None
+        self._camera_extra_m: np.ndarray | None = None
         self._last: Command | None = None  # the last command returned
 
     def _braking(self) -> tuple[tuple[str, float], ...]:
@@ -193,7 +199,41 @@ class Controller:
         updated once per ``new`` frame; captured at ``frame_time_s`` or, without one, the
         controller's clock minus ``frame_age_s``."""
         captured = self._clock_s - frame_age_s if frame_time_s is None else frame_time_s
-        return self.perceiver.update(people, captured, new)
+        return self.perceiver.update(people, captured, new, self._camera_extra_m)
+
+    def body_of(
+        self, joints: object, state: object, camera_format: str | SkeletonFormat | None
+    ) -> People:
+        """The people of a frame as the body's landmarks: a frame (or :class:`People`) of
+        ``camera_format`` mapped (:mod:`qpavoid.human.landmarks`; metres, base frame,
+        states 0, 1, 2), or the body's own (None). The format's landmark uncertainty is
+        the perception's from then on.
+
+        Raises
+        ------
+        InputError
+            For an unknown format, or a frame that is not one of it.
+        """
+        body = self.human.skeleton
+        fmt = body if camera_format is None else skeleton_format(camera_format)
+        if fmt.name == body.name:
+            self._camera_extra_m = None
+            return as_people(joints, state, body)
+        if self._mapped is not None and self._mapped[0] is joints and self._mapped[1] is state:
+            return self._mapped[2]  # the frame in hand, held: mapped once
+        seen = as_people(joints, state, fmt)
+        mapping = landmark_map(fmt)
+        if mapping.target.name != body.name:
+            raise InputError(
+                f"{fmt.title} frames map onto {mapping.target.title} landmarks, not the body "
+                f"model's {body.title}",
+                name="camera_format",
+                value=fmt.name,
+            )
+        people = People(seen.ids, tuple(mapping.map(*f) for f in seen.frames))
+        self._mapped = (joints, state, people)
+        self._camera_extra_m = np.array(mapping.uncertainty_m)
+        return people
 
     def geometry(self, frame: HumanFrame | People) -> list[HumanGeometry]:
         """The geometries used for ``frame`` if last perceived, else its own (raw)."""
@@ -208,6 +248,7 @@ class Controller:
         frame_age_s: float | None = None,
         frame_time_s: float | None = None,
         frame_id: Hashable | None = None,
+        camera_format: str | SkeletonFormat | None = None,
     ) -> Tick:
         """Shared prelude, one step each: the people as perceived, the distances, the laws
         (eqs. 2-5, 7), speed and separation, the reference, the stop rules.
@@ -219,7 +260,7 @@ class Controller:
         """
         t = finite_number(t, "t (path time, s)")
         kin = self.robot.kinematics(q)
-        people = as_people(joints, state, self.human.skeleton)
+        people = self.body_of(joints, state, camera_format)
         self._ticks += 1
         self._clock_s = self._ticks * self.config.control_period_s
         frame_age_s, frame_time_s = _frame_times(frame_age_s, frame_time_s)
@@ -449,6 +490,7 @@ class Controller:
         frame_age_s: float | None = None,
         frame_time_s: float | None = None,
         frame_id: Hashable | None = None,
+        camera_format: str | SkeletonFormat | None = None,
     ) -> Command:
         """One control tick: :meth:`measure`, then (unless a stop rule holds) :meth:`act`.
 
@@ -457,11 +499,14 @@ class Controller:
         q
             (nq,) joint angles, rad.
         joints
-            (25, 3) Kinect joints of the latest frame, m, robot base frame; NaN = lost; or
+            (J, 3) joints of the latest frame, m, robot base frame; NaN = lost: the body's
+            25 landmarks (a Kinect v2 frame), or a frame of ``camera_format``; or
             :class:`~qpavoid.human.people.People` (several people: every distance, rule and
             constraint uses the closest of them).
         state
-            (25,) tracking states (0 not tracked, 1 inferred, 2 tracked), or None.
+            (J,) tracking states (0 not tracked, 1 inferred, 2 tracked), or None (every
+            joint tracked); a camera's own confidence becomes these with
+            :func:`~qpavoid.human.landmarks.camera_frame`.
         t
             Path time, s (the clock of the planned path, which waits while stopped).
         frame_age_s
@@ -479,6 +524,12 @@ class Controller:
             frame is new when its content (any joint or state) changes
             (:class:`~qpavoid.perception.freshness.FrameClock`).
 
+        camera_format
+            The skeleton format of ``joints`` (``"k4abt"``, ``"zed_body_34"``,
+            ``"mediapipe_pose"``, a :class:`~qpavoid.human.skeleton.SkeletonFormat`); None:
+            the body's own. Its frames are mapped onto the body's landmarks and its derived
+            landmarks' uncertainty widens the body (:meth:`body_of`).
+
         A held frame is never a frozen sensor, whatever the number of calls; the same
         skeleton under new ids or times is (``config.perception.max_identical_frames``).
 
@@ -488,7 +539,7 @@ class Controller:
             On malformed inputs (see :meth:`measure`). A numerical failure while computing
             the command is not raised: the robot stops with it as the reason.
         """
-        tick = self.measure(q, joints, state, t, frame_age_s, frame_time_s, frame_id)
+        tick = self.measure(q, joints, state, t, frame_age_s, frame_time_s, frame_id, camera_format)
         if tick.reason:
             return self.command(tick, None)
         try:

@@ -70,9 +70,11 @@ def campaign_spec(
     max_speed_mps: float = 2.0,
     max_time_s: float = CAMPAIGN_MAX_TIME_S,
     robot: str = "iiwa14",
+    camera: str = "kinect_v2",
 ) -> SweepSpec:
     """The runs of a campaign: strikes at up to ``max_speed_mps`` (m/s) on ``robot``, each
-    until the goal or ``max_time_s`` (s), at ``rate_hz`` (Hz)."""
+    until the goal or ``max_time_s`` (s), at ``rate_hz`` (Hz), seen through a simulated
+    ``camera`` (a skeleton format's name)."""
     return SweepSpec(
         "strike",
         controller,
@@ -82,6 +84,7 @@ def campaign_spec(
         max_time_s,
         max_speed_mps,
         robot=robot,
+        camera=camera,
     )
 
 
@@ -99,6 +102,7 @@ def campaign_settings(spec: SweepSpec, n: int, seed: int) -> dict[str, Any]:
         "seed": seed,
         "max_speed_mps": spec.max_speed_mps,
         "rate_hz": spec.rate_hz,
+        "camera": spec.camera,
     }
 
 

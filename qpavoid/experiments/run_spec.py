@@ -17,7 +17,7 @@ from qpavoid.control.tick import SAFETY_MODES
 from qpavoid.core.checks import check_choice, check_range
 from qpavoid.core.errors import InputError
 from qpavoid.drive.connect import parse_arm
-from qpavoid.loop.camera import KINECT_V2_LATENCY_S
+from qpavoid.human.landmarks import FORMAT_NAMES, skeleton_format
 from qpavoid.loop.live_input import parse_address
 from qpavoid.scenarios import motions
 from qpavoid.scenarios.generated import check_scenario_name
@@ -64,8 +64,14 @@ class RunSpec:
         command at once (the frozen-frame check is off: a perfect sensor films a still
         person bit for bit).
     latency_s
-        The real bench's sensor latency, s (default: the Kinect v2's, docs/safety.md); a
-        frame older than the latency plus 40 ms (one frame and 7 ms) is stale.
+        The real bench's sensor latency, s (None, the default: the camera's, from its
+        format file; the Kinect v2's 0.06 s, docs/safety.md); a frame older than the
+        latency plus 40 ms (one frame and 7 ms) is stale.
+    camera
+        The skeleton format of the real bench's simulated camera (``kinect_v2``,
+        ``k4abt``, ``zed_body_34``, ``zed_body_38``, ``mediapipe_pose``:
+        :data:`~qpavoid.human.landmarks.FORMAT_NAMES`), its latency, noise, joint set and
+        failure modes (:mod:`qpavoid.loop.camera`).
     max_time_s
         Cap on the run, s (default 40: the 15 s path plus room for stops).
     rate_hz
@@ -107,7 +113,7 @@ class RunSpec:
     distance: str = "capsules"
     safety: str = "paper"
     bench: str = "real"
-    latency_s: float = KINECT_V2_LATENCY_S
+    latency_s: float | None = None
     max_time_s: float = 40.0
     rate_hz: float = 500.0
     limit_mode: str = "scale"
@@ -121,6 +127,7 @@ class RunSpec:
     listen: str | None = None
     allow_unauthenticated: bool = False
     arm: str | None = None
+    camera: str = "kinect_v2"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sensor_files", tuple(str(f) for f in self.sensor_files))
@@ -160,7 +167,9 @@ class RunSpec:
         check_choice("distance method", self.distance, DISTANCES)
         check_choice("safety mode (--safety)", self.safety, SAFETY_MODES)
         check_choice("bench (--bench)", self.bench, BENCHES)
-        check_range("the sensor latency (--latency)", self.latency_s, 0.0, 1.0, "s")
+        check_choice("camera (--camera)", self.camera, FORMAT_NAMES)
+        if self.latency_s is not None:
+            check_range("the sensor latency (--latency)", self.latency_s, 0.0, 1.0, "s")
         check_choice("limit mode", self.limit_mode, LIMIT_MODES)
         check_range("the run's cap (--max-time)", self.max_time_s, *MAX_TIME_RANGE_S, "s")
         check_range("the control rate (--rate)", self.rate_hz, *RATE_RANGE_HZ, "Hz")
@@ -188,6 +197,13 @@ class RunSpec:
                     name="--arm",
                     value=self.arm,
                 )
+
+    @property
+    def sensor_latency_s(self) -> float:
+        """The real bench's sensor latency, s: ``latency_s``, or the camera's own."""
+        if self.latency_s is not None:
+            return self.latency_s
+        return skeleton_format(self.camera).sensor.latency_s
 
     @property
     def human_files(self) -> tuple[str, ...]:

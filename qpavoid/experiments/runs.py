@@ -19,6 +19,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from qpavoid.arm.braking import BrakingConfig
 from qpavoid.arm.description import description_reference
 from qpavoid.arm.model import Robot, load_robot
@@ -35,6 +37,7 @@ from qpavoid.experiments.run_spec import (
     STALE_AFTER_LATENCY_S,
     RunSpec,
 )
+from qpavoid.human.landmarks import landmark_map, skeleton_format
 from qpavoid.loop.camera import CameraConfig
 from qpavoid.loop.live_input import Listener, LiveSource, parse_address
 from qpavoid.loop.simulation import HumanMotion, SimConfig, SimResult, simulate
@@ -77,7 +80,7 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
         distance=spec.distance,
         control_period_s=1.0 / spec.rate_hz,
         compute_budget_s=ARM_COMPUTE_BUDGET_S if spec.arm is not None else 0.0,
-        max_frame_age_s=spec.latency_s + STALE_AFTER_LATENCY_S,
+        max_frame_age_s=spec.sensor_latency_s + STALE_AFTER_LATENCY_S,
         safety=spec.safety,
         perception=PerceptionConfig(max_identical_frames=None)
         if spec.bench == "ideal"
@@ -93,6 +96,18 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
     if spec.redundant:  # the redundancy mode's weights (docs/qp.md), same solver
         qp = replace(REDUNDANT, backend=qp.backend, solver=qp.solver)
     return QPController(robot, config=config, qp=qp)
+
+
+def cell_uncertainty_m(spec: RunSpec) -> tuple[float, ...]:
+    """Each of the body's landmarks' uncertainty from the cell's cameras, m
+    (:attr:`~qpavoid.perception.tracker.PerceptionConfig.landmark_uncertainty_m`): the
+    largest over the simulated camera's format and the calibration's sensors' formats
+    (empty: every landmark measured, a Kinect v2 cell)."""
+    formats = {spec.camera}
+    if spec.sensors is not None:
+        formats |= {s.format for s in load_calibration(str(spec.sensors)).sensors.values()}
+    worst = np.max([landmark_map(skeleton_format(f)).uncertainty_m for f in formats], axis=0)
+    return tuple(float(u) for u in worst) if worst.any() else ()
 
 
 @contextmanager
@@ -196,7 +211,7 @@ def simulate_one(
         camera = (
             CameraConfig.ideal()
             if spec.bench == "ideal"
-            else CameraConfig(latency_s=spec.latency_s)
+            else CameraConfig.of(spec.camera, latency_s=spec.sensor_latency_s)
         )
     with contextlib.ExitStack() as stack:
         source = stack.enter_context(live_source(spec, clear))
@@ -228,7 +243,8 @@ def simulate_one(
         scenario=spec.label,
         safety=spec.safety,
         bench=spec.bench,
-        latency_s=spec.latency_s if spec.bench == "real" and not live else 0.0,
+        latency_s=spec.sensor_latency_s if spec.bench == "real" and not live else 0.0,
+        camera=spec.camera if spec.bench == "real" and not live else "ideal",
         redundant=bool(spec.redundant),
         robot=description_reference(spec.robot),
         arm=spec.arm or "offline simulation",

@@ -49,7 +49,7 @@ from qpavoid.laws.avoidance import (
     set_stop_distances,
     stop_rule_holds,
 )
-from qpavoid.loop.camera import KINECT_V2_LATENCY_S, CameraConfig
+from qpavoid.loop.camera import CameraConfig
 from qpavoid.scenarios.strikes import StrikeCase, strike_camera, strike_case, strike_motion
 
 __all__ = [
@@ -96,9 +96,12 @@ class SweepSpec:
     max_speed_mps
         Strikes only: the fastest peak hand speed drawn, m/s (from 0.5 m/s up).
     latency_s
-        The Kinect's latency, s.
+        The camera's latency, s (None: its format file's).
     robot
         The robot description (a bundled name or a folder).
+    camera
+        The simulated camera's skeleton format (:class:`~qpavoid.experiments.run_spec.
+        RunSpec`'s ``camera``).
     """
 
     kind: str
@@ -108,8 +111,9 @@ class SweepSpec:
     rate_hz: float = 100.0
     max_time_s: float | None = None
     max_speed_mps: float = 2.0
-    latency_s: float = KINECT_V2_LATENCY_S
+    latency_s: float | None = None
     robot: str = "iiwa14"
+    camera: str = "kinect_v2"
 
     def __post_init__(self) -> None:
         check_choice("sweep kind", self.kind, KINDS)
@@ -139,6 +143,7 @@ class SweepSpec:
             latency_s=self.latency_s,
             robot=self.robot,
             measure_truth=truth,
+            camera=self.camera,
         )
 
 
@@ -313,9 +318,13 @@ def run_case(spec: SweepSpec, seed: int) -> Check:
         return _approach_check(seed, simulate_one(spec.run_spec(seed)))
     robot = load_robot(spec.robot)  # the strike, aimed at its sets, seen through a faulty Kinect
     case = strike_case(seed, spec.max_speed_mps, robot)
-    camera = strike_camera(case, CameraConfig(latency_s=spec.latency_s, seed=case.seed))
+    run_spec = spec.run_spec(seed, case.duration_s)
+    camera = strike_camera(
+        case,
+        CameraConfig.of(spec.camera, latency_s=run_spec.sensor_latency_s, seed=case.seed),
+    )
     run = simulate_one(
-        spec.run_spec(seed, case.duration_s),
+        run_spec,
         strike_motion(case, robot),
         robot=robot,
         camera=camera,
@@ -511,17 +520,26 @@ def strike_sweep(
     safety: str = "ssm",
     rate_hz: float = 100.0,
     max_speed_mps: float = 2.0,
-    latency_s: float = KINECT_V2_LATENCY_S,
+    latency_s: float | None = None,
     workers: int | None = None,
     executor: Executor | None = None,
     progress: bool = False,
     distance: str = "capsules",
     max_time_s: float | None = None,
+    camera: str = "kinect_v2",
 ) -> list[StrikeCheck]:
     """Strikes judged against the truth (:func:`sweep` of strikes: docs/safety.md's
     tables, ``benchmarks/safety.py``), in the order of ``seeds``; each lasts the strike
     (``max_time_s=None``) or until the goal, capped at ``max_time_s`` (s)."""
     spec = SweepSpec(
-        "strike", controller, distance, safety, rate_hz, max_time_s, max_speed_mps, latency_s
+        "strike",
+        controller,
+        distance,
+        safety,
+        rate_hz,
+        max_time_s,
+        max_speed_mps,
+        latency_s,
+        camera=camera,
     )
     return cast(list[StrikeCheck], sweep(spec, seeds, workers, executor, progress))

@@ -91,8 +91,7 @@ class Confidence:
             )
         if self.kind == "levels":
             if not self.levels or not all(
-                isinstance(s, int) and not isinstance(s, bool) and s in _STATES
-                for s in self.levels
+                isinstance(s, int) and not isinstance(s, bool) and s in _STATES for s in self.levels
             ):
                 _fail(
                     f"confidence.levels must be states (0, 1 or 2), one per level, got "
@@ -133,9 +132,7 @@ class Confidence:
                 f"confidence.{unknown[0]}",
                 data[unknown[0]],
             )
-        args: dict[str, Any] = {
-            k: tuple(v) if isinstance(v, list) else v for k, v in data.items()
-        }
+        args: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
         return cls(**args)
 
     def states(self, value: np.ndarray) -> np.ndarray:
@@ -239,7 +236,7 @@ def parse_rule(value: object, key: str) -> LandmarkRule:
     if not isinstance(joints, list) or not joints or not all(isinstance(j, str) for j in joints):
         _fail(f"{key}.{form} must name joints, got {joints!r}", f"{key}.{form}", joints)
     if form == "lerp":
-        t = value.get("t")
+        t: Any = value.get("t")
         if len(joints) != 2 or not _number(t) or not -1.0 <= t <= 2.0:
             _fail(
                 f"{key}: lerp takes two joints and t in [-1, 2], got {joints!r}, t={t!r}",

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import MISSING, dataclass, fields
 from functools import cached_property
 from pathlib import Path
 from typing import Any, NoReturn
@@ -108,6 +108,15 @@ class CameraSpec:
         (near, far) distance at which the sensor sees a person, m.
     max_bodies
         Most bodies the sensor tracks at once (body ids 0 to ``max_bodies - 1``).
+    noise_reference_range_m
+        0: ``noise_m`` at any range; else the range at which the noise is ``noise_m``, m,
+        growing with the square of the range (stereo depth: a ZED).
+    left_right_swap_per_s
+        How often the camera labels a person's left side right and the reverse, per s
+        (each swap lasts ``left_right_swap_s``): a pose model that guesses the sides
+        (MediaPipe) when it cannot see the face.
+    left_right_swap_s
+        How long such a swap lasts, s.
     """
 
     frame_rate_hz: float
@@ -117,6 +126,9 @@ class CameraSpec:
     field_of_view_deg: tuple[float, float]
     range_m: tuple[float, float]
     max_bodies: int
+    noise_reference_range_m: float = 0.0
+    left_right_swap_per_s: float = 0.0
+    left_right_swap_s: float = 0.5
 
     def __post_init__(self) -> None:
         for key, low, value in (
@@ -124,6 +136,9 @@ class CameraSpec:
             ("latency_s", None, self.latency_s),
             ("noise_m", None, self.noise_m),
             ("tracked_uncertainty_m", None, self.tracked_uncertainty_m),
+            ("noise_reference_range_m", None, self.noise_reference_range_m),
+            ("left_right_swap_per_s", None, self.left_right_swap_per_s),
+            ("left_right_swap_s", None, self.left_right_swap_s),
         ):
             if not _is_number(value) or not (value > low if low is not None else value >= 0):
                 rule = "a number > 0" if low is not None else "a number >= 0"
@@ -220,7 +235,7 @@ class SkeletonFormat:
     tracking_states: tuple[tuple[str, int], ...] = TRACKING_STATES
     unit_m: float = 1.0
     axes: tuple[str, str, str] = ("left", "up", "forward")
-    confidence: Confidence = Confidence()
+    confidence: Confidence = Confidence()  # noqa: RUF009 (frozen: one shared default)
     body: str = ""
     landmarks: tuple[tuple[str, LandmarkRule], ...] = ()
     simulate: tuple[tuple[str, LandmarkRule], ...] = ()
@@ -519,7 +534,11 @@ class SkeletonFormat:
                 _fail(f"groups.{group} must be a table, got {roles!r}", f"groups.{group}", roles)
         sensor = _require(data, "sensor", dict, "a table")
         _only_keys(sensor, tuple(CameraSpec.__dataclass_fields__), "sensor.")
-        missing = [k for k in CameraSpec.__dataclass_fields__ if k not in sensor]
+        missing = [
+            k
+            for k, f in CameraSpec.__dataclass_fields__.items()
+            if k not in sensor and f.default is MISSING
+        ]
         if missing:
             _fail(f"sensor has no key {missing[0]!r}", f"sensor.{missing[0]}", None)
         states = data.get("tracking_states", dict(TRACKING_STATES))
@@ -554,7 +573,7 @@ class SkeletonFormat:
             ),
             tracking_states=tuple(states.items()),
             unit_m=UNITS_M[units],
-            axes=tuple(axes),  # type: ignore[arg-type]
+            axes=tuple(axes),
             confidence=Confidence.from_mapping(data.get("confidence", {})),
             body=body,
             landmarks=tables["landmarks"],

@@ -18,6 +18,16 @@ skeleton repeated with advancing time stamps), joints ``"lost"`` (NaN, NotTracke
 
 Frames are deterministic: the noise and the dropouts of frame k come from a generator
 seeded with ``(seed, k)``, whatever the order in which frames are asked for.
+
+**Any camera's format** (``format``, :meth:`CameraConfig.of`): a camera of another format
+than the body's films the true body through its format's ``[simulate]`` table (the body's
+landmarks placed as its joints: its joint set, what it cannot see derived), adds its noise
+to its own joints (growing with the square of the range from ``sensor_position_m`` for a
+stereo camera, ``sensor.noise_reference_range_m``), swaps the person's left and right
+for ``sensor.left_right_swap_s`` at a time, ``sensor.left_right_swap_per_s`` on average
+(MediaPipe), and maps the result back onto the body's landmarks with its ``[landmarks]``
+table, as a real frame of the format is (:mod:`qpavoid.human.landmarks`). Faults are laid
+on the body's landmarks before the format films them.
 """
 
 from __future__ import annotations
@@ -30,6 +40,7 @@ import numpy as np
 from qpavoid.core.errors import InputError
 from qpavoid.human.frames import HumanFrame, HumanMotion
 from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.landmarks import LandmarkMap, landmark_map, skeleton_format
 from qpavoid.human.people import People
 from qpavoid.human.skeleton import INFERRED, NOT_TRACKED
 from qpavoid.sensing.recording import Recording
@@ -105,6 +116,12 @@ class CameraConfig:
         Faults to inject (:class:`CameraFault`).
     seed
         Seed of the noise, jitter and dropouts.
+    format
+        The camera's skeleton format (default the Kinect v2's, the body's own; module
+        docstring). :meth:`of` takes its frame rate, latency and noise from its file.
+    sensor_position_m
+        Where the camera is in the base frame, m: the range a stereo camera's noise grows
+        with. Default: behind the robot's base, facing the seated operator about 2 m away.
     """
 
     frame_rate_hz: float = KINECT_V2.sensor.frame_rate_hz
@@ -114,6 +131,25 @@ class CameraConfig:
     dropout_probability: float = 0.0
     faults: tuple[CameraFault, ...] = field(default=())
     seed: int = 0
+    format: str = KINECT_V2.name
+    sensor_position_m: tuple[float, float, float] = (0.15, -0.9, 0.6)
+
+    def __post_init__(self) -> None:
+        skeleton_format(self.format)  # an unknown format: InputError naming the known ones
+
+    @classmethod
+    def of(cls, format: str, **overrides: object) -> CameraConfig:
+        """The simulated camera of ``format`` with its file's frame rate, latency and noise
+        (``overrides`` replace any field)."""
+        sensor = skeleton_format(format).sensor
+        fields: dict[str, object] = {
+            "frame_rate_hz": sensor.frame_rate_hz,
+            "latency_s": sensor.latency_s,
+            "noise_m": sensor.noise_m,
+            "format": format,
+        }
+        fields.update(overrides)
+        return cls(**fields)  # type: ignore[arg-type]
 
     @classmethod
     def ideal(cls, frame_rate_hz: float = KINECT_V2.sensor.frame_rate_hz) -> CameraConfig:
@@ -140,6 +176,11 @@ class Camera:
         self.end_s = float(getattr(motion, "duration_s", math.inf))
         self._cache: dict[int, tuple[HumanFrame | People, float, float, bool]] = {}
         self._held: tuple[int, HumanFrame | People, float] | None = None
+        fmt = skeleton_format(cfg.format)
+        self._films: LandmarkMap | None = None if not fmt.body else LandmarkMap.simulated(fmt)
+        self._maps = landmark_map(fmt)
+        self._sensor = fmt.sensor
+        self._mirror = fmt.mirror
 
     def _capture_time(self, k: int) -> float:
         """Capture time of frame k on the run clock, s."""
@@ -215,9 +256,39 @@ class Camera:
                         at_start = at_start.frames[at_start.ids.index(pid)]
                     joints[idx] = at_start.joints[idx]
                     state[idx] = INFERRED
+        if self._films is not None:  # another camera's format films the body
+            return self._filmed(joints, state, captured, rng, pid)
         if self.cfg.noise_m > 0.0:
             joints = joints + rng.normal(0.0, self.cfg.noise_m, joints.shape)
         return HumanFrame(joints, state)
+
+    def _filmed(
+        self,
+        joints: np.ndarray,
+        state: np.ndarray,
+        captured: float,
+        rng: np.random.Generator,
+        pid: int | None,
+    ) -> HumanFrame:
+        """The body's landmarks as a camera of another format reports them (module
+        docstring): its joints, their noise and swaps, mapped back."""
+        assert self._films is not None
+        cam = self._films.map(joints, state)
+        points, seen = cam.joints, cam.state
+        sensor = self._sensor
+        if sensor.left_right_swap_per_s > 0.0:  # windows of swap_s, each swapped or not
+            window = math.floor(captured / sensor.left_right_swap_s) + 2**20
+            chance = sensor.left_right_swap_per_s * sensor.left_right_swap_s
+            who = 0 if pid is None else pid + 1
+            if np.random.default_rng([self.cfg.seed, window, who, 7]).random() < chance:
+                points, seen = points[self._mirror], seen[self._mirror]
+        if self.cfg.noise_m > 0.0:
+            sigma = np.full(len(points), self.cfg.noise_m)
+            if sensor.noise_reference_range_m > 0.0:  # stereo: grows with range squared
+                far = np.linalg.norm(points - np.asarray(self.cfg.sensor_position_m), axis=1)
+                sigma = sigma * np.nan_to_num(far / sensor.noise_reference_range_m) ** 2
+            points = points + rng.normal(0.0, 1.0, points.shape) * sigma[:, None]
+        return self._maps.map(points, seen)
 
     def frame_at(self, t: float) -> tuple[HumanFrame | People, float]:
         """The frame the controller holds at run time ``t`` and its capture time (run clock).

@@ -32,12 +32,20 @@ class Perceiver:
         self.part_velocity = np.zeros((0, len(human.parts), 3))
         self._frame: People | None = None
 
-    def update(self, people: People, captured_s: float, new: bool = True) -> Perceiver:
+    def update(
+        self,
+        people: People,
+        captured_s: float,
+        new: bool = True,
+        extra_m: np.ndarray | None = None,
+    ) -> Perceiver:
         """Take ``people``, captured at ``captured_s`` (s), if it is a ``new`` frame (or the
         first); a frame held from an earlier tick (:class:`~qpavoid.perception.freshness.
-        FrameClock`) only becomes the frame in hand, which the trackers saw already."""
+        FrameClock`) only becomes the frame in hand, which the trackers saw already.
+        ``extra_m``: the landmark uncertainty of the frame's camera, m
+        (:meth:`~qpavoid.perception.tracker.Tracker.update`)."""
         if new or self._frame is None:
-            self.perceived = self.trackers.update(people.ids, people.frames, captured_s)
+            self.perceived = self.trackers.update(people.ids, people.frames, captured_s, extra_m)
             bodies = [
                 self.human.tracked_geometry(p.frame, p.joint_radius, p.joint_velocity)
                 for p in self.perceived

@@ -31,12 +31,14 @@ stream of frames into what the distances may trust (:class:`Perceived`):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
 from qpavoid.core.compiling import kernel_input
+from qpavoid.core.errors import InputError
 from qpavoid.human._kernels import fastest_joint
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.kinect_v2 import KINECT_V2
@@ -62,6 +64,12 @@ class PerceptionConfig:
         is bit-identical). Default 3: 0.1 s at 30 Hz.
     velocity_alpha, velocity_beta
         Gains of the α-β velocity filter (position and velocity correction).
+    landmark_uncertainty_m
+        (J,) how far each of the body's landmarks may be from where the cell's cameras put
+        it, m, added to its uncertainty radius: a landmark a camera's format lacks and
+        derives (:attr:`~qpavoid.human.landmarks.LandmarkMap.uncertainty_m`; MediaPipe's
+        neck, a hand tip it does not see). Empty (the default): none, every landmark is
+        one the camera measures (the Kinect v2).
     """
 
     max_human_speed_mps: float = 2.0
@@ -69,6 +77,18 @@ class PerceptionConfig:
     max_identical_frames: int | None = 3
     velocity_alpha: float = 0.5
     velocity_beta: float = 0.3
+    landmark_uncertainty_m: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        extra = self.landmark_uncertainty_m
+        if extra and not all(
+            isinstance(u, (int, float)) and math.isfinite(u) and 0.0 <= u <= 0.5 for u in extra
+        ):
+            raise InputError(
+                "landmark_uncertainty_m must be numbers in [0, 0.5] m, one per landmark",
+                name="landmark_uncertainty_m",
+                value=extra,
+            )
 
 
 class Perceived(NamedTuple):
@@ -125,12 +145,25 @@ class Tracker:
         self.bone = np.array(skeleton.max_bone_m)
         # a writable copy: numba types read-only arrays apart, and dispatches them slower
         self._parent = np.array(skeleton.parent)
+        extra = self.cfg.landmark_uncertainty_m
+        if extra and len(extra) != n:
+            raise InputError(
+                f"landmark_uncertainty_m has {len(extra)} values for the {n} landmarks of "
+                f"{skeleton.title}",
+                name="landmark_uncertainty_m",
+                value=extra,
+            )
+        self._extra = np.array(extra, dtype=np.float64) if any(extra) else None
         self._last: HumanFrame | None = None
         self._perceived: Perceived | None = None
         warm_up(skeleton)
 
-    def update(self, frame: HumanFrame, capture_time_s: float) -> Perceived:
-        """Take a new frame captured at ``capture_time_s`` (s) and return what to trust."""
+    def update(
+        self, frame: HumanFrame, capture_time_s: float, extra_m: np.ndarray | None = None
+    ) -> Perceived:
+        """Take a new frame captured at ``capture_time_s`` (s) and return what to trust;
+        ``extra_m`` (J,), m: the frame's camera's landmark uncertainty, if larger than the
+        configured one (``cfg.landmark_uncertainty_m``) somewhere."""
         cfg = self.cfg
         if self._perceived is not None and capture_time_s <= self._perceived.capture_time_s:
             return self._perceived  # out of order or repeated: keep the newer one
@@ -161,6 +194,11 @@ class Tracker:
             float(cfg.inferred_uncertainty_m),
             float(cfg.max_human_speed_mps),
         )
+        extra = self._extra if extra_m is None else extra_m
+        if self._extra is not None and extra_m is not None:
+            extra = np.maximum(self._extra, extra_m)
+        if extra is not None:  # derived landmarks: only within this of where they are put
+            radius = radius + extra
         self._last = frame
         self._perceived = Perceived(
             HumanFrame(joints, state),
@@ -188,12 +226,17 @@ class PeopleTracker:
         return tracker
 
     def update(
-        self, ids: tuple[int, ...], frames: tuple[HumanFrame, ...], capture_time_s: float
+        self,
+        ids: tuple[int, ...],
+        frames: tuple[HumanFrame, ...],
+        capture_time_s: float,
+        extra_m: np.ndarray | None = None,
     ) -> list[Perceived]:
         """Each person's :meth:`Tracker.update`, in the order of ``ids``."""
         self.trackers = {i: self.person(i) for i in ids}
         return [
-            self.trackers[i].update(f, capture_time_s) for i, f in zip(ids, frames, strict=True)
+            self.trackers[i].update(f, capture_time_s, extra_m)
+            for i, f in zip(ids, frames, strict=True)
         ]
 
 
