@@ -247,8 +247,11 @@ def test_every_format_file_ships_in_the_wheel():
     globs = pyproject["tool"]["setuptools"]["package-data"]["qpavoid.human"]
     files = sorted(FORMATS_DIR.iterdir())
     assert [f.name for f in files if f.suffix == ".toml"] == [
+        "k4abt.toml",
         "kinect_v2.toml",
         "kinect_v2_body.toml",
+        "mediapipe_pose.toml",
+        "zed_body_34.toml",
     ]
     for f in files:
         assert any(fnmatch.fnmatch(f"formats/{f.name}", g) for g in globs), f.name
