@@ -30,27 +30,119 @@ from qpavoid.scenarios.generated import make_scenario
 
 #: The SDKs' joint orders, copied from their documentation (an independent reference):
 #: k4abttypes.h's k4abt_joint_id_t, pyzed's BODY_34_PARTS, MediaPipe's PoseLandmark.
-K4ABT = """PELVIS SPINE_NAVEL SPINE_CHEST NECK CLAVICLE_LEFT SHOULDER_LEFT ELBOW_LEFT
-WRIST_LEFT HAND_LEFT HANDTIP_LEFT THUMB_LEFT CLAVICLE_RIGHT SHOULDER_RIGHT ELBOW_RIGHT
-WRIST_RIGHT HAND_RIGHT HANDTIP_RIGHT THUMB_RIGHT HIP_LEFT KNEE_LEFT ANKLE_LEFT FOOT_LEFT
-HIP_RIGHT KNEE_RIGHT ANKLE_RIGHT FOOT_RIGHT HEAD NOSE EYE_LEFT EAR_LEFT EYE_RIGHT
-EAR_RIGHT""".split()
-ZED_BODY_34 = """PELVIS NAVAL_SPINE CHEST_SPINE NECK LEFT_CLAVICLE LEFT_SHOULDER LEFT_ELBOW
-LEFT_WRIST LEFT_HAND LEFT_HANDTIP LEFT_THUMB RIGHT_CLAVICLE RIGHT_SHOULDER RIGHT_ELBOW
-RIGHT_WRIST RIGHT_HAND RIGHT_HANDTIP RIGHT_THUMB LEFT_HIP LEFT_KNEE LEFT_ANKLE LEFT_FOOT
-RIGHT_HIP RIGHT_KNEE RIGHT_ANKLE RIGHT_FOOT HEAD NOSE LEFT_EYE LEFT_EAR RIGHT_EYE RIGHT_EAR
-LEFT_HEEL RIGHT_HEEL""".split()
-MEDIAPIPE = """NOSE LEFT_EYE_INNER LEFT_EYE LEFT_EYE_OUTER RIGHT_EYE_INNER RIGHT_EYE
-RIGHT_EYE_OUTER LEFT_EAR RIGHT_EAR MOUTH_LEFT MOUTH_RIGHT LEFT_SHOULDER RIGHT_SHOULDER
-LEFT_ELBOW RIGHT_ELBOW LEFT_WRIST RIGHT_WRIST LEFT_PINKY RIGHT_PINKY LEFT_INDEX RIGHT_INDEX
-LEFT_THUMB RIGHT_THUMB LEFT_HIP RIGHT_HIP LEFT_KNEE RIGHT_KNEE LEFT_ANKLE RIGHT_ANKLE
-LEFT_HEEL RIGHT_HEEL LEFT_FOOT_INDEX RIGHT_FOOT_INDEX""".split()
+K4ABT = [
+    "PELVIS",
+    "SPINE_NAVEL",
+    "SPINE_CHEST",
+    "NECK",
+    "CLAVICLE_LEFT",
+    "SHOULDER_LEFT",
+    "ELBOW_LEFT",
+    "WRIST_LEFT",
+    "HAND_LEFT",
+    "HANDTIP_LEFT",
+    "THUMB_LEFT",
+    "CLAVICLE_RIGHT",
+    "SHOULDER_RIGHT",
+    "ELBOW_RIGHT",
+    "WRIST_RIGHT",
+    "HAND_RIGHT",
+    "HANDTIP_RIGHT",
+    "THUMB_RIGHT",
+    "HIP_LEFT",
+    "KNEE_LEFT",
+    "ANKLE_LEFT",
+    "FOOT_LEFT",
+    "HIP_RIGHT",
+    "KNEE_RIGHT",
+    "ANKLE_RIGHT",
+    "FOOT_RIGHT",
+    "HEAD",
+    "NOSE",
+    "EYE_LEFT",
+    "EAR_LEFT",
+    "EYE_RIGHT",
+    "EAR_RIGHT",
+]
+ZED_BODY_34 = [
+    "PELVIS",
+    "NAVAL_SPINE",
+    "CHEST_SPINE",
+    "NECK",
+    "LEFT_CLAVICLE",
+    "LEFT_SHOULDER",
+    "LEFT_ELBOW",
+    "LEFT_WRIST",
+    "LEFT_HAND",
+    "LEFT_HANDTIP",
+    "LEFT_THUMB",
+    "RIGHT_CLAVICLE",
+    "RIGHT_SHOULDER",
+    "RIGHT_ELBOW",
+    "RIGHT_WRIST",
+    "RIGHT_HAND",
+    "RIGHT_HANDTIP",
+    "RIGHT_THUMB",
+    "LEFT_HIP",
+    "LEFT_KNEE",
+    "LEFT_ANKLE",
+    "LEFT_FOOT",
+    "RIGHT_HIP",
+    "RIGHT_KNEE",
+    "RIGHT_ANKLE",
+    "RIGHT_FOOT",
+    "HEAD",
+    "NOSE",
+    "LEFT_EYE",
+    "LEFT_EAR",
+    "RIGHT_EYE",
+    "RIGHT_EAR",
+    "LEFT_HEEL",
+    "RIGHT_HEEL",
+]
+MEDIAPIPE = [
+    "NOSE",
+    "LEFT_EYE_INNER",
+    "LEFT_EYE",
+    "LEFT_EYE_OUTER",
+    "RIGHT_EYE_INNER",
+    "RIGHT_EYE",
+    "RIGHT_EYE_OUTER",
+    "LEFT_EAR",
+    "RIGHT_EAR",
+    "MOUTH_LEFT",
+    "MOUTH_RIGHT",
+    "LEFT_SHOULDER",
+    "RIGHT_SHOULDER",
+    "LEFT_ELBOW",
+    "RIGHT_ELBOW",
+    "LEFT_WRIST",
+    "RIGHT_WRIST",
+    "LEFT_PINKY",
+    "RIGHT_PINKY",
+    "LEFT_INDEX",
+    "RIGHT_INDEX",
+    "LEFT_THUMB",
+    "RIGHT_THUMB",
+    "LEFT_HIP",
+    "RIGHT_HIP",
+    "LEFT_KNEE",
+    "RIGHT_KNEE",
+    "LEFT_ANKLE",
+    "RIGHT_ANKLE",
+    "LEFT_HEEL",
+    "RIGHT_HEEL",
+    "LEFT_FOOT_INDEX",
+    "RIGHT_FOOT_INDEX",
+]
 CAMERAS = ("k4abt", "zed_body_34", "mediapipe_pose")
+
+
 def truth_at(motion, t):
     return HumanFrame.check(*motion.frame_at(t))
 
 
-ROBOT_POINTS = np.random.default_rng(5).uniform(-0.6, 0.6, size=(20, 3)) + [0.5, 0.0, 0.5]
+ROBOT_POINTS = [*np.random.default_rng(5).uniform(-0.6, 0.6, size=(20, 3)), 0.5, 0.0, 0.5]
 
 
 def test_the_format_files_are_the_sdks_joint_orders():
@@ -73,7 +165,7 @@ def test_the_format_files_are_the_sdks_joint_orders():
 
 
 def test_an_unknown_format_names_the_known_ones():
-    with pytest.raises(InputError, match="unknown skeleton format 'kinect_v3'.*k4abt"):
+    with pytest.raises(InputError, match=r"unknown skeleton format .kinect_v3.*k4abt"):
         skeleton_format("kinect_v3")
 
 
@@ -118,7 +210,7 @@ def test_a_k4abt_frame_maps_onto_the_landmarks_by_hand():
     the file writes them, and a landmark one of whose joints is lost is lost."""
     fmt = skeleton_format("k4abt")
     rng = np.random.default_rng(1)
-    mm = rng.uniform(-800.0, 800.0, size=(32, 3)) + [0.0, 0.0, 2000.0]
+    mm = [*rng.uniform(-800.0, 800.0, size=(32, 3)), 0.0, 0.0, 2000.0]
     levels = np.full(32, 2)
     levels[K4ABT.index("CLAVICLE_LEFT")] = 1  # LOW: predicted
     levels[K4ABT.index("HANDTIP_RIGHT")] = 0  # NONE
@@ -263,7 +355,7 @@ def test_each_simulated_camera_has_its_files_numbers_and_failures():
     errors = {}
     for away in (1.0, 2.0):
         position = tuple(
-            np.array(Operator().rest()[KINECT_V2.index("SpineShoulder")]) + [0, -away, 0]
+            [*np.array(Operator().rest()[KINECT_V2.index("SpineShoulder")]), 0, -away, 0]
         )
         cam = Camera(
             scenario, CameraConfig.of("zed_body_34", latency_s=0.0, sensor_position_m=position)
@@ -271,7 +363,8 @@ def test_each_simulated_camera_has_its_files_numbers_and_failures():
         hand = KINECT_V2.index("HandLeft")  # a measured landmark, near the chest's range
         errors[away] = np.std(
             [
-                cam.frame_at(t)[0].joints[hand] - truth_at(scenario, cam.frame_at(t)[1]).joints[hand]
+                cam.frame_at(t)[0].joints[hand]
+                - truth_at(scenario, cam.frame_at(t)[1]).joints[hand]
                 for t in np.arange(0.0, 6.0, 1 / 30)
             ]
         )
@@ -335,3 +428,21 @@ def test_confidence_tables_are_checked():
         Confidence(kind="stars")
     with pytest.raises(SkeletonFormatError, match="level_names"):
         Confidence(kind="levels", levels=(0, 2), level_names=("NONE",))
+
+
+@pytest.mark.parametrize("name", ["k4abt", "zed_body_34"])
+def test_a_simulated_camera_puts_derived_landmarks_anywhere_within_their_uncertainty(name):
+    """The simulated camera does not hand back the rule's own point: each person's derived
+    landmarks are off by a random anatomy within the rule's uncertainty (what the
+    perception widens them by), so that the safety campaigns test the uncertainty."""
+    scenario = make_scenario("test1", load_robot("iiwa14"))
+    u = landmark_map(skeleton_format(name)).uncertainty_m
+    errors = []
+    for seed in range(30):
+        cam = Camera(scenario, CameraConfig.of(name, seed=seed, noise_m=0.0))
+        frame, captured = cam.frame_at(1.0)
+        errors.append(np.linalg.norm(frame.joints - truth_at(scenario, captured).joints, axis=1))
+    worst = np.max(errors, axis=0)
+    assert (worst <= u + 1e-9).all()
+    assert (worst[u > 0] > 0.7 * u[u > 0]).all()  # the whole ball is used
+    assert worst[u == 0].max() < 1e-9

@@ -181,6 +181,9 @@ class Camera:
         self._maps = landmark_map(fmt)
         self._sensor = fmt.sensor
         self._mirror = fmt.mirror
+        body = self._maps.target
+        self._body_order, self._body_mirror = np.arange(body.n_joints), body.mirror
+        self._anatomies: dict[int, np.ndarray] = {}
 
     def _capture_time(self, k: int) -> float:
         """Capture time of frame k on the run clock, s."""
@@ -271,10 +274,14 @@ class Camera:
         pid: int | None,
     ) -> HumanFrame:
         """The body's landmarks as a camera of another format reports them (module
-        docstring): its joints, their noise and swaps, mapped back."""
+        docstring): its joints, their noise and swaps, mapped back; each derived landmark
+        off the true one by the person's own anatomy (:meth:`_anatomy`)."""
         assert self._films is not None
         cam = self._films.map(joints, state)
         points, seen = cam.joints, cam.state
+        # what the rules cannot recover of this body, noiseless: replaced by the anatomy
+        bias = np.nan_to_num(self._maps.map(points, seen).joints - joints)
+        order = self._body_order
         sensor = self._sensor
         if sensor.left_right_swap_per_s > 0.0:  # windows of swap_s, each swapped or not
             window = math.floor(captured / sensor.left_right_swap_s) + 2**20
@@ -282,13 +289,32 @@ class Camera:
             who = 0 if pid is None else pid + 1
             if np.random.default_rng([self.cfg.seed, window, who, 7]).random() < chance:
                 points, seen = points[self._mirror], seen[self._mirror]
+                order = self._body_mirror
         if self.cfg.noise_m > 0.0:
             sigma = np.full(len(points), self.cfg.noise_m)
             if sensor.noise_reference_range_m > 0.0:  # stereo: grows with range squared
                 far = np.linalg.norm(points - np.asarray(self.cfg.sensor_position_m), axis=1)
                 sigma = sigma * np.nan_to_num(far / sensor.noise_reference_range_m) ** 2
             points = points + rng.normal(0.0, 1.0, points.shape) * sigma[:, None]
-        return self._maps.map(points, seen)
+        back = self._maps.map(points, seen)
+        offset = self._anatomy(pid) - bias
+        return HumanFrame(back.joints + offset[order], back.state)
+
+    def _anatomy(self, pid: int | None) -> np.ndarray:
+        """(L, 3) how far each of person ``pid``'s derived landmarks is from where the
+        format's rule puts it, m: a random point of the ball of the rule's uncertainty, the
+        same for the whole run (a body's proportions; 0 for a landmark the camera measures).
+        The perception widens each landmark by that uncertainty: the safety campaigns test
+        that it is enough."""
+        who = -1 if pid is None else pid
+        if who not in self._anatomies:
+            rng = np.random.default_rng([self.cfg.seed, who + 1, 11])
+            u = self._maps.uncertainty_m
+            direction = rng.normal(size=(len(u), 3))
+            direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+            radius = u * rng.random(len(u)) ** (1.0 / 3.0)  # uniform in the ball
+            self._anatomies[who] = direction * radius[:, None]
+        return self._anatomies[who]
 
     def frame_at(self, t: float) -> tuple[HumanFrame | People, float]:
         """The frame the controller holds at run time ``t`` and its capture time (run clock).
