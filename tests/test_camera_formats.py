@@ -142,7 +142,7 @@ def truth_at(motion, t):
     return HumanFrame.check(*motion.frame_at(t))
 
 
-ROBOT_POINTS = [*np.random.default_rng(5).uniform(-0.6, 0.6, size=(20, 3)), 0.5, 0.0, 0.5]
+ROBOT_POINTS = np.random.default_rng(5).uniform(-0.6, 0.6, size=(20, 3)) + np.array([0.5, 0.0, 0.5])
 
 
 def test_the_format_files_are_the_sdks_joint_orders():
@@ -210,7 +210,7 @@ def test_a_k4abt_frame_maps_onto_the_landmarks_by_hand():
     the file writes them, and a landmark one of whose joints is lost is lost."""
     fmt = skeleton_format("k4abt")
     rng = np.random.default_rng(1)
-    mm = [*rng.uniform(-800.0, 800.0, size=(32, 3)), 0.0, 0.0, 2000.0]
+    mm = rng.uniform(-800.0, 800.0, size=(32, 3)) + np.array([0.0, 0.0, 2000.0])
     levels = np.full(32, 2)
     levels[K4ABT.index("CLAVICLE_LEFT")] = 1  # LOW: predicted
     levels[K4ABT.index("HANDTIP_RIGHT")] = 0  # NONE
@@ -355,7 +355,7 @@ def test_each_simulated_camera_has_its_files_numbers_and_failures():
     errors = {}
     for away in (1.0, 2.0):
         position = tuple(
-            [*np.array(Operator().rest()[KINECT_V2.index("SpineShoulder")]), 0, -away, 0]
+            Operator().rest()[KINECT_V2.index("SpineShoulder")] + np.array([0.0, -away, 0.0])
         )
         cam = Camera(
             scenario, CameraConfig.of("zed_body_34", latency_s=0.0, sensor_position_m=position)
