@@ -135,7 +135,15 @@ MEDIAPIPE = [
     "LEFT_FOOT_INDEX",
     "RIGHT_FOOT_INDEX",
 ]
-CAMERAS = ("k4abt", "zed_body_34", "mediapipe_pose")
+ZED_BODY_38 = (
+    "PELVIS SPINE_1 SPINE_2 SPINE_3 NECK NOSE LEFT_EYE RIGHT_EYE LEFT_EAR RIGHT_EAR "
+    "LEFT_CLAVICLE RIGHT_CLAVICLE LEFT_SHOULDER RIGHT_SHOULDER LEFT_ELBOW RIGHT_ELBOW "
+    "LEFT_WRIST RIGHT_WRIST LEFT_HIP RIGHT_HIP LEFT_KNEE RIGHT_KNEE LEFT_ANKLE RIGHT_ANKLE "
+    "LEFT_BIG_TOE RIGHT_BIG_TOE LEFT_SMALL_TOE RIGHT_SMALL_TOE LEFT_HEEL RIGHT_HEEL "
+    "LEFT_HAND_THUMB_4 RIGHT_HAND_THUMB_4 LEFT_HAND_INDEX_1 RIGHT_HAND_INDEX_1 "
+    "LEFT_HAND_MIDDLE_4 RIGHT_HAND_MIDDLE_4 LEFT_HAND_PINKY_1 RIGHT_HAND_PINKY_1"
+).split()
+CAMERAS = ("k4abt", "zed_body_34", "zed_body_38", "mediapipe_pose")
 
 
 def truth_at(motion, t):
@@ -149,6 +157,7 @@ def test_the_format_files_are_the_sdks_joint_orders():
     assert skeleton_format("k4abt").joints == tuple(K4ABT)
     assert skeleton_format("zed_body_34").joints == tuple(ZED_BODY_34)
     assert skeleton_format("mediapipe_pose").joints == tuple(MEDIAPIPE)
+    assert skeleton_format("zed_body_38").joints == tuple(ZED_BODY_38)
     assert skeleton_format("kinect_v2") is KINECT_V2
     for name in FORMAT_NAMES:
         fmt = skeleton_format(name)
@@ -430,7 +439,7 @@ def test_confidence_tables_are_checked():
         Confidence(kind="levels", levels=(0, 2), level_names=("NONE",))
 
 
-@pytest.mark.parametrize("name", ["k4abt", "zed_body_34"])
+@pytest.mark.parametrize("name", ["k4abt", "zed_body_34", "zed_body_38"])
 def test_a_simulated_camera_puts_derived_landmarks_anywhere_within_their_uncertainty(name):
     """The simulated camera does not hand back the rule's own point: each person's derived
     landmarks are off by a random anatomy within the rule's uncertainty (what the

@@ -252,6 +252,7 @@ def test_every_format_file_ships_in_the_wheel():
         "kinect_v2_body.toml",
         "mediapipe_pose.toml",
         "zed_body_34.toml",
+        "zed_body_38.toml",
     ]
     for f in files:
         assert any(fnmatch.fnmatch(f"formats/{f.name}", g) for g in globs), f.name

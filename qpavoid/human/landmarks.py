@@ -41,7 +41,7 @@ from qpavoid.human.skeleton import FORMATS_DIR, SkeletonFormat
 __all__ = ["FORMAT_NAMES", "LandmarkMap", "landmark_map", "skeleton_format"]
 
 #: The skeleton formats the library ships (a file ``formats/<name>.toml`` each).
-FORMAT_NAMES = ("kinect_v2", "k4abt", "zed_body_34", "mediapipe_pose")
+FORMAT_NAMES = ("kinect_v2", "k4abt", "zed_body_34", "zed_body_38", "mediapipe_pose")
 
 
 @cache
