@@ -324,6 +324,11 @@ NPZ_HINT = (
     "expected a NumPy .npz archive with arrays t (N,), joints (N, 25, 3) and state "
     "(N, 25); see docs/formats.md"
 )
+#: What a CSV header that names no format's joints is told (the formats the library has).
+NO_FORMAT = (
+    "the joints of no skeleton format "
+    "(kinect_v2, k4abt, zed_body_34, zed_body_38, mediapipe_pose)"
+)
 CSV_HINT = (
     "expected a UTF-8 CSV file: the header row t,SpineBase_x,SpineBase_y,SpineBase_z,"
     "SpineBase_state,...,ThumbRight_state (101 columns), then one row of numbers per "
@@ -443,12 +448,16 @@ BAD_FILES = {
     ),
     "header.csv": (
         lambda p: p.write_text("time,x,y,z\n0,1,2,3\n"),
-        f"CSV header not found: the first row is 'time,x,y,...' (4 columns); {CSV_HINT}",
+        f"CSV header not found: the first row is 'time,x,y,...' (4 columns), {NO_FORMAT}; "
+        f"{CSV_HINT}",
         "header",
     ),
     "prose.csv": (
         lambda p: p.write_text("just some notes\n"),
-        (f"CSV header not found: the first row is 'just some notes' (1 column); {CSV_HINT}"),
+        (
+            f"CSV header not found: the first row is 'just some notes' (1 column), "
+            f"{NO_FORMAT}; {CSV_HINT}"
+        ),
         "header",
     ),
     "short_row.csv": (

@@ -4,7 +4,10 @@
 number of calibrated sensors, in any interleaving; at a fusion time ``t`` it returns
 every person it knows (:class:`FusedFrame`). docs/sensors.md details and measures it:
 
-1. each frame into the base frame and onto one clock (the sensor's calibration);
+1. each frame into the base frame and onto one clock (the sensor's calibration), and a
+   frame of a camera format onto the body's landmarks
+   (:func:`~qpavoid.human.landmarks.landmark_map`; a Kinect v2 frame is the landmarks
+   already): a cell may mix formats, and everything after this works on the landmarks;
 2. per sensor, its newest frame captured at or before ``t`` (never from the future) and
    no older than ``max_age_s``;
 3. bodies matched to people, left/right swaps undone (:mod:`qpavoid.fusion.association`);
@@ -35,6 +38,7 @@ from typing import NamedTuple
 import numpy as np
 
 from qpavoid.core.checks import finite_number
+from qpavoid.core.errors import CalibrationError
 from qpavoid.fusion._kernels import ingest
 from qpavoid.fusion.admission import Admission
 from qpavoid.fusion.association import (
@@ -49,6 +53,7 @@ from qpavoid.fusion.frame import FusedFrame, FusedPerson, OutlierChoice
 from qpavoid.fusion.person import fuse_person, mirror_costs, warm_up
 from qpavoid.human.frames import HumanFrame, nobody
 from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.landmarks import FORMAT_NAMES, LandmarkMap, landmark_map
 from qpavoid.human.skeleton import NOT_TRACKED, SkeletonFormat
 from qpavoid.sensing.calibration import Calibration
 from qpavoid.sensing.per_sensor import BodyFrame, checked_arrays
@@ -79,11 +84,31 @@ class Fuser:
     Parameters
     ----------
     calibration
-        The sensors; a frame from any other sensor is refused by :meth:`add`.
+        The sensors, each with its skeleton format (``format``: the cell may mix
+        formats); a frame from any other sensor is refused by :meth:`add`.
     config
         Fusion settings.
     skeleton
-        The sensors' skeleton format (default: the Kinect v2's).
+        The body's skeleton format, whose joints the fusion returns (default: the Kinect
+        v2's, the body's landmarks): a sensor of this format is taken as it is, one of
+        another format is mapped onto it (its format's ``body`` must be this one).
+
+    Attributes
+    ----------
+    landmark_uncertainty_m
+        (J,) how far each of the body's landmarks may be from where the cell's cameras put
+        it, m (read-only): for each landmark, the largest
+        :attr:`~qpavoid.human.landmarks.LandmarkMap.uncertainty_m` over the calibration's
+        sensors' formats. Conservative: a fused landmark may come from the sensor that
+        derives it worst (a fused point is a weighted mean, no closer to the truth than
+        its worst term can guarantee); zeros for a cell of the body's format only. The
+        perception adds it to each landmark's uncertainty radius
+        (:attr:`~qpavoid.perception.tracker.PerceptionConfig.landmark_uncertainty_m`).
+
+    Raises
+    ------
+    CalibrationError
+        For a sensor whose format does not map onto ``skeleton``.
     """
 
     def __init__(
@@ -110,6 +135,22 @@ class Fuser:
         self._next_id = 0
         self._admission = Admission(calibration, self.cfg, self.counters)
         self._sensor_weight = {n: calibration[n].weight for n in calibration.names}
+        # a fusion on a body skeleton of the user's own (no shipped format: its
+        # sensors stream that skeleton, the calibration file's format key aside)
+        self._own = own = skeleton.name not in FORMAT_NAMES
+        self._formats = {
+            n: skeleton if own else calibration[n].skeleton for n in calibration.names
+        }
+        # each sensor's map onto the body's landmarks; None: its frames are the landmarks
+        self._maps: dict[str, LandmarkMap | None] = {
+            n: self._landmark_map(n, fmt) for n, fmt in self._formats.items()
+        }
+        extra = np.zeros(skeleton.n_joints)
+        for mapped in self._maps.values():
+            if mapped is not None:
+                extra = np.maximum(extra, mapped.uncertainty_m)
+        extra.setflags(write=False)
+        self.landmark_uncertainty_m = extra
         # each camera's rotation and translation as contiguous arrays: the types the
         # compiled intake was warmed up for (a view would compile anew at the first frame)
         self._pose = {
@@ -132,21 +173,29 @@ class Fuser:
         Raises
         ------
         CalibrationError
-            If the frame's sensor is not in the calibration.
+            If the frame's sensor is not in the calibration, or its ``format`` is not the
+            sensor's calibrated one.
         InputError
             If its time is not finite, its joints are not (J, 3) numbers (NaN: not
-            usable) or its states not (J,) values in {0, 1, 2} (recordings and datagrams
-            are checked so already; a frame made by hand is checked here).
+            usable) or its states not (J,) values in {0, 1, 2}, J its format's joints
+            (recordings and datagrams are checked so already; a frame made by hand is
+            checked here).
         """
         cal = self.calibration[frame.sensor]
+        if frame.format != cal.format and not self._own:
+            self.calibration.check_format(frame.sensor, frame.format, "a frame")
         t = finite_number(frame.t, "t (capture time, s)") + cal.time_offset_s
-        joints_in, state_in = checked_arrays(frame, self.skeleton)
+        joints_in, state_in = checked_arrays(frame, self._formats[frame.sensor])
         history = self._latest[frame.sensor].setdefault(int(frame.body), [])
         if history and t <= history[-1].t:
             self.counters["out_of_order_or_duplicate"] += 1
             return False
         rotation, translation = self._pose[frame.sensor]
         joints, state = ingest(joints_in, state_in, rotation, translation)
+        mapped = self._maps[frame.sensor]
+        if mapped is not None:  # a camera format's joints: the body's landmarks from them
+            joints, state = mapped.map(joints, state)
+            joints = np.ascontiguousarray(joints)
         centre = torso_centre(joints, self.skeleton)
         history.append(_Frame(t, joints, state, tuple(centre.tolist())))
         del history[:-HISTORY]
@@ -199,6 +248,22 @@ class Fuser:
                 people.append(FusedPerson(track.id, self._nobody, unseen, (), (), (), track.flag))
         ages = [c.age for cs in per_track.values() for c in cs]
         return FusedFrame(float(t), tuple(people), float(t - min(ages)) if ages else -np.inf)
+
+    def _landmark_map(self, sensor: str, fmt: SkeletonFormat) -> LandmarkMap | None:
+        """``sensor``'s map onto the body's landmarks (None: its frames are them)."""
+        if fmt.name == self.skeleton.name:
+            return None
+        mapped = landmark_map(fmt)
+        if mapped.target.name != self.skeleton.name:
+            raise CalibrationError(
+                f"sensor {sensor!r}: its format {fmt.name} gives the landmarks of "
+                f"{mapped.target.name}, not of the fusion's skeleton {self.skeleton.name}",
+                path=self.calibration.path,
+                sensor=sensor,
+                name="format",
+                value=fmt.name,
+            )
+        return mapped
 
     def clear_flagged(self) -> tuple[int, ...]:
         """Drop every flagged person (an operator who has looked and found nobody there);

@@ -7,7 +7,9 @@ cell would: each fused frame uses only frames captured by then. The result is a
 :class:`FusedRecording`: one row per person per fused time, in the base frame, with a
 per-joint ``confidence``; saved as NPZ (docs/formats.md): ``t``, ``joints``, ``state``,
 ``confidence`` (N, J) and, where several people are present, ``body`` (N,) (the
-person's stable id). One person's rows are an ordinary base-frame recording.
+person's stable id). One person's rows are an ordinary base-frame recording. The rows
+are the body's landmarks whatever the sensors' skeleton formats (a mixed cell's frames
+are mapped onto them as they enter the fusion).
 """
 
 from __future__ import annotations
@@ -75,12 +77,15 @@ def fuse_recordings(
     Raises
     ------
     CalibrationError
-        If a recording names a sensor that the calibration does not have.
+        If a recording names a sensor that the calibration does not have, or holds frames
+        of another skeleton format than its sensor's calibrated one (before any work).
     InputError
         If no person is ever seen.
     """
     for rec in recordings:
         calibration.check_names(rec.sensors)
+        for sensor in rec.sensors:
+            calibration.check_format(sensor, rec.format)
     fuser = Fuser(calibration, config)
     n = fuser.skeleton.n_joints
     frames = [f for rec in recordings for f in rec.frames()]

@@ -111,7 +111,7 @@ class Listener:
         self.calibration = calibration
         self.workspace = workspace or Workspace()
         context = multiprocessing.get_context("spawn")  # no fork of a threaded process
-        self._table = SlotTable.create(context, calibration.names)
+        self._table = SlotTable.create(context, calibration)  # each sensor's format's layout
         self._stop = context.Event()
         status, child_status = context.Pipe(duplex=False)
         self._process = context.Process(

@@ -15,6 +15,8 @@ from its camera frame to the robot base frame, m (docs/sensors.md)::
     field_of_view_deg = [70.6, 60.0]  # optional: what it sees, horizontal and vertical ...
     range_m = [0.5, 4.5]              # ... between these depths (a Kinect v2's): a person
                                       # in its view that it does not see is suspect
+    format = "kinect_v2"    # optional: its skeleton format (qpavoid.human.landmarks), the
+                            # joints of its recordings and datagrams (default kinect_v2)
 
 with, when the sensors have keys, the cell's name at the top (``cell = "cell-1"``): it is
 signed into every datagram, so that one cell's datagrams are refused by another's. Either
@@ -29,13 +31,30 @@ import math
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from functools import cache
+from types import MappingProxyType
 
 import numpy as np
 
 from qpavoid.core.errors import CalibrationError
+from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.landmarks import FORMAT_NAMES, skeleton_format
+from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.sensing.keys import SensorKeys, sensor_name_error, toml_string
 
-__all__ = ["Calibration", "SensorCalibration", "pair_within", "settings_error"]
+__all__ = [
+    "DEFAULT_FORMAT",
+    "Calibration",
+    "SensorCalibration",
+    "check_format_name",
+    "known_formats",
+    "pair_within",
+    "settings_error",
+]
+
+#: A sensor's skeleton format when its calibration names none (every file before formats
+#: were data was the Kinect v2's).
+DEFAULT_FORMAT = KINECT_V2.name
 
 #: How far a printed rotation may be from orthonormal: ``max |RᵀR − I|`` and ``|det R − 1|``.
 #: 1e-4 admits a matrix written with five or six decimals, and refuses a scale or a shear.
@@ -68,7 +87,13 @@ class SensorCalibration:
     field_of_view_deg, range_m
         What the sensor sees: its full horizontal and vertical angles of view, deg, and
         the nearest and farthest depth it measures, m (None: not known; then
-        :meth:`sees` is False everywhere). The camera frame looks along +z, y up.
+        :meth:`sees` is False everywhere). The camera frame is the format's
+        (:attr:`~qpavoid.human.skeleton.SkeletonFormat.axes`; every format's looks along +z).
+    format
+        The sensor's skeleton format (a name of
+        :data:`~qpavoid.human.landmarks.FORMAT_NAMES`; default ``"kinect_v2"``): its
+        recordings and datagrams carry frames of this format's joints, in metres, with the
+        library's tracking states.
     """
 
     name: str
@@ -77,6 +102,7 @@ class SensorCalibration:
     weight: float = 1.0
     field_of_view_deg: tuple[float, float] | None = None
     range_m: tuple[float, float] | None = None
+    format: str = DEFAULT_FORMAT
 
     def __post_init__(self) -> None:
         """The same limits as a calibration file's (a weight of 0 made seen joints
@@ -114,6 +140,19 @@ class SensorCalibration:
             raise CalibrationError(
                 f"sensor {self.name!r}: {message}", sensor=self.name, name=key, value=value
             )
+        problem = check_format_name(self.format)
+        if problem is not None:
+            raise CalibrationError(
+                f"sensor {self.name!r}: {problem}",
+                sensor=self.name,
+                name="format",
+                value=self.format,
+            )
+
+    @property
+    def skeleton(self) -> SkeletonFormat:
+        """The sensor's skeleton format (:attr:`format`, loaded once per process)."""
+        return known_formats()[self.format]
 
     def to_base(self, joints: np.ndarray) -> np.ndarray:
         """Joint positions (..., 3) in the camera frame → the robot base frame, m."""
@@ -126,7 +165,8 @@ class SensorCalibration:
         if self.field_of_view_deg is None or self.range_m is None:
             return False
         T = self.base_from_camera
-        x, y, z = (np.asarray(point, dtype=float) - T[:3, 3]) @ T[:3, :3]
+        local = (np.asarray(point, dtype=float) - T[:3, 3]) @ T[:3, :3]
+        x, y, z = self.skeleton.axes_matrix @ local  # the optical frame: z forward
         half_h, half_v = (math.radians(a) / 2 for a in self.field_of_view_deg)
         return bool(
             self.range_m[0] <= z <= self.range_m[1]
@@ -207,6 +247,26 @@ class Calibration:
         for name in names:
             self[name]
 
+    def check_format(self, sensor: str, format: str, what: str = "a recording") -> None:
+        """Raise :class:`CalibrationError` (an :class:`~qpavoid.core.errors.InputError`)
+        unless ``format`` is the calibrated format of ``sensor`` (which must be here):
+        ``what`` names the data in the message."""
+        calibrated = self[sensor].format
+        if format != calibrated:
+            raise CalibrationError(
+                f"{self._where()}{what} of sensor {sensor!r} holds {format} frames, but the "
+                f"sensor is calibrated as {calibrated} (its format key)",
+                path=self.path,
+                sensor=sensor,
+                name="format",
+                value=format,
+            )
+
+    @property
+    def formats(self) -> tuple[str, ...]:
+        """The sensors' skeleton formats, in the file's order (:attr:`names`)."""
+        return tuple(cal.format for cal in self.sensors.values())
+
     @property
     def names(self) -> tuple[str, ...]:
         """The sensors' names, in the file's order."""
@@ -232,11 +292,31 @@ class Calibration:
                 value = getattr(cal, key)
                 if value is not None:
                     lines.append(f"{key} = [{float(value[0])!r}, {float(value[1])!r}]")
+            if cal.format != DEFAULT_FORMAT:
+                lines.append(f"format = {toml_string(cal.format)}")
             lines.append("")
         return "\n".join(lines)
 
     def _where(self) -> str:
         return f"calibration {self.path}: " if self.path else "calibration "
+
+
+def check_format_name(name: object) -> str | None:
+    """Why ``name`` is not a skeleton format the library has (None if it is one)."""
+    if isinstance(name, str) and name in known_formats():
+        return None
+    return (
+        f"format must be one of the skeleton formats {', '.join(known_formats())}, got "
+        f"{str(name)[:80]!r}"
+    )
+
+
+@cache
+def known_formats() -> Mapping[str, SkeletonFormat]:
+    """The skeleton formats of :data:`~qpavoid.human.landmarks.FORMAT_NAMES` whose file
+    the library ships, by name (read once per process: a datagram's format is looked up
+    here, never read from a file)."""
+    return MappingProxyType({name: skeleton_format(name) for name in FORMAT_NAMES})
 
 
 def pair_within(value: object, low: float, high: float, increasing: bool) -> bool:

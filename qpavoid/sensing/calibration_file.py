@@ -23,10 +23,12 @@ from qpavoid.core.checks import one_line
 from qpavoid.core.errors import CalibrationError
 from qpavoid.core.file_bounds import NotTOMLError, read_toml
 from qpavoid.sensing.calibration import (
+    DEFAULT_FORMAT,
     MAX_TRANSLATION_M,
     RIGID_TOLERANCE,
     Calibration,
     SensorCalibration,
+    check_format_name,
     pair_within,
     settings_error,
 )
@@ -43,6 +45,7 @@ SENSOR_KEYS = (
     "key_ids",
     "field_of_view_deg",
     "range_m",
+    "format",
 )
 #: A calibration file is a few tables of numbers (about 400 bytes a sensor): 1 MiB holds
 #: thousands, and refuses a device or a huge file before it is read (``--sensors /dev/zero``
@@ -138,8 +141,12 @@ def _sensor(name: str, table: object, where: str, path: str | None) -> SensorCal
                 what = "increasing positive numbers" if key == "range_m" else "positive numbers"
                 raise fail(f"{key} must be two {what}, got {str(value)[:80]}", key, value)
             view[key] = (float(value[0]), float(value[1]))
+    fmt = table.get("format", DEFAULT_FORMAT)
+    problem = check_format_name(fmt)
+    if problem is not None:
+        raise fail(problem, "format", fmt)
     try:
-        return SensorCalibration(name, T, float(offset), float(weight), **view)
+        return SensorCalibration(name, T, float(offset), float(weight), **view, format=fmt)
     except CalibrationError as exc:
         raise fail(str(exc).split(": ", 1)[-1], exc.name, exc.value) from None
 

@@ -8,11 +8,18 @@ sensor's clock. :mod:`qpavoid.sensing.calibration` puts the rows in the base fra
 :mod:`qpavoid.fusion.fuser` merges them. The file formats (docs/formats.md, "Per-sensor
 recordings") extend the base-frame ones:
 
-* **NPZ**: ``t`` (N,), ``joints`` (N, J, 3), ``state`` (N, J) as before (J = 25 Kinect v2
-  joints), plus ``sensor``
-  (a string, or (N,) strings) and optionally ``body`` (N,) integers (default 0).
+* **NPZ**: ``t`` (N,), ``joints`` (N, J, 3), ``state`` (N, J) as before (J the joints of
+  the file's skeleton format: 25 for the Kinect v2's), plus ``sensor`` (a string, or (N,)
+  strings), optionally ``body`` (N,) integers (default 0) and ``format`` (a string: the
+  skeleton format's name, :data:`~qpavoid.human.landmarks.FORMAT_NAMES`; none is
+  ``"kinect_v2"``).
 * **CSV**: the header ``t,sensor,body,SpineBase_x,...,ThumbRight_state`` (``body`` may be
-  left out), one row per body per frame.
+  left out), one row per body per frame; the joint columns (``<Joint>_x,_y,_z,_state``
+  of a format's joints, in its order) name the format.
+
+A file holds one format's frames, in metres, with the library's tracking states 0/1/2
+(:func:`~qpavoid.human.landmarks.camera_frame` converts an SDK's own units and
+confidence); the calibration's ``format`` of each of its sensors must be that format.
 
 Within one (sensor, body) the times must increase strictly; rows of different bodies or
 sensors may share a time.
@@ -36,11 +43,13 @@ from qpavoid.core.file_bounds import check_file_size
 from qpavoid.human.frames import check_joints, check_states
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.skeleton import SkeletonFormat
+from qpavoid.sensing.calibration import DEFAULT_FORMAT, check_format_name, known_formats
 from qpavoid.sensing.recording_files import (
     CSV_JOINT_FIELDS,
-    csv_header,
+    joint_columns,
     read_by_suffix,
     read_csv_columns,
+    read_csv_format,
     read_npz,
 )
 
@@ -78,6 +87,9 @@ class BodyFrame(NamedTuple):
         (J, 3) joint positions in the sensor's camera frame, m; NaN = not usable.
     state
         (J,) tracking states (0 not tracked, 1 inferred, 2 tracked).
+    format
+        The skeleton format of ``joints`` and ``state`` (J its joints, in its order): a name
+        of :data:`~qpavoid.human.landmarks.FORMAT_NAMES`, the sensor's calibrated format.
     """
 
     sensor: str
@@ -85,6 +97,7 @@ class BodyFrame(NamedTuple):
     t: float
     joints: np.ndarray
     state: np.ndarray
+    format: str = DEFAULT_FORMAT
 
 
 def checked_arrays(
@@ -119,11 +132,15 @@ def checked_arrays(
 class SensorRecording:
     """Rows of (sensor, body, t, joints, state), checked and read-only (module docstring).
 
+    ``format`` names the rows' skeleton format (default ``"kinect_v2"``): ``joints`` are
+    (N, J, 3) and ``state`` (N, J) with J its joints.
+
     Raises
     ------
     InputError
-        On wrong shapes, a non-finite time, an empty sensor name, a body id outside
-        0-5, or times that do not increase within one (sensor, body).
+        On an unknown format, wrong shapes, a non-finite time, an empty sensor name, a
+        body id outside the format's (0-5 for the Kinect v2), or times that do not
+        increase within one (sensor, body).
     """
 
     sensor: np.ndarray
@@ -131,8 +148,13 @@ class SensorRecording:
     body: np.ndarray
     joints: np.ndarray
     state: np.ndarray
+    format: str = DEFAULT_FORMAT
 
     def __post_init__(self) -> None:
+        problem = check_format_name(self.format)
+        if problem is not None:
+            raise InputError(problem, name="format", value=self.format)
+        fmt = known_formats()[self.format]
         t = as_array(self.t, (None,), "t (capture times, s)")
         n = t.shape[0]
         if n == 0:
@@ -146,12 +168,12 @@ class SensorRecording:
                 value=self.sensor,
             )
         body = as_array(self.body, (n,), "body (body ids)")
-        max_bodies = KINECT_V2.sensor.max_bodies  # body ids 0-5, from the format file
+        max_bodies = fmt.sensor.max_bodies  # body ids 0-5 on a Kinect v2: its format file
         wrong = (body != np.round(body)) | (body < 0) | (body >= max_bodies)
         if np.any(wrong):
             bad = int(np.flatnonzero(wrong)[0])
             raise InputError(
-                f"body[{bad}] is {body[bad].item()!r}; a Kinect v2 body id is 0 to "
+                f"body[{bad}] is {body[bad].item()!r}; a {fmt.title} body id is 0 to "
                 f"{max_bodies - 1}",
                 name="body",
                 value=body,
@@ -168,8 +190,8 @@ class SensorRecording:
                     name="t",
                     value=t,
                 )
-        joints = check_joints(self.joints, t)
-        state = check_states(self.state, t)
+        joints = check_joints(self.joints, t, skeleton=fmt)
+        state = check_states(self.state, t, skeleton=fmt)
         for name, arr in (
             ("sensor", sensor),
             ("t", t),
@@ -200,23 +222,43 @@ class SensorRecording:
                 float(self.t[i]),
                 self.joints[i],
                 self.state[i],
+                self.format,
             )
 
     @classmethod
     def from_frames(cls, frames: list[BodyFrame]) -> SensorRecording:
-        """A recording of ``frames`` (any order; kept as given)."""
+        """A recording of ``frames`` (any order; kept as given), all of one format.
+
+        Raises
+        ------
+        InputError
+            For frames of several formats (a file holds one), or as the class does.
+        """
+        formats = list(dict.fromkeys(f.format for f in frames)) or [DEFAULT_FORMAT]
+        if len(formats) > 1:
+            raise InputError(
+                f"the frames are of several skeleton formats ({', '.join(map(str, formats))}); "
+                "a recording holds one",
+                name="format",
+                value=formats,
+            )
+        problem = check_format_name(formats[0])
+        if problem is not None:
+            raise InputError(problem, name="format", value=formats[0])
+        n = known_formats()[formats[0]].n_joints
         return cls(
             sensor=np.array([f.sensor for f in frames], dtype=str),
             t=np.array([f.t for f in frames]),
             body=np.array([f.body for f in frames]),
-            joints=np.array([f.joints for f in frames]).reshape(-1, KINECT_V2.n_joints, 3),
-            state=np.array([f.state for f in frames]).reshape(-1, KINECT_V2.n_joints),
+            joints=np.array([f.joints for f in frames]).reshape(-1, n, 3),
+            state=np.array([f.state for f in frames]).reshape(-1, n),
+            format=formats[0],
         )
 
 
-def _names(with_body: bool) -> list[str]:
+def _names(with_body: bool, skeleton: SkeletonFormat = KINECT_V2) -> list[str]:
     head = ["t", "sensor", "body"] if with_body else ["t", "sensor"]
-    return head + csv_header()[1:]
+    return head + joint_columns(skeleton)
 
 
 def is_sensor_recording(path: str | Path) -> bool:
@@ -261,7 +303,7 @@ def load_sensor_recording(path: str | Path) -> SensorRecording:
 
 
 def _load_npz(path: Path) -> SensorRecording:
-    arrays = read_npz(path, None, SENSOR_NPZ_EXPECTED)
+    arrays = read_npz(path, None, SENSOR_NPZ_EXPECTED, formatted=True)
     missing = [k for k in ("t", "joints", "state", "sensor") if k not in arrays]
     if missing:
         hint = (
@@ -275,15 +317,24 @@ def _load_npz(path: Path) -> SensorRecording:
         )
     t = arrays["t"]
     body = arrays.get("body", np.zeros(np.shape(t)))
-    return SensorRecording(arrays["sensor"], t, body, arrays["joints"], arrays["state"])
+    fmt = arrays.get("format")
+    return SensorRecording(
+        arrays["sensor"],
+        t,
+        body,
+        arrays["joints"],
+        arrays["state"],
+        DEFAULT_FORMAT if fmt is None else str(np.asarray(fmt).reshape(-1)[0]),
+    )
 
 
 def _load_csv(path: Path) -> SensorRecording:
     header = _csv_first_row(path)
-    names = _names(with_body=len(header) > 2 and header[2] == "body")
+    fmt = read_csv_format(path)
+    names = _names(len(header) > 2 and header[2] == "body", fmt)
     data, words = read_csv_columns(path, names, SENSOR_CSV_EXPECTED, text=("sensor",))
-    first = names.index(csv_header()[1])  # the first joint's first column
-    per_joint = data[:, first:].reshape(-1, KINECT_V2.n_joints, len(CSV_JOINT_FIELDS))
+    first = names.index(joint_columns(fmt)[0])  # the first joint's first column
+    per_joint = data[:, first:].reshape(-1, fmt.n_joints, len(CSV_JOINT_FIELDS))
     body = data[:, 2] if "body" in names else np.zeros(len(data))
     return SensorRecording(
         np.array(words["sensor"], dtype=str),
@@ -291,27 +342,32 @@ def _load_csv(path: Path) -> SensorRecording:
         body,
         per_joint[:, :, :3],
         per_joint[:, :, 3],
+        fmt.name,
     )
 
 
 def save_sensor_npz(path: str | Path, rec: SensorRecording) -> None:
-    """Write ``rec`` as a per-sensor NPZ (``sensor`` as a string array, ``body`` as int)."""
+    """Write ``rec`` as a per-sensor NPZ (``sensor`` as a string array, ``body`` as int,
+    and ``format`` unless it is the default ``"kinect_v2"``: a Kinect v2 file is as
+    before)."""
+    arrays = {
+        "t": rec.t,
+        "sensor": rec.sensor,
+        "body": rec.body,
+        "joints": rec.joints,
+        "state": rec.state,
+    }
+    if rec.format != DEFAULT_FORMAT:
+        arrays["format"] = np.array(rec.format)
     with Path(path).open("wb") as handle:
-        np.savez(
-            handle,
-            t=rec.t,
-            sensor=rec.sensor,
-            body=rec.body,
-            joints=rec.joints,
-            state=rec.state,
-        )
+        np.savez(handle, **arrays)  # type: ignore[arg-type]  # numpy's stub: allow_pickle
 
 
 def save_sensor_csv(path: str | Path, rec: SensorRecording) -> None:
     """Write ``rec`` as a per-sensor CSV (``t,sensor,body,...``; exact float round trip)."""
     with Path(path).open("w", encoding="utf-8", newline="") as handle:
         writer = csv.writer(handle, lineterminator="\n")
-        writer.writerow(_names(with_body=True))
+        writer.writerow(_names(True, known_formats()[rec.format]))
         for k in range(rec.n_rows):
             cells = [repr(float(rec.t[k])), str(rec.sensor[k]), str(int(rec.body[k]))]
             for xyz, s in zip(rec.joints[k], rec.state[k], strict=True):

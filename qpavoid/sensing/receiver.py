@@ -19,7 +19,8 @@ than its body's last (``out_of_order_or_duplicate``); the others are
 ``accepted``, and one replaced before the loop took it is counted ``superseded``:
 ``received`` is ``accepted`` plus every drop. The loop's side (:meth:`SlotTable.take`)
 costs the same whatever arrives: one lock, one copy of at most sensors × bodies slots (the
-wire format's ``max_bodies`` a sensor, six for the Kinect v2).
+most ``max_bodies`` of the sensors' formats a sensor, six for the Kinect v2). Each slot is
+as wide as the cell's widest format; a sensor's frames fill its format's share of it.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ import numpy as np
 from qpavoid.core.errors import CalibrationError
 from qpavoid.core.signals import worker_process
 from qpavoid.human.skeleton import SkeletonFormat
-from qpavoid.sensing.calibration import Calibration
+from qpavoid.sensing.calibration import Calibration, known_formats
 from qpavoid.sensing.calibration_file import load_calibration
 from qpavoid.sensing.per_sensor import BodyFrame
 from qpavoid.sensing.signing import FUTURE_TOLERANCE_S, Verifier
@@ -91,7 +92,11 @@ class SlotTable:
     lock
         Guards both.
     n_joints, max_bodies
-        Joints per frame and bodies per sensor of the datagrams' skeleton format.
+        Joints per frame and bodies per sensor of the slots: the most of the sensors'
+        formats.
+    formats
+        Each sensor's skeleton format (a name, in slot order): a frame of another is
+        not kept (``dropped_wrong_format``).
     """
 
     sensors: tuple[str, ...]
@@ -100,28 +105,40 @@ class SlotTable:
     lock: Any
     n_joints: int
     max_bodies: int
+    formats: tuple[str, ...] = ()
 
     @classmethod
     def create(
-        cls, context: SpawnContext, sensors: Sequence[str], skeleton: SkeletonFormat = SKELETON
+        cls,
+        context: SpawnContext,
+        sensors: Sequence[str] | Calibration,
+        skeleton: SkeletonFormat = SKELETON,
     ) -> SlotTable:
-        """Zeroed slots and counters for ``sensors``' bodies of ``skeleton`` (by default the
-        wire format's, :data:`~qpavoid.sensing.wire.SKELETON`).
+        """Zeroed slots and counters for ``sensors``' bodies.
 
         Parameters
         ----------
         context
             The multiprocessing context that makes the shared arrays and the lock.
         sensors
-            The sensors' names, in slot order.
+            The sensors: a calibration (each sensor's slots for its calibrated format), or
+            their names, in slot order (every sensor's of ``skeleton``).
         skeleton
-            The skeleton format of the frames kept (its joints and bodies per sensor).
+            The skeleton format of the frames of sensors given by name (by default the
+            wire format's, :data:`~qpavoid.sensing.wire.SKELETON`).
         """
-        n_joints, max_bodies = skeleton.n_joints, skeleton.sensor.max_bodies
-        n = len(sensors) * max_bodies * (SLOT_HEAD + 4 * n_joints)
+        if isinstance(sensors, Calibration):
+            names, formats = sensors.names, sensors.formats
+        else:
+            names, formats = tuple(sensors), (skeleton.name,) * len(sensors)
+        kinds = [known_formats().get(f, skeleton) for f in formats] or [skeleton]
+        n_joints = max(fmt.n_joints for fmt in kinds)
+        max_bodies = max(fmt.sensor.max_bodies for fmt in kinds)
+        n = len(names) * max_bodies * (SLOT_HEAD + 4 * n_joints)
         values = context.Array("d", n, lock=False)
         counts = context.Array("q", len(COUNTERS), lock=False)
-        return cls(tuple(sensors), values, counts, context.Lock(), n_joints, max_bodies)
+        lock = context.Lock()
+        return cls(names, values, counts, lock, n_joints, max_bodies, tuple(formats))
 
     def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
         width = SLOT_HEAD + 4 * self.n_joints
@@ -142,18 +159,28 @@ class SlotTable:
             new = np.flatnonzero(rows[:, 0] > rows[:, 1])
             picked = rows[new].copy()
             rows[new, 1] = rows[new, 0]
-        n, bodies, states = self.n_joints, self.max_bodies, SLOT_HEAD + 3 * self.n_joints
-        frames = [
-            BodyFrame(
-                self.sensors[slot // bodies],
-                int(slot % bodies),
-                float(row[2]),
-                row[SLOT_HEAD:states].reshape(n, 3),
-                row[states:].astype(np.int8),
+        bodies, states = self.max_bodies, SLOT_HEAD + 3 * self.n_joints
+        frames = []
+        for slot, row in zip(new, picked, strict=True):
+            sensor = slot // bodies
+            fmt = self._format(sensor)
+            n = fmt.n_joints
+            frames.append(
+                BodyFrame(
+                    self.sensors[sensor],
+                    int(slot % bodies),
+                    float(row[2]),
+                    row[SLOT_HEAD : SLOT_HEAD + 3 * n].reshape(n, 3),
+                    row[states : states + n].astype(np.int8),
+                    fmt.name,
+                )
             )
-            for slot, row in zip(new, picked, strict=True)
-        ]
         return sorted(frames, key=lambda f: f.t)
+
+    def _format(self, sensor: int) -> SkeletonFormat:
+        """The skeleton format of the ``sensor``-th sensor's slots."""
+        name = self.formats[sensor] if self.formats else SKELETON.name
+        return known_formats()[name]
 
 
 def serve(
@@ -240,7 +267,9 @@ class _KeyWatch:
         except CalibrationError as exc:
             return str(exc)
         if not _same_sensors(again, self.calibration):
-            return "only the keys are read again: a new pose, clock or sensor needs a restart"
+            return (
+                "only the keys are read again: a new pose, clock, format or sensor needs a restart"
+            )
         self.files = _watched(again)  # a key_file that now names another file: that one
         self.stamp = self._stamp()
         return again
@@ -252,11 +281,11 @@ def _watched(calibration: Calibration) -> list[str]:
 
 
 def _same_sensors(a: Calibration, b: Calibration) -> bool:
-    """The same sensors, poses, clocks, weights and views (keys and cell aside)."""
+    """The same sensors, poses, clocks, weights, views and formats (keys and cell aside)."""
     return list(a.sensors) == list(b.sensors) and all(
         np.array_equal(a[n].base_from_camera, b[n].base_from_camera)
-        and (a[n].time_offset_s, a[n].weight, a[n].field_of_view_deg, a[n].range_m)
-        == (b[n].time_offset_s, b[n].weight, b[n].field_of_view_deg, b[n].range_m)
+        and (a[n].time_offset_s, a[n].weight, a[n].field_of_view_deg, a[n].range_m, a[n].format)
+        == (b[n].time_offset_s, b[n].weight, b[n].field_of_view_deg, b[n].range_m, b[n].format)
         for n in a.sensors
     )
 
@@ -271,6 +300,7 @@ def _receive(
 ) -> None:
     rows, counts = table._arrays()
     index = {name: i for i, name in enumerate(table.sensors)}
+    formats = {name: table._format(i).name for i, name in enumerate(table.sensors)}
     code = {name: i for i, name in enumerate(COUNTERS)}
     newest = np.full(len(rows), -np.inf)
     bodies, states = table.max_bodies, SLOT_HEAD + 3 * table.n_joints
@@ -290,7 +320,10 @@ def _receive(
             return
         try:
             frame = verifier.decode(data)
+            if frame.format != formats[frame.sensor]:  # a table not made for this calibration
+                raise WireError(f"format {frame.format!r}", reason="wrong_format")
             slot = index[frame.sensor] * bodies + int(frame.body)
+            n = len(frame.state)
             reason = "out_of_order_or_duplicate" if frame.t <= newest[slot] else None
         except WireError as exc:
             reason = exc.reason if exc.reason in TIME_REASONS else f"dropped_{exc.reason}"
@@ -306,6 +339,6 @@ def _receive(
             counts[code["superseded"]] += row[0] > row[1]  # the last one was never taken
             row[0] += 1.0
             row[2] = frame.t
-            row[SLOT_HEAD:states] = np.ravel(frame.joints)
-            row[states:] = frame.state
+            row[SLOT_HEAD : SLOT_HEAD + 3 * n] = np.ravel(frame.joints)
+            row[states : states + n] = frame.state
         newest[slot] = frame.t

@@ -1,11 +1,21 @@
-"""Recorded human motion: Kinect v2 skeletons over time, stored as NPZ or CSV.
+"""Recorded human motion: skeletons over time in the robot base frame, stored as NPZ or CSV.
 
-A recording is N camera frames of the 25 Kinect v2 joints, already expressed in the
-robot base frame. Two file formats hold it (see ``docs/formats.md``):
+A recording is N camera frames of one person, already expressed in the robot base frame.
+Two file formats hold it (see ``docs/formats.md``), in any skeleton format the library
+has (:data:`~qpavoid.human.landmarks.FORMAT_NAMES`; the Kinect v2's by default):
 
-* **NPZ**: arrays ``t`` (N,) s, ``joints`` (N, 25, 3) m, ``state`` (N, 25) int.
+* **NPZ**: arrays ``t`` (N,) s, ``joints`` (N, J, 3) m, ``state`` (N, J) int (J the
+  format's joints: 25 for the Kinect v2), and optionally ``format`` (a string: the
+  format's name; none is the Kinect v2's).
 * **CSV**: a header row ``t`` then ``<Joint>_x,<Joint>_y,<Joint>_z,<Joint>_state`` for
-  the 25 joints in :class:`~qpavoid.human.kinect_v2.JointType` order (101 columns), one row a frame.
+  the format's joints in its order (101 columns for the Kinect v2's 25, in
+  :class:`~qpavoid.human.kinect_v2.JointType` order), one row a frame; the joint columns
+  name the format.
+
+A file of another format is mapped onto the body's landmarks when it is read
+(:func:`~qpavoid.human.landmarks.landmark_map`): a :class:`Recording` always holds the
+body's landmarks (the Kinect v2's 25 joints; bit-identical for a Kinect v2 file), and
+:attr:`Recording.format` names the format of the file it came from.
 
 The simulation samples a recording with *sample-and-hold*: at time ``t_s`` it uses the
 last frame with ``t <= t_s``, never a frame from the future, and holds the last frame
@@ -23,14 +33,18 @@ import numpy as np
 from qpavoid.core.checks import as_array, finite_number
 from qpavoid.core.errors import InputError
 from qpavoid.human.frames import HumanFrame, check_joints, check_states
-from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.landmarks import landmark_map
+from qpavoid.human.skeleton import SkeletonFormat
+from qpavoid.sensing.calibration import DEFAULT_FORMAT, check_format_name
 from qpavoid.sensing.recording_files import (
     CSV_EXPECTED,
     CSV_JOINT_FIELDS,
     NPZ_ARRAYS,
     NPZ_EXPECTED,
     csv_header,
+    npz_format,
     read_by_suffix,
+    read_csv_format,
     read_csv_table,
     read_file,
     read_npz,
@@ -49,7 +63,7 @@ __all__ = [
 
 @dataclass(frozen=True, eq=False)
 class Recording:
-    """N frames of a Kinect v2 skeleton in the robot base frame.
+    """N frames of the body's landmarks (the Kinect v2's 25 joints) in the robot base frame.
 
     The arrays are validated, converted (``t`` and ``joints`` to float64, ``state`` to
     int8), copied and made read-only at construction.
@@ -66,19 +80,29 @@ class Recording:
         (N, 25) tracking states: 0 not tracked, 1 inferred, 2 tracked
         (:class:`~qpavoid.human.kinect_v2.TrackingState`). A joint in state 0 is not usable
         whatever its coordinates.
+    format
+        The skeleton format of the camera the frames came from (a name of
+        :data:`~qpavoid.human.landmarks.FORMAT_NAMES`; default ``"kinect_v2"``): what the
+        file read held, before its frames were mapped onto the body's landmarks. The
+        joints are the landmarks whatever it says.
 
     Raises
     ------
     InputError
         On a wrong shape, no frame, a non-finite or non-increasing ``t``, an infinite
-        coordinate or a state outside {0, 1, 2}; the message names the bad value.
+        coordinate, a state outside {0, 1, 2} or an unknown format; the message names
+        the bad value.
     """
 
     t: np.ndarray
     joints: np.ndarray
     state: np.ndarray
+    format: str = DEFAULT_FORMAT
 
     def __post_init__(self) -> None:
+        problem = check_format_name(self.format)
+        if problem is not None:
+            raise InputError(problem, name="format", value=self.format)
         t = _check_times(self.t)
         joints = check_joints(self.joints, t)
         state = check_states(self.state, t)
@@ -214,16 +238,29 @@ def load_recording(path: str | Path) -> Recording:
 
 
 def _load_npz(path: Path) -> Recording:
-    """Read an NPZ recording (arrays ``t``, ``joints``, ``state``; others are ignored)."""
-    arrays = read_npz(path, NPZ_ARRAYS, NPZ_EXPECTED)
-    return Recording(**arrays)
+    """Read an NPZ recording (arrays ``t``, ``joints``, ``state``, optionally ``format``;
+    others are ignored)."""
+    arrays = read_npz(path, NPZ_ARRAYS, NPZ_EXPECTED, formatted=True)
+    fmt = npz_format(arrays)
+    return _on_landmarks(arrays["t"], arrays["joints"], arrays["state"], fmt)
 
 
 def _load_csv(path: Path) -> Recording:
     """Read a CSV recording (header row, then one row of numbers per frame)."""
-    data = read_csv_table(path, csv_header(), CSV_EXPECTED)
-    per_joint = data[:, 1:].reshape(-1, KINECT_V2.n_joints, len(CSV_JOINT_FIELDS))
-    return Recording(t=data[:, 0], joints=per_joint[:, :, :3], state=per_joint[:, :, 3])
+    fmt = read_csv_format(path)
+    data = read_csv_table(path, csv_header(fmt), CSV_EXPECTED)
+    per_joint = data[:, 1:].reshape(-1, fmt.n_joints, len(CSV_JOINT_FIELDS))
+    return _on_landmarks(data[:, 0], per_joint[:, :, :3], per_joint[:, :, 3], fmt)
+
+
+def _on_landmarks(t: object, joints: object, state: object, fmt: SkeletonFormat) -> Recording:
+    """A recording of the body's landmarks from frames of ``fmt`` (checked as such first:
+    a wrong shape or a coordinate beyond 100 m is named in the format's joints)."""
+    times = _check_times(t)
+    j = check_joints(joints, times, skeleton=fmt)
+    s = check_states(state, times, skeleton=fmt)
+    mapped = landmark_map(fmt).map(j, s)
+    return Recording(times, mapped.joints, mapped.state, fmt.name)
 
 
 def save_npz(path: str | Path, rec: Recording) -> None:

@@ -29,6 +29,7 @@ from qpavoid.core.errors import InputError, RecordingError
 from qpavoid.core.file_bounds import check_file_size, check_npy_headers
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.skeleton import SkeletonFormat
+from qpavoid.sensing.calibration import DEFAULT_FORMAT, known_formats
 
 T = TypeVar("T")
 
@@ -57,17 +58,75 @@ CSV_EXPECTED = (
 )
 
 
-def csv_header() -> list[str]:
-    """The column names of a CSV recording (101 for the Kinect v2's 25 joints).
+def csv_header(skeleton: SkeletonFormat = KINECT_V2) -> list[str]:
+    """The column names of a CSV recording of ``skeleton`` (101 for the Kinect v2's 25
+    joints).
 
     Returns
     -------
     list of str
-        ``t`` then ``<Joint>_x, <Joint>_y, <Joint>_z, <Joint>_state`` for each Kinect v2
-        joint in the format's order (:data:`~qpavoid.human.kinect_v2.KINECT_V2`, the
-        SDK's :class:`~qpavoid.human.kinect_v2.JointType`).
+        ``t`` then :func:`joint_columns`.
     """
-    return ["t"] + [f"{joint}_{field}" for joint in KINECT_V2.joints for field in CSV_JOINT_FIELDS]
+    return ["t", *joint_columns(skeleton)]
+
+
+def joint_columns(skeleton: SkeletonFormat = KINECT_V2) -> list[str]:
+    """``<Joint>_x, <Joint>_y, <Joint>_z, <Joint>_state`` for each joint of ``skeleton``
+    in the format's order (the Kinect v2's: the SDK's
+    :class:`~qpavoid.human.kinect_v2.JointType`)."""
+    return [f"{joint}_{field}" for joint in skeleton.joints for field in CSV_JOINT_FIELDS]
+
+
+def csv_format(header: Sequence[str]) -> SkeletonFormat:
+    """The skeleton format whose joint columns a CSV header names: of the formats the
+    library has, the one the most of whose columns it holds (its reader then says what
+    else is wrong with the header, as for a Kinect v2 file); the Kinect v2's if it holds
+    none (the reader refuses the header, naming the formats)."""
+    cells = set(header)
+    best, most = KINECT_V2, 0
+    for fmt in known_formats().values():
+        found = len(cells.intersection(joint_columns(fmt)))
+        if found > most:
+            best, most = fmt, found
+    return best
+
+
+def read_csv_format(path: Path) -> SkeletonFormat:
+    """:func:`csv_format` of the CSV file's first row (the Kinect v2's for a file that is
+    not text or has no row: its reader says what it is). Opens no file over its size
+    bound."""
+    check_file_size(path, "csv")
+    if _file_kind(path) != "text":
+        return KINECT_V2
+    with path.open("r", encoding="utf-8-sig", errors="replace", newline="") as handle:
+        try:
+            return csv_format([cell.strip() for cell in next(csv.reader(handle), [])])
+        except csv.Error:  # a field over the csv module's limit: the reader says so
+            return KINECT_V2
+
+
+def npz_format(arrays: Mapping[str, np.ndarray]) -> SkeletonFormat:
+    """The skeleton format an NPZ recording names in its optional ``format`` array (a
+    string; none: the Kinect v2's, as every file before formats were data).
+
+    Raises
+    ------
+    RecordingError
+        For a ``format`` that is not one string naming a format the library has.
+    """
+    if "format" not in arrays:
+        return known_formats()[DEFAULT_FORMAT]
+    value = np.asarray(arrays["format"])
+    name = str(value.reshape(-1)[0]) if value.dtype.kind == "U" and value.size == 1 else None
+    if name is None or name not in known_formats():
+        shown = str(value.tolist())[:80]
+        raise RecordingError(
+            f"array 'format' must be one string naming a skeleton format "
+            f"({', '.join(known_formats())}), got {shown}",
+            name="format",
+            value=shown,
+        )
+    return known_formats()[name]
 
 
 def read_file(path: Path, reader: Callable[[Path], T], what: str, hint: str = "") -> T:
@@ -153,12 +212,15 @@ def read_npz(
     names: Sequence[str] | None,
     expected: str,
     skeleton: SkeletonFormat = KINECT_V2,
+    formatted: bool = False,
 ) -> dict[str, np.ndarray]:
     """Arrays of an NPZ file by name (``names``, or all if None); no pickled objects.
 
     The file's size, the archive's declared size and every array's ``.npy`` header are
     checked (:func:`~qpavoid.core.file_bounds.check_npy_headers`, rows as wide as frames
-    of ``skeleton``'s joints) before any array is read.
+    of ``skeleton``'s joints) before any array is read. ``formatted``: the file's optional
+    ``format`` array is read first, and returned; the rows are as wide as frames of the
+    format it names (:func:`npz_format`), ``skeleton`` is not used.
 
     Raises
     ------
@@ -189,8 +251,15 @@ def read_npz(
                     name=missing[0],
                 )
             wanted = list(names or found)
-            check_npy_headers(archive, wanted, expected, skeleton.n_joints)
             arrays = {}
+            if formatted:
+                if "format" in found:
+                    check_npy_headers(archive, ["format"], expected, KINECT_V2.n_joints)
+                    with archive.open("format.npy") as member:
+                        arrays["format"] = npy_format.read_array(member, allow_pickle=False)
+                skeleton = npz_format(arrays)
+                wanted = [name for name in wanted if name != "format"]
+            check_npy_headers(archive, wanted, expected, skeleton.n_joints)
             for name in wanted:
                 with archive.open(f"{name}.npy") as member:
                     arrays[name] = npy_format.read_array(member, allow_pickle=False)
@@ -263,10 +332,14 @@ def _check_csv_header(header: list[str] | None, expected: list[str]) -> None:
         return RecordingError(f"CSV header {problem}", name="header", value=found)
 
     missing = [name for name in expected if name not in found]
-    if len(missing) == len(expected):
+    joints = [name for name in expected if name.rpartition("_")[2] in CSV_JOINT_FIELDS]
+    if len(missing) == len(expected) or (joints and set(joints) <= set(missing)):
         shown = ",".join(found[:3]) + (",..." if len(found) > 3 else "")
         count = f"{len(found)} column" + ("s" if len(found) != 1 else "")
-        raise fail(f"not found: the first row is {shown!r} ({count}); {CSV_EXPECTED}")
+        raise fail(
+            f"not found: the first row is {shown!r} ({count}), the joints of no skeleton "
+            f"format ({', '.join(known_formats())}); {CSV_EXPECTED}"
+        )
     if missing:
         more = len(missing) - 5
         shown = ", ".join(missing[:5]) + (f" and {more} more" if more > 0 else "")

@@ -12,6 +12,7 @@ A datagram is a binary header, a JSON payload and an HMAC-SHA256 tag (big-endian
     10+n    8      sequence number (unsigned), one more per datagram of this sensor
     18+n    8      capture time t, s (IEEE double), on the sensor's clock
     26+n    ...    payload: {"body": 0, "joints": [[x, y, z, state], ... 25 rows]}
+                   (and "format": "k4abt", then its 32 rows, for a format not the Kinect v2's)
     end-32  32     tag = HMAC-SHA256(key, DOMAIN || len(cell) || cell || every byte before it)
 
 The tag covers a domain string (so that no other message signed with the key can pass for
@@ -53,7 +54,7 @@ from qpavoid.sensing.wire import (
     Workspace,
     decode,
     json_object,
-    rows,
+    payload,
     skeleton,
 )
 
@@ -141,7 +142,7 @@ class Signer:
             raise InputError(
                 f"a frame of sensor {frame.sensor!r} signed as {self.sensor!r}", name="sensor"
             )
-        message = {"body": int(frame.body), "joints": rows(frame)}
+        message = payload(frame)
         return self.seal(float(frame.t), json.dumps(message, separators=(",", ":")).encode())
 
 

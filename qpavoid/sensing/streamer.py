@@ -37,13 +37,25 @@ def stream(
     ``time_offset_s`` in ``calibration``, 0 without one), paced so that the median frame
     interval of a sensor's body lasts ``1 / rate_hz`` (the recordings' own rate: real
     time). Each is stamped with its send time on ``clock`` as its sensor's clock shows
-    it (minus the offset), so the listener's calibration puts it back. ``mangle(i,
-    datagram)`` (tests) may replace datagram i by any datagrams, to inject faults.
+    it (minus the offset), so the listener's calibration puts it back. Each datagram
+    carries its recording's skeleton format (``format``, for a format other than the
+    Kinect v2's: :func:`~qpavoid.sensing.wire.payload`). ``mangle(i, datagram)`` (tests)
+    may replace datagram i by any datagrams, to inject faults.
+
+    Raises
+    ------
+    InputError
+        Without keys when signing, or (before anything is sent) for a recording whose
+        format is not its sensors' calibrated one.
     """
 
     def offset(sensor: str) -> float:
         return calibration[sensor].time_offset_s if calibration is not None else 0.0
 
+    if calibration is not None:
+        for rec in recordings:
+            for sensor in rec.sensors:
+                calibration.check_format(sensor, rec.format)
     signers: dict[str, Signer] = {}
     if not unsigned:
         if calibration is None or not calibration.authenticated:

@@ -11,16 +11,24 @@ object::
      "joints": [[x, y, z, state], ... one row per joint of the Kinect v2 format]}
 
 In both (in a signed datagram the sensor's name and the capture time are in the header,
-and the payload is ``{"body", "joints"}``):
+and the payload is ``{"body", "joints"}``, with ``"format"`` for a format other than the
+Kinect v2's):
 
 * ``sensor``: the sensor's name, as in the calibration file.
-* ``body``: the sensor's body id, 0-5 (the format's ``max_bodies``).
+* ``format`` (optional): the skeleton format of ``joints``, a name of
+  :data:`~qpavoid.human.landmarks.FORMAT_NAMES` (missing: ``"kinect_v2"``, every
+  datagram before formats were data); it must be the sensor's calibrated ``format``
+  (else ``wrong_format``). :func:`encode` writes it for any other format than the
+  Kinect v2's, so that a Kinect v2 datagram is as it was.
+* ``body``: the sensor's body id, 0 to the format's ``max_bodies`` − 1 (0-5 on a
+  Kinect v2).
 * ``t``: capture time, s, on a clock shared with the controller (UNIX time from PTP or
   NTP; the calibration's ``time_offset_s`` corrects a known offset).
-* ``joints``: one row ``[x, y, z, state]`` per joint (25, in the SDK's JointType order:
-  :data:`~qpavoid.human.kinect_v2.KINECT_V2`) in the sensor's camera frame, m (six
-  decimals); ``state`` 0
-  (not tracked: the coordinates are ignored), 1 (inferred) or 2 (tracked).
+* ``joints``: one row ``[x, y, z, state]`` per joint of the format, in its order (25 in
+  the Kinect SDK's JointType order: :data:`~qpavoid.human.kinect_v2.KINECT_V2`), in the
+  sensor's camera frame, m (six decimals; :func:`~qpavoid.human.landmarks.camera_frame`
+  converts an SDK's millimetres and confidence); ``state`` 0 (not tracked: the
+  coordinates are ignored), 1 (inferred) or 2 (tracked).
 
 JSON is chosen over a binary layout for the skeleton because every language and tool
 reads it and a datagram of one body (about 1 kB) is parsed in tens of microseconds
@@ -41,7 +49,7 @@ import numpy as np
 from qpavoid.core.errors import InputError
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.skeleton import TRACKING_STATES
-from qpavoid.sensing.calibration import Calibration
+from qpavoid.sensing.calibration import DEFAULT_FORMAT, Calibration, known_formats
 from qpavoid.sensing.per_sensor import BodyFrame
 
 __all__ = [
@@ -53,6 +61,7 @@ __all__ = [
     "decode",
     "encode",
     "json_object",
+    "payload",
     "rows",
     "skeleton",
 ]
@@ -64,7 +73,7 @@ MAX_DATAGRAM_BYTES = 8192
 #: Coordinates are sent to the micrometre (a Kinect measures to the millimetre), which keeps
 #: a body's datagram near 1 kB, inside one Ethernet frame.
 COORDINATE_DECIMALS = 6
-#: A datagram's skeleton: joints of the Kinect v2 format.
+#: A datagram's skeleton when it names no ``format``: joints of the Kinect v2 format.
 SKELETON = KINECT_V2
 #: The tracking states a datagram's joint may carry.
 STATES = tuple(code for _, code in TRACKING_STATES)
@@ -81,6 +90,7 @@ REASONS = (
     "from_the_future",
     "bad_json",
     "bad_version",
+    "wrong_format",
     "bad_field",
     "non_finite",
     "outside_workspace",
@@ -124,11 +134,22 @@ def rows(frame: BodyFrame) -> list[list[float]]:
     return out
 
 
+def payload(frame: BodyFrame) -> dict:
+    """What a datagram of ``frame`` says of its skeleton: ``body``, ``format`` (for a format
+    other than the Kinect v2's) and ``joints`` (:func:`rows`)."""
+    message: dict = {"body": int(frame.body)}
+    if frame.format != DEFAULT_FORMAT:
+        message["format"] = frame.format
+    message["joints"] = rows(frame)
+    return message
+
+
 def encode(frame: BodyFrame) -> bytes:
     """One unsigned version-1 datagram of ``frame`` (joints in its camera frame, to the
-    micrometre; joints that are NaN are sent as state 0)."""
+    micrometre; joints that are NaN are sent as state 0; ``format`` for a format other
+    than the Kinect v2's)."""
     message = {"v": VERSION, "sensor": frame.sensor, "body": int(frame.body), "t": frame.t}
-    message["joints"] = rows(frame)
+    message.update(payload(frame))
     return json.dumps(message, separators=(",", ":")).encode()
 
 
@@ -177,16 +198,23 @@ def skeleton(
     workspace: Workspace | None,
     t: object = None,
 ) -> BodyFrame:
-    """The body frame of a message's ``body``, ``t`` (or ``t`` given: a signed header's)
-    and ``joints`` (``sensor``'s, camera frame), checked: :class:`WireError` otherwise."""
+    """The body frame of a message's ``format``, ``body``, ``t`` (or ``t`` given: a signed
+    header's) and ``joints`` (``sensor``'s, camera frame), checked: :class:`WireError`
+    otherwise."""
+    name = msg.get("format", DEFAULT_FORMAT)
+    fmt = known_formats().get(name) if isinstance(name, str) else None
+    if fmt is None:
+        raise WireError(f"format {str(name)[:40]!r}", reason="wrong_format")
+    cal = calibration.sensors.get(sensor)
+    if cal is not None and cal.format != name:
+        raise WireError(
+            f"format {name!r} of sensor {sensor!r}, calibrated as {cal.format!r}",
+            reason="wrong_format",
+        )
     body, joint_rows = msg.get("body"), msg.get("joints")
     if t is None:
         t = msg.get("t")
-    if (
-        not isinstance(body, int)
-        or isinstance(body, bool)
-        or not 0 <= body < SKELETON.sensor.max_bodies
-    ):
+    if not isinstance(body, int) or isinstance(body, bool) or not 0 <= body < fmt.sensor.max_bodies:
         raise WireError(f"body {body!r}", reason="bad_field")
     if not isinstance(t, (int, float)) or isinstance(t, bool):
         raise WireError(f"t {str(t)[:40]}", reason="bad_field")
@@ -197,13 +225,14 @@ def skeleton(
         raise WireError("a number too large for a float", reason="non_finite") from None
     except (TypeError, ValueError):
         raise WireError(
-            f"joints are not {SKELETON.n_joints} rows of 4 numbers", reason="bad_field"
+            f"joints are not {fmt.n_joints} rows of 4 numbers", reason="bad_field"
         ) from None
     if not math.isfinite(t):
         raise WireError(f"t {t!r}", reason="non_finite")
-    if arr.shape != (SKELETON.n_joints, 4) or not _all_numbers(joint_rows):
+    if arr.shape != (fmt.n_joints, 4) or not _all_numbers(joint_rows):
         raise WireError(
-            f"joints of shape {arr.shape}, expected ({SKELETON.n_joints}, 4)", reason="bad_field"
+            f"joints of shape {arr.shape}, expected ({fmt.n_joints}, 4) ({fmt.title})",
+            reason="bad_field",
         )
     if not np.isfinite(arr).all():
         raise WireError("a non-finite coordinate", reason="non_finite")
@@ -219,7 +248,7 @@ def skeleton(
         in_base = calibration[sensor].to_base(joints[used])
         if not workspace.contains(in_base).all():
             raise WireError("a joint outside the workspace", reason="outside_workspace")
-    return BodyFrame(sensor, body, float(t), joints, state.astype(np.int8))
+    return BodyFrame(sensor, body, float(t), joints, state.astype(np.int8), fmt.name)
 
 
 class _NonFiniteError(ValueError):
