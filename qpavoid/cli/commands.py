@@ -194,6 +194,7 @@ def build_parser() -> Parser:
         metavar="N",
         help="parallel processes (default: all cores)",
     )
+    add_camera_option(cmp)
     _add_common(cmp)
     cmp.set_defaults(parser=cmp)
     add_sensor_commands(sub)
@@ -314,6 +315,7 @@ def _compare(args: argparse.Namespace) -> str:
         workers=args.workers,
         progress=not args.quiet,
         view=not args.no_view,
+        camera=args.camera,
     )
     written = ["compare.json", "compare.md"] + ["the plots"] * (not args.no_plots)
     written += ["the replays"] * (not args.no_view)

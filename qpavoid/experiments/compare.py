@@ -105,8 +105,10 @@ def compare_specs(
     max_time_s: float = 40.0,
     rate_hz: float = 500.0,
     robot: str = "iiwa14",
+    camera: str = "kinect_v2",
 ) -> list[RunSpec]:
-    """Every case of a comparison, checked: each input × controller × distance method.
+    """Every case of a comparison, checked: each input × controller × distance method,
+    seen through the simulated ``camera`` (a skeleton format's name).
 
     Raises
     ------
@@ -141,7 +143,15 @@ def compare_specs(
     inputs += [dict(human_file=str(f)) for f in human_files]
     inputs += [dict(scenario=f"random:{seed + k}") for k in range(n_random)]
     return [
-        RunSpec(**i, controller=c, distance=d, max_time_s=max_time_s, rate_hz=rate_hz, robot=robot)  # type: ignore[arg-type]
+        RunSpec(
+            **i,  # type: ignore[arg-type]
+            controller=c,
+            distance=d,
+            max_time_s=max_time_s,
+            rate_hz=rate_hz,
+            robot=robot,
+            camera=camera,
+        )
         for i in inputs
         for c in CONTROLLERS
         for d in DISTANCES
@@ -161,6 +171,7 @@ def compare(
     workers: int | None = None,
     progress: bool = False,
     view: bool = True,
+    camera: str = "kinect_v2",
 ) -> str:
     """Run the comparison, write its files into ``out``; return the markdown table.
 
@@ -171,7 +182,9 @@ def compare(
     appear in ``out`` only when all of them are written.
     """
     check_output_dir(out)
-    specs = compare_specs(scenarios, human_files, n_random, seed, max_time_s, rate_hz, robot)
+    specs = compare_specs(
+        scenarios, human_files, n_random, seed, max_time_s, rate_hz, robot, camera
+    )
     view = view and view_html.available()
     case = partial(run_case, view=view)
     done = map_jobs(case, specs, workers=workers, progress=progress, desc="compare", unit="run")
