@@ -34,8 +34,15 @@ and the point at depth ``z`` is ``z r``: ``X = (u - cx) z / fx``, ``Y = (v - cy)
    are *inferred* at ``z_exp`` along the landmark's ray, never at the measured depth. Else
    the landmark is *tracked* at ``z_meas``. Without a reference (no torso landmark
    measured) a measured landmark cannot be checked: inferred at ``z_meas``.
-5. **Visibility** (optional): below ``tracked_min_visibility`` a landmark is at most
-   inferred; below ``inferred_min_visibility`` it is not tracked.
+5. **Visibility** (optional): its state by the format's ``[confidence]`` thresholds
+   (``formats/mediapipe_pose.toml``: tracked from 0.5, inferred from 0.1) caps the
+   landmark's.
+
+The landmarks are those of a skeleton format (MediaPipe Pose's by default): its torso
+joints (shoulders and hips) are the reference and its confidence the visibility's reading.
+The result is a frame of that format, in metres in the camera frame: calibrated by the
+calibration file (the sensor's ``format = "mediapipe_pose"``) or given to
+:meth:`~qpavoid.control.controller.Controller.step` with ``camera_format``.
 """
 
 from __future__ import annotations
@@ -46,10 +53,13 @@ import numpy as np
 
 from qpavoid.core.checks import as_array
 from qpavoid.core.errors import InputError
+from qpavoid.human.landmarks import skeleton_format
+from qpavoid.human.skeleton import INFERRED, NOT_TRACKED, TRACKED, SkeletonFormat
 
-__all__ = ["INFERRED", "NOT_TRACKED", "TRACKED", "Intrinsics", "LiftConfig", "lift_landmarks"]
+__all__ = ["MEDIAPIPE_POSE", "Intrinsics", "LiftConfig", "lift_landmarks"]
 
-NOT_TRACKED, INFERRED, TRACKED = 0, 1, 2
+#: MediaPipe Pose's skeleton format (``formats/mediapipe_pose.toml``).
+MEDIAPIPE_POSE = skeleton_format("mediapipe_pose")
 
 
 @dataclass(frozen=True)
@@ -124,13 +134,10 @@ class LiftConfig:
     min_depth_m, max_depth_m
         The depth camera's valid range: 0.3-5.0 m, the RGB-D cameras of a robot cell
         (Kinect v2: 0.5-4.5 m; RealSense D4xx: ~0.3 m near, several cm of noise past 5 m).
-    tracked_min_visibility, inferred_min_visibility
-        Visibility under which a landmark is at most inferred (0.5, MediaPipe's own drawing
-        threshold), and not tracked (0.1: MediaPipe is then guessing the 2D point too).
-        The skeleton format file holds the official values.
     reference_indices
-        Landmarks whose measured depth gives the reference: MediaPipe's shoulders and hips
-        (11, 12, 23, 24), the most rigid and most often visible.
+        Landmarks whose measured depth gives the reference; None (the default): the
+        format's torso joints (MediaPipe's shoulders and hips: the most rigid and most
+        often visible).
     """
 
     window_px: int = 2
@@ -139,9 +146,7 @@ class LiftConfig:
     background_tolerance_m: float = 0.3
     min_depth_m: float = 0.3
     max_depth_m: float = 5.0
-    tracked_min_visibility: float = 0.5
-    inferred_min_visibility: float = 0.1
-    reference_indices: tuple[int, ...] = (11, 12, 23, 24)
+    reference_indices: tuple[int, ...] | None = None
 
     def __post_init__(self) -> None:
         def bad(name: str, want: str) -> InputError:
@@ -160,9 +165,9 @@ class LiftConfig:
                 raise bad(name, "positive, m")
         if not 0 <= self.min_depth_m < self.max_depth_m < np.inf:
             raise bad("max_depth_m", f"finite and above min_depth_m={self.min_depth_m!r}")
-        if not 0 <= self.inferred_min_visibility <= self.tracked_min_visibility <= 1:
-            raise bad("tracked_min_visibility", "in [inferred_min_visibility, 1]")
-        if not all(isinstance(i, (int, np.integer)) and i >= 0 for i in self.reference_indices):
+        if self.reference_indices is not None and not all(
+            isinstance(i, (int, np.integer)) and i >= 0 for i in self.reference_indices
+        ):
             raise bad("reference_indices", "landmark indices (>= 0)")
 
 
@@ -173,6 +178,7 @@ def lift_landmarks(
     intrinsics: Intrinsics,
     cfg: LiftConfig = LiftConfig(),  # frozen, hence shareable
     visibility: object = None,
+    skeleton: SkeletonFormat = MEDIAPIPE_POSE,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Landmarks in the camera's optical frame, m, and their states (module docstring).
 
@@ -189,7 +195,11 @@ def lift_landmarks(
     cfg
         Window, offsets, tolerances, depth range, visibility thresholds.
     visibility
-        (J,) MediaPipe's visibility in [0, 1], or None (all visible).
+        (J,) MediaPipe's visibility in [0, 1] (or min(visibility, presence)), or None
+        (all visible).
+    skeleton
+        The landmarks' format: its torso is the reference (unless
+        ``cfg.reference_indices``), its confidence reads ``visibility``.
 
     Returns
     -------
@@ -221,7 +231,9 @@ def lift_landmarks(
     if ((vis < 0) | (vis > 1)).any():
         raise InputError("visibility must be in [0, 1]", name="visibility", value=vis)
     offset = np.asarray(cfg.surface_offset_m, dtype=float)
-    ref = np.asarray(cfg.reference_indices, dtype=int)
+    ref = np.asarray(
+        skeleton.torso_ids if cfg.reference_indices is None else cfg.reference_indices, dtype=int
+    )
     if (offset.ndim == 1 and offset.shape != (J,)) or (ref >= J).any():
         msg = f"cfg does not fit {J} landmarks (surface_offset_m length, reference_indices)"
         raise InputError(msg, name="cfg", value=cfg)
@@ -246,7 +258,8 @@ def lift_landmarks(
     rays = np.stack((x_ray, y_ray, np.ones(J)), axis=1)
     z_meas = surface + offset / np.linalg.norm(rays, axis=1)
     scale = 1.0 + (W / intrinsics.fx) * zr  # z_exp / Z_ref
-    use = np.isfinite(z_meas[ref]) & (vis[ref] >= cfg.tracked_min_visibility) & (scale[ref] > 0)
+    seen = skeleton.confidence.states(vis)  # the visibility's own state
+    use = np.isfinite(z_meas[ref]) & (seen[ref] == TRACKED) & (scale[ref] > 0)
     z_ref = float(np.median(z_meas[ref][use] / scale[ref][use])) if use.any() else np.nan
     z_exp = np.where(scale > 0, z_ref * scale, np.nan)
 
@@ -256,7 +269,6 @@ def lift_landmarks(
     tracked = measured & checkable & ~hidden
     z = np.where(hidden, z_exp, np.where(measured, z_meas, np.nan))
     states = np.where(tracked, TRACKED, np.where(measured, INFERRED, NOT_TRACKED))
-    states = np.where(vis < cfg.tracked_min_visibility, np.minimum(states, INFERRED), states)
-    states = np.where(vis < cfg.inferred_min_visibility, NOT_TRACKED, states).astype(np.int8)
+    states = np.minimum(states, seen).astype(np.int8)
     z = np.where(states == NOT_TRACKED, np.nan, z)
     return rays * z[:, None], states
