@@ -13,6 +13,9 @@ the depth noise (σ = 2 mm, its median over 25 pixels ~0.5 mm).
 
 from __future__ import annotations
 
+import runpy
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -338,3 +341,16 @@ def test_lifted_landmarks_calibrated_are_the_body_a_controller_steps_on():
     controller.step(q, placed, states, 0.0, frame_age_s=0.0, camera_format="mediapipe_pose")
     radius = controller.perceiver.perceived[0].joint_radius
     assert (radius >= to_body.uncertainty_m - 1e-12).all()
+
+
+def test_the_mediapipe_example_runs(capsys):
+    """examples/mediapipe_depth.py: the whole path a newcomer copies, as it is."""
+    example = Path(__file__).parents[1] / "examples" / "mediapipe_depth.py"
+    done = runpy.run_path(str(example))
+    states, in_base, truth = done["states"], done["in_base"], done["truth"]
+    tracked = states == 2
+    assert tracked.sum() >= 20
+    assert errors(in_base[tracked], truth[tracked]).max() < 0.05
+    assert (
+        "the neck, which MediaPipe lacks, derived and widened by 60 mm" in capsys.readouterr().out
+    )
