@@ -113,6 +113,7 @@ def main() -> None:
                     (f"{right} alone (raw)", BOTH[1:], raw),
                     ("fused, raw mean", BOTH, raw),
                     (f"{left} alone, filtered", BOTH[:1], filtered),
+                    (f"{right} alone, filtered", BOTH[1:], filtered),
                     ("fused, filtered (default)", BOTH, filtered),
                 ):
                     e, _ = play(data, names, cfg, motion)
