@@ -11,6 +11,7 @@ from qpavoid.control.task import inverse_kinematics
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.core.errors import InputError, SkeletonFormatError
 from qpavoid.experiments.run_spec import RunSpec
+from qpavoid.experiments.runs import build_controller
 from qpavoid.human.conversion import Confidence, parse_rule
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.kinect_v2 import KINECT_V2
@@ -27,6 +28,7 @@ from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.loop.camera import Camera, CameraConfig
 from qpavoid.perception.tracker import PerceptionConfig
 from qpavoid.scenarios.generated import make_scenario
+from qpavoid.sensing.calibration import Calibration, SensorCalibration
 
 #: The SDKs' joint orders, copied from their documentation (an independent reference):
 #: k4abttypes.h's k4abt_joint_id_t, pyzed's BODY_34_PARTS, MediaPipe's PoseLandmark.
@@ -487,3 +489,28 @@ def test_a_simulated_camera_puts_derived_landmarks_anywhere_within_their_uncerta
     assert (worst <= u + 1e-9).all()
     assert (worst[u > 0] > 0.7 * u[u > 0]).all()  # the whole ball is used
     assert worst[u == 0].max() < 1e-9
+
+
+def test_a_runs_controller_knows_its_cells_cameras(tmp_path):
+    """The simulated camera's format, and each calibrated sensor's: the largest landmark
+    uncertainty and Z_d of them reach the perception and speed and separation."""
+    robot = load_robot("iiwa14")
+    calibration = Calibration(
+        {
+            "kinect": SensorCalibration("kinect", np.eye(4)),
+            "femto": SensorCalibration("femto", np.eye(4), format="k4abt"),
+        }
+    )
+    path = tmp_path / "calib.toml"
+    path.write_text(calibration.to_toml())
+    fused = RunSpec(human_file=None, sensors=str(path), listen="127.0.0.1:5005")
+    config = build_controller(fused, robot).config
+    k4abt = landmark_map(skeleton_format("k4abt")).uncertainty_m
+    np.testing.assert_array_equal(config.perception.landmark_uncertainty_m, k4abt)
+    assert config.ssm.sensing_uncertainty_m == skeleton_format("k4abt").sensor.tracked_uncertainty_m
+    alone = build_controller(RunSpec("test1", camera="mediapipe_pose"), robot).config
+    mediapipe = landmark_map(skeleton_format("mediapipe_pose")).uncertainty_m
+    np.testing.assert_array_equal(alone.perception.landmark_uncertainty_m, mediapipe)
+    kinect = build_controller(RunSpec("test1"), robot).config
+    assert kinect.perception == PerceptionConfig()  # a Kinect v2 cell: as before
+    assert kinect.ssm.sensing_uncertainty_m == KINECT_V2.sensor.tracked_uncertainty_m

@@ -39,6 +39,10 @@ def qpavoid_cli(*args: str, cwd) -> subprocess.CompletedProcess:
 #: Bad inputs a user tried (issue 7), and a word the one-line error must contain.
 BAD_INPUTS = [
     (["run", "test1", "--out", "afile"], "is a file"),
+    (["run", "test1", "--camera", "kinect_v1"], "--camera"),
+    (["compare", "--camera", "zed"], "--camera"),
+    (["sweep", "--n", "1", "--controller", "qp", "--camera", "femto", "--out", "o"], "--camera"),
+    (["run", "test1", "--camera", "k4abt", "--latency", "2"], "--latency"),
     (["run", "test1", "--max-time", "-1"], "--max-time"),
     (["run", "test1", "--max-time", "nan"], "--max-time"),
     (["run", "test1", "--max-time", "0"], "--max-time"),

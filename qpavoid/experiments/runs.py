@@ -38,6 +38,8 @@ from qpavoid.experiments.run_spec import (
     RunSpec,
 )
 from qpavoid.human.landmarks import landmark_map, skeleton_format
+from qpavoid.human.skeleton import SkeletonFormat
+from qpavoid.laws.ssm import SSMConfig
 from qpavoid.loop.camera import CameraConfig
 from qpavoid.loop.live_input import Listener, LiveSource, parse_address
 from qpavoid.loop.simulation import HumanMotion, SimConfig, SimResult, simulate
@@ -76,6 +78,7 @@ ARM_COMPUTE_BUDGET_S = 0.01
 
 def build_controller(spec: RunSpec, robot: Robot) -> Controller:
     """The controller ``spec`` names, on ``robot``, at the spec's control rate."""
+    cameras = cell_formats(spec)
     config = ControllerConfig(
         distance=spec.distance,
         control_period_s=1.0 / spec.rate_hz,
@@ -84,7 +87,11 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
         safety=spec.safety,
         perception=PerceptionConfig(max_identical_frames=None)
         if spec.bench == "ideal"
-        else PerceptionConfig(),
+        else PerceptionConfig(landmark_uncertainty_m=cell_uncertainty_m(cameras)),
+        # Z_d: the position error of a tracked joint of the cell's cameras, the largest
+        ssm=SSMConfig(
+            sensing_uncertainty_m=max(c.sensor.tracked_uncertainty_m for c in cameras)
+        ),
     )
     if spec.controller == "analytic":
         return AnalyticController(
@@ -98,15 +105,20 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
     return QPController(robot, config=config, qp=qp)
 
 
-def cell_uncertainty_m(spec: RunSpec) -> tuple[float, ...]:
-    """Each of the body's landmarks' uncertainty from the cell's cameras, m
-    (:attr:`~qpavoid.perception.tracker.PerceptionConfig.landmark_uncertainty_m`): the
-    largest over the simulated camera's format and the calibration's sensors' formats
-    (empty: every landmark measured, a Kinect v2 cell)."""
-    formats = {spec.camera}
+def cell_formats(spec: RunSpec) -> list[SkeletonFormat]:
+    """The skeleton formats of a run's cameras: the simulated camera's (``--camera``) and,
+    with ``--sensors``, each calibrated sensor's."""
+    names = {spec.camera}
     if spec.sensors is not None:
-        formats |= {s.format for s in load_calibration(str(spec.sensors)).sensors.values()}
-    worst = np.max([landmark_map(skeleton_format(f)).uncertainty_m for f in formats], axis=0)
+        names |= {s.format for s in load_calibration(str(spec.sensors)).sensors.values()}
+    return [skeleton_format(name) for name in sorted(names)]
+
+
+def cell_uncertainty_m(cameras: list[SkeletonFormat]) -> tuple[float, ...]:
+    """Each of the body's landmarks' uncertainty from the cell's ``cameras``, m
+    (:attr:`~qpavoid.perception.tracker.PerceptionConfig.landmark_uncertainty_m`): the
+    largest over them (empty: every landmark measured, a Kinect v2 cell)."""
+    worst = np.max([landmark_map(c).uncertainty_m for c in cameras], axis=0)
     return tuple(float(u) for u in worst) if worst.any() else ()
 
 
