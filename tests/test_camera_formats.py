@@ -243,9 +243,35 @@ def test_a_confidence_out_of_range_is_refused_naming_the_joint(name, bad):
     good = {"kinect_v2": 2, "k4abt": 2, "zed_body_34": 80.0, "mediapipe_pose": 0.9}[name]
     confidence = np.full(fmt.n_joints, good, dtype=float)
     confidence[3] = bad
-    joints = np.zeros((fmt.n_joints, 3)) + 1.0 / fmt.unit_m
+    joints = np.random.default_rng(0).uniform(-0.5, 0.5, (fmt.n_joints, 3)) / fmt.unit_m
     with pytest.raises(InputError, match=f"confidence of {fmt.joints[3]} .*expected"):
         camera_frame(fmt, joints, confidence)
+
+
+def test_a_camera_frame_in_the_wrong_units_or_types_is_refused():
+    """An adversarial tester's cases: a ZED opened in metres (or a streamer that divided by
+    1000 already) shrank the body to a millimetre on the camera and the robot moved on;
+    booleans passed as confidence were taken as levels."""
+    fmt = skeleton_format("zed_body_34")
+    metres = np.random.default_rng(1).uniform(-0.5, 0.5, (34, 3)) + np.array([0.0, 0.0, 2.0])
+    with pytest.raises(InputError, match="no body is that small; zed_body_34 joints are in mm"):
+        camera_frame("zed_body_34", metres, np.full(34, 90.0))
+    joints, states = camera_frame("zed_body_34", metres * 1000.0, np.full(34, 90.0))
+    np.testing.assert_allclose(joints, metres)  # the name does as the format
+    with pytest.raises(InputError, match="must be numeric"):
+        camera_frame(fmt, metres * 1000.0, np.full(34, True))
+    with pytest.raises(InputError, match="must be numeric"):
+        camera_frame(fmt, metres.astype(str), None)
+    # an undetected keypoint: NaN position and NaN confidence, not tracked
+    lost = metres * 1000.0
+    lost[5] = np.nan
+    confidence = np.full(34, 90.0)
+    confidence[5] = np.nan
+    joints, states = camera_frame(fmt, lost, confidence)
+    assert states[5] == 0 and (np.delete(states, 5) == 2).all()
+    confidence[6] = np.nan  # a detected joint without a confidence: refused
+    with pytest.raises(InputError, match=f"confidence of {fmt.joints[6]}"):
+        camera_frame(fmt, lost, confidence)
 
 
 def test_a_k4abt_frame_maps_onto_the_landmarks_by_hand():
@@ -514,3 +540,31 @@ def test_a_runs_controller_knows_its_cells_cameras(tmp_path):
     kinect = build_controller(RunSpec("test1"), robot).config
     assert kinect.perception == PerceptionConfig()  # a Kinect v2 cell: as before
     assert kinect.ssm.sensing_uncertainty_m == KINECT_V2.sensor.tracked_uncertainty_m
+
+
+@pytest.mark.parametrize("lost", [("RIGHT_SHOULDER", "RIGHT_ELBOW", "RIGHT_WRIST")])
+def test_an_arm_never_seen_beside_the_robot_stops_it(lost):
+    """An adversarial tester's case: MediaPipe's spine derives from both shoulders, so a
+    shoulder lost from the first frame lost the whole spine; the arm, with no tracked
+    ancestor, stayed missing and the robot moved on beside the hand's tracked knuckles.
+    Now the arm is bounded by the nearest tracked joint along the tree (the thumb)."""
+    robot = load_robot("iiwa14")
+    fmt = skeleton_format("mediapipe_pose")
+    controller = AnalyticController(robot)
+    q = inverse_kinematics(robot, controller.path.reference(0.0)[0])
+    ee = robot.kinematics(q).ee_placement[:3, 3]
+    body = Operator().reach(Operator().rest(), "right", ee + np.array([0.0, 0.10, 0.0]))
+    seen = LandmarkMap.simulated(fmt).map(body, np.full(25, 2, dtype=np.int8))
+    joints, state = seen.joints.copy(), seen.state.copy()
+    joints[fmt.indices(list(lost))], state[fmt.indices(list(lost))] = np.nan, 0
+    mapped = landmark_map(fmt).map(joints, state)
+    assert mapped.state[KINECT_V2.index("SpineShoulder")] == 0  # the spine is lost too
+    for k in range(100):
+        wobble = joints + 1e-4 * np.sin(k)  # a live sensor: never bit-identical
+        command = controller.step(
+            q, wobble, state, 1.0, frame_age_s=0.0, frame_id=k, camera_format=fmt
+        )
+        assert command.stopped and not np.any(command.dq), (k, command.reason)
+        q = q + command.dq * 0.002
+    radius = controller.perceiver.perceived[0].joint_radius
+    assert np.isfinite(radius).all() and radius[KINECT_V2.index("WristRight")] > 0

@@ -40,11 +40,24 @@ def numpy_track(mem, z, state, t, cfg):
     lost = ~seen & np.isfinite(last_seen)
     radius[lost] = cfg.max_human_speed_mps * (t - last_seen[lost])
     radius[~seen & ~np.isfinite(last_seen)] = np.inf
-    for j in np.flatnonzero(~tracked & (PARENT >= 0)):
+    # the tree's path lengths, by Floyd-Warshall on its edges (a second method)
+    n = len(PARENT)
+    D = np.full((n, n), np.inf)
+    np.fill_diagonal(D, 0.0)
+    for j in np.flatnonzero(PARENT >= 0):
+        D[j, PARENT[j]] = D[PARENT[j], j] = bone[j]
+    for m in range(n):
+        D = np.minimum(D, D[:, m : m + 1] + D[m : m + 1, :])
+    for j in np.flatnonzero(~tracked):
         reach, a = bone[j], PARENT[j]
         while a >= 0 and not tracked[a]:
             reach, a = reach + bone[a], PARENT[a]
-        if a >= 0 and reach < radius[j]:
+        if a < 0:  # no tracked ancestor: the nearest tracked joint along the tree
+            near = np.where(tracked, D[j], np.inf)
+            a, reach = int(np.argmin(near)), float(near.min())
+            if not np.isfinite(reach):
+                continue
+        if reach < radius[j]:
             joints[j], radius[j] = z[a], reach
     known = np.isfinite(joints).all(axis=1)
     out_state = state.copy()

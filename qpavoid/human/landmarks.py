@@ -32,14 +32,28 @@ from pathlib import Path
 
 import numpy as np
 
+from qpavoid.core.checks import as_array
 from qpavoid.core.errors import InputError, SkeletonFormatError
 from qpavoid.human.conversion import LandmarkRule
 from qpavoid.human.frames import HumanFrame, check_joints
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.skeleton import FORMATS_DIR, SkeletonFormat
 
-__all__ = ["FORMAT_NAMES", "LandmarkMap", "landmark_map", "skeleton_format"]
+__all__ = [
+    "FORMAT_NAMES",
+    "LandmarkMap",
+    "body_frame",
+    "camera_frame",
+    "landmark_map",
+    "skeleton_format",
+]
 
+#: The smallest extent a camera's frame of three or more usable joints may have, m: a
+#: person's hand alone spans more; a whole body 1000 times too small is metres given
+#: where the format says millimetres.
+MIN_BODY_M = 0.05
+#: The units' names, for messages.
+UNIT_NAMES = {1.0: "m", 0.001: "mm"}
 #: The skeleton formats the library ships (a file ``formats/<name>.toml`` each).
 FORMAT_NAMES = ("kinect_v2", "k4abt", "zed_body_34", "zed_body_38", "mediapipe_pose")
 
@@ -183,43 +197,49 @@ def landmark_map(camera: SkeletonFormat) -> LandmarkMap:
 
 
 def camera_frame(
-    camera: SkeletonFormat, joints: object, confidence: object = None
+    camera: str | SkeletonFormat, joints: object, confidence: object = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """A camera's frame checked: ``joints`` (J, 3) in the camera's units and its
-    ``confidence`` values (None: every joint tracked) as metres and tracking states.
+    """A camera's frame checked: ``joints`` (J, 3) in the camera's units (an SDK's
+    millimetres for ``k4abt``) and its ``confidence`` values (None: every joint tracked)
+    as metres and tracking states; ``camera`` a format or its name.
 
     Raises
     ------
     InputError
-        On a shape not the format's, an infinite coordinate, or a confidence the format
-        cannot have; the message names the format and the joint.
+        On a shape not the format's, a value that is not a real number, an infinite
+        coordinate, a body no bigger than :data:`MIN_BODY_M` (metres given where the
+        format says millimetres), or a confidence the format cannot have; the message
+        names the format and the joint.
     """
-    j = check_joints(
-        np.asarray(joints, dtype=np.float64) * camera.unit_m
-        if isinstance(joints, (np.ndarray, list, tuple))
-        else joints,
-        skeleton=camera,
-    )
-    if confidence is None:
-        return j, np.full(camera.n_joints, 2, dtype=np.int8)
-    from_camera = np.asarray(confidence)
-    if from_camera.shape != (camera.n_joints,):
+    fmt = skeleton_format(camera)
+    raw = as_array(joints, (fmt.n_joints, 3), f"joints ({fmt.title})", finite=False)
+    j = check_joints(raw * fmt.unit_m, skeleton=fmt)
+    usable = np.isfinite(j).all(axis=1)
+    if usable.sum() >= 3 and np.ptp(j[usable], axis=0).max() < MIN_BODY_M:
         raise InputError(
-            f"confidence ({camera.title}) must have shape ({camera.n_joints},), got "
-            f"{from_camera.shape}",
-            name="confidence",
-            value=from_camera,
+            f"joints ({fmt.title}) span {np.ptp(j[usable], axis=0).max():.3g} m: no body is "
+            f"that small; {fmt.name} joints are in {UNIT_NAMES[fmt.unit_m]}",
+            name="joints",
+            value=joints,
         )
+    if confidence is None:
+        return j, np.full(fmt.n_joints, 2, dtype=np.int8)
+    from_camera = as_array(confidence, (fmt.n_joints,), f"confidence ({fmt.title})", finite=False)
+    # an SDK gives no confidence (NaN) for a joint it did not detect (NaN): not tracked
+    undetected = ~usable & np.isnan(from_camera)
+    values = np.where(undetected, fmt.confidence.range[0], from_camera)
     try:
-        return j, camera.confidence.states(from_camera)
+        states = fmt.confidence.states(values)
     except (ValueError, TypeError) as exc:
-        bad = _first_bad(camera, from_camera)
+        bad = _first_bad(fmt, values)
         raise InputError(
-            f"confidence of {camera.joints[bad]} ({camera.title}) is "
-            f"{from_camera[bad]!r}: {exc}; expected {camera.confidence.describe()}",
+            f"confidence of {fmt.joints[bad]} ({fmt.title}) is "
+            f"{float(values[bad])!r}: {exc}; expected {fmt.confidence.describe()}",
             name="confidence",
             value=from_camera,
         ) from None
+    states[undetected] = 0
+    return j, states
 
 
 def _first_bad(camera: SkeletonFormat, values: np.ndarray) -> int:
@@ -237,5 +257,5 @@ def body_frame(
     """The body's landmarks from one frame of ``camera`` (module docstring): joints in the
     camera's units, its own confidence values (None: all tracked)."""
     fmt = skeleton_format(camera)
-    j, s = camera_frame(fmt, joints, confidence)
-    return landmark_map(fmt).map(j, s)
+    j, state = camera_frame(fmt, joints, confidence)
+    return landmark_map(fmt).map(j, state)

@@ -61,7 +61,10 @@ def track(
       (time since last tracked) inferred; ``max_speed ×`` (time since last seen) lost;
       infinite if never seen;
     * a joint not tracked lies within the summed bones of its nearest tracked ancestor:
-      placed there when that bound is tighter.
+      placed there when that bound is tighter; with no tracked ancestor (a camera whose
+      spine landmarks derive from a lost shoulder), within the summed bones of the
+      nearest tracked joint along the tree (a descendant, or one reached through a common
+      ancestor): a joint never seen is bounded too, not left missing.
 
     Returns
     -------
@@ -106,14 +109,34 @@ def track(
             joints[j] = position[j]
             lost = t - last_seen[j]
             radius[j] = max_speed * lost if np.isfinite(last_seen[j]) else np.inf
+    along = np.empty(n)  # a joint's ancestors' distance from it, bone by bone (-1: none)
     for j in range(n):
-        if tracked[j] or parent[j] < 0:
+        if tracked[j]:
             continue
         reach, a = bone[j], parent[j]
         while a >= 0 and not tracked[a]:
             reach, a = reach + bone[a], parent[a]
-        if a >= 0 and reach < radius[j]:
-            joints[j], radius[j] = z[a], reach
+        if a >= 0:
+            if reach < radius[j]:
+                joints[j], radius[j] = z[a], reach
+            continue
+        # no tracked ancestor (a camera that lost the spine): the nearest tracked joint
+        # along the tree, a descendant or through a common ancestor
+        along[:] = -1.0
+        x, reach = j, 0.0
+        while x >= 0:
+            along[x], reach, x = reach, reach + bone[x], parent[x]
+        best, at = np.inf, -1
+        for k in range(n):
+            if not tracked[k]:
+                continue
+            y, up = k, 0.0
+            while y >= 0 and along[y] < 0.0:
+                up, y = up + bone[y], parent[y]
+            if y >= 0 and up + along[y] < best:
+                best, at = up + along[y], k
+        if at >= 0 and best < radius[j]:
+            joints[j], radius[j] = z[at], best
     out_state = state.copy()
     out_velocity = np.zeros((n, 3))
     for j in range(n):
