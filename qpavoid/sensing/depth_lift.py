@@ -28,12 +28,17 @@ and the point at depth ``z`` is ``z r``: ``X = (u - cx) z / fx``, ``Y = (v - cy)
    (``reference_indices``: shoulders and hips) with a measured centre and enough visibility
    gives ``Z_ref = z_meas / (1 + k z_rel)``; their median is ``Z_ref`` (one occluded
    reference in four does not move it). ``Z_ref`` comes from measured depth only.
-4. **Occlusion**: ``e = z_meas - z_exp``. ``e < -occlusion_tolerance_m``: the surface is
-   in front of the landmark (an arm, an object): hidden. ``e > background_tolerance_m``: the
+4. **Occlusion**: ``e = z_meas - z_exp``. ``|e| <= tracked_tolerance_m`` (the format's
+   Z_d, 0.05 m): *tracked* at ``z_meas``. Up to the tolerances below: *inferred* at
+   ``z_meas`` (the truth is at ``z_meas`` or, behind an occluder, near ``z_exp``: within
+   the perception's inferred uncertainty of it either way). ``e < -occlusion_tolerance_m``:
+   the surface is in front of the landmark (an arm, an object): hidden.
+   ``e > background_tolerance_m``: the
    depth is behind it (a hole to the background, e.g. between fingers): not trusted. Both
-   are *inferred* at ``z_exp`` along the landmark's ray, never at the measured depth. Else
-   the landmark is *tracked* at ``z_meas``. Without a reference (no torso landmark
-   measured) a measured landmark cannot be checked: inferred at ``z_meas``.
+   are *inferred* at ``z_exp`` along the landmark's ray, never at the measured depth. A
+   ``z_exp`` outside the depth range (an implausible ``z_rel``) is no estimate: the
+   landmark is lost. Without a reference (no torso landmark measured) a measured landmark
+   cannot be checked: inferred at ``z_meas``.
 5. **Visibility** (optional): its state by the format's ``[confidence]`` thresholds
    (``formats/mediapipe_pose.toml``: tracked from 0.5, inferred from 0.1) caps the
    landmark's.
@@ -58,6 +63,8 @@ from qpavoid.human.skeleton import INFERRED, NOT_TRACKED, TRACKED, SkeletonForma
 
 __all__ = ["MEDIAPIPE_POSE", "Intrinsics", "LiftConfig", "lift_landmarks"]
 
+#: Largest window half-size, px: 101 x 101 pixels is a body at 2 m, not a landmark.
+MAX_WINDOW_PX = 50
 #: MediaPipe Pose's skeleton format (``formats/mediapipe_pose.toml``).
 MEDIAPIPE_POSE = skeleton_format("mediapipe_pose")
 
@@ -124,13 +131,22 @@ class LiftConfig:
         Joint centre's distance behind the visible surface, one value or one per landmark:
         0.04 m, the mean radius of the arm (upper arm ~4.5 cm, forearm ~3.5 cm, wrist ~3
         cm), the part that comes near the robot. Face landmarks lie on the surface (0).
+    tracked_tolerance_m
+        How far the measured depth may be from the expected one for a *tracked* landmark,
+        m; None (the default): the format's ``sensor.tracked_uncertainty_m`` (0.05 m), the
+        error speed and separation counts for a tracked joint. Beyond it the landmark is
+        at most inferred: an occluder nearer than that to the landmark is within Z_d.
     occlusion_tolerance_m
         How much nearer than expected the surface may be before the landmark counts as
-        hidden: 0.2 m, above MediaPipe's relative-depth error on limbs (~0.1 m) and below
-        the depth of an arm or object held across the body.
+        hidden (inferred at the expected depth): 0.10 m, the perception's uncertainty of
+        an inferred joint (``PerceptionConfig.inferred_uncertainty_m``), so that an
+        inferred landmark at the measured depth is within it of the truth. MediaPipe's
+        relative depth errs by about as much on limbs: an unoccluded limb often counts as
+        inferred (the price of a monocular reference; an adversarial tester's occluder
+        0.1-0.2 m in front of a wrist was taken as tracked at 0.2 m).
     background_tolerance_m
         How much farther than expected the depth may be before it counts as a hole through
-        to the background: 0.3 m, as above plus a limb's depth seen edge-on.
+        to the background: 0.10 m, as above.
     min_depth_m, max_depth_m
         The depth camera's valid range: 0.3-5.0 m, the RGB-D cameras of a robot cell
         (Kinect v2: 0.5-4.5 m; RealSense D4xx: ~0.3 m near, several cm of noise past 5 m).
@@ -141,9 +157,10 @@ class LiftConfig:
     """
 
     window_px: int = 2
+    tracked_tolerance_m: float | None = None
     surface_offset_m: float | tuple[float, ...] = 0.04
-    occlusion_tolerance_m: float = 0.2
-    background_tolerance_m: float = 0.3
+    occlusion_tolerance_m: float = 0.10
+    background_tolerance_m: float = 0.10
     min_depth_m: float = 0.3
     max_depth_m: float = 5.0
     reference_indices: tuple[int, ...] | None = None
@@ -155,11 +172,18 @@ class LiftConfig:
 
         if isinstance(self.window_px, bool) or not isinstance(self.window_px, (int, np.integer)):
             raise bad("window_px", "a whole number of pixels")
-        if self.window_px < 0:
-            raise bad("window_px", ">= 0")
+        if not 0 <= self.window_px <= MAX_WINDOW_PX:
+            raise bad("window_px", f"in [0, {MAX_WINDOW_PX}] px")
         offsets = np.atleast_1d(np.asarray(self.surface_offset_m, dtype=float))
         if offsets.ndim != 1 or not (np.isfinite(offsets).all() and (offsets >= 0).all()):
             raise bad("surface_offset_m", "finite and >= 0, m (one value or one a landmark)")
+        if self.tracked_tolerance_m is not None and not (
+            np.isfinite(self.tracked_tolerance_m)
+            and 0
+            < self.tracked_tolerance_m
+            <= min(self.occlusion_tolerance_m, self.background_tolerance_m)
+        ):
+            raise bad("tracked_tolerance_m", "positive, m, and at most the other tolerances")
         for name in ("occlusion_tolerance_m", "background_tolerance_m"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) > 0):
                 raise bad(name, "positive, m")
@@ -234,6 +258,13 @@ def lift_landmarks(
     ref = np.asarray(
         skeleton.torso_ids if cfg.reference_indices is None else cfg.reference_indices, dtype=int
     )
+    if cfg.reference_indices is None and skeleton.n_joints != J:
+        raise InputError(
+            f"image_xy must have shape ({skeleton.n_joints}, 2), one row per landmark of "
+            f"{skeleton.title}, got {xy.shape}",
+            name="image_xy",
+            value=xy,
+        )
     if (offset.ndim == 1 and offset.shape != (J,)) or (ref >= J).any():
         msg = f"cfg does not fit {J} landmarks (surface_offset_m length, reference_indices)"
         raise InputError(msg, name="cfg", value=cfg)
@@ -263,12 +294,21 @@ def lift_landmarks(
     z_ref = float(np.median(z_meas[ref][use] / scale[ref][use])) if use.any() else np.nan
     z_exp = np.where(scale > 0, z_ref * scale, np.nan)
 
+    z_exp = np.where((z_exp >= cfg.min_depth_m) & (z_exp <= cfg.max_depth_m), z_exp, np.nan)
     measured, checkable = np.isfinite(z_meas), np.isfinite(z_exp)
+    referenced = np.isfinite(z_ref)
     err = np.where(measured & checkable, z_meas - z_exp, 0.0)
     hidden = measured & ((err < -cfg.occlusion_tolerance_m) | (err > cfg.background_tolerance_m))
-    tracked = measured & checkable & ~hidden
+    agree = np.abs(err) <= (
+        skeleton.sensor.tracked_uncertainty_m
+        if cfg.tracked_tolerance_m is None
+        else cfg.tracked_tolerance_m
+    )
+    tracked = measured & checkable & agree
     z = np.where(hidden, z_exp, np.where(measured, z_meas, np.nan))
     states = np.where(tracked, TRACKED, np.where(measured, INFERRED, NOT_TRACKED))
+    # a reference, but no plausible expected depth: the relative depth is garbage
+    states = np.where(referenced & ~checkable, NOT_TRACKED, states)
     states = np.minimum(states, seen).astype(np.int8)
     z = np.where(states == NOT_TRACKED, np.nan, z)
     return rays * z[:, None], states
