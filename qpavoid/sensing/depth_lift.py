@@ -241,6 +241,13 @@ def lift_landmarks(
     """
     xy = as_array(image_xy, (None, 2), "image_xy (normalised image landmarks)")
     J = len(xy)
+    if cfg.reference_indices is None and skeleton.n_joints != J:
+        raise InputError(
+            f"image_xy must have shape ({skeleton.n_joints}, 2), one row per landmark of "
+            f"{skeleton.title}, got {xy.shape}",
+            name="image_xy",
+            value=xy,
+        )
     zr = as_array(z_rel, (J,), "z_rel (relative depth)")
     if getattr(depth, "dtype", np.dtype(float)).kind in "iu":  # millimetres, most likely
         raise InputError("depth must be float metres (uint16 in mm: / 1000)", name="depth")
@@ -258,13 +265,6 @@ def lift_landmarks(
     ref = np.asarray(
         skeleton.torso_ids if cfg.reference_indices is None else cfg.reference_indices, dtype=int
     )
-    if cfg.reference_indices is None and skeleton.n_joints != J:
-        raise InputError(
-            f"image_xy must have shape ({skeleton.n_joints}, 2), one row per landmark of "
-            f"{skeleton.title}, got {xy.shape}",
-            name="image_xy",
-            value=xy,
-        )
     if (offset.ndim == 1 and offset.shape != (J,)) or (ref >= J).any():
         msg = f"cfg does not fit {J} landmarks (surface_offset_m length, reference_indices)"
         raise InputError(msg, name="cfg", value=cfg)
