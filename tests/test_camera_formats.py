@@ -568,3 +568,23 @@ def test_an_arm_never_seen_beside_the_robot_stops_it(lost):
         q = q + command.dq * 0.002
     radius = controller.perceiver.perceived[0].joint_radius
     assert np.isfinite(radius).all() and radius[KINECT_V2.index("WristRight")] > 0
+
+
+def test_a_replayed_recording_of_a_camera_is_widened_as_that_camera(tmp_path):
+    """An adversarial tester's case: ``run --human femto.npz`` replayed a k4abt recording
+    with no widening of its derived landmarks."""
+    fmt = skeleton_format("k4abt")
+    body = Operator().rest()
+    seen = LandmarkMap.simulated(fmt).map(body, np.full(25, 2, dtype=np.int8))
+    path = tmp_path / "femto.npz"
+    np.savez(
+        path,
+        t=np.arange(3) / 30,
+        joints=np.repeat(seen.joints[None], 3, axis=0),
+        state=np.repeat(seen.state[None], 3, axis=0),
+        format="k4abt",
+    )
+    config = build_controller(RunSpec(human_file=str(path)), load_robot("iiwa14")).config
+    np.testing.assert_array_equal(
+        config.perception.landmark_uncertainty_m, landmark_map(fmt).uncertainty_m
+    )

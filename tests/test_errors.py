@@ -419,7 +419,7 @@ BAD_FILES = {
             p, t=np.arange(3.0), joints=np.zeros((3, 24, 3)), state=np.zeros((3, 25))
         ),
         (
-            "joints (robot base frame, m) must have shape (3, 25, 3), got (3, 24, 3); "
+            "joints (Kinect v2, m) must have shape (3, 25, 3), got (3, 24, 3); "
             "see docs/formats.md"
         ),
         "joints",

@@ -51,6 +51,7 @@ from qpavoid.output.view_data import replay_data
 from qpavoid.perception.tracker import PerceptionConfig
 from qpavoid.scenarios import motions
 from qpavoid.sensing.calibration_file import load_calibration
+from qpavoid.sensing.recording import load_recording
 
 
 @dataclass
@@ -107,10 +108,13 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
 
 def cell_formats(spec: RunSpec) -> list[SkeletonFormat]:
     """The skeleton formats of a run's cameras: the simulated camera's (``--camera``) and,
-    with ``--sensors``, each calibrated sensor's."""
+    with ``--sensors``, each calibrated sensor's, or a replayed recording's (``--human``:
+    the landmarks its camera derived are no truer for being recorded)."""
     names = {spec.camera}
     if spec.sensors is not None:
         names |= {s.format for s in load_calibration(str(spec.sensors)).sensors.values()}
+    elif spec.human_file is not None:  # a recording's derived landmarks: as seen, not truth
+        names.add(load_recording(spec.human_file).format)
     return [skeleton_format(name) for name in sorted(names)]
 
 

@@ -307,7 +307,7 @@ def check_format_name(name: object) -> str | None:
         return None
     return (
         f"format must be one of the skeleton formats {', '.join(known_formats())}, got "
-        f"{str(name)[:80]!r}"
+        f"{repr(name)[:80]}"
     )
 
 

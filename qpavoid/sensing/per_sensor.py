@@ -173,7 +173,7 @@ class SensorRecording:
         if np.any(wrong):
             bad = int(np.flatnonzero(wrong)[0])
             raise InputError(
-                f"body[{bad}] is {body[bad].item()!r}; a {fmt.title} body id is 0 to "
+                f"body[{bad}] is {body[bad].item()!r}; the body ids of {fmt.title} are 0 to "
                 f"{max_bodies - 1}",
                 name="body",
                 value=body,

@@ -167,7 +167,7 @@ def two_sensor_data(
     for fmt in formats:
         if len(motions) > fmt.sensor.max_bodies:
             raise InputError(
-                f"{len(motions)} people for a {fmt.title} camera, which tracks at most "
+                f"{len(motions)} people for one {fmt.title} camera, which tracks at most "
                 f"{fmt.sensor.max_bodies}",
                 name="motions",
                 value=len(motions),
