@@ -100,7 +100,7 @@ def check_joints(
     NaN is allowed (a joint not usable); an infinite coordinate is not.
     """
     lead = () if times is None else (times.shape[0],)
-    what = f"joints ({skeleton.title}, m)" if times is None else f"joints ({skeleton.title}, m)"
+    what = f"joints ({skeleton.title}, m)"
     arr = as_array(joints, (*lead, skeleton.n_joints, 3), what, finite=False)
     if np.any(np.isinf(arr)):
         *frame, joint, axis = (int(i) for i in np.argwhere(np.isinf(arr))[0])
