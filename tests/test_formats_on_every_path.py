@@ -364,3 +364,59 @@ def test_a_recording_whose_format_is_not_its_sensors_is_refused_on_the_command_l
     assert "\n" not in message and not out.exists()
     assert main(["replay", str(rec), "--to", "127.0.0.1:9", "--sensors", str(cal)]) == 2
     assert "calibrated as kinect_v2" in capsys.readouterr().err
+
+
+def test_a_live_mixed_cell_takes_each_sensors_own_format_and_drops_the_rest():
+    """A Kinect v2 and an Azure Kinect signing into one listener: each one's frames come
+    out in its own format; a Femto frame claiming the Kinect's format, or the Kinect's
+    sensor sending k4abt, is dropped and counted (wrong_format)."""
+    import socket
+    import time
+
+    from qpavoid.human.landmarks import LandmarkMap, skeleton_format
+    from qpavoid.human.posture import Operator
+    from qpavoid.loop.live_input import Listener
+    from qpavoid.sensing.keys import SensorKeys
+    from qpavoid.sensing.signing import Signer
+
+    keys = {name: SensorKeys.generate(name) for name in ("kinect", "femto")}
+    cal = Calibration(
+        {
+            "kinect": SensorCalibration("kinect", np.eye(4)),
+            "femto": SensorCalibration("femto", np.eye(4), format="k4abt"),
+        },
+        cell="mixed",
+        keys=keys,
+    )
+    body = Operator().rest()
+    k4abt = skeleton_format("k4abt")
+    femto = LandmarkMap.simulated(k4abt).map(body, np.full(25, 2, dtype=np.int8))
+    good = {
+        "kinect": BodyFrame("kinect", 0, 0.0, body, np.full(25, 2, dtype=np.int8)),
+        "femto": BodyFrame("femto", 3, 0.0, femto.joints, femto.state, format="k4abt"),
+    }
+    bad = [
+        BodyFrame("femto", 1, 0.0, body, np.full(25, 2, dtype=np.int8)),  # a Kinect frame
+        BodyFrame("kinect", 1, 0.0, femto.joints, femto.state, format="k4abt"),
+    ]
+    signers = {name: Signer(cal.cell, keys[name]) for name in keys}
+    frames: list[BodyFrame] = []
+    with Listener(("127.0.0.1", 0), cal) as listener:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            deadline = time.time() + 30.0  # as sensors stream: until the loop took both
+            while {f.sensor for f in frames} != {"kinect", "femto"} and time.time() < deadline:
+                for f in [*bad, *good.values()]:  # fresh stamps: a loaded machine's
+                    sock.sendto(
+                        signers[f.sensor].encode(f._replace(t=time.time())), listener.address
+                    )
+                time.sleep(0.05)
+                frames += listener.drain()
+        counts = dict(listener.counters)
+    assert {(f.sensor, f.format, f.body) for f in frames} == {
+        ("femto", "k4abt", 3),
+        ("kinect", "kinect_v2", 0),
+    }
+    assert counts["dropped_wrong_format"] >= 2  # (a late one is dropped as late first)
+    np.testing.assert_allclose(
+        next(f for f in frames if f.sensor == "femto").joints, femto.joints, atol=1e-6
+    )
