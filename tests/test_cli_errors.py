@@ -43,6 +43,7 @@ BAD_INPUTS = [
     (["compare", "--camera", "zed"], "--camera"),
     (["sweep", "--n", "1", "--controller", "qp", "--camera", "femto", "--out", "o"], "--camera"),
     (["run", "test1", "--camera", "k4abt", "--latency", "2"], "--latency"),
+    (["sweep", "--n", "1", "--controller", "qp", "--latency", "-1", "--out", "o"], "--latency"),
     (["run", "test1", "--max-time", "-1"], "--max-time"),
     (["run", "test1", "--max-time", "nan"], "--max-time"),
     (["run", "test1", "--max-time", "0"], "--max-time"),

@@ -18,6 +18,7 @@ from qpavoid.cli.args import (
     add_camera_option,
     add_robot_option,
     count,
+    positive_float,
     folder,
     whole_number,
     workers,
@@ -59,6 +60,13 @@ def add_campaign_command(sub: argparse._SubParsersAction) -> None:
     sweep.add_argument("--executor", choices=EXECUTORS, default="local")
     add_robot_option(sweep)
     add_camera_option(sweep)
+    sweep.add_argument(
+        "--latency",
+        type=positive_float,
+        default=None,
+        metavar="S",
+        help="the camera's latency, s (default: its format file's)",
+    )
     sweep.add_argument("--out", type=folder, required=True, metavar="DIR", help="output folder")
     sweep.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     sweep.set_defaults(parser=sweep, handler=sweep_command)
@@ -68,7 +76,12 @@ def sweep_command(args: argparse.Namespace) -> str:
     """``qpavoid sweep``: check, run, write, print the summary."""
     out = check_output_dir(args.out)
     spec = campaign_spec(
-        args.controller, args.distance, args.safety, robot=args.robot, camera=args.camera
+        args.controller,
+        args.distance,
+        args.safety,
+        robot=args.robot,
+        camera=args.camera,
+        latency_s=args.latency,
     )
     executor: Executor | None = RayExecutor(args.workers) if args.executor == "ray" else None
     try:

@@ -71,10 +71,11 @@ def campaign_spec(
     max_time_s: float = CAMPAIGN_MAX_TIME_S,
     robot: str = "iiwa14",
     camera: str = "kinect_v2",
+    latency_s: float | None = None,
 ) -> SweepSpec:
     """The runs of a campaign: strikes at up to ``max_speed_mps`` (m/s) on ``robot``, each
     until the goal or ``max_time_s`` (s), at ``rate_hz`` (Hz), seen through a simulated
-    ``camera`` (a skeleton format's name)."""
+    ``camera`` (a skeleton format's name) of ``latency_s`` (s; None: its format file's)."""
     return SweepSpec(
         "strike",
         controller,
@@ -83,6 +84,7 @@ def campaign_spec(
         rate_hz,
         max_time_s,
         max_speed_mps,
+        latency_s,
         robot=robot,
         camera=camera,
     )
@@ -103,6 +105,7 @@ def campaign_settings(spec: SweepSpec, n: int, seed: int) -> dict[str, Any]:
         "max_speed_mps": spec.max_speed_mps,
         "rate_hz": spec.rate_hz,
         "camera": spec.camera,
+        "latency_s": spec.run_spec(0, 1.0).sensor_latency_s,
     }
 
 
