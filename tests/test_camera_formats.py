@@ -600,3 +600,23 @@ def test_strikes_through_each_camera_never_move_in_true_contact(name):
     checks = strike_sweep(range(20), "qp", "ssm", camera=name, workers=1)
     assert sum(c.ticks_moving_in_true_contact for c in checks) == 0
     assert sum(c.command_limit_violations for c in checks) == 0
+
+
+def test_a_camera_frame_written_into_the_same_buffer_each_tick_is_new_each_tick():
+    """A caller that reuses one array for every frame (as a driver's buffer does) gets each
+    new content mapped, never the first frame held."""
+    robot = load_robot("iiwa14")
+    fmt = skeleton_format("k4abt")
+    films = LandmarkMap.simulated(fmt)
+    controller = AnalyticController(robot)
+    q = inverse_kinematics(robot, controller.path.reference(0.0)[0])
+    buffer = np.empty((32, 3))
+    state = np.full(32, 2, dtype=np.int8)
+    body = Operator().rest()
+    for k in range(3):
+        buffer[:] = films.map(body + np.array([0.0, 0.0, 0.01 * k]), np.full(25, 2, np.int8)).joints
+        controller.step(q, buffer, state, 0.0, frame_age_s=0.0, camera_format="k4abt")
+        head = controller.closest_frame.joints[KINECT_V2.index("Head")]
+        np.testing.assert_allclose(
+            head, body[KINECT_V2.index("Head")] + np.array([0.0, 0.0, 0.01 * k])
+        )

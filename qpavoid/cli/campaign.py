@@ -18,8 +18,8 @@ from qpavoid.cli.args import (
     add_camera_option,
     add_robot_option,
     count,
-    positive_float,
     folder,
+    positive_float,
     whole_number,
     workers,
 )

@@ -153,9 +153,9 @@ class Controller:
         self._ticks = 0  # the controller's own clock: control periods since it started
         self._clock_s = 0.0  # = _ticks × control_period_s, s
         self.closest_frame: HumanFrame | None = None  # the closest person's, last tick
-        # the last camera frame of another format and its body (the same frame object held
-        # over ticks maps once), and that format's landmark uncertainty, m
-        self._mapped: tuple[object, object, People] | None = None
+        # the last camera frame of another format (its format, ids and content) and its
+        # body (a frame held over ticks maps once), and that format's landmark uncertainty, m
+        self._mapped: tuple[tuple[str, tuple[int, ...], tuple[bytes, ...]], People] | None = None
         self._camera_extra_m: np.ndarray | None = None
         self._last: Command | None = None  # the last command returned
 
@@ -219,9 +219,10 @@ class Controller:
         if fmt.name == body.name:
             self._camera_extra_m = None
             return as_people(joints, state, body)
-        if self._mapped is not None and self._mapped[0] is joints and self._mapped[1] is state:
-            return self._mapped[2]  # the frame in hand, held: mapped once
         seen = as_people(joints, state, fmt)
+        key = tuple(f.joints.tobytes() + f.state.tobytes() for f in seen.frames)
+        if self._mapped is not None and self._mapped[0] == (fmt.name, seen.ids, key):
+            return self._mapped[1]  # the frame in hand, held (the same content): mapped once
         mapping = landmark_map(fmt)
         if mapping.target.name != body.name:
             raise InputError(
@@ -231,7 +232,7 @@ class Controller:
                 value=fmt.name,
             )
         people = People(seen.ids, tuple(mapping.map(*f) for f in seen.frames))
-        self._mapped = (joints, state, people)
+        self._mapped = ((fmt.name, seen.ids, key), people)
         self._camera_extra_m = np.array(mapping.uncertainty_m)
         return people
 

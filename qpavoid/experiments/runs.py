@@ -90,9 +90,7 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
         if spec.bench == "ideal"
         else PerceptionConfig(landmark_uncertainty_m=cell_uncertainty_m(cameras)),
         # Z_d: the position error of a tracked joint of the cell's cameras, the largest
-        ssm=SSMConfig(
-            sensing_uncertainty_m=max(c.sensor.tracked_uncertainty_m for c in cameras)
-        ),
+        ssm=SSMConfig(sensing_uncertainty_m=max(c.sensor.tracked_uncertainty_m for c in cameras)),
     )
     if spec.controller == "analytic":
         return AnalyticController(

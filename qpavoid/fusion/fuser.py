@@ -138,9 +138,7 @@ class Fuser:
         # a fusion on a body skeleton of the user's own (no shipped format: its
         # sensors stream that skeleton, the calibration file's format key aside)
         self._own = own = skeleton.name not in FORMAT_NAMES
-        self._formats = {
-            n: skeleton if own else calibration[n].skeleton for n in calibration.names
-        }
+        self._formats = {n: skeleton if own else calibration[n].skeleton for n in calibration.names}
         # each sensor's map onto the body's landmarks; None: its frames are the landmarks
         self._maps: dict[str, LandmarkMap | None] = {
             n: self._landmark_map(n, fmt) for n, fmt in self._formats.items()
