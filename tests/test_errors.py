@@ -326,8 +326,7 @@ NPZ_HINT = (
 )
 #: What a CSV header that names no format's joints is told (the formats the library has).
 NO_FORMAT = (
-    "the joints of no skeleton format "
-    "(kinect_v2, k4abt, zed_body_34, zed_body_38, mediapipe_pose)"
+    "the joints of no skeleton format (kinect_v2, k4abt, zed_body_34, zed_body_38, mediapipe_pose)"
 )
 CSV_HINT = (
     "expected a UTF-8 CSV file: the header row t,SpineBase_x,SpineBase_y,SpineBase_z,"
@@ -418,10 +417,7 @@ BAD_FILES = {
         lambda p: np.savez(
             p, t=np.arange(3.0), joints=np.zeros((3, 24, 3)), state=np.zeros((3, 25))
         ),
-        (
-            "joints (Kinect v2, m) must have shape (3, 25, 3), got (3, 24, 3); "
-            "see docs/formats.md"
-        ),
+        ("joints (Kinect v2, m) must have shape (3, 25, 3), got (3, 24, 3); see docs/formats.md"),
         "joints",
     ),
     "nan_t.npz": (
