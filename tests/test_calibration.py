@@ -161,7 +161,7 @@ def test_bad_per_sensor_recordings_are_one_line_errors(tmp_path):
         load_sensor_recording(base)
     with pytest.raises(Exception, match="must increase strictly"):
         SensorRecording(["a", "a"], [0.1, 0.1], [0, 0], np.stack([rest, rest]), np.full((2, 25), 2))
-    with pytest.raises(Exception, match="body id is 0 to 5"):
+    with pytest.raises(Exception, match="body ids of Kinect v2 are 0 to 5"):
         SensorRecording(["a"], [0.0], [6], rest[None], np.full((1, 25), 2))
     with pytest.raises(Exception, match="non-empty name"):
         SensorRecording([""], [0.0], [0], rest[None], np.full((1, 25), 2))

@@ -288,7 +288,11 @@ def test_redundancy_moves_the_elbow_away_keeping_the_end_effector(robot7):
     side = np.cross(P[7] - P[3], P[3] - robot7.capsules(q)[0, 0])
     side /= np.linalg.norm(side)
     for sign in (1.0, -1.0):
-        joints = np.full((25, 3), np.nan)  # only one hand is tracked
+        # one hand near the elbow, the rest of the person beyond it, away from the arm (a
+        # body with only a hand seen is bounded around the hand by its bones: a stop)
+        joints = np.repeat((elbow + sign * 1.3 * side)[None], 25, axis=0)
+        joints[JointType.ShoulderRight] = elbow + sign * 1.0 * side
+        joints[JointType.ElbowRight] = elbow + sign * 0.65 * side
         joints[JointType.WristRight] = elbow + sign * 0.35 * side
         joints[JointType.HandRight] = elbow + sign * 0.33 * side
         # the fingers seen too (unseen, they could be a bone beyond the hand)

@@ -51,7 +51,7 @@ from qpavoid.output.view_data import replay_data
 from qpavoid.perception.tracker import PerceptionConfig
 from qpavoid.scenarios import motions
 from qpavoid.sensing.calibration_file import load_calibration
-from qpavoid.sensing.recording import load_recording
+from qpavoid.sensing.recording_files import recording_format
 
 
 @dataclass
@@ -112,7 +112,7 @@ def cell_formats(spec: RunSpec) -> list[SkeletonFormat]:
     if spec.sensors is not None:
         names |= {s.format for s in load_calibration(str(spec.sensors)).sensors.values()}
     elif spec.human_file is not None:  # a recording's derived landmarks: as seen, not truth
-        names.add(load_recording(spec.human_file).format)
+        names.add(recording_format(spec.human_file).name)
     return [skeleton_format(name) for name in sorted(names)]
 
 

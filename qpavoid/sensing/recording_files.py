@@ -382,3 +382,24 @@ def _is_float(text: str) -> bool:
     except ValueError:
         return False
     return "_" not in text
+
+
+def recording_format(path: str | Path) -> SkeletonFormat:
+    """The skeleton format of the recording at ``path`` (NPZ: its ``format`` array; CSV:
+    its header's joint columns), without reading its frames: a file of one person or of
+    several, base-frame or per sensor.
+
+    Raises
+    ------
+    RecordingError
+        For a file that cannot be read, an unknown suffix or a ``format`` array naming no
+        format.
+    """
+    return read_by_suffix(
+        path,
+        {
+            ".npz": lambda p: npz_format(read_npz(p, ["t"], "a recording", formatted=True)),
+            ".csv": read_csv_format,
+        },
+        "recording",
+    )
