@@ -221,7 +221,9 @@ def _processes_with(marker: str) -> list[int]:
     "signals, status, line",
     [
         pytest.param(["INT"], 130, "interrupted", marks=pytest.mark.slow),  # as twice's first
-        (["INT", "INT"], 130, "interrupted"),  # hung forever in the adversary's hands
+        pytest.param(  # hung forever in the adversary's hands (slow: the default suite's time)
+            ["INT", "INT"], 130, "interrupted", marks=pytest.mark.slow
+        ),
         (["TERM"], 143, "terminated"),  # left both workers running, orphaned
     ],
     ids=["ctrl-c", "ctrl-c twice", "sigterm"],
