@@ -134,6 +134,7 @@ def test_a_ray_that_cannot_be_reached_is_an_input_error(monkeypatch, address):
     assert (caught.value.name, caught.value.value) == ("RAY_ADDRESS", address)
 
 
+@pytest.mark.slow  # the default suite's time; a CLI sweep runs there too (SIGTERM's test)
 def test_qpavoid_sweep_from_the_command_line(tmp_path):
     import subprocess
     import sys
