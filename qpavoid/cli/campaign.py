@@ -1,7 +1,7 @@
 """``qpavoid sweep``: a randomized safety campaign, on local processes or on Ray.
 
     qpavoid sweep --n N --controller analytic|qp [--distance ...] [--safety ...] [--seed S]
-                  [--robot NAME|PATH]
+                  [--robot NAME|PATH] [--camera FORMAT] [--latency S]
                   [--workers W] [--executor local|ray] --out DIR
 
 Like :mod:`qpavoid.cli.commands` it parses, calls the library and prints.
