@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import signal
 import subprocess
 import sys
 
@@ -12,7 +11,6 @@ import pytest
 import qpavoid
 from qpavoid.control.qp import kernels as qp_kernels
 from qpavoid.control.qp import solver_kernels
-from qpavoid.core import signals as core_signals
 from qpavoid.distance import _kernels as distance_kernels
 from qpavoid.drive.limits import CommandCheck
 from qpavoid.fusion import person as fusion_person
@@ -47,22 +45,6 @@ def pytest_configure(config):
         law_kernels.warm_up()
         if fusion.wait() != 0:  # compile it here, where an error shows
             fusion_person.warm_up(KINECT_V2)
-
-
-@pytest.fixture(autouse=True)
-def ctrl_c_and_sigterm_as_they_were():
-    """Each test starts with Ctrl-C and SIGTERM as the worker had them. A command run in
-    the test's process and stopped by a signal marks the process as ending
-    (``qpavoid.core.signals.ignore_until_exit``: both ignored, by design, until a real
-    command's process exits); in a test worker that outlived it, every later test's
-    Ctrl-C was ignored and its subprocesses inherited the ignoring (seen once in CI: five
-    signal tests failed on one worker, and passed on a rerun)."""
-    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-    yield
-    core_signals._ending = False
-    for s, handler in before.items():
-        if signal.getsignal(s) is not handler and handler is not None:
-            signal.signal(s, handler)
 
 
 @pytest.fixture(autouse=True)
