@@ -27,6 +27,7 @@ table form takes ``uncertainty_m``.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, NoReturn
 
@@ -34,7 +35,7 @@ import numpy as np
 
 from qpavoid.core.errors import SkeletonFormatError
 
-__all__ = ["CONFIDENCE_KINDS", "Confidence", "LandmarkRule", "parse_rule"]
+__all__ = ["CONFIDENCE_KINDS", "Confidence", "LandmarkRule", "is_number", "only_keys", "parse_rule"]
 
 #: The kinds of a joint's confidence value a format may declare.
 CONFIDENCE_KINDS = ("states", "levels", "score")
@@ -49,8 +50,20 @@ def _fail(message: str, name: str, value: object) -> NoReturn:
     raise SkeletonFormatError(message, name=name, value=value)
 
 
-def _number(value: object) -> bool:
+def is_number(value: object) -> bool:
+    """A finite int or float (not a bool): a number a format file may hold."""
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def only_keys(data: Mapping[str, object], known: tuple[str, ...], prefix: str) -> None:
+    """Refuse a key of ``data`` not in ``known`` (a misspelt key would be ignored)."""
+    unknown = [k for k in data if k not in known]
+    if unknown:
+        _fail(
+            f"unknown key {prefix}{unknown[0]}; the keys are {', '.join(known)}",
+            f"{prefix}{unknown[0]}",
+            data[unknown[0]],
+        )
 
 
 @dataclass(frozen=True)
@@ -108,7 +121,7 @@ class Confidence:
         if self.kind == "score":
             low, high = self.range if len(self.range) == 2 else (math.nan, math.nan)
             values = (low, self.inferred_at, self.tracked_at, high)
-            if not all(_number(v) for v in values) or not (
+            if not all(is_number(v) for v in values) or not (
                 low <= self.inferred_at <= self.tracked_at <= high and low < high
             ):
                 _fail(
@@ -124,14 +137,11 @@ class Confidence:
         """The ``[confidence]`` table of a format file."""
         if not isinstance(data, dict):
             _fail(f"confidence must be a table, got {data!r}", "confidence", data)
-        known = ("kind", "levels", "level_names", "range", "inferred_at", "tracked_at")
-        unknown = [k for k in data if k not in known]
-        if unknown:
-            _fail(
-                f"unknown key confidence.{unknown[0]}; the keys are {', '.join(known)}",
-                f"confidence.{unknown[0]}",
-                data[unknown[0]],
-            )
+        only_keys(
+            data,
+            ("kind", "levels", "level_names", "range", "inferred_at", "tracked_at"),
+            "confidence.",
+        )
         args: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
         return cls(**args)
 
@@ -207,7 +217,7 @@ def parse_rule(value: object, key: str) -> LandmarkRule:
             value,
         )
     uncertainty = value.get("uncertainty_m", 0.0)
-    if not _number(uncertainty) or not 0.0 <= uncertainty <= MAX_RULE_UNCERTAINTY_M:
+    if not is_number(uncertainty) or not 0.0 <= uncertainty <= MAX_RULE_UNCERTAINTY_M:
         _fail(
             f"{key}.uncertainty_m must be in [0, {MAX_RULE_UNCERTAINTY_M}] m, got {uncertainty!r}",
             f"{key}.uncertainty_m",
@@ -220,7 +230,7 @@ def parse_rule(value: object, key: str) -> LandmarkRule:
         if (
             not isinstance(table, dict)
             or not table
-            or not all(_number(w) for w in table.values())
+            or not all(is_number(w) for w in table.values())
             or abs(sum(table.values()) - 1.0) > 1e-9
         ):
             _fail(
@@ -237,7 +247,7 @@ def parse_rule(value: object, key: str) -> LandmarkRule:
         _fail(f"{key}.{form} must name joints, got {joints!r}", f"{key}.{form}", joints)
     if form == "lerp":
         t: Any = value.get("t")
-        if len(joints) != 2 or not _number(t) or not -1.0 <= t <= 2.0:
+        if len(joints) != 2 or not is_number(t) or not -1.0 <= t <= 2.0:
             _fail(
                 f"{key}: lerp takes two joints and t in [-1, 2], got {joints!r}, t={t!r}",
                 key,

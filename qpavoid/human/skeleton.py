@@ -17,7 +17,6 @@ joints through it (:attr:`~SkeletonFormat.parent`, :attr:`~SkeletonFormat.mirror
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, fields
 from functools import cached_property
@@ -30,7 +29,7 @@ from qpavoid.core.checks import one_line
 from qpavoid.core.errors import InputError, SkeletonFormatError
 from qpavoid.core.file_bounds import NotTOMLError
 from qpavoid.core.file_bounds import read_toml as read_toml_file
-from qpavoid.human.conversion import Confidence, LandmarkRule, parse_rule
+from qpavoid.human.conversion import Confidence, LandmarkRule, is_number, only_keys, parse_rule
 
 __all__ = [
     "FORMATS_DIR",
@@ -140,7 +139,7 @@ class CameraSpec:
             ("left_right_swap_per_s", None, self.left_right_swap_per_s),
             ("left_right_swap_s", None, self.left_right_swap_s),
         ):
-            if not _is_number(value) or not (value > low if low is not None else value >= 0):
+            if not is_number(value) or not (value > low if low is not None else value >= 0):
                 rule = "a number > 0" if low is not None else "a number >= 0"
                 _fail(f"sensor.{key} must be {rule}, got {value!r}", f"sensor.{key}", value)
         fov = self.field_of_view_deg
@@ -334,7 +333,7 @@ class SkeletonFormat:
                     _fail(
                         f"joints[{k}]: {joint!r} is its own parent", f"joints[{k}].parent", parent
                     )
-            if not _is_number(bound) or bound < 0.0:
+            if not is_number(bound) or bound < 0.0:
                 _fail(
                     f"joints[{k}].max_bone_m ({joint}) must be a number >= 0, m, got {bound!r}",
                     f"joints[{k}].max_bone_m",
@@ -505,13 +504,13 @@ class SkeletonFormat:
     @classmethod
     def from_mapping(cls, data: Mapping[str, object]) -> SkeletonFormat:
         """The format of a parsed format file (the keys of :meth:`load`)."""
-        _only_keys(data, _TOP_KEYS, "")
+        only_keys(data, _TOP_KEYS, "")
         rows = _require(data, "joints", list, "an array of tables")
         names, parents, bounds = [], [], []
         for k, row in enumerate(rows):
             if not isinstance(row, dict):
                 _fail(f"joints[{k}] must be a table, got {row!r}", f"joints[{k}]", row)
-            _only_keys(row, _JOINT_KEYS, f"joints[{k}].")
+            only_keys(row, _JOINT_KEYS, f"joints[{k}].")
             if row.get("id") != k or isinstance(row.get("id"), bool):
                 _fail(
                     f"joints[{k}].id must be {k} (ids run 0, 1, 2, ... in file order), "
@@ -533,7 +532,7 @@ class SkeletonFormat:
             if not isinstance(roles, dict):
                 _fail(f"groups.{group} must be a table, got {roles!r}", f"groups.{group}", roles)
         sensor = _require(data, "sensor", dict, "a table")
-        _only_keys(sensor, tuple(CameraSpec.__dataclass_fields__), "sensor.")
+        only_keys(sensor, tuple(CameraSpec.__dataclass_fields__), "sensor.")
         missing = [
             k
             for k, f in CameraSpec.__dataclass_fields__.items()
@@ -608,22 +607,8 @@ def _require(data: Mapping[str, object], key: str, kind: type, what: str, prefix
     return value
 
 
-def _only_keys(data: Mapping[str, object], known: tuple[str, ...], prefix: str) -> None:
-    unknown = [k for k in data if k not in known]
-    if unknown:
-        _fail(
-            f"unknown key {prefix}{unknown[0]}; the keys are {', '.join(known)}",
-            f"{prefix}{unknown[0]}",
-            data[unknown[0]],
-        )
-
-
-def _is_number(value: object) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
 def _pair(value: object) -> bool:
-    return isinstance(value, tuple) and len(value) == 2 and all(_is_number(v) for v in value)
+    return isinstance(value, tuple) and len(value) == 2 and all(is_number(v) for v in value)
 
 
 def _frozen(values: object, dtype: type) -> np.ndarray:
