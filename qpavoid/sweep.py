@@ -3,8 +3,10 @@ here. The engine lives in :mod:`qpavoid.experiments.sweep`; this module only nam
 
 from qpavoid.experiments.sweep import (
     ApproachCheck,
+    CloseWorkCheck,
     StrikeCheck,
     SweepSpec,
+    TouchCounts,
     as_dicts,
     check_log,
     safety_sweep,
@@ -15,8 +17,10 @@ from qpavoid.experiments.sweep import (
 
 __all__ = [
     "ApproachCheck",
+    "CloseWorkCheck",
     "StrikeCheck",
     "SweepSpec",
+    "TouchCounts",
     "as_dicts",
     "check_log",
     "safety_sweep",

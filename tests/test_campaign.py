@@ -86,6 +86,8 @@ def test_a_campaign_is_the_same_on_one_or_two_workers_and_its_worst_runs_replay(
         "rate_hz": 100.0,
         "camera": "kinect_v2",
         "latency_s": 0.06,
+        "motion": "strikes",
+        "payload_kg": 0.0,
     }
     on_disk = json.loads((tmp_path / "c" / "summary.json").read_text())
     assert strip(on_disk) == strip(json.loads(json.dumps(summary)))

@@ -13,11 +13,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def source_files() -> set[str]:
-    """What the wheel must hold: the package's modules and markers, the robot descriptions."""
+    """What the wheel must hold: the package's modules, markers and data files (skeleton
+    formats, body models, Annex A's regions), the robot descriptions."""
     pkg = {
         p.relative_to(ROOT).as_posix()
         for p in (ROOT / "qpavoid").rglob("*")
-        if p.suffix in (".py", ".typed") and "__pycache__" not in p.parts
+        if p.suffix in (".py", ".typed", ".toml") and "__pycache__" not in p.parts
     }
     robots = {
         "qpavoid/robots/" + p.relative_to(ROOT / "robots").as_posix()
@@ -42,5 +43,9 @@ def test_wheel_holds_every_module_and_robot_file(tmp_path):
     (wheel,) = tmp_path.glob("qpavoid-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
     expected = source_files()
-    assert {"qpavoid/control/qp/tasks/ee.py", "qpavoid/robots/iiwa14/iiwa14.urdf"} <= expected
+    assert {
+        "qpavoid/control/qp/tasks/ee.py",
+        "qpavoid/robots/iiwa14/iiwa14.urdf",
+        "qpavoid/laws/body_regions.toml",
+    } <= expected
     assert expected - names == set()

@@ -542,7 +542,9 @@ def test_iiwa_defaults_come_from_the_description(robot):
         "reaction_time_s",
         "max_acceleration_radps2",
         "max_point_speed_mps",
+        "rated_payload_kg",
     }
+    assert robot.arm.rated_payload_kg == 14.0  # the iiwa 14 R820's
     assert robot.ik_seed.wrist_to_tool_m == 0.126
     ctrl = AnalyticController(robot)  # the settings' None: the description's joints
     assert robot.joint_names[ctrl.scaled_cols[0]] == "A1"

@@ -9,6 +9,9 @@ so it lives in its description (``docs/robot.md``, "Arm"), each value with its s
   (m/s² for a prismatic joint), one for **each** joint of the URDF: an arm whose joints
   were renamed cannot silently run with another arm's limits;
 * ``max_point_speed_mps``: no point of the arm moves faster, m/s;
+* optional, ``rated_payload_kg``: the maker's rated payload, kg (the heaviest payload the arm
+  is rated to carry at its flange; power and force limiting refuses a heavier one,
+  :class:`qpavoid.arm.inertia.EffectiveMass`);
 * optional, where the maker publishes them: ``max_velocity_radps`` (a joint's velocity limit
   where the maker's is lower than the URDF's), ``max_jerk_radps3`` (the rate of change of a
   joint's acceleration), ``position_limits_rad`` (a joint's ``[lower, upper]`` where the
@@ -77,7 +80,7 @@ MAX_VELOCITY_RADPS = 20.0
 MAX_POSITION_RAD = 4.0 * math.pi
 #: A maker's stop: within 5 s (KUKA's heavy industrial arms stop in 0.2-0.5 s; 244 written
 #: for 244 ms lies beyond) and one turn (30° written as 30 lies beyond); the payload at most
-#: 1000 kg.
+#: 1000 kg (a stop's, and an arm's rated payload: above 0 and at most this).
 MAX_STOP_TIME_S = 5.0
 MAX_STOP_DISTANCE_RAD = 2.0 * math.pi
 MAX_PAYLOAD_KG = 1000.0
@@ -87,7 +90,13 @@ STOP_CATEGORIES = (0, 1)
 #: Keys of the ``[arm]`` table that must be given, and those that may be (each of these
 #: then needs its source in ``[arm.sources]``).
 ARM_KEYS = ("reaction_time_s", "max_acceleration_radps2", "max_point_speed_mps")
-OPTIONAL_KEYS = ("max_velocity_radps", "max_jerk_radps3", "position_limits_rad", "stopping")
+OPTIONAL_KEYS = (
+    "max_velocity_radps",
+    "max_jerk_radps3",
+    "position_limits_rad",
+    "stopping",
+    "rated_payload_kg",
+)
 #: Keys of a ``[[arm.stopping]]`` entry (all needed).
 STOPPING_KEYS = (
     "joints",
@@ -183,6 +192,9 @@ class ArmDynamics:
         joints it gives (intersected with the URDF's: :func:`tighter_limits`).
     stopping
         The maker's stopping distances and times.
+    rated_payload_kg
+        The maker's rated payload, kg (the heaviest it may carry at its flange), or None
+        where the description gives none.
     """
 
     reaction_time_s: float
@@ -193,6 +205,7 @@ class ArmDynamics:
     max_jerk_radps3: Pairs = ()
     position_limits_rad: tuple[tuple[str, tuple[float, float]], ...] = ()
     stopping: tuple[StoppingData, ...] = ()
+    rated_payload_kg: float | None = None
 
     def stopping_deceleration_radps2(self) -> Pairs:
         """``(joint, a)`` for each joint the maker's stopping data cover: the smallest
@@ -333,6 +346,13 @@ def read_arm(cfg: Mapping[str, Any], path: Path, joints: Sequence[str]) -> ArmDy
         ),
         position_limits_rad=_position_limits(table, path, joints),
         stopping=_stopping(table, path, joints),
+        rated_payload_kg=(
+            _number(
+                table["rated_payload_kg"], "arm.rated_payload_kg", path, 0.0, True, MAX_PAYLOAD_KG
+            )
+            if "rated_payload_kg" in table
+            else None
+        ),
     )
 
 

@@ -66,6 +66,7 @@ def _positive_finite(x: float) -> bool:
 
 
 positive_float = _number(float, _positive_finite, "a positive finite number")
+non_negative_float = _number(float, lambda x: 0.0 <= x < float("inf"), "a finite number >= 0")
 count = _number(int, lambda n: n >= 0, "a whole number >= 0")
 workers = _number(int, lambda n: n >= 1, "a whole number >= 1")
 
@@ -90,6 +91,19 @@ def add_camera_option(parser: argparse.ArgumentParser) -> None:
         default=FORMAT_NAMES[0],
         help="the simulated camera's skeleton format, with its latency, noise, joints and "
         "failure modes (docs/sensors.md)",
+    )
+
+
+def add_payload_option(parser: argparse.ArgumentParser) -> None:
+    """``--payload KG``, the load the arm carries, on every command that runs an arm."""
+    parser.add_argument(
+        "--payload",
+        type=non_negative_float,
+        default=0.0,
+        metavar="KG",
+        help="the payload at the end effector, kg, within the arm's rating: power and "
+        "force limiting counts it in the arm's effective mass, and so does the judge of "
+        "every true contact (default: 0)",
     )
 
 

@@ -1,8 +1,8 @@
 """``qpavoid sweep``: a randomized safety campaign, on local processes or on Ray.
 
     qpavoid sweep --n N --controller analytic|qp [--distance ...] [--safety ...] [--seed S]
-                  [--robot NAME|PATH] [--camera FORMAT] [--latency S]
-                  [--workers W] [--executor local|ray] --out DIR
+                  [--motion strikes|closework] [--robot NAME|PATH] [--camera FORMAT] [--payload KG]
+                  [--latency S] [--workers W] [--executor local|ray] --out DIR
 
 Like :mod:`qpavoid.cli.commands` it parses, calls the library and prints.
 """
@@ -16,6 +16,7 @@ from concurrent.futures import Executor
 from qpavoid.cli.args import (
     HelpFormatter,
     add_camera_option,
+    add_payload_option,
     add_robot_option,
     count,
     folder,
@@ -25,7 +26,9 @@ from qpavoid.cli.args import (
 )
 from qpavoid.control.tick import SAFETY_MODES
 from qpavoid.experiments.campaign import (
+    CAMPAIGN_MAX_TIME_S,
     MAX_RUNS,
+    MOTIONS,
     RayExecutor,
     campaign_spec,
     run_campaign,
@@ -44,22 +47,43 @@ def add_campaign_command(sub: argparse._SubParsersAction) -> None:
     sweep = sub.add_parser(
         "sweep",
         formatter_class=HelpFormatter,
-        help="randomized safety campaign: strikes judged against the truth",
+        help="randomized safety campaign: strikes or close work judged against the truth",
         description="Run N randomized strikes (hands into every robot set at up to 2 m/s, "
-        "with sensor faults; docs/safety.md) along the whole path, judged against the "
-        "true motion; write summary.json, runs.json and the worst runs into --out.",
+        "with sensor faults; docs/safety.md) or close-work cases (--motion closework) "
+        "along the whole path, judged against the true motion; write summary.json, "
+        "runs.json and the worst runs into --out.",
     )
     sweep.add_argument("--n", type=whole_number(1, MAX_RUNS), required=True, help="number of runs")
     sweep.add_argument("--controller", choices=CONTROLLERS, required=True)
     sweep.add_argument("--distance", choices=DISTANCES, default=DISTANCES[0])
-    sweep.add_argument("--safety", choices=SAFETY_MODES, default="ssm")
+    sweep.add_argument(
+        "--safety",
+        choices=SAFETY_MODES,
+        default="ssm",
+        help="ssm: ISO/TS 15066 speed and separation on top of the paper's rules; pfl: "
+        "speed and separation for the head and trunk, transient contact within Annex A's "
+        "limits for the arms and hands; paper: the paper's rules alone",
+    )
     sweep.add_argument("--seed", type=count, default=0, help="seed of the first run")
+    sweep.add_argument(
+        "--motion",
+        choices=tuple(MOTIONS),
+        default="strikes",
+        help="strikes: hands driven into the robot at up to 2 m/s with sensor faults, each "
+        f"run until the goal or {CAMPAIGN_MAX_TIME_S:g} s; closework: the seated operator "
+        "working within reach of the path, never at the robot (hands resting or working "
+        "0.1-0.3 m from it, reaching across it, handing over a part: scenario "
+        "closework:SEED) on a clean camera, each run until the goal or the path's "
+        "duration and 15 s more, summed up for productivity too (reaching the goal, "
+        "time to it, time stopped, per variant)",
+    )
     sweep.add_argument(
         "--workers", type=workers, default=None, metavar="W", help="processes (default: all cores)"
     )
     sweep.add_argument("--executor", choices=EXECUTORS, default="local")
     add_robot_option(sweep)
     add_camera_option(sweep)
+    add_payload_option(sweep)
     sweep.add_argument(
         "--latency",
         type=positive_float,
@@ -82,6 +106,8 @@ def sweep_command(args: argparse.Namespace) -> str:
         robot=args.robot,
         camera=args.camera,
         latency_s=args.latency,
+        motion=args.motion,
+        payload_kg=args.payload,
     )
     executor: Executor | None = RayExecutor(args.workers) if args.executor == "ray" else None
     try:

@@ -29,6 +29,7 @@ from qpavoid.cli.args import (
     HelpFormatter,
     Parser,
     add_camera_option,
+    add_payload_option,
     add_robot_option,
     count,
     folder,
@@ -81,7 +82,7 @@ def build_parser() -> Parser:
         "scenario",
         nargs="?",
         metavar="SCENARIO",
-        help=f"{', '.join(SCENARIOS)} or random:SEED (or give --human FILE)",
+        help=f"{', '.join(SCENARIOS)}, random:SEED or closework:SEED (or give --human FILE)",
     )
     run.add_argument(
         "--human",
@@ -118,7 +119,13 @@ def build_parser() -> Parser:
     for flag, choices, help_text in (
         ("--controller", CONTROLLERS, "the paper's controller or its QP variant"),
         ("--distance", DISTANCES, "exact capsules (cover the shoulder) or the paper's spheres"),
-        ("--safety", SAFETY_MODES, "the paper's rules, or ISO/TS 15066 SSM on top of them"),
+        (
+            "--safety",
+            SAFETY_MODES,
+            "the paper's rules; ISO/TS 15066 SSM on top of them; or SSM for the head and "
+            "trunk with power and force limiting (transient contact within Annex A's "
+            "limits) for the arms and hands (docs/safety.md)",
+        ),
         (
             "--bench",
             BENCHES,
@@ -128,6 +135,7 @@ def build_parser() -> Parser:
     ):
         run.add_argument(flag, choices=choices, default=choices[0], help=help_text)
     add_camera_option(run)
+    add_payload_option(run)
     run.add_argument(
         "--latency",
         type=float,
@@ -260,6 +268,7 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
         solver=args.solver,
         redundant=args.redundant,
         goal_tolerance_m=args.goal_tolerance,
+        payload_kg=args.payload,
     )
     out = Path(args.out or Path("runs") / spec.label.replace(":", "-"))
     check_output_dir(out)

@@ -22,7 +22,8 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from qpavoid.arm.model import Robot, joint_columns
+from qpavoid.arm.model import Kinematics, Robot, joint_columns
+from qpavoid.control.contact import ContactLimits
 from qpavoid.control.smoothing import CommandRamp
 from qpavoid.control.task import PlannedPath, default_task, pose_error
 from qpavoid.control.tick import Command, ControllerConfig, Tick
@@ -142,6 +143,14 @@ class Controller:
         self._no_bound, self._no_approach = np.full(shape, np.inf), np.zeros(shape)
         for a in (self._no_bound, self._no_approach):
             a.setflags(write=False)
+        #: Power and force limiting (``safety="pfl"``): each pair's permitted contact
+        #: speed, and the parts the paper's stop rules still hold for (head, trunk).
+        self.contact = (
+            ContactLimits(robot, self.human, self.config.pfl)
+            if self.config.safety == "pfl"
+            else None
+        )
+        self._protected = None if self.contact is None else np.flatnonzero(self.contact.protected())
         warm_up()  # law_kernels, before the first tick
         #: The commands so far and the reach of the next (None: the paper's steps).
         self.ramp = (
@@ -285,7 +294,9 @@ class Controller:
         frame = self.closest_frame = people.frames[nearest] if people.ids else NOBODY
         f = float(l1_factor(dmin[roles.scaled], cfg))  # eq. (2)
         limits = scaled_velocity_limits(self.dq_max, f, self.scaled_cols)  # eq. (3)
-        approach_limit, human_approach, limits = self._separation(table, who, v_people, age, limits)
+        approach_limit, human_approach, limits, contact = self._separation(
+            kin, table, who, geos, v_people, age, limits
+        )
         ref_pose, ref_twist = self.path.reference(t)
         error = pose_error(ref_pose, kin.ee_placement)
         return Tick(
@@ -305,12 +316,13 @@ class Controller:
             ref_twist,
             error,
             ref_twist + self.K * error,
-            self._stop_reason(age, percs, dmin, f),
+            self._stop_reason(age, percs, dmin, f, table),
             percs[nearest],
             age,
             approach_limit,
             human_approach,
             None if self.ramp is None else self.ramp.box(kin.q),
+            contact,
         )
 
     def _perceived(
@@ -327,25 +339,42 @@ class Controller:
 
     def _separation(
         self,
+        kin: Kinematics,
         table: DistanceTable,
         who: np.ndarray,
+        geos: list[HumanGeometry],
         v_people: np.ndarray,
         age: float,
         limits: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Speed and separation (``safety="ssm"``): each pair's bound on the robot's approach
-        speed and the part's own approach speed (S, K), m/s, and the joint limits within the
-        stopping-time budget (|q̇_j| ≤ a_j T_s); with the paper's rules, no bound."""
-        if self.config.safety != "ssm":
-            return self._no_bound, self._no_approach, limits
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """Speed and separation (``safety="ssm"``, ``"pfl"``): each pair's bound on the
+        robot's approach speed and the part's own approach speed (S, K), m/s, the joint
+        limits within the stopping-time budget (|q̇_j| ≤ a_j T_s), and with ``"pfl"`` each
+        pair's permitted contact speed (:class:`~qpavoid.control.contact.ContactLimits`),
+        which the bound is then at least; with the paper's rules, no bound."""
+        if not self.config.monitors_separation:
+            return self._no_bound, self._no_approach, limits, None
         ssm = with_stop_time(self.ssm, self.stop_budget.budget())
         v_parts = v_people[who, np.arange(who.shape[1])[None, :]]  # each pair's person
         approach_limit, human_approach = separation_bounds(table, v_parts, age, ssm)
-        return approach_limit, human_approach, np.minimum(limits, self.accel * ssm.stop_time_s)
+        limits = np.minimum(limits, self.accel * ssm.stop_time_s)
+        if self.contact is None:
+            return approach_limit, human_approach, limits, None
+        contact = self.contact(kin, table, geos, who)
+        return np.maximum(approach_limit, contact), human_approach, limits, contact
 
-    def _stop_reason(self, age: float, percs: list[Perceived], dmin: np.ndarray, f: float) -> str:
+    def _stop_reason(
+        self,
+        age: float,
+        percs: list[Perceived],
+        dmin: np.ndarray,
+        f: float,
+        table: DistanceTable,
+    ) -> str:
         """Why the robot must stop this tick ("" if it may move): a stale or frozen frame,
-        nobody tracked, the paper's stop rules (Sect. 5.4), a set with no role touching."""
+        nobody tracked, the paper's stop rules (Sect. 5.4), a set with no role touching.
+        With ``safety="pfl"`` the stop rules and the touch hold for the parts that permit
+        no contact (head, trunk): the arms and hands may be touched within their limit."""
         frozen = self.config.perception.max_identical_frames
         if not age <= self.config.max_frame_age_s:  # NaN too
             return f"human frame is stale ({age:.3f} s old, max {self.config.max_frame_age_s} s)"
@@ -353,6 +382,9 @@ class Controller:
             return f"human frame is frozen ({repeats + 1} identical skeletons in a row)"
         if self.config.require_human and not np.isfinite(dmin).any():
             return "no body part of the operator is tracked"
+        if self._protected is not None:  # pfl: the rules judge the head and trunk only
+            dmin = table.distance[:, self._protected].min(axis=1, initial=np.inf)
+            f = float(l1_factor(dmin[self.roles.scaled], self.config.avoidance))
         d_rep, d_ee = dmin[self.roles.repelled], dmin[self.roles.end_effector]
         cfg = self.config.avoidance
         return stop_reason(f, d_rep, d_ee, cfg, self.role_names) or self._contact(dmin)
@@ -426,7 +458,7 @@ class Controller:
             applied = self.ramp.limit(dq, *tick.command_box)
             self.ramp.commit(applied, stopping=False)
             self._scale_at_stop = float(time_scale)
-        if self.config.safety == "ssm":
+        if self.config.monitors_separation:
             self.stop_budget.record(applied)
         zero3 = np.zeros(3)
         self._last = Command(
@@ -477,7 +509,7 @@ class Controller:
                 self.ramp.undo()
             applied = self.ramp.brake()
             time_scale = self._scale_at_stop * self.ramp.commit(applied, stopping=True)
-        if self.config.safety == "ssm":
+        if self.config.monitors_separation:
             self.stop_budget.record(applied)
         self._last = replace(last, dq=applied, stopped=True, reason=reason, time_scale=time_scale)
         return self._last

@@ -18,12 +18,13 @@ from qpavoid.distance.methods import DistanceTable
 from qpavoid.human.body import HumanGeometry
 from qpavoid.human.frames import HumanFrame
 from qpavoid.laws.avoidance import AvoidanceConfig
+from qpavoid.laws.pfl import PFLConfig
 from qpavoid.laws.ssm import SSMConfig
 from qpavoid.perception.tracker import Perceived, PerceptionConfig
 
-#: What ``ControllerConfig.safety`` may be: the paper's rules as written, or speed and
-#: separation monitoring on top of them.
-SAFETY_MODES = ("paper", "ssm")
+#: What ``ControllerConfig.safety`` may be: the paper's rules as written, speed and
+#: separation monitoring on top of them, or power and force limiting beside it.
+SAFETY_MODES = ("paper", "ssm", "pfl")
 
 
 @dataclass(frozen=True)
@@ -64,9 +65,16 @@ class ControllerConfig:
         separation monitoring on top of them (:mod:`qpavoid.laws.ssm`): each robot point's
         approach speed towards each body part bounded so that it can be stationary before
         the person arrives, joint speeds kept within the stopping-time budget, and (QP)
-        the velocity damper reduced by the part's own approach speed.
+        the velocity damper reduced by the part's own approach speed; ``"pfl"``: power
+        and force limiting beside it (:mod:`qpavoid.control.contact`): speed and
+        separation for the parts whose Annex A region permits no contact (head, trunk),
+        and for the arms and hands a transient contact at up to their region's speed
+        limit; the paper's stop rules then hold for the head and trunk only.
     ssm
-        Constants of speed and separation monitoring (used with ``safety="ssm"``).
+        Constants of speed and separation monitoring (used with ``safety="ssm"`` and
+        ``"pfl"``).
+    pfl
+        The payload and the body regions' limits (used with ``safety="pfl"``).
     perception
         How frames are judged: lost and inferred joints, frozen frames, the person's
         velocity (:mod:`qpavoid.perception.tracker`).
@@ -91,6 +99,7 @@ class ControllerConfig:
     max_frame_age_s: float = 0.1
     safety: str = "paper"
     ssm: SSMConfig = field(default_factory=SSMConfig)
+    pfl: PFLConfig = field(default_factory=PFLConfig)
     perception: PerceptionConfig = field(default_factory=PerceptionConfig)
     smooth: bool = True
 
@@ -101,6 +110,11 @@ class ControllerConfig:
                 name="safety",
                 value=self.safety,
             )
+
+    @property
+    def monitors_separation(self) -> bool:
+        """True if speed and separation bounds the approach speeds (``"ssm"``, ``"pfl"``)."""
+        return self.safety != "paper"
 
 
 @dataclass(frozen=True)
@@ -193,11 +207,16 @@ class Tick:
         (6,) ``v_PL + K e``: eq. (8)'s target without the EE repulsion.
     approach_limit
         (S, K) speed and separation bound on each pair's robot approach speed, m/s
-        (:func:`~qpavoid.laws.ssm.max_approach_speed`; +inf with ``safety="paper"``).
+        (:func:`~qpavoid.laws.ssm.max_approach_speed`; +inf with ``safety="paper"``; with
+        ``"pfl"`` the larger of it and ``contact_limit``).
     human_approach
         (S, K) each part's own speed towards each set, m/s (≥ 0; 0 with ``"paper"``).
     reason
         Why a stop rule holds ("" if none).
+    contact_limit
+        (S, K) each pair's permitted contact speed with ``safety="pfl"``, m/s
+        (:class:`~qpavoid.control.contact.ContactLimits`: −inf where no contact is
+        permitted), or None.
     command_box
         ``(lo, hi)`` (nv,) each the reachable box of this tick's command, rad/s
         (:meth:`~qpavoid.control.smoothing.CommandRamp.box`), or None (``smooth=False``).
@@ -225,6 +244,7 @@ class Tick:
     approach_limit: np.ndarray
     human_approach: np.ndarray
     command_box: tuple[np.ndarray, np.ndarray] | None = None
+    contact_limit: np.ndarray | None = None
 
     def separation_reason(self) -> str:
         """Why speed and separation monitoring stops the robot: the tightest pair."""

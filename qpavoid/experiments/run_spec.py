@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from qpavoid.arm.dynamics import MAX_PAYLOAD_KG
 from qpavoid.control.analytic import LIMIT_MODES
 from qpavoid.control.qp.backends import check_solver
 from qpavoid.control.tick import SAFETY_MODES
@@ -20,7 +21,7 @@ from qpavoid.drive.connect import parse_arm
 from qpavoid.human.landmarks import FORMAT_NAMES, skeleton_format
 from qpavoid.loop.live_input import parse_address
 from qpavoid.scenarios import motions
-from qpavoid.scenarios.generated import check_scenario_name
+from qpavoid.scenarios.generated import SCENARIOS, check_scenario_name
 
 __all__ = ["BENCHES", "CONTROLLERS", "DISTANCES", "LIMIT_MODES", "RunSpec"]
 
@@ -45,8 +46,10 @@ class RunSpec:
     Attributes
     ----------
     scenario
-        A generated scenario (``test1``, ``test2``, ``free``, ``random:SEED``); or None
-        with ``human_file``.
+        A generated scenario (``test1``, ``test2``, ``free``, ``random:SEED``,
+        ``closework:SEED`` or a fixed close-work case: ``rest_near``, ``work_near``,
+        ``reach_across``, ``handover``; :mod:`qpavoid.scenarios.generated`); or None with
+        ``human_file``.
     human_file
         A recording to replay (NPZ or CSV, docs/formats.md) instead of a scenario.
     controller
@@ -105,6 +108,11 @@ class RunSpec:
         (:func:`~qpavoid.drive.connect.open_arm`): ``"sim"`` (the kinematic arm on the wall
         clock) or ``"franka:HOST"`` (a Franka, or franky-sim, through franky-control);
         None: the offline simulation (a live run's: the simulated arm in real time).
+    payload_kg
+        The payload at the end effector, kg (``--payload``): power and force limiting
+        counts it in the arm's effective mass (:class:`~qpavoid.laws.pfl.PFLConfig`), and
+        so does the judge of every true contact; above the arm's rated payload the run
+        is refused.
     """
 
     scenario: str | None = None
@@ -128,6 +136,7 @@ class RunSpec:
     allow_unauthenticated: bool = False
     arm: str | None = None
     camera: str = "kinect_v2"
+    payload_kg: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sensor_files", tuple(str(f) for f in self.sensor_files))
@@ -151,7 +160,8 @@ class RunSpec:
             )
         elif self.scenario is None and self.human_file is None:
             raise InputError(
-                "give a SCENARIO (test1, test2, free, random:SEED) or --human FILE",
+                f"give a SCENARIO ({', '.join(SCENARIOS)}, random:SEED, closework:SEED) "
+                "or --human FILE",
                 name="scenario",
                 value=None,
             )
@@ -171,6 +181,7 @@ class RunSpec:
         if self.latency_s is not None:
             check_range("the sensor latency (--latency)", self.latency_s, 0.0, 1.0, "s")
         check_choice("limit mode", self.limit_mode, LIMIT_MODES)
+        check_range("the payload (--payload)", self.payload_kg, 0.0, MAX_PAYLOAD_KG, "kg")
         check_range("the run's cap (--max-time)", self.max_time_s, *MAX_TIME_RANGE_S, "s")
         check_range("the control rate (--rate)", self.rate_hz, *RATE_RANGE_HZ, "Hz")
         check_range("the goal tolerance (--goal-tolerance)", self.goal_tolerance_m, 1e-6, 1.0, "m")

@@ -39,6 +39,7 @@ from qpavoid.experiments.run_spec import (
 )
 from qpavoid.human.landmarks import landmark_map, skeleton_format
 from qpavoid.human.skeleton import SkeletonFormat
+from qpavoid.laws.pfl import PFLConfig
 from qpavoid.laws.ssm import SSMConfig
 from qpavoid.loop.camera import CameraConfig
 from qpavoid.loop.live_input import Listener, LiveSource, parse_address
@@ -91,6 +92,7 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
         else PerceptionConfig(landmark_uncertainty_m=cell_uncertainty_m(cameras)),
         # Z_d: the position error of a tracked joint of the cell's cameras, the largest
         ssm=SSMConfig(sensing_uncertainty_m=max(c.sensor.tracked_uncertainty_m for c in cameras)),
+        pfl=PFLConfig(payload_kg=spec.payload_kg),
     )
     if spec.controller == "analytic":
         return AnalyticController(

@@ -23,10 +23,17 @@ runs share) and seeds; the spec's *kind* chooses the motion and the check:
     which the arm moved while a robot capsule touched the true person, and the true
     clearance while moving.
 
+``"closework"`` (:class:`CloseWorkCheck`)
+    The operator working within reach of the path, never at the robot
+    (:mod:`qpavoid.scenarios.closework`: hands resting or working 0.1-0.3 m from it,
+    reaching across it, handing over a part; scenario ``closework:SEED``) on the real
+    bench with a clean camera, judged against the truth as strikes are, and for
+    productivity: whether and when the goal was reached, the time stopped.
+
 Every run depends on its seed alone, so a sweep is a map over seeds
 (:func:`~qpavoid.experiments.jobs.map_jobs`): a local process pool or any executor with
 ``map`` (Ray's, a cluster's), results in seed order whatever the number of workers.
-:func:`summarize` sums either kind up.
+:func:`summarize` sums any kind up.
 """
 
 from __future__ import annotations
@@ -50,12 +57,19 @@ from qpavoid.laws.avoidance import (
     stop_rule_holds,
 )
 from qpavoid.loop.camera import CameraConfig
+from qpavoid.scenarios.closework import (
+    VARIANTS,
+    CloseWorkCase,
+    closework_case,
+    closework_motion,
+)
 from qpavoid.scenarios.strikes import StrikeCase, strike_camera, strike_case, strike_motion
 
 __all__ = [
     "KINDS",
     "ApproachCheck",
     "Check",
+    "CloseWorkCheck",
     "StrikeCheck",
     "SweepSpec",
     "as_dicts",
@@ -65,14 +79,19 @@ __all__ = [
     "strike_sweep",
     "summarize",
     "sweep",
+    "true_contact_fields",
 ]
 
 #: The kinds of case a sweep runs.
-KINDS = ("approach", "strike")
+KINDS = ("approach", "strike", "closework")
 #: An approach lasts this long unless the spec says otherwise, s.
 APPROACH_MAX_TIME_S = 25.0
 #: The progress bar's label and unit, per kind.
-_PROGRESS = {"approach": ("safety sweep", "approach"), "strike": ("strike sweep", "strike")}
+_PROGRESS = {
+    "approach": ("safety sweep", "approach"),
+    "strike": ("strike sweep", "strike"),
+    "closework": ("close-work sweep", "case"),
+}
 
 
 @dataclass(frozen=True)
@@ -85,14 +104,15 @@ class SweepSpec:
     Attributes
     ----------
     kind
-        ``"approach"`` or ``"strike"`` (module docstring).
+        ``"approach"``, ``"strike"`` or ``"closework"`` (module docstring).
     controller, distance, safety
         As in :class:`~qpavoid.experiments.run_spec.RunSpec`.
     rate_hz
         Control rate, Hz.
     max_time_s
         Cap on each run, s; None: an approach's 25 s, a strike's own duration (the
-        hand's approach, 1.5 s of holding and 0.5 s more).
+        hand's approach, 1.5 s of holding and 0.5 s more), a close-work case's (the
+        path and 15 s more).
     max_speed_mps
         Strikes only: the fastest peak hand speed drawn, m/s (from 0.5 m/s up).
     latency_s
@@ -102,6 +122,9 @@ class SweepSpec:
     camera
         The simulated camera's skeleton format (:class:`~qpavoid.experiments.run_spec.
         RunSpec`'s ``camera``).
+    payload_kg
+        The payload at the end effector, kg (:class:`~qpavoid.experiments.run_spec.
+        RunSpec`'s).
     """
 
     kind: str
@@ -114,6 +137,7 @@ class SweepSpec:
     latency_s: float | None = None
     robot: str = "iiwa14"
     camera: str = "kinect_v2"
+    payload_kg: float = 0.0
 
     def __post_init__(self) -> None:
         check_choice("sweep kind", self.kind, KINDS)
@@ -121,17 +145,19 @@ class SweepSpec:
 
     def run_spec(self, seed: int, duration_s: float | None = None) -> RunSpec:
         """The run of ``seed``, lasting ``max_time_s`` or else the case's own
-        ``duration_s`` (a strike's, s); a strike's motion and camera aside
-        (:func:`run_case`)."""
+        ``duration_s`` (a strike's or a close-work case's, s); a strike's motion and
+        camera, a close-work case's motion aside (:func:`run_case`)."""
         if self.kind == "approach":
             scenario, truth = f"random:{seed}", False  # checked on what the controller saw
             duration_s = APPROACH_MAX_TIME_S
+        elif self.kind == "closework":
+            scenario, truth = f"closework:{seed}", True  # judged on the truth
         else:
             scenario, truth = "free", True  # the strike is its motion; judged on the truth
         max_time_s = self.max_time_s if self.max_time_s is not None else duration_s
         if max_time_s is None:
             raise InputError(
-                "a strike's run needs its duration or a cap", name="max_time_s", value=None
+                f"a {self.kind} run needs its duration or a cap", name="max_time_s", value=None
             )
         return RunSpec(
             scenario=scenario,
@@ -144,6 +170,7 @@ class SweepSpec:
             robot=self.robot,
             measure_truth=truth,
             camera=self.camera,
+            payload_kg=self.payload_kg,
         )
 
 
@@ -202,8 +229,37 @@ class ApproachCheck:
         )
 
 
+@dataclass(frozen=True, kw_only=True)
+class TouchCounts:
+    """What power and force limiting's judge says of a run's true contacts (fields of
+    :class:`StrikeCheck` and :class:`CloseWorkCheck`, :func:`true_contact_fields`).
+
+    Attributes
+    ----------
+    ticks_moving_protected_contact, ticks_contact_above_limit, ticks_contact_within_limit
+        Power and force limiting judged against the truth (``true_contacts`` of the run's
+        metrics, :func:`~qpavoid.loop.metrics.contact_metrics`): ticks the arm moved while
+        touching the head, face, neck or trunk; ticks an arm or hand region was touched
+        faster than its Annex A limit; ticks every touch was within it.
+    ticks_clamped
+        Ticks an arm or hand region was touched where it could be pinned against the table.
+    max_contact_speed_mps, max_contact_speed_ratio, max_contact_force_n
+        Over the touches of arm and hand regions: the robot point's fastest speed towards
+        the part (m/s), its largest ratio to the region's limit, the largest force that
+        speed transfers (N); 0 without any.
+    """
+
+    ticks_moving_protected_contact: int = 0
+    ticks_contact_above_limit: int = 0
+    ticks_contact_within_limit: int = 0
+    ticks_clamped: int = 0
+    max_contact_speed_mps: float = 0.0
+    max_contact_speed_ratio: float = 0.0
+    max_contact_force_n: float = 0.0
+
+
 @dataclass(frozen=True)
-class StrikeCheck:
+class StrikeCheck(TouchCounts):
     """One strike (:func:`~qpavoid.scenarios.strikes.strike_case`) judged against the truth.
 
     Attributes
@@ -232,6 +288,8 @@ class StrikeCheck:
         Commands beyond the arm's velocity, acceleration or jerk limits.
     tick_us_median, tick_us_p99
         The controller's time per tick, µs (measured: not reproducible).
+
+    The contacts' judgement by power and force limiting: :class:`TouchCounts`'s fields.
     """
 
     kind: ClassVar[str] = "strike"
@@ -258,8 +316,59 @@ class StrikeCheck:
     command_limit_violations: int = 0
 
 
-#: What a sweep's run gives: an approach's or a strike's check.
-Check: TypeAlias = ApproachCheck | StrikeCheck
+@dataclass(frozen=True)
+class CloseWorkCheck(TouchCounts):
+    """One close-work case (:func:`~qpavoid.scenarios.closework.closework_case`) judged
+    against the truth, and for productivity.
+
+    Attributes
+    ----------
+    seed, controller, safety
+        What was run.
+    variant, side
+        The case: one of :data:`~qpavoid.scenarios.closework.VARIANTS`, and its hand.
+    ticks_moving_in_true_contact, min_true_clearance_moving_m
+        As :class:`StrikeCheck`'s (:func:`true_contact_fields`).
+    moving_s, stopped_s
+        Time the arm moved / the controller held a stop, s.
+    reached_goal
+        Whether the path's goal was reached.
+    time_to_goal_s
+        When it was reached (the run ends there), s; None if it was not.
+    duration_s
+        When the run ended, s.
+    limit_violations
+        Ticks over a joint's velocity or position limit.
+    command_limit_violations
+        Commands beyond the arm's velocity, acceleration or jerk limits.
+    tick_us_median, tick_us_p99
+        The controller's time per tick, µs (measured: not reproducible).
+
+    The contacts' judgement by power and force limiting: :class:`TouchCounts`'s fields.
+    """
+
+    kind: ClassVar[str] = "closework"
+
+    seed: int
+    controller: str
+    safety: str
+    variant: str
+    side: str
+    ticks_moving_in_true_contact: int
+    min_true_clearance_moving_m: float
+    moving_s: float
+    stopped_s: float
+    reached_goal: bool
+    time_to_goal_s: float | None
+    duration_s: float
+    limit_violations: int = 0
+    command_limit_violations: int = 0
+    tick_us_median: float = 0.0
+    tick_us_p99: float = 0.0
+
+
+#: What a sweep's run gives: an approach's, a strike's or a close-work case's check.
+Check: TypeAlias = ApproachCheck | StrikeCheck | CloseWorkCheck
 
 
 def braking_ticks(dq_command: np.ndarray) -> np.ndarray:
@@ -316,6 +425,8 @@ def run_case(spec: SweepSpec, seed: int) -> Check:
     """Simulate the case ``seed`` of ``spec``'s kind and judge it (module docstring)."""
     if spec.kind == "approach":  # the scenario random:SEED, seen through the bench's Kinect
         return _approach_check(seed, simulate_one(spec.run_spec(seed)))
+    if spec.kind == "closework":  # the operator at work beside the path, a clean camera
+        return _closework_run(spec, seed)
     robot = load_robot(spec.robot)  # the strike, aimed at its sets, seen through a faulty Kinect
     case = strike_case(seed, spec.max_speed_mps, robot)
     run_spec = spec.run_spec(seed, case.duration_s)
@@ -332,6 +443,16 @@ def run_case(spec: SweepSpec, seed: int) -> Check:
     return _strike_check(case, run)
 
 
+def _closework_run(spec: SweepSpec, seed: int) -> CloseWorkCheck:
+    """The close-work case ``seed`` of ``spec``, simulated and judged."""
+    robot = load_robot(spec.robot)
+    case = closework_case(seed, robot)
+    run_spec = spec.run_spec(seed, case.duration_s)
+    camera = CameraConfig.of(spec.camera, latency_s=run_spec.sensor_latency_s, seed=case.seed)
+    run = simulate_one(run_spec, closework_motion(case, robot), robot=robot, camera=camera)
+    return _closework_check(case, run)
+
+
 def _approach_check(seed: int, run: RunResult) -> ApproachCheck:
     spec = run.spec
     return ApproachCheck(
@@ -346,31 +467,82 @@ def _approach_check(seed: int, run: RunResult) -> ApproachCheck:
     )
 
 
-def _strike_check(case: StrikeCase, run: RunResult) -> StrikeCheck:
+def true_contact_fields(run: RunResult) -> dict[str, Any]:
+    """What a run judged against the truth says of contact, as fields of a check
+    (:class:`StrikeCheck`, :class:`CloseWorkCheck`): ``ticks_moving_in_true_contact``
+    (ticks in which the arm moved while a robot capsule touched the true person),
+    ``min_true_clearance_moving_m`` (the smallest true distance while it moved, m; +inf
+    if it never moved), and power and force limiting's judgement of each touch
+    (``ticks_moving_protected_contact``, ``ticks_contact_above_limit``,
+    ``ticks_contact_within_limit``, ``ticks_clamped``, ``max_contact_speed_mps``,
+    ``max_contact_speed_ratio``, ``max_contact_force_n``)."""
+    m = run.sim.metrics
+    clearance = m["min_true_clearance_moving_m"]
+    touched = m.get("true_contacts") or {}
+    return {
+        "ticks_moving_in_true_contact": int(m["ticks_moving_in_true_contact"]),
+        "min_true_clearance_moving_m": float("inf") if clearance is None else float(clearance),
+        "ticks_moving_protected_contact": int(touched.get("ticks_moving_protected", 0)),
+        "ticks_contact_above_limit": int(touched.get("ticks_above_limit", 0)),
+        "ticks_contact_within_limit": int(touched.get("ticks_within_limit", 0)),
+        "ticks_clamped": int(touched.get("ticks_clamped", 0)),
+        "max_contact_speed_mps": float(touched.get("max_speed_mps") or 0.0),
+        "max_contact_speed_ratio": float(touched.get("max_speed_ratio") or 0.0),
+        "max_contact_force_n": float(touched.get("max_force_n") or 0.0),
+    }
+
+
+def _run_fields(run: RunResult) -> dict[str, Any]:
+    """What every judged run reports besides contact: time moving and stopped, the goal,
+    the duration, limits broken and the controller's tick times."""
     m, log = run.sim.metrics, run.sim.log
     moving = np.any(log["dq"] != 0.0, axis=1)
-    clearance = m["min_true_clearance_moving_m"]
+    return {
+        "moving_s": float(moving.sum() / run.spec.rate_hz),
+        "stopped_s": float(m["stopped_s"]),
+        "reached_goal": bool(m["reached_goal"]),
+        "duration_s": float(m["duration_s"]),
+        "limit_violations": int(
+            m["joint_velocity_limit_violations"] + m["joint_position_limit_violations"]
+        ),
+        "tick_us_median": float(m["tick_us"]["median"]),
+        "tick_us_p99": float(m["tick_us"]["p99"]),
+        "command_limit_violations": sum(m["command_limit_violations"].values()),
+    }
+
+
+def _strike_check(case: StrikeCase, run: RunResult) -> StrikeCheck:
+    m = run.sim.metrics
     return StrikeCheck(
-        case.seed,
-        run.spec.controller,
-        run.spec.safety,
-        case.target,
-        case.speed_mps,
-        case.side,
-        case.both_hands,
-        case.fault,
-        int(m["ticks_moving_in_true_contact"]),
-        float("inf") if clearance is None else float(clearance),
-        float(moving.sum() / run.spec.rate_hz),
-        float(m["stopped_s"]),
-        max((e.get("robot_speed_mps", 0.0) for e in m["stop_events"]), default=0.0),
-        int(m["ticks_moving_below_stop_distance"] or 0),
-        bool(m["reached_goal"]),
-        float(m["duration_s"]),
-        int(m["joint_velocity_limit_violations"] + m["joint_position_limit_violations"]),
-        float(m["tick_us"]["median"]),
-        float(m["tick_us"]["p99"]),
-        sum(m["command_limit_violations"].values()),
+        seed=case.seed,
+        controller=run.spec.controller,
+        safety=run.spec.safety,
+        target=case.target,
+        speed_mps=case.speed_mps,
+        side=case.side,
+        both_hands=case.both_hands,
+        fault=case.fault,
+        max_stop_speed_mps=max(
+            (e.get("robot_speed_mps", 0.0) for e in m["stop_events"]), default=0.0
+        ),
+        ticks_moving_below_stop_distance=int(m["ticks_moving_below_stop_distance"] or 0),
+        **true_contact_fields(run),
+        **_run_fields(run),
+    )
+
+
+def _closework_check(case: CloseWorkCase, run: RunResult) -> CloseWorkCheck:
+    fields = _run_fields(run)
+    return CloseWorkCheck(
+        seed=case.seed,
+        controller=run.spec.controller,
+        safety=run.spec.safety,
+        variant=case.variant,
+        side=case.side,
+        # the run ends at the goal: its duration is the time to reach it
+        time_to_goal_s=fields["duration_s"] if fields["reached_goal"] else None,
+        **true_contact_fields(run),
+        **fields,
     )
 
 
@@ -413,8 +585,9 @@ def sweep(
 
 
 def summarize(checks: Sequence[Check]) -> dict[str, Any]:
-    """A sweep's totals (the ``qpavoid sweep`` summary for strikes); everything but a
-    strike sweep's ``timing`` is reproducible from the seeds.
+    """A sweep's totals (the ``qpavoid sweep`` summary for strikes and close work);
+    everything but a strike or close-work sweep's ``timing`` is reproducible from the
+    seeds.
 
     Raises
     ------
@@ -425,6 +598,8 @@ def summarize(checks: Sequence[Check]) -> dict[str, Any]:
         raise InputError("a sweep's summary needs at least one run", name="checks", value=[])
     if checks[0].kind == "approach":
         return _approach_totals(cast(Sequence[ApproachCheck], checks))
+    if checks[0].kind == "closework":
+        return _closework_totals(cast(Sequence[CloseWorkCheck], checks))
     return _strike_totals(cast(Sequence[StrikeCheck], checks))
 
 
@@ -446,33 +621,114 @@ def _approach_totals(checks: Sequence[ApproachCheck]) -> dict[str, Any]:
     }
 
 
-def _strike_totals(runs: Sequence[StrikeCheck]) -> dict[str, Any]:
+def _mm(x: float) -> float:
+    """``x`` m in mm, to the µm."""
+    return round(float(x) * 1e3, 3)
+
+
+def _clearance_totals(runs: Sequence[StrikeCheck | CloseWorkCheck]) -> dict[str, float | None]:
+    """The true clearance while moving over the runs that moved, mm: min, p01, median."""
     clear = np.array([r.min_true_clearance_moving_m for r in runs])
     moved = np.isfinite(clear)
+    return {
+        "min": _mm(clear[moved].min()) if moved.any() else None,
+        "p01": _mm(np.percentile(clear[moved], 1)) if moved.any() else None,
+        "median": _mm(np.median(clear[moved])) if moved.any() else None,
+    }
 
-    def mm(x: float) -> float:
-        return round(float(x) * 1e3, 3)
 
+def _timing(runs: Sequence[StrikeCheck | CloseWorkCheck]) -> dict[str, float]:
+    """The controller's tick times over the runs, µs: the median of the runs' medians,
+    the 99th percentile of their p99s."""
+    return {
+        "tick_us_median": float(np.median([r.tick_us_median for r in runs])),
+        "tick_us_p99": float(np.percentile([r.tick_us_p99 for r in runs], 99)),
+    }
+
+
+def _contact_totals(runs: Sequence[StrikeCheck | CloseWorkCheck]) -> dict[str, Any]:
+    """Power and force limiting over the runs (issue 29): runs whose arm moved while
+    touching the head, face, neck or trunk, runs touching an arm or hand region above its
+    limit (both must be zero), runs touching one within it (allowed with ``pfl``), runs
+    clamping, the contact ticks within limit, and the fastest touch, its ratio to its
+    limit and its force, with the medians over the runs that touched."""
+    touched = [r for r in runs if r.ticks_contact_within_limit or r.ticks_contact_above_limit]
+
+    def spread(values: list[float]) -> dict[str, float | None]:
+        return {
+            "max": round(float(np.max(values)), 6) if values else None,
+            "median": round(float(np.median(values)), 6) if values else None,
+        }
+
+    return {
+        "runs_touching_protected_regions": sum(r.ticks_moving_protected_contact > 0 for r in runs),
+        "runs_touching_above_limit": sum(r.ticks_contact_above_limit > 0 for r in runs),
+        "runs_touching_within_limit": sum(r.ticks_contact_within_limit > 0 for r in runs),
+        "runs_clamping": sum(r.ticks_clamped > 0 for r in runs),
+        "ticks_touching_within_limit": sum(r.ticks_contact_within_limit for r in runs),
+        "contact_speed_mps": spread([r.max_contact_speed_mps for r in touched]),
+        "contact_speed_ratio": spread([r.max_contact_speed_ratio for r in touched]),
+        "contact_force_n": spread([r.max_contact_force_n for r in touched]),
+    }
+
+
+def _strike_totals(runs: Sequence[StrikeCheck]) -> dict[str, Any]:
     return {
         "runs": len(runs),
         "runs_moving_in_true_contact": sum(r.ticks_moving_in_true_contact > 0 for r in runs),
         "runs_moving_below_stop_distance": sum(
             r.ticks_moving_below_stop_distance > 0 for r in runs
         ),
-        "true_clearance_moving_mm": {
-            "min": mm(clear[moved].min()) if moved.any() else None,
-            "p01": mm(np.percentile(clear[moved], 1)) if moved.any() else None,
-            "median": mm(np.median(clear[moved])) if moved.any() else None,
-        },
+        "true_clearance_moving_mm": _clearance_totals(runs),
         "fraction_reaching_goal": sum(r.reached_goal for r in runs) / len(runs),
         "mean_time_stopped_s": round(float(np.mean([r.stopped_s for r in runs])), 6),
         "mean_duration_s": round(float(np.mean([r.duration_s for r in runs])), 6),
         "runs_with_limit_violations": sum(r.limit_violations > 0 for r in runs),
         "runs_with_command_limit_violations": sum(r.command_limit_violations > 0 for r in runs),
-        "timing": {
-            "tick_us_median": float(np.median([r.tick_us_median for r in runs])),
-            "tick_us_p99": float(np.percentile([r.tick_us_p99 for r in runs], 99)),
+        "contacts": _contact_totals(runs),
+        "timing": _timing(runs),
+    }
+
+
+def _goal_times(runs: Sequence[CloseWorkCheck]) -> list[float]:
+    """The times to goal of the runs that reached it, s."""
+    return [r.time_to_goal_s for r in runs if r.time_to_goal_s is not None]
+
+
+def _closework_totals(runs: Sequence[CloseWorkCheck]) -> dict[str, Any]:
+    """Safety as strikes' (true contact, clearance), then productivity: the fraction of
+    runs reaching the goal, the time to it over those that did (None if none did), the
+    time stopped, per variant too."""
+    times = _goal_times(runs)
+    per_variant = {}
+    for variant in VARIANTS:
+        these = [r for r in runs if r.variant == variant]
+        if not these:
+            continue
+        reached = _goal_times(these)
+        per_variant[variant] = {
+            "runs": len(these),
+            "fraction_reaching_goal": sum(r.reached_goal for r in these) / len(these),
+            "time_to_goal_s_median": round(float(np.median(reached)), 6) if reached else None,
+            "mean_time_stopped_s": round(float(np.mean([r.stopped_s for r in these])), 6),
+            "runs_moving_in_true_contact": sum(r.ticks_moving_in_true_contact > 0 for r in these),
+        }
+    return {
+        "runs": len(runs),
+        "runs_moving_in_true_contact": sum(r.ticks_moving_in_true_contact > 0 for r in runs),
+        "true_clearance_moving_mm": _clearance_totals(runs),
+        "fraction_reaching_goal": sum(r.reached_goal for r in runs) / len(runs),
+        "time_to_goal_s": {
+            "median": round(float(np.median(times)), 6) if times else None,
+            "mean": round(float(np.mean(times)), 6) if times else None,
         },
+        "mean_time_stopped_s": round(float(np.mean([r.stopped_s for r in runs])), 6),
+        "mean_duration_s": round(float(np.mean([r.duration_s for r in runs])), 6),
+        "per_variant": per_variant,
+        "runs_with_limit_violations": sum(r.limit_violations > 0 for r in runs),
+        "runs_with_command_limit_violations": sum(r.command_limit_violations > 0 for r in runs),
+        "contacts": _contact_totals(runs),
+        "timing": _timing(runs),
     }
 
 

@@ -61,6 +61,7 @@ _PART_KEYS = (
     "capsule_radius_m",
     "reach",
     "moves_with_body",
+    "region",
 )
 
 
@@ -88,6 +89,10 @@ class BodyPart:
         The part moves with the body, not the arm (the head and trunk of a seated
         person): speed and separation monitoring gives it the body's approach speed.
         Default False: an arm's part, the faster case.
+    region
+        The ISO/TS 15066 Annex A body region the part is (a name of
+        ``qpavoid/laws/body_regions.toml``, e.g. ``"hand_finger"``): power and force limiting
+        takes its limits from it (:mod:`qpavoid.laws.pfl`). None (the default): no region.
     """
 
     name: str
@@ -97,6 +102,7 @@ class BodyPart:
     capsule_radius_m: float
     reach: tuple[Joint, ...] = ()
     moves_with_body: bool = False
+    region: str | None = None
 
 
 @dataclass(frozen=True)
@@ -174,8 +180,9 @@ class BodyModel:
     Raises
     ------
     SkeletonFormatError
-        For a part that names a joint the format does not have, two parts of one name, or
-        a radius that is not a positive number.
+        For a part that names a joint the format does not have, two parts of one name, a
+        radius that is not a positive number, or a region that is not a name (whether the
+        region table has it is :mod:`qpavoid.laws.pfl`'s to check).
     """
 
     parts: tuple[BodyPart, ...]
@@ -249,6 +256,13 @@ class BodyModel:
                     raise SkeletonFormatError(
                         f"part {p.name!r}: {key} is {r!r}", name=f"{p.name}.{key}", value=r
                     )
+            if p.region is not None and (not isinstance(p.region, str) or not p.region.strip()):
+                raise SkeletonFormatError(
+                    f"part {p.name!r}: region must name a body region (text) or be absent, "
+                    f"got {p.region!r}",
+                    name=f"{p.name}.region",
+                    value=p.region,
+                )
             if not p.chain or len(p.mid) != 2:
                 raise SkeletonFormatError(
                     f"part {p.name!r} needs a chain of joints and two mid joints, got chain "
@@ -325,6 +339,13 @@ class BodyModel:
     def body_parts(self) -> tuple[str, ...]:
         """Names of the parts that move with the body (:attr:`BodyPart.moves_with_body`)."""
         return tuple(p.name for p in self.parts if p.moves_with_body)
+
+    @property
+    def regions(self) -> tuple[str | None, ...]:
+        """Each part's ISO/TS 15066 body region (:attr:`BodyPart.region`), None where the
+        part names none; power and force limiting's ``part_regions``
+        (:meth:`qpavoid.laws.pfl.PFLConfig.part_limits`)."""
+        return tuple(p.region for p in self.parts)
 
     @property
     def sphere_radii(self) -> np.ndarray:
@@ -453,6 +474,13 @@ def read_body_file(path: str | Path) -> tuple[tuple[str, ...], tuple[BodyPart, .
                 f"parts[{k}].moves_with_body",
                 moves,
             )
+        region = row.get("region")
+        if region is not None and (not isinstance(region, str) or not region.strip()):
+            raise fail(
+                f"parts[{k}].region must name a body region (text), got {region!r}",
+                f"parts[{k}].region",
+                region,
+            )
         parts.append(
             BodyPart(
                 row["name"],
@@ -462,6 +490,7 @@ def read_body_file(path: str | Path) -> tuple[tuple[str, ...], tuple[BodyPart, .
                 row["capsule_radius_m"],
                 tuple(row.get("reach", ())),
                 moves,
+                region,
             )
         )
     return tuple(points), tuple(parts), format_name

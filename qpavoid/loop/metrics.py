@@ -16,6 +16,7 @@ import numpy as np
 from qpavoid.arm.model import Robot
 from qpavoid.control.tick import Command
 from qpavoid.laws.avoidance import AvoidanceConfig, set_stop_distances, stop_rule_prefixes
+from qpavoid.loop.truth import TrueContact
 
 
 def end_of_run(
@@ -130,6 +131,63 @@ def truth_metrics(
     }
 
 
+def contact_metrics(contacts: dict[int, list[TrueContact]], moving: np.ndarray) -> dict[str, Any]:
+    """Power and force limiting judged against the truth: the ``true_contacts`` metric.
+
+    ``contacts`` maps each tick in true contact to its pairs
+    (:meth:`~qpavoid.loop.truth.TrueClearance.contacts`); ``moving`` (T,) says which ticks
+    the arm moved in. Returns tick counts (a tick counts once, by its worst pair):
+
+    * ``ticks_moving_protected``: the arm moving while touching a region that permits no
+      contact (head, face, neck, trunk); must be zero in every mode;
+    * ``ticks_above_limit``: a permitted region (arm, hand) touched faster than its
+      transient limit (or with no limit known); must be zero;
+    * ``ticks_within_limit``: every pair touched within its region's limit (allowed with
+      ``safety="pfl"``);
+    * ``ticks_clamped``: a permitted region touched where it could be pinned against the
+      fixed surface (its limit is no approach at all: above it counts in
+      ``ticks_above_limit``);
+
+    and over the contacts with permitted regions: ``max_speed_mps``, ``max_speed_ratio``
+    (speed / limit, over the parts not clamped), ``max_force_n`` (None without any), and
+    ``by_region`` (ticks per region).
+    """
+    protected = above = within = clamped = 0
+    speeds, ratios, forces = [], [], []
+    by_region: dict[str, int] = {}
+    for k, pairs in contacts.items():
+        if bool(moving[k]) and any(not c.permitted for c in pairs):
+            protected += 1
+        touched = [c for c in pairs if c.permitted]
+        clamped += any(c.clamped for c in touched)
+        if touched:
+            if all(c.within_limit for c in touched):
+                within += 1
+            else:
+                above += 1
+        for region in {c.region or "none" for c in pairs}:
+            by_region[region] = by_region.get(region, 0) + 1
+        for c in touched:
+            speeds.append(c.speed_mps)
+            if c.limit_mps > 0.0:  # (a clamped part's limit is 0: counted on its own)
+                ratios.append(c.speed_mps / c.limit_mps)
+            forces.append(c.force_n)
+
+    def top(x: list[float]) -> float | None:
+        return round(float(np.max(x)), 6) if x else None
+
+    return {
+        "ticks_moving_protected": protected,
+        "ticks_above_limit": above,
+        "ticks_within_limit": within,
+        "ticks_clamped": clamped,
+        "max_speed_mps": top(speeds),
+        "max_speed_ratio": top(ratios),
+        "max_force_n": top(forces),
+        "by_region": dict(sorted(by_region.items())),
+    }
+
+
 def run_metrics(
     log: dict[str, np.ndarray],
     robot: Robot,
@@ -228,7 +286,28 @@ def describe(m: dict[str, Any]) -> str:
             f"position {m['joint_position_limit_violations']}"
         )
         + (_input_line(m["input"]) if "input" in m else "")
+        + _contact_line(m)
         + _loop_line(m)
+    )
+
+
+def _contact_line(m: dict[str, Any]) -> str:
+    """The true contacts as power and force limiting judges them (none: no line)."""
+    c = m.get("true_contacts")
+    if not c or not (
+        c["ticks_within_limit"] or c["ticks_above_limit"] or c["ticks_moving_protected"]
+    ):
+        return ""
+    fastest = (
+        f" (fastest {c['max_speed_mps']:.3f} m/s, {c['max_speed_ratio']:.2f} of its limit, "
+        f"{c['max_force_n']:.0f} N)"
+        if c["max_speed_mps"] is not None and c["max_speed_ratio"] is not None
+        else ""
+    )
+    return (
+        f"\n  true contacts: {c['ticks_within_limit']} ticks within the regions' limits"
+        f"{fastest}, {c['ticks_above_limit']} above, {c['ticks_clamped']} clamped, "
+        f"{c['ticks_moving_protected']} moving against the head or trunk"
     )
 
 

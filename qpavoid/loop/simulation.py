@@ -52,7 +52,13 @@ from qpavoid.drive.watchdog import Watchdog
 from qpavoid.human.frames import HumanFrame, HumanMotion
 from qpavoid.human.people import People
 from qpavoid.loop.camera import Camera, CameraConfig
-from qpavoid.loop.metrics import end_of_run, measured_motion, run_metrics, truth_metrics
+from qpavoid.loop.metrics import (
+    contact_metrics,
+    end_of_run,
+    measured_motion,
+    run_metrics,
+    truth_metrics,
+)
 from qpavoid.loop.run_log import TEXT_KEYS, finished, new_log, repulsion_keys
 from qpavoid.loop.timing import LoopTiming, StallCheck
 from qpavoid.loop.truth import TrueClearance
@@ -225,7 +231,7 @@ def simulate(
         else ArmResponse(cfg.braking.resolve(robot.arm), robot.joint_names, dt)
     )
     truth = (
-        TrueClearance(robot, controller.human, motion)
+        TrueClearance(robot, controller.human, motion, controller.config.pfl)
         if cfg.measure_truth and motion is not None
         else None
     )
@@ -413,6 +419,13 @@ def simulate(
         ending["watchdog_fired"] = True
     moving = None if arm is None else measured_motion(robot, log["q"], log["t"])
     ending |= truth_metrics(log, robot, avoidance, stop_events, dt, moving)
+    if truth is not None:  # each tick in true contact: its regions, speeds and limits
+        touching = np.flatnonzero(np.any(log["true_distance"] <= 0.0, axis=1))
+        contacts = {
+            int(k): truth.contacts(log["q"][k], log["dq"][k], log["t"][k]) for k in touching
+        }
+        moved = np.any(log["dq"] != 0.0, axis=1) if moving is None else moving
+        ending["true_contacts"] = contact_metrics(contacts, moved)
     if arm is None:  # offline: the whole stream at once, after the run
         checked.stream(log["dq_command"])
     ending["command_limit_violations"] = dict(checked.counts)

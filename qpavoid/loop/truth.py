@@ -12,19 +12,32 @@ true person, whatever distance method the controller uses: against the arm's rea
 where its URDF has collision meshes (:class:`MeshClearance`: coal, the person's capsules
 against the meshes and shapes of the links each set covers), otherwise the exact capsule
 distance (coal) of the set's capsule.
+
+:meth:`TrueClearance.contacts` judges each tick in true contact for power and force
+limiting (ISO/TS 15066 Annex A): per robot set × body part pair in contact, the part's body
+region, the robot point's true speed towards it (the arm's real joint velocity through the
+point's Jacobian, along the normal from the part's axis to the point), the region's
+transient speed limit at that point (the arm's true effective mass there, eq. A.6,
+:mod:`qpavoid.laws.pfl`) and the force that speed would transfer.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import coal
 import numpy as np
 import pinocchio as pin
 
+from qpavoid.arm.description import RobotDescriptionError
+from qpavoid.arm.inertia import EffectiveMass
 from qpavoid.arm.meshes import collision_geometry, object_vertices
 from qpavoid.arm.model import Kinematics, Robot
+from qpavoid.core.geometry import unit
 from qpavoid.distance.capsules import CapsuleDistance, axis_rotation
 from qpavoid.human.body import BodyModel, HumanGeometry
 from qpavoid.human.frames import HumanFrame, HumanMotion
+from qpavoid.laws.pfl import PFLConfig, clampable, contact_force_n, transient_speed_limit_mps
 from qpavoid.loop.crowd import Crowd
 from qpavoid.sensing.recording import Recording
 
@@ -113,14 +126,50 @@ class MeshClearance:
         distance = np.full(len(self.objects), np.inf)
         for k in np.flatnonzero(self.on_set[near].any(axis=0)):
             obj = self.objects[k]
-            placement = self.data.oMi[obj.parentJoint] * obj.placement
-            tf = coal.Transform3s(placement.rotation, placement.translation)
-            for shape, tf_h in person:
+            tf = self._placement(obj)
+            for _, shape, tf_h in person:
                 self.result.clear()
                 d = coal.distance(obj.geometry, tf, shape, tf_h, self.request, self.result)
                 distance[k] = min(distance[k], d)
         per_set = np.where(self.on_set, distance[None, :], np.inf).min(axis=1)
         return np.where(near, per_set, capsule)
+
+    def pairs(
+        self, q: np.ndarray, sets: np.ndarray, geo: HumanGeometry
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each of ``sets``' true distance to each usable part, from its objects.
+
+        Returns
+        -------
+        distance
+            (len(sets), K) m (+inf for a part not usable).
+        robot_point
+            (len(sets), K, 3) the objects' witness point, base frame, m (NaN where +inf).
+        joint
+            (len(sets), K) the Pinocchio joint carrying that point (-1 where +inf).
+        """
+        n_parts = len(self.radii)
+        distance = np.full((len(sets), n_parts), np.inf)
+        point = np.full((len(sets), n_parts, 3), np.nan)
+        joint = np.full((len(sets), n_parts), -1)
+        pin.forwardKinematics(self.robot.model, self.data, q)
+        person = self._person(geo)
+        for i, s in enumerate(sets):
+            for k in np.flatnonzero(self.on_set[s]):
+                obj = self.objects[k]
+                tf = self._placement(obj)
+                for part, shape, tf_h in person:
+                    self.result.clear()
+                    d = coal.distance(obj.geometry, tf, shape, tf_h, self.request, self.result)
+                    if d < distance[i, part]:
+                        distance[i, part], joint[i, part] = d, obj.parentJoint
+                        point[i, part] = self.result.getNearestPoint1()
+        return distance, point, joint
+
+    def _placement(self, obj: pin.GeometryObject) -> coal.Transform3s:
+        """Where ``obj`` is at the joint placements last computed."""
+        placement = self.data.oMi[obj.parentJoint] * obj.placement
+        return coal.Transform3s(placement.rotation, placement.translation)
 
     @staticmethod
     def _gap(robot: Robot, s: int, obj: pin.GeometryObject, body: int) -> float:
@@ -137,9 +186,9 @@ class MeshClearance:
         gap = np.linalg.norm(v - (a + t[:, None] * (b - a)), axis=1) - cs.capsule_radius_m
         return float(gap.max())
 
-    def _person(self, geo: HumanGeometry) -> list[tuple[coal.Capsule, coal.Transform3s]]:
-        """The person's usable parts as coal capsules, radii widened by the fingers'
-        reach (and the part margin, zero for the truth)."""
+    def _person(self, geo: HumanGeometry) -> list[tuple[int, coal.Capsule, coal.Transform3s]]:
+        """The person's usable parts (index, coal capsule, placement), radii widened by the
+        fingers' reach (and the part margin, zero for the truth)."""
         widen = np.zeros(len(self.radii))
         for extra in (geo.part_margin, geo.reach_margin):
             if extra is not None:
@@ -154,8 +203,59 @@ class MeshClearance:
             tf.setTranslation(0.5 * (a + b))
             shape = coal.Capsule(float(self.radii[k] + widen[k]), 0.0)
             shape.halfLength = half  # (the constructor takes the full length)
-            out.append((shape, tf))
+            out.append((int(k), shape, tf))
         return out
+
+
+#: A robot point approaching a clamped part no faster than this is not pushing it, m/s
+#: (1 mm/s: the residue of a braking ramp's other joints along the normal).
+CREEP_MPS = 0.001
+
+
+@dataclass(frozen=True)
+class TrueContact:
+    """One robot set touching one body part at one tick, judged against the truth.
+
+    Attributes
+    ----------
+    set_name, part
+        The pair.
+    region
+        The part's Annex A body region (:mod:`qpavoid.laws.pfl`; None if the body model
+        names none).
+    permitted
+        The region permits transient contact (arms, hands); False for the head, face, neck
+        and trunk.
+    clamped
+        The part could be pinned against the fixed surface at this contact
+        (:func:`~qpavoid.laws.pfl.clampable`): quasi-static, its limit 0 (no approach).
+    distance_m
+        The true distance (≤ 0: touching or penetrating), m.
+    speed_mps
+        The robot point's true speed towards the part (≥ 0: 0 when moving away), m/s.
+    limit_mps
+        The region's transient contact speed at that point (eq. A.5, the arm's effective
+        mass there along the normal), m/s; 0 for a clamped part; NaN if the arm has no
+        inertias.
+    force_n
+        The force that speed would transfer (:func:`~qpavoid.laws.pfl.contact_force_n`), N.
+    """
+
+    set_name: str
+    part: str
+    region: str | None
+    permitted: bool
+    clamped: bool
+    distance_m: float
+    speed_mps: float
+    limit_mps: float
+    force_n: float
+
+    @property
+    def within_limit(self) -> bool:
+        """A permitted region, touched no faster than its limit (a clamped one: not
+        approached faster than :data:`CREEP_MPS`); False if unknown."""
+        return self.permitted and self.speed_mps <= max(self.limit_mps, CREEP_MPS)
 
 
 class TrueClearance:
@@ -170,23 +270,113 @@ class TrueClearance:
         The arm and the body model.
     motion
         The true motion (a scenario or a recording).
+    pfl
+        The payload and the regions' limits the contacts are judged with (default:
+        :class:`~qpavoid.laws.pfl.PFLConfig`'s).
     """
 
-    def __init__(self, robot: Robot, human: BodyModel, motion: HumanMotion):
-        self.human, self.motion = human, motion
+    def __init__(
+        self, robot: Robot, human: BodyModel, motion: HumanMotion, pfl: PFLConfig | None = None
+    ):
+        self.robot, self.human, self.motion = robot, human, motion
         self.capsules = CapsuleDistance(robot, human)
         self.meshes = MeshClearance(robot, human)
         self.n_sets = len(robot.sets)
         self.t0 = float(np.asarray(getattr(motion, "t", [0.0]))[0])
+        cfg = pfl or PFLConfig()
+        try:  # an arm without inertias is judged on its speeds alone (limits NaN)
+            self.mass: EffectiveMass | None = EffectiveMass(robot, cfg.payload_kg)
+        except RobotDescriptionError:
+            self.mass = None
+        contact, force, spring, mass = cfg.part_limits(human.regions)
+        self.permitted = np.asarray(contact, dtype=bool)
+        self.force_n, self.spring_npm = np.asarray(force), np.asarray(spring)
+        self.human_kg = np.asarray(mass)
+        self.surface_z_m, self.clamp_gap_m = cfg.surface_z_m, cfg.clamp_gap_m
 
     def __call__(self, kin: Kinematics, t: float) -> np.ndarray:
         """(S,) the smallest true distance of each robot set at run time ``t``, m."""
+        geos = self._geometries(t)
+        per_person = [self._one(kin, g) for g in geos]
+        return np.min(per_person, axis=0) if per_person else np.full(self.n_sets, np.inf)
+
+    def _geometries(self, t: float) -> list[HumanGeometry]:
+        """The true geometry of everybody present at run time ``t``."""
         if isinstance(self.motion, Crowd):  # the nearest of everybody present
             people = self.motion.true_frames(t, true_frame).frames
-            per_person = [self._one(kin, self.human.geometry(f)) for f in people]
-            return np.min(per_person, axis=0) if per_person else np.full(self.n_sets, np.inf)
-        return self._one(kin, self.human.geometry(true_frame(self.motion, self.t0 + t)))
+            return [self.human.geometry(f) for f in people]
+        return [self.human.geometry(true_frame(self.motion, self.t0 + t))]
 
     def _one(self, kin: Kinematics, geometry: HumanGeometry) -> np.ndarray:
         """(S,) one person's true distance per set, m."""
         return self.meshes(kin.q, self.capsules(kin, geometry).min_per_set(), geometry)
+
+    def contacts(self, q: np.ndarray, dq: np.ndarray, t: float) -> list[TrueContact]:
+        """Every set × part pair truly in contact at run time ``t`` (module docstring),
+        with the arm at ``q`` moving at ``dq`` (rad/s, its real joint velocity)."""
+        kin = self.robot.kinematics(q)
+        out: list[TrueContact] = []
+        for geo in self._geometries(t):
+            table = self.capsules(kin, geo)
+            distance, point = table.distance.copy(), table.robot_point.copy()
+            joint = np.full(distance.shape, -1)  # -1: the capsule's point
+            if self.meshes.has_mesh:
+                near = (
+                    table.min_per_set() - self.meshes.excess <= self.meshes.margin_m
+                ) & self.meshes.on_set.any(axis=1)
+                sets = np.flatnonzero(near)
+                if len(sets):
+                    distance[sets], point[sets], joint[sets] = self.meshes.pairs(q, sets, geo)
+            for s, k in zip(*np.nonzero(distance <= 0.0), strict=True):
+                if joint[s, k] < 0:
+                    jac = kin.segment_point_jacobian(int(s), float(table.robot_s[s, k]))
+                else:
+                    jac = self._point_jacobian(q, int(joint[s, k]), point[s, k])
+                out.append(
+                    self._contact(q, dq, int(s), int(k), distance[s, k], point[s, k], jac, geo)
+                )
+        return out
+
+    def _point_jacobian(self, q: np.ndarray, joint: int, p: np.ndarray) -> np.ndarray:
+        """(3, nv) the Jacobian of the point ``p`` (base frame, m) fixed to ``joint``:
+        ``v_p = v_o + ω × (p − o)`` from Pinocchio's joint Jacobian (world-aligned)."""
+        model, data = self.robot.model, self.meshes.data
+        pin.computeJointJacobians(model, data, q)
+        j6 = pin.getJointJacobian(model, data, joint, pin.LOCAL_WORLD_ALIGNED)
+        return j6[:3] - pin.skew(p - data.oMi[joint].translation) @ j6[3:]
+
+    def _contact(
+        self,
+        q: np.ndarray,
+        dq: np.ndarray,
+        s: int,
+        k: int,
+        distance: float,
+        p: np.ndarray,
+        jac: np.ndarray,
+        geo: HumanGeometry,
+    ) -> TrueContact:
+        """The pair (set ``s``, part ``k``) touching at ``p`` with point Jacobian ``jac``."""
+        a, b = geo.segments[k]
+        axis = b - a
+        u = float(np.clip((p - a) @ axis / max(float(axis @ axis), 1e-300), 0.0, 1.0))
+        n = unit(p - (a + u * axis), np.array([0.0, 0.0, 1.0]))  # from the part to the arm
+        speed = max(0.0, -float(n @ (jac @ dq)))
+        m_robot = float(self.mass(q, jac[None], n[None])[0]) if self.mass is not None else np.nan
+        force, spring, m_h = self.force_n[k], self.spring_npm[k], self.human_kg[k]
+        radius = self.human.capsule_radii[k] + np.asarray(geo.reach_margin)[k]
+        clamped = bool(
+            clampable(a + u * axis + radius * n, n, radius, self.surface_z_m, self.clamp_gap_m)
+        )
+        limit = float(transient_speed_limit_mps(force, spring, m_h, m_robot))
+        return TrueContact(
+            self.robot.set_names[s],
+            self.human.part_names[k],
+            self.human.regions[k],
+            bool(self.permitted[k]),
+            clamped,
+            float(distance),
+            speed,
+            0.0 if clamped and np.isfinite(limit) else limit,
+            float(contact_force_n(speed, spring, m_h, m_robot)),
+        )

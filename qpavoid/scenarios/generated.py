@@ -11,7 +11,13 @@ at the camera rate (sample and hold).
 * ``test2`` (paper Sect. 6.2) the right hand comes close to L1 (near A3) until f
   exceeds 0.8 and the robot stops; it holds there, then withdraws;
 * ``random:SEED`` (:func:`random_approach`) a hand moving at up to 1.6 m/s towards a
-  random point of a random robot set, from a random direction, at a random time.
+  random point of a random robot set, from a random direction, at a random time;
+* ``closework:SEED`` (:mod:`qpavoid.scenarios.closework`) the operator working within
+  reach of the path, never at the robot: hands resting or working 0.1-0.3 m from it,
+  reaching across it, or handing over a part; ``rest_near``, ``work_near``,
+  ``reach_across`` and ``handover`` are the fixed cases of
+  :data:`~qpavoid.scenarios.closework.FIXED_SEEDS` (``closework:1``, ``closework:5``,
+  ``closework:3``, ``closework:0``).
 
 Targets are placed against the robot's *nominal* motion (the path tracked with nobody
 near, :func:`nominal_configurations`), so they stay right if the path or radii change.
@@ -42,6 +48,13 @@ from qpavoid.distance.methods import distance_method
 from qpavoid.human.body import KinectHuman
 from qpavoid.human.posture import Operator
 from qpavoid.human.skeleton import TRACKED
+from qpavoid.scenarios.closework import (
+    FIXED_SEEDS,
+    VARIANTS,
+    CloseWork,
+    closework_case,
+    closework_motion,
+)
 
 
 @dataclass(frozen=True)
@@ -168,8 +181,10 @@ def make_scenario(
     human: KinectHuman | None = None,
     operator: Operator | None = None,
     task: Task | None = None,
-) -> ScriptedReach | Working:
-    """The generated motion called ``name`` (``free``, ``test1``, ``test2``, ``random:SEED``).
+) -> ScriptedReach | Working | CloseWork:
+    """The generated motion called ``name`` (``free``, ``test1``, ``test2``, ``random:SEED``,
+    ``closework:SEED`` and the fixed close-work cases ``rest_near``, ``work_near``,
+    ``reach_across``, ``handover``: module docstring).
 
     ``task`` (default: the arm's, :func:`~qpavoid.control.task.default_task`) gives the
     path and where the operator sits, unless ``path`` and ``operator`` are given.
@@ -230,12 +245,17 @@ def make_scenario(
             ("spheres", "capsules"),
         )
         return reach_and_return(op, "right", target, (1.0, 4.0, 9.0, 11.0))
-    rng = np.random.default_rng(check_scenario_name(name))
-    return random_approach(rng, robot, path, operator, task=task)
+    seed = check_scenario_name(name)
+    if name in VARIANTS or name.startswith(CLOSEWORK_PREFIX):
+        task = replace(task, path=path, operator=op)
+        case = closework_case(FIXED_SEEDS[name] if seed is None else seed, robot, task)
+        return closework_motion(case, robot, task=task)
+    return random_approach(np.random.default_rng(seed), robot, path, operator, task=task)
 
 
 def check_scenario_name(name: str) -> int | None:
-    """Check that ``name`` is a scenario; return the seed of ``random:SEED`` (else None).
+    """Check that ``name`` is a scenario; return the seed of ``random:SEED`` or
+    ``closework:SEED`` (else None).
 
     Raises
     ------
@@ -244,18 +264,22 @@ def check_scenario_name(name: str) -> int | None:
     """
     if name in SCENARIOS:
         return None
-    seed = name[len("random:") :] if name.startswith("random:") else None
+    prefix = next((p for p in (RANDOM_PREFIX, CLOSEWORK_PREFIX) if name.startswith(p)), None)
+    seed = name[len(prefix) :] if prefix is not None else None
     if seed is not None and seed.isdigit() and seed.isascii():
         return int(seed)
     raise InputError(
-        f"unknown scenario {name!r}; choose from {', '.join(SCENARIOS)} or "
-        "random:SEED (SEED a whole number >= 0)",
+        f"unknown scenario {name!r}; choose from {', '.join(SCENARIOS)}, "
+        f"{RANDOM_PREFIX}SEED or {CLOSEWORK_PREFIX}SEED (SEED a whole number >= 0)",
         name="scenario",
         value=name,
     )
 
 
-SCENARIOS = ("test1", "test2", "free")
+#: The scenarios by name: the paper's, the operator at work, the fixed close-work cases.
+SCENARIOS = ("test1", "test2", "free", *VARIANTS)
+#: The seeded scenarios' names start so: ``random:SEED``, ``closework:SEED``.
+RANDOM_PREFIX, CLOSEWORK_PREFIX = "random:", "closework:"
 
 
 def random_approach(

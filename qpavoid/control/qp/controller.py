@@ -103,7 +103,7 @@ class QPController(Controller):
         self.qp = qp or QPConfig()
         w, cfg = self.qp, self.config
         self.variables = x = Variables(robot.nv)
-        ssm = cfg.safety == "ssm"
+        ssm = cfg.monitors_separation
         d_stop = set_stop_distances(cfg.avoidance, self.roles, len(robot.sets))
         self.ee_task = EndEffectorTask(x, w.weight_position, w.weight_orientation)
         pieces: list[QPPiece[Tick]] = [

@@ -14,7 +14,11 @@ d_i, or not seen, get the bound +inf.
 
 With speed and separation monitoring (``safety="ssm"``) the bound is reduced by the part's
 own speed towards the set (``Tick.human_approach``): the robot slows, or retreats, before
-a fast hand closes the gap.
+a fast hand closes the gap. With power and force limiting (``safety="pfl"``) a pair whose
+part permits contact may approach at its permitted contact speed where that is larger
+(``Tick.contact_limit``, :mod:`qpavoid.control.contact`): the damper's hard bound becomes
+``max(ξ (d − d_s)/(d_i − d_s) − v_h,n, v_max)``, and the avoidance of those parts is left
+to the soft repulsion tasks.
 """
 
 from __future__ import annotations
@@ -81,3 +85,5 @@ class VelocityDamper(QPPiece[Tick]):
             G,
             h,
         )
+        if tick.contact_limit is not None:  # pfl: a transient contact's speed is permitted
+            np.maximum(h, tick.contact_limit.reshape(-1), out=h)

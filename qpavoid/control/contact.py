@@ -1,0 +1,121 @@
+"""Power and force limiting (``safety="pfl"``): each pair's permitted contact speed, per tick.
+
+ISO/TS 15066 §5.5.5 permits contact with the body regions of its Annex A other than the
+head, face, neck and trunk, as long as the robot's speed towards the region at the moment
+of contact keeps the transferred energy within the region's limit (eq. A.6,
+:func:`~qpavoid.laws.pfl.transient_speed_limit_mps`):
+
+    v_max = F_T / sqrt(μ k),    μ = (1/m_H + 1/m_R)⁻¹,    m_R = (nᵀ J_p M⁻¹ J_pᵀ n)⁻¹
+
+with F_T the region's transient permissible force, k its effective spring constant, m_H
+its effective mass (Tables A.2 and A.3, :mod:`qpavoid.laws.pfl`), and m_R the arm's
+effective mass at the pair's robot point p along the pair's normal n, from the mass
+matrix M (payload included) and the point's Jacobian J_p (:class:`~qpavoid.arm.inertia.
+EffectiveMass`). For a pair whose part permits contact, the speed and separation bound on
+the robot point's approach speed ``−nᵀ J_p q̇`` becomes
+
+    −nᵀ J_p q̇  ≤  max(v_SSM(d), v_max)        (separation holds, or the contact is transient)
+
+except where the pair is already in contact (d ≤ 0, as perceived), or where the part could
+be pinned against the fixed surface (the table its forearms and hands rest on,
+:func:`~qpavoid.laws.pfl.clampable`): there the bound is ``max(v_SSM(d), 0)``. The robot
+never pushes on into a part it touches, nor towards a part it could clamp: a contact stays
+transient, never quasi-static. The head and trunk keep the speed and separation bound.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from qpavoid.arm.inertia import EffectiveMass
+from qpavoid.arm.model import Kinematics, Robot
+from qpavoid.distance.table import DistanceTable
+from qpavoid.human.body import BodyModel, HumanGeometry
+from qpavoid.laws.pfl import PFLConfig, clampable, transient_speed_limit_mps
+
+__all__ = ["ContactLimits"]
+
+
+class ContactLimits:
+    """The permitted contact speed of every set × part pair (build once per controller).
+
+    Parameters
+    ----------
+    robot
+        The arm (its inertias: a description without them cannot use ``pfl``).
+    human
+        The body model (each part's Annex A region, ``BodyModel.regions``).
+    config
+        The payload and the regions' table (:class:`~qpavoid.laws.pfl.PFLConfig`).
+
+    Raises
+    ------
+    RobotDescriptionError
+        If the arm's description has no inertias.
+    InputError
+        If the payload is outside the arm's rating, or a part names a region the table
+        lacks.
+    """
+
+    def __init__(self, robot: Robot, human: BodyModel, config: PFLConfig):
+        self.mass = EffectiveMass(robot, config.payload_kg)
+        contact, force, spring, mass = config.part_limits(human.regions)
+        #: (K,) True for the parts whose region permits transient contact
+        self.contact = np.asarray(contact, dtype=bool)
+        self.force_n, self.spring_npm = np.asarray(force), np.asarray(spring)
+        self.human_kg = np.asarray(mass)
+        self.radii = np.asarray(human.capsule_radii, dtype=float)
+        self.surface_z_m, self.clamp_gap_m = config.surface_z_m, config.clamp_gap_m
+
+    def __call__(
+        self,
+        kin: Kinematics,
+        table: DistanceTable,
+        geos: list[HumanGeometry],
+        who: np.ndarray,
+    ) -> np.ndarray:
+        """(S, K) each pair's permitted contact speed, m/s: v_max where the pair's part
+        permits contact and is seen, 0 where it is already touched (d ≤ 0) or could be
+        clamped, −inf elsewhere (the head and trunk, parts not seen: no contact permitted).
+
+        Parameters
+        ----------
+        kin
+            The arm's kinematics (with Jacobians).
+        table
+            The distance table (its witness points and directions).
+        geos, who
+            Everybody's geometry as perceived and the person of each pair (S, K): the
+            parts' radii, widened by their uncertainty, for :func:`~qpavoid.laws.pfl.
+            clampable`.
+        """
+        d = table.distance
+        out = np.full(d.shape, -np.inf)
+        pairs = self.contact[None, :] & np.isfinite(d)
+        if not pairs.any():
+            return out
+        sets, parts = np.nonzero(pairs)
+        jac = table.robot_jacobians(kin, sets, parts)
+        m_robot = self.mass(kin.q, jac, table.vector[sets, parts])
+        v_max = transient_speed_limit_mps(
+            self.force_n[parts], self.spring_npm[parts], self.human_kg[parts], m_robot
+        )
+        margin = np.array(
+            [
+                np.asarray(geos[p].part_margin)[k]
+                for p, k in zip(who[sets, parts], parts, strict=True)
+            ]
+        )
+        pinned = clampable(
+            table.human_point[sets, parts],
+            table.vector[sets, parts],
+            self.radii[parts] + margin,
+            self.surface_z_m,
+            self.clamp_gap_m,
+        )
+        out[sets, parts] = np.where((d[sets, parts] <= 0.0) | pinned, 0.0, v_max)
+        return out
+
+    def protected(self) -> np.ndarray:
+        """(K,) True for the parts whose region permits no contact (head, trunk)."""
+        return ~self.contact

@@ -1,0 +1,262 @@
+"""Power and force limiting in the controllers and in the true-contact judge (issue 29).
+
+Each pair's permitted contact speed against an independent computation (finite-difference
+Jacobian, numpy's inverse of Pinocchio's mass matrix), the bounds of the head and trunk
+untouched, the stop rules for them only, clamping, and the judge's speeds against finite
+differences of the true distance.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import qpavoid
+from qpavoid.control.task import default_task, inverse_kinematics
+from qpavoid.experiments.run_spec import RunSpec
+from qpavoid.experiments.runs import simulate_one
+from qpavoid.laws.pfl import PFLConfig, clampable, transient_speed_limit_mps
+from qpavoid.loop.metrics import contact_metrics
+from qpavoid.loop.truth import TrueClearance, TrueContact
+
+
+def _controller(robot, safety, kind=qpavoid.QPController):
+    return kind(robot, config=qpavoid.ControllerConfig(safety=safety, control_period_s=0.01))
+
+
+def _start(robot):
+    return inverse_kinematics(robot, default_task(robot).path.reference(0.0)[0])
+
+
+def _hand_near(robot, q, set_name, gap_m, side="right"):
+    """The seated operator, the ``side`` hand ``gap_m`` beyond the set's capsule surface,
+    towards the operator (+y), at the capsule's middle."""
+    op = default_task(robot).operator
+    a, b = robot.capsules(q)[robot.set_index(set_name)]
+    r = robot.capsule_radii[robot.set_index(set_name)]
+    target = 0.5 * (a + b) + np.array([0.0, r + gap_m + 0.05, 0.0])  # hand radius 0.05
+    return op.reach(op.rest(), side, target)
+
+
+def _fd_jacobian(robot, q, s, u, eps=1e-7):
+    """(3, nv) the Jacobian of the point at parameter u on set s's capsule axis, by central
+    differences of the capsule ends (no Pinocchio Jacobian involved)."""
+    out = np.zeros((3, robot.nv))
+    for j in range(robot.nv):
+        dq = np.zeros(robot.nv)
+        dq[j] = eps
+        pts = []
+        for sign in (1.0, -1.0):
+            a, b = robot.capsules(pin.integrate(robot.model, q, sign * dq))[s]
+            pts.append(a + u * (b - a))
+        out[:, j] = (pts[0] - pts[1]) / (2 * eps)
+    return out
+
+
+def test_a_hand_pair_may_approach_at_its_annex_a_speed_computed_independently(robot):
+    q = _start(robot)
+    joints = _hand_near(robot, q, "EE", 0.12)
+    ctrl = _controller(robot, "pfl")
+    tick = ctrl.measure(q, joints, None, 0.0, frame_age_s=0.03)
+    table = tick.table
+    s, k = robot.set_index("EE"), table.part_names.index("right_hand")
+    assert 0.05 < table.distance[s, k] < 0.2
+    # independent: finite-difference Jacobian, numpy inverse of the mass matrix
+    J = _fd_jacobian(robot, q, s, float(table.robot_s[s, k]))
+    M = pin.crba(robot.model, robot.model.createData(), q)
+    n = table.vector[s, k]
+    m_r = 1.0 / (n @ J @ np.linalg.solve(M, J.T @ n))
+    hand = PFLConfig().region("hand_finger")
+    expected = transient_speed_limit_mps(
+        2.0 * 140.0, 75_000.0, 0.6, m_r
+    )  # Table A.2 (× 2, transient) and A.3's hand row
+    assert hand.transient_force_n == 280.0 and hand.spring_constant_n_per_m == 75_000.0
+    assert tick.contact_limit[s, k] == pytest.approx(float(expected), rel=1e-5)
+    assert 0.5 < tick.contact_limit[s, k] < 3.0
+    assert tick.approach_limit[s, k] == pytest.approx(
+        max(
+            float(expected),
+            float(
+                _controller(robot, "ssm")
+                .measure(q, joints, None, 0.0, frame_age_s=0.03)
+                .approach_limit[s, k]
+            ),
+        ),
+        rel=1e-5,
+    )
+
+
+def test_the_head_and_trunk_keep_their_speed_and_separation_bounds(robot, human):
+    q = _start(robot)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        joints = _hand_near(robot, q, rng.choice(robot.set_names), rng.uniform(0.0, 0.3))
+        ssm = _controller(robot, "ssm").measure(q, joints, None, 0.0, frame_age_s=0.03)
+        pfl = _controller(robot, "pfl").measure(q, joints, None, 0.0, frame_age_s=0.03)
+        protected = [human.part_names.index(p) for p in ("head", "trunk")]
+        np.testing.assert_array_equal(
+            pfl.approach_limit[:, protected], ssm.approach_limit[:, protected]
+        )
+        assert np.all(pfl.contact_limit[:, protected] == -np.inf)
+        assert np.all(pfl.approach_limit >= ssm.approach_limit)
+        np.testing.assert_array_equal(
+            pfl.approach_limit, np.maximum(ssm.approach_limit, pfl.contact_limit)
+        )
+
+
+def test_the_paper_s_stop_rules_hold_for_the_head_and_trunk_only(robot):
+    q = _start(robot)
+    joints = _hand_near(robot, q, "EE", 0.01)  # inside the paper's 0.05 m stop distance
+    assert _controller(robot, "ssm").measure(q, joints, None, 0.0, frame_age_s=0.03).reason
+    assert not _controller(robot, "pfl").measure(q, joints, None, 0.0, frame_age_s=0.03).reason
+
+
+def test_a_touched_part_may_not_be_pushed_further(robot):
+    q = _start(robot)
+    joints = _hand_near(robot, q, "EE", -0.02)  # 2 cm into the capsule
+    tick = _controller(robot, "pfl").measure(q, joints, None, 0.0, frame_age_s=0.03)
+    s, k = robot.set_index("EE"), tick.table.part_names.index("right_hand")
+    assert tick.table.distance[s, k] <= 0.0
+    assert tick.contact_limit[s, k] == 0.0
+
+
+def test_clampable_by_hand():
+    up, side = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
+    # a hand (r 0.05) lying on the table, touched from above: its far side is on the table
+    assert clampable([0.0, 0.0, 0.10], up, 0.05, 0.0, 0.05)
+    # lifted 0.04 m: still within the gap; 0.06 m: free to recoil
+    assert clampable([0.0, 0.0, 0.14], up, 0.05, 0.0, 0.05)
+    assert not clampable([0.0, 0.0, 0.16], up, 0.05, 0.0, 0.05)
+    # touched from the side, or with no surface: never pinned
+    assert not clampable([0.0, 0.0, 0.10], side, 0.05, 0.0, 0.05)
+    assert not clampable([0.0, 0.0, 0.10], up, 0.05, None, 0.05)
+    # at 60 degrees from the vertical (n_z = 0.5) the far side is h_z - 2 r n_z = h_z - 0.05
+    # high, and the surface twice as far along the approach: pinned while h_z - 0.05 <= 0.025
+    tilted = np.array([0.0, np.sin(np.pi / 3), 0.5])
+    assert clampable([0.0, 0.0, 0.074], tilted, 0.05, 0.0, 0.05)
+    assert not clampable([0.0, 0.0, 0.076], tilted, 0.05, 0.0, 0.05)
+
+
+class _Still:
+    """A person holding one pose."""
+
+    def __init__(self, joints):
+        self.joints = joints
+
+    def frame_at(self, t):
+        return self.joints, np.full(len(self.joints), 2, dtype=np.int8)
+
+
+def test_the_judge_s_speed_is_the_true_distance_s_rate_of_change(robot, human):
+    q = _start(robot)
+    joints = _hand_near(robot, q, "L2", -0.005)
+    truth = TrueClearance(robot, human, _Still(joints))
+    s = robot.set_index("L2")
+    rng = np.random.default_rng(0)
+    checked = 0
+    for _ in range(20):
+        dq = rng.normal(0.0, 0.3, robot.nv)
+        contacts = [c for c in truth.contacts(q, dq, 0.0) if c.set_name == "L2"]
+        hand = [c for c in contacts if c.part == "right_hand"]
+        if len(contacts) != 1 or not hand:
+            continue
+        (c,) = hand
+        h = 1e-6
+        rate = (
+            truth(robot.kinematics(q + h * dq), 0.0)[s]
+            - truth(robot.kinematics(q - h * dq), 0.0)[s]
+        ) / (2 * h)
+        assert c.speed_mps == pytest.approx(max(0.0, -rate), abs=1e-5)
+        assert c.region == "hand_finger" and c.permitted and not c.clamped
+        # F = v sqrt(mu k) and v_max = F_T / sqrt(mu k): F = v F_T / v_max (F_T 280 N)
+        assert c.limit_mps > 1.0
+        assert c.force_n == pytest.approx(c.speed_mps * 280.0 / c.limit_mps, rel=1e-9, abs=1e-12)
+        checked += 1
+    assert checked >= 10
+
+
+def _contact(region="hand_finger", permitted=True, clamped=False, speed=0.1, limit=1.0):
+    return TrueContact("EE", "right_hand", region, permitted, clamped, -0.001, speed, limit, 10.0)
+
+
+def test_contact_metrics_by_hand():
+    moving = np.array([True, True, False, True, True])
+    contacts = {
+        0: [_contact()],  # within
+        1: [_contact(speed=1.2)],  # above
+        2: [_contact("face", permitted=False, speed=0.0, limit=0.0)],  # not moving: allowed
+        3: [_contact("chest", permitted=False, speed=0.0, limit=0.0), _contact(speed=0.5)],
+        4: [_contact(clamped=True, speed=0.01, limit=0.0)],  # pushing a pinned hand
+    }
+    m = contact_metrics(contacts, moving)
+    assert m["ticks_moving_protected"] == 1
+    assert m["ticks_above_limit"] == 2 and m["ticks_within_limit"] == 2
+    assert m["ticks_clamped"] == 1
+    assert m["max_speed_mps"] == 1.2 and m["max_speed_ratio"] == 1.2
+    assert m["by_region"] == {"chest": 1, "face": 1, "hand_finger": 4}
+    assert contact_metrics({}, moving)["max_force_n"] is None
+
+
+def test_pfl_moves_where_ssm_holds_and_touches_nothing_above_its_limit():
+    out = {}
+    for safety in ("ssm", "pfl"):
+        spec = RunSpec(
+            scenario="test1", controller="qp", safety=safety, rate_hz=100.0, max_time_s=30.0
+        )
+        out[safety] = simulate_one(spec).sim.metrics
+    assert out["ssm"]["stopped_s"] > 1.0  # the hand beside the path holds SSM's robot
+    assert out["pfl"]["stopped_s"] < out["ssm"]["stopped_s"]
+    assert out["pfl"]["reached_goal"]
+    contacts = out["pfl"]["true_contacts"]
+    assert contacts["ticks_moving_protected"] == 0 and contacts["ticks_above_limit"] == 0
+
+
+def _iiwa_without_inertias(folder):
+    """The iiwa's description in ``folder`` with every link's mass zero."""
+    import re
+    import shutil
+    from pathlib import Path
+
+    src = Path(qpavoid.__file__).resolve().parents[1] / "robots" / "iiwa14"
+    for name in ("control_points.toml", "task.toml"):
+        shutil.copy(src / name, folder / name)
+    urdf = (src / "iiwa14.urdf").read_text()
+    (folder / "iiwa14.urdf").write_text(re.sub(r'<mass value="[^"]*"', '<mass value="0"', urdf))
+    return folder
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--payload", "14.5"], "payload"),  # the iiwa 14's rating: 14 kg
+        (["--payload", "-1"], "--payload"),
+        (["--payload", "nan"], "--payload"),
+        (["--robot", "NOINERTIA"], "inerti"),
+    ],
+)
+def test_pfl_refuses_bad_arms_and_payloads_in_one_line(tmp_path, monkeypatch, capsys, argv, words):
+    from qpavoid.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    if "NOINERTIA" in argv:
+        (tmp_path / "arm").mkdir()
+        argv = [
+            str(_iiwa_without_inertias(tmp_path / "arm")) if a == "NOINERTIA" else a for a in argv
+        ]
+    try:
+        code = main(["run", "test1", "--safety", "pfl", "--max-time", "1", "--out", "r", *argv])
+    except SystemExit as exc:  # argparse's refusal of a flag's value
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert err.count("\n") == 1 and err.startswith("qpavoid: error:") and words in err
+    assert not (tmp_path / "r").exists()
+
+
+def test_a_body_region_missing_from_the_table_is_refused(robot):
+    regions = tuple(r for r in PFLConfig().regions if r.name != "hand_finger")
+    config = qpavoid.ControllerConfig(safety="pfl", pfl=PFLConfig(regions=regions))
+    with pytest.raises(qpavoid.InputError, match="hand_finger") as info:
+        qpavoid.QPController(robot, config=config)
+    assert "\n" not in str(info.value)
