@@ -34,7 +34,8 @@ def test_bench_writes_every_documented_key(tmp_path):
         "qp_solve/daqp_direct",
     ):
         assert data["stages"][key]["median_us"] > 0, key
-    assert len(data["ticks"]) == 12 and "qp/capsules/ssm" in data["ticks"]
+    assert len(data["ticks"]) == 18 and "qp/capsules/ssm" in data["ticks"]
+    assert "qp/capsules/pfl" in data["ticks"]
     assert "qp_daqp/spheres/paper" in data["ticks"]
     for key in ("robot_points/9", "robot_points/1000", "people/1", "people/6"):
         assert data["scaling"][key]["p99_us"] >= data["scaling"][key]["median_us"] > 0

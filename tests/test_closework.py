@@ -207,6 +207,7 @@ def test_a_close_work_sweep_sums_up_safety_and_productivity():
         "ticks_touching_within_limit",
         "contact_speed_mps",
         "contact_speed_ratio",
+        "contact_advance_mm",
         "contact_force_n",
     }
     assert summary["runs"] == 2 and summary["runs_moving_in_true_contact"] == 0
@@ -297,3 +298,20 @@ def test_qpavoid_sweep_motion_closework(tmp_path, monkeypatch, capsys):
     case = json.loads((tmp_path / "c" / "worst" / "seed0.json").read_text())
     assert case["variant"] == "handover"
     assert case["replay"].startswith("qpavoid run closework:0 --controller qp")
+
+
+def test_a_close_work_sweep_s_run_is_the_run_of_its_scenario():
+    # the replay line of a sweep's worst run (qpavoid run closework:SEED) repeats it: the
+    # camera draws its noise from the case's seed in both
+    from qpavoid.experiments.run_spec import RunSpec
+    from qpavoid.experiments.runs import simulate_one
+
+    check = sweep.run_case(SweepSpec("closework", "qp", safety="pfl", max_time_s=4.0), 3)
+    run = simulate_one(
+        RunSpec(
+            scenario="closework:3", controller="qp", safety="pfl", rate_hz=100.0, max_time_s=4.0
+        )
+    )
+    assert run.metrics["stopped_s"] == check.stopped_s
+    assert run.metrics["ticks_moving_in_true_contact"] == check.ticks_moving_in_true_contact
+    assert run.metrics["duration_s"] == check.duration_s

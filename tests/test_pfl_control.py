@@ -58,6 +58,7 @@ def test_a_hand_pair_may_approach_at_its_annex_a_speed_computed_independently(ro
     q = _start(robot)
     joints = _hand_near(robot, q, "EE", 0.12)
     ctrl = _controller(robot, "pfl")
+    stop_s = ctrl.stop_budget.budget()  # this tick's T_s (the first: one period)
     tick = ctrl.measure(q, joints, None, 0.0, frame_age_s=0.03)
     table = tick.table
     s, k = robot.set_index("EE"), table.part_names.index("right_hand")
@@ -68,12 +69,17 @@ def test_a_hand_pair_may_approach_at_its_annex_a_speed_computed_independently(ro
     n = table.vector[s, k]
     m_r = 1.0 / (n @ J @ np.linalg.solve(M, J.T @ n))
     hand = PFLConfig().region("hand_finger")
-    expected = transient_speed_limit_mps(
+    v_max = transient_speed_limit_mps(
         2.0 * 140.0, 75_000.0, 0.6, m_r
     )  # Table A.2 (× 2, transient) and A.3's hand row
     assert hand.transient_force_n == 280.0 and hand.spring_constant_n_per_m == 75_000.0
-    assert tick.contact_limit[s, k] == pytest.approx(float(expected), rel=1e-5)
-    assert 0.5 < tick.contact_limit[s, k] < 3.0
+    # the stopping bound: (d - C - Z_d - Z_r + 280 N / 75 N/mm) / (T_r + T_s / 2)
+    fixed = 0.02 + 0.03 + 0.005  # docs/safety.md §4's C, the Kinect v2's Z_d, Z_r
+    assert ctrl.ssm.reaction_time_s == pytest.approx(0.02)  # 100 Hz: one period + 5 ms
+    v_c = (table.distance[s, k] - fixed + 280.0 / 75_000.0) / (0.02 + stop_s / 2)
+    expected = min(float(v_max), float(v_c))
+    assert tick.contact_limit[s, k] == pytest.approx(expected, rel=1e-5)
+    assert 0.5 < float(v_max) < 3.0
     assert tick.approach_limit[s, k] == pytest.approx(
         max(
             float(expected),
@@ -112,13 +118,16 @@ def test_the_paper_s_stop_rules_hold_for_the_head_and_trunk_only(robot):
     assert not _controller(robot, "pfl").measure(q, joints, None, 0.0, frame_age_s=0.03).reason
 
 
-def test_a_touched_part_may_not_be_pushed_further(robot):
+@pytest.mark.parametrize("gap_m, sign", [(-0.02, -1), (0.04, -1), (0.15, 1)])
+def test_a_part_seen_within_the_robot_s_stop_is_backed_off_from(robot, gap_m, sign):
+    # the robot must stop within the hand's allowance (3.7 mm) of where it sees it, less
+    # C + Z_d + Z_r (55 mm): touching, or a few cm away, it must back off; further, it may come
     q = _start(robot)
-    joints = _hand_near(robot, q, "EE", -0.02)  # 2 cm into the capsule
+    joints = _hand_near(robot, q, "EE", gap_m)
     tick = _controller(robot, "pfl").measure(q, joints, None, 0.0, frame_age_s=0.03)
     s, k = robot.set_index("EE"), tick.table.part_names.index("right_hand")
-    assert tick.table.distance[s, k] <= 0.0
-    assert tick.contact_limit[s, k] == 0.0
+    assert np.sign(tick.table.distance[s, k] - 0.055 + 0.0037) == sign
+    assert np.sign(tick.contact_limit[s, k]) == sign
 
 
 def test_clampable_by_hand():
@@ -176,8 +185,13 @@ def test_the_judge_s_speed_is_the_true_distance_s_rate_of_change(robot, human):
     assert checked >= 10
 
 
-def _contact(region="hand_finger", permitted=True, clamped=False, speed=0.1, limit=1.0):
-    return TrueContact("EE", "right_hand", region, permitted, clamped, -0.001, speed, limit, 10.0)
+def _contact(
+    region="hand_finger", permitted=True, clamped=False, speed=0.1, limit=1.0, part="right_hand"
+):
+    allowance = 280.0 / 75_000.0 if permitted and not clamped else 0.0
+    return TrueContact(
+        "EE", part, region, permitted, clamped, -0.001, speed, limit, allowance, 75_000.0, 10.0
+    )
 
 
 def test_contact_metrics_by_hand():
@@ -185,17 +199,41 @@ def test_contact_metrics_by_hand():
     contacts = {
         0: [_contact()],  # within
         1: [_contact(speed=1.2)],  # above
-        2: [_contact("face", permitted=False, speed=0.0, limit=0.0)],  # not moving: allowed
-        3: [_contact("chest", permitted=False, speed=0.0, limit=0.0), _contact(speed=0.5)],
+        2: [_contact("face", permitted=False, speed=0.0, limit=0.0, part="head")],  # at rest
+        3: [
+            _contact("chest", permitted=False, speed=0.0, limit=0.0, part="trunk"),
+            _contact(speed=0.5),
+        ],
         4: [_contact(clamped=True, speed=0.01, limit=0.0)],  # pushing a pinned hand
     }
-    m = contact_metrics(contacts, moving)
+    t = np.arange(5) * 0.5  # ticks far apart: each contact its own (no advance)
+    m = contact_metrics({k: contacts[k] for k in (0, 2, 4)}, moving, t)
+    assert m["ticks_above_limit"] == 1 and m["ticks_within_limit"] == 1
+    assert m["max_advance_m"] == 0.0
+    m = contact_metrics(contacts, moving, t)
     assert m["ticks_moving_protected"] == 1
     assert m["ticks_above_limit"] == 2 and m["ticks_within_limit"] == 2
     assert m["ticks_clamped"] == 1
     assert m["max_speed_mps"] == 1.2 and m["max_speed_ratio"] == 1.2
     assert m["by_region"] == {"chest": 1, "face": 1, "hand_finger": 4}
-    assert contact_metrics({}, moving)["max_force_n"] is None
+    assert contact_metrics({}, moving, t)["max_force_n"] is None
+
+
+def test_a_robot_that_keeps_pushing_into_a_hand_is_above_its_limit():
+    # 0.1 m/s into a hand, 10 ms ticks: its allowance 280 N / 75 N/mm = 3.73 mm (and the
+    # 0.5 mm tolerance) is used up after 42 ms; the ticks after that (advance 5 mm and
+    # more) are above the limit
+    t = np.arange(10) * 0.01
+    moving = np.ones(10, dtype=bool)
+    m = contact_metrics({k: [_contact(speed=0.1)] for k in range(10)}, moving, t)
+    assert m["max_advance_m"] == pytest.approx(0.009)  # 9 ticks of 1 mm before the last
+    assert m["ticks_within_limit"] == 5 and m["ticks_above_limit"] == 5  # 0..4 mm, 5..9 mm
+    assert m["max_force_n"] == pytest.approx(75_000.0 * 0.009)
+    # backing off undoes it; a gap in the contact starts a new one
+    back = {k: [_contact(speed=0.1 if k < 3 else -0.1)] for k in range(10)}
+    assert contact_metrics(back, moving, t)["ticks_above_limit"] == 0
+    gaps = {k: [_contact(speed=0.1)] for k in (0, 1, 2, 4, 5, 6, 8, 9)}
+    assert contact_metrics(gaps, moving, t)["ticks_above_limit"] == 0
 
 
 def test_pfl_moves_where_ssm_holds_and_touches_nothing_above_its_limit():

@@ -177,7 +177,7 @@ def _check_payload(payload_kg: object, rated_payload_kg: float | None, name: str
             else f"{limit:g} kg (the {name} description gives no rated payload)"
         )
         raise InputError(
-            f"payload_kg = {p:g} kg is above {what}", name="payload_kg", value=payload_kg
+            f"payload_kg = {p!r} kg is above {what}", name="payload_kg", value=payload_kg
         )
     return p
 

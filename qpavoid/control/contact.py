@@ -31,7 +31,14 @@ from qpavoid.arm.inertia import EffectiveMass
 from qpavoid.arm.model import Kinematics, Robot
 from qpavoid.distance.table import DistanceTable
 from qpavoid.human.body import BodyModel, HumanGeometry
-from qpavoid.laws.pfl import PFLConfig, clampable, transient_speed_limit_mps
+from qpavoid.laws.pfl import (
+    PFLConfig,
+    clampable,
+    compression_allowance_m,
+    stopping_contact_speed_mps,
+    transient_speed_limit_mps,
+)
+from qpavoid.laws.ssm import SSMConfig, fixed_terms
 
 __all__ = ["ContactLimits"]
 
@@ -64,6 +71,10 @@ class ContactLimits:
         self.contact = np.asarray(contact, dtype=bool)
         self.force_n, self.spring_npm = np.asarray(force), np.asarray(spring)
         self.human_kg = np.asarray(mass)
+        #: (K,) δ = F_T / k of each part, m (0 where no contact is permitted)
+        self.allowance_m = np.where(
+            self.contact, compression_allowance_m(self.force_n, self.spring_npm), 0.0
+        )
         self.radii = np.asarray(human.capsule_radii, dtype=float)
         self.surface_z_m, self.clamp_gap_m = config.surface_z_m, config.clamp_gap_m
 
@@ -73,10 +84,11 @@ class ContactLimits:
         table: DistanceTable,
         geos: list[HumanGeometry],
         who: np.ndarray,
+        ssm: SSMConfig,
     ) -> np.ndarray:
-        """(S, K) each pair's permitted contact speed, m/s: v_max where the pair's part
-        permits contact and is seen, 0 where it is already touched (d ≤ 0) or could be
-        clamped, −inf elsewhere (the head and trunk, parts not seen: no contact permitted).
+        """(S, K) each pair's permitted contact speed, m/s: ``min(v_max, v_c)`` where the
+        pair's part permits contact and is seen (no more than 0 where it could be clamped),
+        −inf elsewhere (the head and trunk, parts not seen: no contact permitted).
 
         Parameters
         ----------
@@ -88,6 +100,10 @@ class ContactLimits:
             Everybody's geometry as perceived and the person of each pair (S, K): the
             parts' radii, widened by their uncertainty, for :func:`~qpavoid.laws.pfl.
             clampable`.
+        ssm
+            This tick's speed and separation constants (resolved, with this tick's T_s):
+            C + Z_d + Z_r and T_r + T_s/2 of :func:`~qpavoid.laws.pfl.
+            stopping_contact_speed_mps`.
         """
         d = table.distance
         out = np.full(d.shape, -np.inf)
@@ -113,7 +129,15 @@ class ContactLimits:
             self.surface_z_m,
             self.clamp_gap_m,
         )
-        out[sets, parts] = np.where((d[sets, parts] <= 0.0) | pinned, 0.0, v_max)
+        assert ssm.reaction_time_s is not None  # resolved by the controller
+        v_stop = stopping_contact_speed_mps(
+            d[sets, parts],
+            self.allowance_m[parts],
+            fixed_terms(ssm),
+            ssm.reaction_time_s + ssm.stop_time_s / 2.0,
+        )
+        v = np.minimum(v_max, v_stop)
+        out[sets, parts] = np.where(pinned, np.minimum(v, 0.0), v)
         return out
 
     def protected(self) -> np.ndarray:

@@ -13,7 +13,7 @@ stable (docs/performance.md):
   backend, when daqp is installed) and ``qp_solve/<solver>`` for each qpsolvers solver;
 * ``ticks``: ``<controller>/<distance>/<safety>`` for both controllers (``analytic``,
   ``qp``; and ``qp_daqp``, the QP controller on the ``daqp`` backend, when
-  installed), both methods, both safety modes;
+  installed), both methods, the three safety modes (paper, ssm, pfl);
 * ``scaling``: ``robot_points/<n>`` (sphere table, n robot spheres) and ``people/<n>``
   (QP tick, capsules, SSM, n people, a new camera frame every other tick);
 * ``paper_budget_us``: the paper's 33 ms frame, 21 ms for distances and avoidance,
@@ -142,7 +142,7 @@ def run_bench(quick: bool = False, robot: str = "iiwa14") -> dict[str, Any]:
     result["ticks"] = {}
     for kind in kinds:
         for distance in ("spheres", "capsules"):
-            for safety in ("paper", "ssm"):
+            for safety in ("paper", "ssm", "pfl"):
                 ctrl = (  # qp_daqp: the QP controller on the daqp backend
                     _controller("qp", distance, safety, backend="daqp")
                     if kind == "qp_daqp"

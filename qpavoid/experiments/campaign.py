@@ -286,8 +286,8 @@ def rerun_command(run: CampaignRun, spec: SweepSpec) -> str:
     A strike's is its recording: its camera faults are not in it, the rerun sees the
     person through ``run``'s ordinary Kinect (``--bench real``). A close-work case's is
     its scenario, ``closework:SEED``, until the goal or the case's own duration, through
-    the campaign's camera and latency (its noise drawn anew: the campaign's runs each
-    draw their own)."""
+    the campaign's camera and latency, its noise drawn from the case's seed as the
+    campaign drew it: the same run."""
     try:  # a folder absolute: the line runs from inside worst/
         reference = description_reference(spec.robot)
     except RobotDescriptionError:  # no such robot: the line says what the spec said

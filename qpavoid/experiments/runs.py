@@ -51,6 +51,7 @@ from qpavoid.output.run_files import staged_output, write_run
 from qpavoid.output.view_data import replay_data
 from qpavoid.perception.tracker import PerceptionConfig
 from qpavoid.scenarios import motions
+from qpavoid.scenarios.generated import closework_seed
 from qpavoid.sensing.calibration_file import load_calibration
 from qpavoid.sensing.recording_files import recording_format
 
@@ -223,11 +224,12 @@ def simulate_one(
     live = spec.listen is not None
     if motion is None and not live:
         motion = motions.load_motion(robot, spec.scenario, spec.human_files, spec.sensors)
-    if camera is None:
+    if camera is None:  # a close-work case's noise from its seed, as its sweep draws it
+        seed = None if spec.scenario is None else closework_seed(spec.scenario)
         camera = (
             CameraConfig.ideal()
             if spec.bench == "ideal"
-            else CameraConfig.of(spec.camera, latency_s=spec.sensor_latency_s)
+            else CameraConfig.of(spec.camera, latency_s=spec.sensor_latency_s, seed=seed or 0)
         )
     with contextlib.ExitStack() as stack:
         source = stack.enter_context(live_source(spec, clear))
@@ -261,6 +263,7 @@ def simulate_one(
         bench=spec.bench,
         latency_s=spec.sensor_latency_s if spec.bench == "real" and not live else 0.0,
         camera=spec.camera if spec.bench == "real" and not live else "ideal",
+        payload_kg=spec.payload_kg,
         redundant=bool(spec.redundant),
         robot=description_reference(spec.robot),
         arm=spec.arm or "offline simulation",

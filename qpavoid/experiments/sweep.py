@@ -243,10 +243,11 @@ class TouchCounts:
         faster than its Annex A limit; ticks every touch was within it.
     ticks_clamped
         Ticks an arm or hand region was touched where it could be pinned against the table.
-    max_contact_speed_mps, max_contact_speed_ratio, max_contact_force_n
+    max_contact_speed_mps, max_contact_speed_ratio, max_contact_advance_m, max_contact_force_n
         Over the touches of arm and hand regions: the robot point's fastest speed towards
-        the part (m/s), its largest ratio to the region's limit, the largest force that
-        speed transfers (N); 0 without any.
+        the part (m/s), its largest ratio to the region's limit, the robot's deepest
+        advance into a part over one contact (m), the largest force (N: the impact's or the
+        spring's after that advance); 0 without any.
     """
 
     ticks_moving_protected_contact: int = 0
@@ -255,6 +256,7 @@ class TouchCounts:
     ticks_clamped: int = 0
     max_contact_speed_mps: float = 0.0
     max_contact_speed_ratio: float = 0.0
+    max_contact_advance_m: float = 0.0
     max_contact_force_n: float = 0.0
 
 
@@ -475,7 +477,7 @@ def true_contact_fields(run: RunResult) -> dict[str, Any]:
     if it never moved), and power and force limiting's judgement of each touch
     (``ticks_moving_protected_contact``, ``ticks_contact_above_limit``,
     ``ticks_contact_within_limit``, ``ticks_clamped``, ``max_contact_speed_mps``,
-    ``max_contact_speed_ratio``, ``max_contact_force_n``)."""
+    ``max_contact_speed_ratio``, ``max_contact_advance_m``, ``max_contact_force_n``)."""
     m = run.sim.metrics
     clearance = m["min_true_clearance_moving_m"]
     touched = m.get("true_contacts") or {}
@@ -488,6 +490,7 @@ def true_contact_fields(run: RunResult) -> dict[str, Any]:
         "ticks_clamped": int(touched.get("ticks_clamped", 0)),
         "max_contact_speed_mps": float(touched.get("max_speed_mps") or 0.0),
         "max_contact_speed_ratio": float(touched.get("max_speed_ratio") or 0.0),
+        "max_contact_advance_m": float(touched.get("max_advance_m") or 0.0),
         "max_contact_force_n": float(touched.get("max_force_n") or 0.0),
     }
 
@@ -651,7 +654,8 @@ def _contact_totals(runs: Sequence[StrikeCheck | CloseWorkCheck]) -> dict[str, A
     touching the head, face, neck or trunk, runs touching an arm or hand region above its
     limit (both must be zero), runs touching one within it (allowed with ``pfl``), runs
     clamping, the contact ticks within limit, and the fastest touch, its ratio to its
-    limit and its force, with the medians over the runs that touched."""
+    limit, the deepest advance into a part (mm) and the largest force, with the medians
+    over the runs that touched."""
     touched = [r for r in runs if r.ticks_contact_within_limit or r.ticks_contact_above_limit]
 
     def spread(values: list[float]) -> dict[str, float | None]:
@@ -668,6 +672,7 @@ def _contact_totals(runs: Sequence[StrikeCheck | CloseWorkCheck]) -> dict[str, A
         "ticks_touching_within_limit": sum(r.ticks_contact_within_limit for r in runs),
         "contact_speed_mps": spread([r.max_contact_speed_mps for r in touched]),
         "contact_speed_ratio": spread([r.max_contact_speed_ratio for r in touched]),
+        "contact_advance_mm": spread([1e3 * r.max_contact_advance_m for r in touched]),
         "contact_force_n": spread([r.max_contact_force_n for r in touched]),
     }
 

@@ -68,9 +68,11 @@ __all__ = [
     "BodyRegion",
     "PFLConfig",
     "clampable",
+    "compression_allowance_m",
     "contact_force_n",
     "load_regions",
     "reduced_mass_kg",
+    "stopping_contact_speed_mps",
     "transient_speed_limit_mps",
 ]
 
@@ -349,6 +351,32 @@ def contact_force_n(
         raise InputError(f"speed_mps must be finite, got {bad}", name="speed_mps", value=speed_mps)
     k = _positive(spring_n_per_m, "spring_n_per_m")
     return np.maximum(v, 0.0) * np.sqrt(reduced_mass_kg(m_h_kg, m_r_kg) * k)
+
+
+def compression_allowance_m(force_n: ArrayLike, spring_n_per_m: ArrayLike) -> np.ndarray:
+    """δ = F_T / k: how far a driven robot point may compress the region's tissue before
+    the force reaches F_T (the spring of Annex A), m. A position-controlled arm does not
+    bounce off a contact as Annex A's free masses do: it keeps moving until it has
+    stopped, so its advance into the part after the first touch must stay within δ
+    (:func:`stopping_contact_speed_mps`). NaN stays NaN; 0 N gives 0 m."""
+    return np.asarray(force_n, dtype=float) / _positive(spring_n_per_m, "spring_n_per_m")
+
+
+def stopping_contact_speed_mps(
+    distance_m: ArrayLike, allowance_m: ArrayLike, fixed_m: float, stop_s: float
+) -> np.ndarray:
+    """The fastest approach from which a robot point still stops within the allowance
+    ``δ`` past a part standing at ``distance_m``, m/s:
+
+        v_c = (d − C − Z_d − Z_r + δ) / (T_r + T_s/2)
+
+    speed and separation's bound (:func:`~qpavoid.laws.ssm.max_approach_speed`) without
+    S_h (the part's own approach, whose contact with a robot no faster than v_max is the
+    transient contact Annex A permits) and with δ (:func:`compression_allowance_m`) of room
+    beyond the part's surface. ``fixed_m`` is C + Z_d + Z_r (m), ``stop_s`` T_r + T_s/2
+    (s). Negative past ``δ − C − Z_d − Z_r`` inside the part: the robot must back off."""
+    d = np.asarray(distance_m, dtype=float)
+    return (d - fixed_m + np.asarray(allowance_m, dtype=float)) / stop_s
 
 
 def clampable(

@@ -131,47 +131,72 @@ def truth_metrics(
     }
 
 
-def contact_metrics(contacts: dict[int, list[TrueContact]], moving: np.ndarray) -> dict[str, Any]:
+def contact_metrics(
+    contacts: dict[int, list[TrueContact]], moving: np.ndarray, t: np.ndarray
+) -> dict[str, Any]:
     """Power and force limiting judged against the truth: the ``true_contacts`` metric.
 
     ``contacts`` maps each tick in true contact to its pairs
     (:meth:`~qpavoid.loop.truth.TrueClearance.contacts`); ``moving`` (T,) says which ticks
-    the arm moved in. Returns tick counts (a tick counts once, by its worst pair):
+    the arm moved in, ``t`` (T,) when they were (s). A pair's contact lasts while it is in
+    contact tick after tick; over it the robot's own advance into the part is summed, its
+    approach speed times each tick's duration (never below 0: backing off undoes it).
+    Returns tick counts (a tick counts once, by its worst pair):
 
     * ``ticks_moving_protected``: the arm moving while touching a region that permits no
       contact (head, face, neck, trunk); must be zero in every mode;
     * ``ticks_above_limit``: a permitted region (arm, hand) touched faster than its
-      transient limit (or with no limit known); must be zero;
-    * ``ticks_within_limit``: every pair touched within its region's limit (allowed with
+      transient limit (or with no limit known), or the robot advanced into it further than
+      its allowance δ = F_T / k (the spring's force past F_T: a push, not a transient
+      contact); must be zero;
+    * ``ticks_within_limit``: every pair touched within its region's limits (allowed with
       ``safety="pfl"``);
     * ``ticks_clamped``: a permitted region touched where it could be pinned against the
-      fixed surface (its limit is no approach at all: above it counts in
+      fixed surface (its limits are no approach and no advance: above them counts in
       ``ticks_above_limit``);
 
     and over the contacts with permitted regions: ``max_speed_mps``, ``max_speed_ratio``
-    (speed / limit, over the parts not clamped), ``max_force_n`` (None without any), and
-    ``by_region`` (ticks per region).
+    (speed / limit, over the parts not clamped), ``max_advance_m`` (the robot's deepest
+    advance into a part over one contact), ``max_force_n`` (the larger of the impact's
+    force and the spring's after that advance; None without any), and ``by_region`` (ticks
+    per region).
     """
     protected = above = within = clamped = 0
-    speeds, ratios, forces = [], [], []
+    speeds, ratios, forces, advances = [], [], [], []
     by_region: dict[str, int] = {}
-    for k, pairs in contacts.items():
+    advance: dict[tuple[str, str], float] = {}
+    last: dict[tuple[str, str], TrueContact] = {}
+    previous = -2
+    for k in sorted(contacts):
+        pairs = contacts[k]
+        now: dict[tuple[str, str], float] = {}
+        for c in pairs:  # each pair's advance since its contact began
+            key = (c.set_name, c.part)
+            before = last.get(key) if previous == k - 1 else None
+            now[key] = (
+                max(0.0, advance[key] + before.approach_mps * float(t[k] - t[k - 1]))
+                if before is not None
+                else 0.0
+            )
+        advance, last, previous = now, {(c.set_name, c.part): c for c in pairs}, k
         if bool(moving[k]) and any(not c.permitted for c in pairs):
             protected += 1
         touched = [c for c in pairs if c.permitted]
         clamped += any(c.clamped for c in touched)
         if touched:
-            if all(c.within_limit for c in touched):
+            if all(c.within_limit(advance[(c.set_name, c.part)]) for c in touched):
                 within += 1
             else:
                 above += 1
         for region in {c.region or "none" for c in pairs}:
             by_region[region] = by_region.get(region, 0) + 1
         for c in touched:
+            x = advance[(c.set_name, c.part)]
             speeds.append(c.speed_mps)
+            advances.append(x)
             if c.limit_mps > 0.0:  # (a clamped part's limit is 0: counted on its own)
                 ratios.append(c.speed_mps / c.limit_mps)
-            forces.append(c.force_n)
+            forces.append(c.force_after(x))
 
     def top(x: list[float]) -> float | None:
         return round(float(np.max(x)), 6) if x else None
@@ -183,6 +208,7 @@ def contact_metrics(contacts: dict[int, list[TrueContact]], moving: np.ndarray) 
         "ticks_clamped": clamped,
         "max_speed_mps": top(speeds),
         "max_speed_ratio": top(ratios),
+        "max_advance_m": top(advances),
         "max_force_n": top(forces),
         "by_region": dict(sorted(by_region.items())),
     }
@@ -299,8 +325,8 @@ def _contact_line(m: dict[str, Any]) -> str:
     ):
         return ""
     fastest = (
-        f" (fastest {c['max_speed_mps']:.3f} m/s, {c['max_speed_ratio']:.2f} of its limit, "
-        f"{c['max_force_n']:.0f} N)"
+        f" (fastest {c['max_speed_mps']:.3f} m/s, {c['max_speed_ratio']:.2f} of its limit; "
+        f"deepest advance {c['max_advance_m'] * 1e3:.1f} mm; {c['max_force_n']:.0f} N)"
         if c["max_speed_mps"] is not None and c["max_speed_ratio"] is not None
         else ""
     )

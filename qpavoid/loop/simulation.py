@@ -425,7 +425,7 @@ def simulate(
             int(k): truth.contacts(log["q"][k], log["dq"][k], log["t"][k]) for k in touching
         }
         moved = np.any(log["dq"] != 0.0, axis=1) if moving is None else moving
-        ending["true_contacts"] = contact_metrics(contacts, moved)
+        ending["true_contacts"] = contact_metrics(contacts, moved, log["t"])
     if arm is None:  # offline: the whole stream at once, after the run
         checked.stream(log["dq_command"])
     ending["command_limit_violations"] = dict(checked.counts)

@@ -37,7 +37,13 @@ from qpavoid.core.geometry import unit
 from qpavoid.distance.capsules import CapsuleDistance, axis_rotation
 from qpavoid.human.body import BodyModel, HumanGeometry
 from qpavoid.human.frames import HumanFrame, HumanMotion
-from qpavoid.laws.pfl import PFLConfig, clampable, contact_force_n, transient_speed_limit_mps
+from qpavoid.laws.pfl import (
+    PFLConfig,
+    clampable,
+    compression_allowance_m,
+    contact_force_n,
+    transient_speed_limit_mps,
+)
 from qpavoid.loop.crowd import Crowd
 from qpavoid.sensing.recording import Recording
 
@@ -210,6 +216,9 @@ class MeshClearance:
 #: A robot point approaching a clamped part no faster than this is not pushing it, m/s
 #: (1 mm/s: the residue of a braking ramp's other joints along the normal).
 CREEP_MPS = 0.001
+#: How much more than its allowance a robot may advance into a part over a contact, m
+#: (0.5 mm: the integration of the approach speed tick by tick, not a motion).
+ADVANCE_TOLERANCE_M = 0.0005
 
 
 @dataclass(frozen=True)
@@ -231,14 +240,21 @@ class TrueContact:
         (:func:`~qpavoid.laws.pfl.clampable`): quasi-static, its limit 0 (no approach).
     distance_m
         The true distance (≤ 0: touching or penetrating), m.
-    speed_mps
-        The robot point's true speed towards the part (≥ 0: 0 when moving away), m/s.
+    approach_mps
+        The robot point's true velocity towards the part, m/s (negative: moving away).
     limit_mps
         The region's transient contact speed at that point (eq. A.5, the arm's effective
         mass there along the normal), m/s; 0 for a clamped part; NaN if the arm has no
         inertias.
+    allowance_m
+        How far the robot may advance into the part over one contact, δ = F_T / k
+        (:func:`~qpavoid.laws.pfl.compression_allowance_m`), m; 0 for a clamped part and a
+        region that permits no contact.
+    spring_n_per_m
+        The region's k, N/m (NaN without a region).
     force_n
-        The force that speed would transfer (:func:`~qpavoid.laws.pfl.contact_force_n`), N.
+        The force the contact's speed transfers (:func:`~qpavoid.laws.pfl.contact_force_n`),
+        N; :meth:`force_after` adds the robot's advance.
     """
 
     set_name: str
@@ -247,15 +263,32 @@ class TrueContact:
     permitted: bool
     clamped: bool
     distance_m: float
-    speed_mps: float
+    approach_mps: float
     limit_mps: float
+    allowance_m: float
+    spring_n_per_m: float
     force_n: float
 
     @property
-    def within_limit(self) -> bool:
+    def speed_mps(self) -> float:
+        """The robot point's speed towards the part (≥ 0: 0 when moving away), m/s."""
+        return max(self.approach_mps, 0.0)
+
+    def within_limit(self, advance_m: float = 0.0) -> bool:
         """A permitted region, touched no faster than its limit (a clamped one: not
-        approached faster than :data:`CREEP_MPS`); False if unknown."""
-        return self.permitted and self.speed_mps <= max(self.limit_mps, CREEP_MPS)
+        approached faster than :data:`CREEP_MPS`), the robot having advanced ``advance_m``
+        (m) into it since the contact began, no more than its allowance (and
+        :data:`ADVANCE_TOLERANCE_M`); False if unknown."""
+        return (
+            self.permitted
+            and self.speed_mps <= max(self.limit_mps, CREEP_MPS)
+            and advance_m <= self.allowance_m + ADVANCE_TOLERANCE_M
+        )
+
+    def force_after(self, advance_m: float) -> float:
+        """The larger of the impact's force and the spring's after the robot advanced
+        ``advance_m`` (m) into the part, ``max(v √(μk), k x)``, N."""
+        return max(self.force_n, self.spring_n_per_m * advance_m)
 
 
 class TrueClearance:
@@ -361,7 +394,8 @@ class TrueClearance:
         axis = b - a
         u = float(np.clip((p - a) @ axis / max(float(axis @ axis), 1e-300), 0.0, 1.0))
         n = unit(p - (a + u * axis), np.array([0.0, 0.0, 1.0]))  # from the part to the arm
-        speed = max(0.0, -float(n @ (jac @ dq)))
+        approach = -float(n @ (jac @ dq))
+        speed = max(0.0, approach)
         m_robot = float(self.mass(q, jac[None], n[None])[0]) if self.mass is not None else np.nan
         force, spring, m_h = self.force_n[k], self.spring_npm[k], self.human_kg[k]
         radius = self.human.capsule_radii[k] + np.asarray(geo.reach_margin)[k]
@@ -369,14 +403,17 @@ class TrueClearance:
             clampable(a + u * axis + radius * n, n, radius, self.surface_z_m, self.clamp_gap_m)
         )
         limit = float(transient_speed_limit_mps(force, spring, m_h, m_robot))
+        permitted = bool(self.permitted[k])
         return TrueContact(
             self.robot.set_names[s],
             self.human.part_names[k],
             self.human.regions[k],
-            bool(self.permitted[k]),
+            permitted,
             clamped,
             float(distance),
-            speed,
+            approach,
             0.0 if clamped and np.isfinite(limit) else limit,
+            float(compression_allowance_m(force, spring)) if permitted and not clamped else 0.0,
+            float(spring),
             float(contact_force_n(speed, spring, m_h, m_robot)),
         )

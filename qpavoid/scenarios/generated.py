@@ -276,6 +276,23 @@ def check_scenario_name(name: str) -> int | None:
     )
 
 
+def closework_seed(name: str) -> int | None:
+    """The close-work case a scenario name runs (``closework:SEED``, or a fixed variant's
+    :data:`~qpavoid.scenarios.closework.FIXED_SEEDS`), else None: its camera draws its
+    noise from that seed, in a run as in a sweep (``qpavoid sweep --motion closework``),
+    so a sweep's replay line repeats the run.
+
+    Raises
+    ------
+    InputError
+        For a name that is no scenario (:func:`check_scenario_name`).
+    """
+    seed = check_scenario_name(name)
+    if name in VARIANTS:
+        return FIXED_SEEDS[name]
+    return seed if name.startswith(CLOSEWORK_PREFIX) else None
+
+
 #: The scenarios by name: the paper's, the operator at work, the fixed close-work cases.
 SCENARIOS = ("test1", "test2", "free", *VARIANTS)
 #: The seeded scenarios' names start so: ``random:SEED``, ``closework:SEED``.
