@@ -204,6 +204,7 @@ def test_a_close_work_sweep_sums_up_safety_and_productivity():
         "runs_touching_above_limit",
         "runs_touching_within_limit",
         "runs_clamping",
+        "runs_pushing",
         "ticks_touching_within_limit",
         "contact_speed_mps",
         "contact_speed_ratio",

@@ -243,17 +243,21 @@ class TouchCounts:
         faster than its Annex A limit; ticks every touch was within it.
     ticks_clamped
         Ticks an arm or hand region was touched where it could be pinned against the table.
+    ticks_pushed
+        Ticks the robot had advanced into a free arm or hand region further than its
+        allowance δ = F_T / k over one contact (pushed it along: reported, not a limit).
     max_contact_speed_mps, max_contact_speed_ratio, max_contact_advance_m, max_contact_force_n
         Over the touches of arm and hand regions: the robot point's fastest speed towards
         the part (m/s), its largest ratio to the region's limit, the robot's deepest
-        advance into a part over one contact (m), the largest force (N: the impact's or the
-        spring's after that advance); 0 without any.
+        advance into a part over one contact (m), the largest impact force (N); 0 without
+        any.
     """
 
     ticks_moving_protected_contact: int = 0
     ticks_contact_above_limit: int = 0
     ticks_contact_within_limit: int = 0
     ticks_clamped: int = 0
+    ticks_pushed: int = 0
     max_contact_speed_mps: float = 0.0
     max_contact_speed_ratio: float = 0.0
     max_contact_advance_m: float = 0.0
@@ -476,7 +480,7 @@ def true_contact_fields(run: RunResult) -> dict[str, Any]:
     ``min_true_clearance_moving_m`` (the smallest true distance while it moved, m; +inf
     if it never moved), and power and force limiting's judgement of each touch
     (``ticks_moving_protected_contact``, ``ticks_contact_above_limit``,
-    ``ticks_contact_within_limit``, ``ticks_clamped``, ``max_contact_speed_mps``,
+    ``ticks_contact_within_limit``, ``ticks_clamped``, ``ticks_pushed``, ``max_contact_speed_mps``,
     ``max_contact_speed_ratio``, ``max_contact_advance_m``, ``max_contact_force_n``)."""
     m = run.sim.metrics
     clearance = m["min_true_clearance_moving_m"]
@@ -488,6 +492,7 @@ def true_contact_fields(run: RunResult) -> dict[str, Any]:
         "ticks_contact_above_limit": int(touched.get("ticks_above_limit", 0)),
         "ticks_contact_within_limit": int(touched.get("ticks_within_limit", 0)),
         "ticks_clamped": int(touched.get("ticks_clamped", 0)),
+        "ticks_pushed": int(touched.get("ticks_pushed", 0)),
         "max_contact_speed_mps": float(touched.get("max_speed_mps") or 0.0),
         "max_contact_speed_ratio": float(touched.get("max_speed_ratio") or 0.0),
         "max_contact_advance_m": float(touched.get("max_advance_m") or 0.0),
@@ -669,6 +674,7 @@ def _contact_totals(runs: Sequence[StrikeCheck | CloseWorkCheck]) -> dict[str, A
         "runs_touching_above_limit": sum(r.ticks_contact_above_limit > 0 for r in runs),
         "runs_touching_within_limit": sum(r.ticks_contact_within_limit > 0 for r in runs),
         "runs_clamping": sum(r.ticks_clamped > 0 for r in runs),
+        "runs_pushing": sum(r.ticks_pushed > 0 for r in runs),
         "ticks_touching_within_limit": sum(r.ticks_contact_within_limit for r in runs),
         "contact_speed_mps": spread([r.max_contact_speed_mps for r in touched]),
         "contact_speed_ratio": spread([r.max_contact_speed_ratio for r in touched]),

@@ -146,22 +146,23 @@ def contact_metrics(
     * ``ticks_moving_protected``: the arm moving while touching a region that permits no
       contact (head, face, neck, trunk); must be zero in every mode;
     * ``ticks_above_limit``: a permitted region (arm, hand) touched faster than its
-      transient limit (or with no limit known), or the robot advanced into it further than
-      its allowance δ = F_T / k (the spring's force past F_T: a push, not a transient
-      contact); must be zero;
+      transient limit (or with no limit known), or a clamped one approached or advanced
+      into (quasi-static: no approach at all); must be zero;
     * ``ticks_within_limit``: every pair touched within its region's limits (allowed with
       ``safety="pfl"``);
     * ``ticks_clamped``: a permitted region touched where it could be pinned against the
-      fixed surface (its limits are no approach and no advance: above them counts in
-      ``ticks_above_limit``);
+      fixed surface;
+    * ``ticks_pushed``: the robot advanced into a free part further than its allowance
+      δ = F_T / k over one contact: it pushed the part along (a free part recoils, so Annex
+      A counts the contact as transient; were it pinned, the spring's force ``k x`` would
+      pass F_T): reported, not a limit;
 
     and over the contacts with permitted regions: ``max_speed_mps``, ``max_speed_ratio``
     (speed / limit, over the parts not clamped), ``max_advance_m`` (the robot's deepest
-    advance into a part over one contact), ``max_force_n`` (the larger of the impact's
-    force and the spring's after that advance; None without any), and ``by_region`` (ticks
-    per region).
+    advance into a part over one contact), ``max_force_n`` (the impact's, ``v √(μk)``;
+    None without any), and ``by_region`` (ticks per region).
     """
-    protected = above = within = clamped = 0
+    protected = above = within = clamped = pushed = 0
     speeds, ratios, forces, advances = [], [], [], []
     by_region: dict[str, int] = {}
     advance: dict[tuple[str, str], float] = {}
@@ -183,6 +184,7 @@ def contact_metrics(
             protected += 1
         touched = [c for c in pairs if c.permitted]
         clamped += any(c.clamped for c in touched)
+        pushed += any(c.pushed(advance[(c.set_name, c.part)]) for c in touched)
         if touched:
             if all(c.within_limit(advance[(c.set_name, c.part)]) for c in touched):
                 within += 1
@@ -196,7 +198,7 @@ def contact_metrics(
             advances.append(x)
             if c.limit_mps > 0.0:  # (a clamped part's limit is 0: counted on its own)
                 ratios.append(c.speed_mps / c.limit_mps)
-            forces.append(c.force_after(x))
+            forces.append(c.force_n)
 
     def top(x: list[float]) -> float | None:
         return round(float(np.max(x)), 6) if x else None
@@ -206,6 +208,7 @@ def contact_metrics(
         "ticks_above_limit": above,
         "ticks_within_limit": within,
         "ticks_clamped": clamped,
+        "ticks_pushed": pushed,
         "max_speed_mps": top(speeds),
         "max_speed_ratio": top(ratios),
         "max_advance_m": top(advances),
@@ -326,14 +329,15 @@ def _contact_line(m: dict[str, Any]) -> str:
         return ""
     fastest = (
         f" (fastest {c['max_speed_mps']:.3f} m/s, {c['max_speed_ratio']:.2f} of its limit; "
-        f"deepest advance {c['max_advance_m'] * 1e3:.1f} mm; {c['max_force_n']:.0f} N)"
+        f"{c['max_force_n']:.0f} N; deepest advance {c['max_advance_m'] * 1e3:.1f} mm)"
         if c["max_speed_mps"] is not None and c["max_speed_ratio"] is not None
         else ""
     )
     return (
         f"\n  true contacts: {c['ticks_within_limit']} ticks within the regions' limits"
         f"{fastest}, {c['ticks_above_limit']} above, {c['ticks_clamped']} clamped, "
-        f"{c['ticks_moving_protected']} moving against the head or trunk"
+        f"{c['ticks_moving_protected']} moving against the head or trunk, "
+        f"{c['ticks_pushed']} pushing a part along"
     )
 
 

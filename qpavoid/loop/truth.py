@@ -247,14 +247,14 @@ class TrueContact:
         mass there along the normal), m/s; 0 for a clamped part; NaN if the arm has no
         inertias.
     allowance_m
-        How far the robot may advance into the part over one contact, δ = F_T / k
-        (:func:`~qpavoid.laws.pfl.compression_allowance_m`), m; 0 for a clamped part and a
-        region that permits no contact.
+        How far the robot may advance into a part that could not recoil before the force
+        reaches F_T, δ = F_T / k (:func:`~qpavoid.laws.pfl.compression_allowance_m`), m; 0
+        for a clamped part and a region that permits no contact.
     spring_n_per_m
         The region's k, N/m (NaN without a region).
     force_n
         The force the contact's speed transfers (:func:`~qpavoid.laws.pfl.contact_force_n`),
-        N; :meth:`force_after` adds the robot's advance.
+        N.
     """
 
     set_name: str
@@ -275,20 +275,19 @@ class TrueContact:
         return max(self.approach_mps, 0.0)
 
     def within_limit(self, advance_m: float = 0.0) -> bool:
-        """A permitted region, touched no faster than its limit (a clamped one: not
-        approached faster than :data:`CREEP_MPS`), the robot having advanced ``advance_m``
-        (m) into it since the contact began, no more than its allowance (and
+        """A permitted region touched no faster than its transient limit; a clamped one
+        (pinned: quasi-static) neither approached faster than :data:`CREEP_MPS` nor
+        advanced into since the contact began (``advance_m``, m, within
         :data:`ADVANCE_TOLERANCE_M`); False if unknown."""
-        return (
-            self.permitted
-            and self.speed_mps <= max(self.limit_mps, CREEP_MPS)
-            and advance_m <= self.allowance_m + ADVANCE_TOLERANCE_M
-        )
+        if not self.permitted or not self.speed_mps <= max(self.limit_mps, CREEP_MPS):
+            return False
+        return not self.clamped or advance_m <= ADVANCE_TOLERANCE_M
 
-    def force_after(self, advance_m: float) -> float:
-        """The larger of the impact's force and the spring's after the robot advanced
-        ``advance_m`` (m) into the part, ``max(v √(μk), k x)``, N."""
-        return max(self.force_n, self.spring_n_per_m * advance_m)
+    def pushed(self, advance_m: float) -> bool:
+        """The robot advanced ``advance_m`` (m) into a free part, further than its allowance
+        δ (and :data:`ADVANCE_TOLERANCE_M`): it pushed the part along, which a free part
+        bears as a transient contact (it recoils) but a pinned one would not."""
+        return self.permitted and advance_m > self.allowance_m + ADVANCE_TOLERANCE_M
 
 
 class TrueClearance:
