@@ -146,12 +146,20 @@ class EffectiveMass:
         InputError
             For arrays of the wrong shape or with non-finite entries.
         """
-        minv = self.minverse(q)
+        q = as_array(q, (self.nq,), "q (joint angles, rad)")
         jac = as_array(jacobians, (None, 3, self.nv), "jacobians (A, 3, nv)")
         n = as_array(normals, (jac.shape[0], 3), "normals (A, 3)")
         length = np.linalg.norm(n, axis=1)
-        unit = n / np.where(length > 0.0, length, 1.0)[:, None]
-        row = np.einsum("ax,axv->av", unit, jac)  # nᵀ J, (A, nv)
+        return self.along_unit(q, jac, n / np.where(length > 0.0, length, 1.0)[:, None])
+
+    def along_unit(self, q: np.ndarray, jacobians: np.ndarray, units: np.ndarray) -> np.ndarray:
+        """:meth:`__call__` without its checks, for a controller's tick: ``q`` (nq,),
+        ``jacobians`` (A, 3, nv) and ``units`` (A, 3) already float arrays of those shapes,
+        each direction of length 1 or 0 (the distance table's), kg (A,)."""
+        upper = pin.computeMinverse(self.model, self.data, q)
+        minv = np.triu(upper) + np.triu(upper, 1).T
+        jac = jacobians
+        row = np.einsum("ax,axv->av", units, jac)  # nᵀ J, (A, nv)
         inverse = np.einsum("av,av->a", row @ minv, row)  # nᵀ J M⁻¹ Jᵀ n ≥ 0
         # at most ‖J‖² tr M⁻¹: a value below ROUNDING of that is rounding, not motion
         bound = np.einsum("axv,axv->a", jac, jac) * np.trace(minv)

@@ -77,6 +77,9 @@ class ContactLimits:
         )
         self.radii = np.asarray(human.capsule_radii, dtype=float)
         self.surface_z_m, self.clamp_gap_m = config.surface_z_m, config.clamp_gap_m
+        #: A speed and separation bound at or above this cannot bind (the description's
+        #: ``[arm] max_point_speed_mps``): its pair needs no contact speed, m/s.
+        self.above_mps = float(robot.arm.max_point_speed_mps)
 
     def __call__(
         self,
@@ -85,6 +88,7 @@ class ContactLimits:
         geos: list[HumanGeometry],
         who: np.ndarray,
         ssm: SSMConfig,
+        bound: np.ndarray,
     ) -> np.ndarray:
         """(S, K) each pair's permitted contact speed, m/s: ``min(v_max, v_c)`` where the
         pair's part permits contact and is seen (no more than 0 where it could be clamped),
@@ -104,24 +108,25 @@ class ContactLimits:
             This tick's speed and separation constants (resolved, with this tick's T_s):
             C + Z_d + Z_r and T_r + T_s/2 of :func:`~qpavoid.laws.pfl.
             stopping_contact_speed_mps`.
+        bound
+            (S, K) the pairs' speed and separation bounds, m/s: a pair whose bound no point
+            of the arm reaches (+inf for a part not seen) needs no contact speed (−inf),
+            since the separation row takes the larger and its damper is beyond reach too
+            (the dampers act within 0.15 m, where the bound is below 1 m/s).
         """
         d = table.distance
         out = np.full(d.shape, -np.inf)
-        pairs = self.contact[None, :] & np.isfinite(d)
+        pairs = self.contact[None, :] & (bound < self.above_mps) & np.isfinite(d)
         if not pairs.any():
             return out
         sets, parts = np.nonzero(pairs)
         jac = table.robot_jacobians(kin, sets, parts)
-        m_robot = self.mass(kin.q, jac, table.vector[sets, parts])
+        m_robot = self.mass.along_unit(kin.q, jac, table.vector[sets, parts])
         v_max = transient_speed_limit_mps(
             self.force_n[parts], self.spring_npm[parts], self.human_kg[parts], m_robot
         )
-        margin = np.array(
-            [
-                np.asarray(geos[p].part_margin)[k]
-                for p, k in zip(who[sets, parts], parts, strict=True)
-            ]
-        )
+        margins = np.stack([np.asarray(g.part_margin, dtype=float) for g in geos])
+        margin = margins[who[sets, parts], parts]
         pinned = clampable(
             table.human_point[sets, parts],
             table.vector[sets, parts],

@@ -360,7 +360,7 @@ class Controller:
         limits = np.minimum(limits, self.accel * ssm.stop_time_s)
         if self.contact is None:
             return approach_limit, human_approach, limits, None
-        contact = self.contact(kin, table, geos, who, ssm)
+        contact = self.contact(kin, table, geos, who, ssm, approach_limit)
         return np.maximum(approach_limit, contact), human_approach, limits, contact
 
     def _stop_reason(
