@@ -2,7 +2,7 @@
 
 ISO/TS 15066 §5.5.5 permits contact with the body regions of its Annex A other than the
 head, face, neck and trunk, as long as the robot's speed towards the region at the moment
-of contact keeps the transferred energy within the region's limit (eq. A.6,
+of contact keeps the transferred energy within the region's limit (Annex A's force form,
 :func:`~qpavoid.laws.pfl.transient_speed_limit_mps`):
 
     v_max = F_T / sqrt(μ k),    μ = (1/m_H + 1/m_R)⁻¹,    m_R = (nᵀ J_p M⁻¹ J_pᵀ n)⁻¹
@@ -11,16 +11,21 @@ with F_T the region's transient permissible force, k its effective spring consta
 its effective mass (Tables A.2 and A.3, :mod:`qpavoid.laws.pfl`), and m_R the arm's
 effective mass at the pair's robot point p along the pair's normal n, from the mass
 matrix M (payload included) and the point's Jacobian J_p (:class:`~qpavoid.arm.inertia.
-EffectiveMass`). For a pair whose part permits contact, the speed and separation bound on
-the robot point's approach speed ``−nᵀ J_p q̇`` becomes
+EffectiveMass`). Annex A's masses bounce apart; a position-controlled arm keeps moving
+until it has stopped, so it must also stop within the part's allowance δ = F_T / k past
+the surface it sees (:func:`~qpavoid.laws.pfl.stopping_contact_speed_mps`):
 
-    −nᵀ J_p q̇  ≤  max(v_SSM(d), v_max)        (separation holds, or the contact is transient)
+    v_c = (d − C − Z_d − Z_r + δ) / (T_r + T_s/2)
 
-except where the pair is already in contact (d ≤ 0, as perceived), or where the part could
-be pinned against the fixed surface (the table its forearms and hands rest on,
-:func:`~qpavoid.laws.pfl.clampable`): there the bound is ``max(v_SSM(d), 0)``. The robot
-never pushes on into a part it touches, nor towards a part it could clamp: a contact stays
-transient, never quasi-static. The head and trunk keep the speed and separation bound.
+For a pair whose part permits contact, the speed and separation bound on the robot
+point's approach speed ``−nᵀ J_p q̇`` becomes
+
+    −nᵀ J_p q̇  ≤  max(v_SSM(d), min(v_max, v_c))   (separation holds, or a transient contact)
+
+and ``max(v_SSM(d), min(v_max, v_c, 0))`` where the part could be pinned against the fixed
+surface (the table its forearms and hands rest on, :func:`~qpavoid.laws.pfl.clampable`).
+The robot never pushes on into a part it sees, nor towards one it could clamp. The head
+and trunk keep the speed and separation bound (docs/safety.md §9).
 """
 
 from __future__ import annotations
