@@ -190,7 +190,7 @@ def _contact(
 ):
     allowance = 280.0 / 75_000.0 if permitted and not clamped else 0.0
     return TrueContact(
-        "EE", part, region, permitted, clamped, -0.001, speed, limit, allowance, 75_000.0, 10.0
+        0, "EE", part, region, permitted, clamped, -0.001, speed, limit, allowance, 75_000.0, 10.0
     )
 
 
@@ -206,10 +206,10 @@ def test_contact_metrics_by_hand():
         ],
         4: [_contact(clamped=True, speed=0.01, limit=0.0)],  # pushing a pinned hand
     }
-    t = np.arange(5) * 0.5  # ticks far apart: each contact its own (no advance)
+    t = np.arange(5) * 0.5  # ticks far apart: each contact its own
     m = contact_metrics({k: contacts[k] for k in (0, 2, 4)}, moving, t)
     assert m["ticks_above_limit"] == 1 and m["ticks_within_limit"] == 1
-    assert m["max_advance_m"] == 0.0
+    assert m["max_advance_m"] == pytest.approx(0.005)  # the crossing tick: 0.01 m/s × 0.5 s
     m = contact_metrics(contacts, moving, t)
     assert m["ticks_moving_protected"] == 1
     assert m["ticks_above_limit"] == 2 and m["ticks_within_limit"] == 2
@@ -220,28 +220,29 @@ def test_contact_metrics_by_hand():
 
 
 def test_a_robot_that_keeps_advancing_into_a_hand_pushes_it_and_into_a_pinned_one_is_above():
-    # 0.1 m/s into a hand, 10 ms ticks: its allowance 280 N / 75 N/mm = 3.73 mm (and the
-    # 0.5 mm tolerance) is used up after 42 ms; the ticks after that (advance 5 mm and
-    # more) push a free hand along, and are above the limit of a pinned one
-    t = np.arange(10) * 0.01
-    moving = np.ones(10, dtype=bool)
-    m = contact_metrics({k: [_contact(speed=0.1)] for k in range(10)}, moving, t)
-    assert m["max_advance_m"] == pytest.approx(0.009)  # 9 ticks of 1 mm before the last
-    assert m["ticks_pushed"] == 5 and m["ticks_within_limit"] == 10  # 5..9 mm
+    # 0.1 m/s into a hand, 10 ms ticks from the tick that crossed its surface: its
+    # allowance 280 N / 75 N/mm = 3.73 mm (and the 0.5 mm tolerance) is used up after
+    # 42 ms; the ticks after that (advance 5 mm and more) push a free hand along, and are
+    # above the limit of a pinned one
+    t = np.arange(11) * 0.01
+    moving = np.ones(11, dtype=bool)
+    m = contact_metrics({k: [_contact(speed=0.1)] for k in range(1, 11)}, moving, t)
+    assert m["max_advance_m"] == pytest.approx(0.010)  # 1 mm a tick, the crossing one too
+    assert m["ticks_pushed"] == 6 and m["ticks_within_limit"] == 10  # 5..10 mm
     assert m["ticks_above_limit"] == 0
     # backing off undoes it; a gap in the contact starts a new one
-    back = {k: [_contact(speed=0.1 if k < 3 else -0.1)] for k in range(10)}
+    back = {k: [_contact(speed=0.1 if k < 4 else -0.1)] for k in range(1, 11)}
     assert contact_metrics(back, moving, t)["ticks_pushed"] == 0
-    gaps = {k: [_contact(speed=0.1)] for k in (0, 1, 2, 4, 5, 6, 8, 9)}
+    gaps = {k: [_contact(speed=0.1)] for k in (1, 2, 3, 5, 6, 7, 9, 10)}
     assert contact_metrics(gaps, moving, t)["ticks_pushed"] == 0
     # a pinned hand: any approach beyond 1 mm/s is above, and so is any advance
-    pinned = {k: [_contact(clamped=True, speed=0.0005, limit=0.0)] for k in range(10)}
-    m = contact_metrics(pinned, moving, t)  # 0.5 mm/s: 4.5 µm after 9 ticks, within
+    creep = {k: [_contact(clamped=True, speed=0.0005, limit=0.0)] for k in range(1, 11)}
+    m = contact_metrics(creep, moving, t)  # 0.5 mm/s: 50 µm after 10 ticks, within
     assert m["ticks_above_limit"] == 0 and m["ticks_clamped"] == 10
-    pinned = {
-        k: [_contact(clamped=True, speed=0.1 if k == 0 else 0.0, limit=0.0)] for k in range(10)
+    press = {
+        k: [_contact(clamped=True, speed=0.1 if k == 1 else 0.0, limit=0.0)] for k in range(1, 11)
     }
-    m = contact_metrics(pinned, moving, t)  # 1 mm in, then held: above from the first tick
+    m = contact_metrics(press, moving, t)  # 1 mm in, then held: above from the first tick
     assert m["ticks_above_limit"] == 10
 
 
@@ -343,3 +344,31 @@ def test_pfl_works_within_reach_where_ssm_waits():
     contacts = out["pfl"]["contacts"]
     assert contacts["runs_touching_protected_regions"] == 0
     assert contacts["runs_touching_above_limit"] == 0
+
+
+@pytest.mark.parametrize("distance", ["capsules", "spheres"])
+def test_a_hand_on_the_table_under_the_arm_may_not_be_approached(robot, distance):
+    # the end effector lowered to 0.3 m over the table, the right hand flat on the table
+    # under it: a press would pin the hand, so the pair's contact speed is at most 0, in
+    # both distance methods (a sphere's witness point lies higher than the capsule's);
+    # with no table (surface_z_m=None) the same pair may be approached
+    pose = default_task(robot).path.reference(0.0)[0].copy()
+    pose[2, 3] = 0.30
+    q = inverse_kinematics(robot, pose)
+    op = default_task(robot).operator
+    ee = robot.end_effector(q)[:3, 3]
+    joints = op.reach(op.rest(), "right", np.array([ee[0], ee[1], 0.05]))
+    hand = np.array(joints)
+    limits = {}
+    for surface in (0.0, None):
+        pfl = PFLConfig(surface_z_m=surface)
+        config = qpavoid.ControllerConfig(
+            safety="pfl", control_period_s=0.01, distance=distance, pfl=pfl
+        )
+        tick = qpavoid.QPController(robot, config=config).measure(
+            q, hand, None, 0.0, frame_age_s=0.03
+        )
+        s, k = robot.set_index("EE"), tick.table.part_names.index("right_hand")
+        assert tick.table.vector[s, k, 2] > 0.7  # the arm above the hand
+        limits[surface] = tick.contact_limit[s, k]
+    assert limits[0.0] <= 0.0 < limits[None]

@@ -130,15 +130,7 @@ class ContactLimits:
         v_max = transient_speed_limit_mps(
             self.force_n[parts], self.spring_npm[parts], self.human_kg[parts], m_robot
         )
-        margins = np.stack([np.asarray(g.part_margin, dtype=float) for g in geos])
-        margin = margins[who[sets, parts], parts]
-        pinned = clampable(
-            table.human_point[sets, parts],
-            table.vector[sets, parts],
-            self.radii[parts] + margin,
-            self.surface_z_m,
-            self.clamp_gap_m,
-        )
+        pinned = self._pinned(table, geos, who[sets, parts], sets, parts)
         assert ssm.reaction_time_s is not None  # resolved by the controller
         v_stop = stopping_contact_speed_mps(
             d[sets, parts],
@@ -149,6 +141,39 @@ class ContactLimits:
         v = np.minimum(v_max, v_stop)
         out[sets, parts] = np.where(pinned, np.minimum(v, 0.0), v)
         return out
+
+    def _pinned(
+        self,
+        table: DistanceTable,
+        geos: list[HumanGeometry],
+        people: np.ndarray,
+        sets: np.ndarray,
+        parts: np.ndarray,
+    ) -> np.ndarray:
+        """(A,) True where the pair's part could be clamped (:func:`~qpavoid.laws.pfl.
+        clampable`), whatever the distance method: the part as its capsule, widened by its
+        uncertainty and its fingers' reach, around the axis point under the table's witness
+        point (a sphere's witness point lies further out, on a larger radius)."""
+        person = [geos[p] for p in people]
+        a = np.array([g.segments[k, 0] for g, k in zip(person, parts, strict=True)])
+        b = np.array([g.segments[k, 1] for g, k in zip(person, parts, strict=True)])
+        widen = np.array(
+            [
+                np.asarray(g.part_margin)[k] + np.asarray(g.reach_margin)[k]
+                for g, k in zip(person, parts, strict=True)
+            ]
+        )
+        h, n = table.human_point[sets, parts], table.vector[sets, parts]
+        axis = b - a
+        u = np.clip(
+            np.einsum("ax,ax->a", h - a, axis)
+            / np.maximum(np.einsum("ax,ax->a", axis, axis), 1e-300),
+            0.0,
+            1.0,
+        )
+        radius = self.radii[parts] + widen
+        surface = a + u[:, None] * axis + radius[:, None] * n
+        return clampable(surface, n, radius, self.surface_z_m, self.clamp_gap_m)
 
     def protected(self) -> np.ndarray:
         """(K,) True for the parts whose region permits no contact (head, trunk)."""

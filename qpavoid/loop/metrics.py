@@ -140,7 +140,9 @@ def contact_metrics(
     (:meth:`~qpavoid.loop.truth.TrueClearance.contacts`); ``moving`` (T,) says which ticks
     the arm moved in, ``t`` (T,) when they were (s). A pair's contact lasts while it is in
     contact tick after tick; over it the robot's own advance into the part is summed, its
-    approach speed times each tick's duration (never below 0: backing off undoes it).
+    approach speed times each tick's duration (never below 0: backing off undoes it), from
+    the tick before the first (the motion that crossed the surface, at the first tick's
+    approach: the faster of the velocities before and after it).
     Returns tick counts (a tick counts once, by its worst pair):
 
     * ``ticks_moving_protected``: the arm moving while touching a region that permits no
@@ -165,35 +167,35 @@ def contact_metrics(
     protected = above = within = clamped = pushed = 0
     speeds, ratios, forces, advances = [], [], [], []
     by_region: dict[str, int] = {}
-    advance: dict[tuple[str, str], float] = {}
-    last: dict[tuple[str, str], TrueContact] = {}
+    advance: dict[tuple[int, str, str], float] = {}
+    last: dict[tuple[int, str, str], TrueContact] = {}
     previous = -2
     for k in sorted(contacts):
         pairs = contacts[k]
-        now: dict[tuple[str, str], float] = {}
+        dt = float(t[k] - t[k - 1]) if k > 0 else 0.0
+        now: dict[tuple[int, str, str], float] = {}
         for c in pairs:  # each pair's advance since its contact began
-            key = (c.set_name, c.part)
+            key = (c.person, c.set_name, c.part)
             before = last.get(key) if previous == k - 1 else None
-            now[key] = (
-                max(0.0, advance[key] + before.approach_mps * float(t[k] - t[k - 1]))
-                if before is not None
-                else 0.0
+            now[key] = max(
+                0.0,
+                advance[key] + before.approach_mps * dt if before is not None else c.speed_mps * dt,
             )
-        advance, last, previous = now, {(c.set_name, c.part): c for c in pairs}, k
+        advance, last, previous = now, {(c.person, c.set_name, c.part): c for c in pairs}, k
         if bool(moving[k]) and any(not c.permitted for c in pairs):
             protected += 1
         touched = [c for c in pairs if c.permitted]
         clamped += any(c.clamped for c in touched)
-        pushed += any(c.pushed(advance[(c.set_name, c.part)]) for c in touched)
+        pushed += any(c.pushed(advance[(c.person, c.set_name, c.part)]) for c in touched)
         if touched:
-            if all(c.within_limit(advance[(c.set_name, c.part)]) for c in touched):
+            if all(c.within_limit(advance[(c.person, c.set_name, c.part)]) for c in touched):
                 within += 1
             else:
                 above += 1
         for region in {c.region or "none" for c in pairs}:
             by_region[region] = by_region.get(region, 0) + 1
         for c in touched:
-            x = advance[(c.set_name, c.part)]
+            x = advance[(c.person, c.set_name, c.part)]
             speeds.append(c.speed_mps)
             advances.append(x)
             if c.limit_mps > 0.0:  # (a clamped part's limit is 0: counted on its own)

@@ -422,7 +422,10 @@ def simulate(
     if truth is not None:  # each tick in true contact: its regions, speeds and limits
         touching = np.flatnonzero(np.any(log["true_distance"] <= 0.0, axis=1))
         contacts = {
-            int(k): truth.contacts(log["q"][k], log["dq"][k], log["t"][k]) for k in touching
+            int(k): truth.contacts(
+                log["q"][k], log["dq"][k], log["t"][k], log["dq"][k - 1] if k > 0 else None
+            )
+            for k in touching
         }
         moved = np.any(log["dq"] != 0.0, axis=1) if moving is None else moving
         ending["true_contacts"] = contact_metrics(contacts, moved, log["t"])

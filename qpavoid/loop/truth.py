@@ -142,7 +142,7 @@ class MeshClearance:
 
     def pairs(
         self, q: np.ndarray, sets: np.ndarray, geo: HumanGeometry
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Each of ``sets``' true distance to each usable part, from its objects.
 
         Returns
@@ -153,10 +153,14 @@ class MeshClearance:
             (len(sets), K, 3) the objects' witness point, base frame, m (NaN where +inf).
         joint
             (len(sets), K) the Pinocchio joint carrying that point (-1 where +inf).
+        normal
+            (len(sets), K, 3) the unit direction from the part to the object, coal's (also
+            under penetration), NaN where +inf.
         """
         n_parts = len(self.radii)
         distance = np.full((len(sets), n_parts), np.inf)
         point = np.full((len(sets), n_parts, 3), np.nan)
+        normal = np.full((len(sets), n_parts, 3), np.nan)
         joint = np.full((len(sets), n_parts), -1)
         pin.forwardKinematics(self.robot.model, self.data, q)
         person = self._person(geo)
@@ -170,7 +174,8 @@ class MeshClearance:
                     if d < distance[i, part]:
                         distance[i, part], joint[i, part] = d, obj.parentJoint
                         point[i, part] = self.result.getNearestPoint1()
-        return distance, point, joint
+                        normal[i, part] = -np.asarray(self.result.normal)  # (robot → part)
+        return distance, point, joint, normal
 
     def _placement(self, obj: pin.GeometryObject) -> coal.Transform3s:
         """Where ``obj`` is at the joint placements last computed."""
@@ -221,12 +226,23 @@ CREEP_MPS = 0.001
 ADVANCE_TOLERANCE_M = 0.0005
 
 
+def _axis_point(segment: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The point of the axis ``segment`` (2, 3) closest to ``p`` (m): where on the part a
+    contact at the robot's point ``p`` is, also when ``p`` lies inside the part."""
+    a, b = segment
+    axis = b - a
+    u = float(np.clip((p - a) @ axis / max(float(axis @ axis), 1e-300), 0.0, 1.0))
+    return a + u * axis
+
+
 @dataclass(frozen=True)
 class TrueContact:
     """One robot set touching one body part at one tick, judged against the truth.
 
     Attributes
     ----------
+    person
+        Which of the people present (0: the only one).
     set_name, part
         The pair.
     region
@@ -257,6 +273,7 @@ class TrueContact:
         N.
     """
 
+    person: int
     set_name: str
     part: str
     region: str | None
@@ -343,14 +360,19 @@ class TrueClearance:
         """(S,) one person's true distance per set, m."""
         return self.meshes(kin.q, self.capsules(kin, geometry).min_per_set(), geometry)
 
-    def contacts(self, q: np.ndarray, dq: np.ndarray, t: float) -> list[TrueContact]:
+    def contacts(
+        self, q: np.ndarray, dq: np.ndarray, t: float, dq_before: np.ndarray | None = None
+    ) -> list[TrueContact]:
         """Every set × part pair truly in contact at run time ``t`` (module docstring),
-        with the arm at ``q`` moving at ``dq`` (rad/s, its real joint velocity)."""
+        with the arm at ``q`` moving at ``dq`` (rad/s, its real joint velocity); with
+        ``dq_before``, the tick before's, each pair's approach is the faster of the two (the
+        velocity that made the contact and the one after it)."""
         kin = self.robot.kinematics(q)
         out: list[TrueContact] = []
-        for geo in self._geometries(t):
+        for person, geo in enumerate(self._geometries(t)):
             table = self.capsules(kin, geo)
             distance, point = table.distance.copy(), table.robot_point.copy()
+            normal = table.vector.copy()  # coal's, from the part to the robot
             joint = np.full(distance.shape, -1)  # -1: the capsule's point
             if self.meshes.has_mesh:
                 near = (
@@ -358,14 +380,29 @@ class TrueClearance:
                 ) & self.meshes.on_set.any(axis=1)
                 sets = np.flatnonzero(near)
                 if len(sets):
-                    distance[sets], point[sets], joint[sets] = self.meshes.pairs(q, sets, geo)
+                    found = self.meshes.pairs(q, sets, geo)
+                    distance[sets], point[sets], joint[sets], normal[sets] = found
             for s, k in zip(*np.nonzero(distance <= 0.0), strict=True):
                 if joint[s, k] < 0:
                     jac = kin.segment_point_jacobian(int(s), float(table.robot_s[s, k]))
                 else:
                     jac = self._point_jacobian(q, int(joint[s, k]), point[s, k])
+                velocities = (dq,) if dq_before is None else (dq, dq_before)
+                approach = max(-float(normal[s, k] @ (jac @ v)) for v in velocities)
+                axis_point = _axis_point(geo.segments[k], point[s, k])
                 out.append(
-                    self._contact(q, dq, int(s), int(k), distance[s, k], point[s, k], jac, geo)
+                    self._contact(
+                        q,
+                        person,
+                        int(s),
+                        int(k),
+                        distance[s, k],
+                        approach,
+                        normal[s, k],
+                        jac,
+                        geo,
+                        axis_point,
+                    )
                 )
         return out
 
@@ -380,30 +417,38 @@ class TrueClearance:
     def _contact(
         self,
         q: np.ndarray,
-        dq: np.ndarray,
+        person: int,
         s: int,
         k: int,
         distance: float,
-        p: np.ndarray,
+        approach: float,
+        normal: np.ndarray,
         jac: np.ndarray,
         geo: HumanGeometry,
+        axis_point: np.ndarray,
     ) -> TrueContact:
-        """The pair (set ``s``, part ``k``) touching at ``p`` with point Jacobian ``jac``."""
-        a, b = geo.segments[k]
-        axis = b - a
-        u = float(np.clip((p - a) @ axis / max(float(axis @ axis), 1e-300), 0.0, 1.0))
-        n = unit(p - (a + u * axis), np.array([0.0, 0.0, 1.0]))  # from the part to the arm
-        approach = -float(n @ (jac @ dq))
+        """The pair (set ``s``, part ``k`` of ``person``) touching along ``normal`` (unit,
+        from the part to the arm: coal's, right under penetration too) at ``axis_point`` of
+        the part's axis, the robot point (Jacobian ``jac``) approaching at ``approach``
+        (m/s)."""
+        n = unit(normal, np.array([0.0, 0.0, 1.0]))
         speed = max(0.0, approach)
         m_robot = float(self.mass(q, jac[None], n[None])[0]) if self.mass is not None else np.nan
         force, spring, m_h = self.force_n[k], self.spring_npm[k], self.human_kg[k]
         radius = self.human.capsule_radii[k] + np.asarray(geo.reach_margin)[k]
         clamped = bool(
-            clampable(a + u * axis + radius * n, n, radius, self.surface_z_m, self.clamp_gap_m)
+            clampable(
+                axis_point + radius * n,
+                n,
+                radius,
+                self.surface_z_m,
+                self.clamp_gap_m,
+            )
         )
         limit = float(transient_speed_limit_mps(force, spring, m_h, m_robot))
         permitted = bool(self.permitted[k])
         return TrueContact(
+            person,
             self.robot.set_names[s],
             self.human.part_names[k],
             self.human.regions[k],
