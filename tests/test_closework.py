@@ -32,7 +32,7 @@ from qpavoid.scenarios.generated import (
 SEEDS = {"rest_near": (1, 2), "work_near": (5, 8), "reach_across": (3, 9), "handover": (0, 4)}
 #: The arms the cases are checked on: the iiwa and one whose task is scaled (its meshes
 #: come from example-robot-data: the UR5's).
-ARMS = ("iiwa14", "ur5")
+ARMS = ("iiwa14", pytest.param("ur5", marks=pytest.mark.slow))  # (the UR5's: slow suite)
 
 
 class Arm:
@@ -301,6 +301,7 @@ def test_qpavoid_sweep_motion_closework(tmp_path, monkeypatch, capsys):
     assert case["replay"].startswith("qpavoid run closework:0 --controller qp")
 
 
+@pytest.mark.slow  # two 4 s runs
 def test_a_close_work_sweep_s_run_is_the_run_of_its_scenario():
     # the replay line of a sweep's worst run (qpavoid run closework:SEED) repeats it: the
     # camera draws its noise from the case's seed in both

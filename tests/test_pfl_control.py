@@ -246,6 +246,7 @@ def test_a_robot_that_keeps_advancing_into_a_hand_pushes_it_and_into_a_pinned_on
     assert m["ticks_above_limit"] == 10
 
 
+@pytest.mark.slow  # two 10 s runs; the default suite has the bounds tick by tick
 def test_pfl_moves_where_ssm_holds_and_touches_nothing_above_its_limit():
     out = {}
     for safety in ("ssm", "pfl"):
@@ -266,7 +267,7 @@ def _iiwa_without_inertias(folder):
     import shutil
     from pathlib import Path
 
-    src = Path(qpavoid.__file__).resolve().parents[1] / "robots" / "iiwa14"
+    src = Path(__file__).resolve().parents[1] / "robots" / "iiwa14"  # the source tree's
     for name in ("control_points.toml", "task.toml"):
         shutil.copy(src / name, folder / name)
     urdf = (src / "iiwa14.urdf").read_text()
