@@ -155,6 +155,7 @@ def test_a_busy_port_is_a_clear_error():
         Listener(first.address, CAL)
 
 
+@pytest.mark.slow  # 4 s of real time on loopback (the default suite's cold time)
 def test_loopback_replay_with_faults_never_moves_on_stale_or_invalid_data(robot):
     """stream → UDP → listener → fusion → controller, in real time, with bad datagrams."""
     motion = make_scenario("free", robot)
