@@ -154,15 +154,11 @@ class ContactLimits:
         clampable`), whatever the distance method: the part as its capsule, widened by its
         uncertainty and its fingers' reach, around the axis point under the table's witness
         point (a sphere's witness point lies further out, on a larger radius)."""
-        person = [geos[p] for p in people]
-        a = np.array([g.segments[k, 0] for g, k in zip(person, parts, strict=True)])
-        b = np.array([g.segments[k, 1] for g, k in zip(person, parts, strict=True)])
-        widen = np.array(
-            [
-                np.asarray(g.part_margin)[k] + np.asarray(g.reach_margin)[k]
-                for g, k in zip(person, parts, strict=True)
-            ]
-        )
+        segments = np.stack([g.segments for g in geos])[people, parts]  # (A, 2, 3)
+        a, b = segments[:, 0], segments[:, 1]
+        widen = np.stack([np.asarray(g.part_margin) + np.asarray(g.reach_margin) for g in geos])[
+            people, parts
+        ]
         h, n = table.human_point[sets, parts], table.vector[sets, parts]
         axis = b - a
         u = np.clip(

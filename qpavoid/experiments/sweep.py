@@ -333,22 +333,10 @@ class CloseWorkCheck(TouchCounts):
         What was run.
     variant, side
         The case: one of :data:`~qpavoid.scenarios.closework.VARIANTS`, and its hand.
-    ticks_moving_in_true_contact, min_true_clearance_moving_m
-        As :class:`StrikeCheck`'s (:func:`true_contact_fields`).
-    moving_s, stopped_s
-        Time the arm moved / the controller held a stop, s.
-    reached_goal
-        Whether the path's goal was reached.
     time_to_goal_s
-        When it was reached (the run ends there), s; None if it was not.
-    duration_s
-        When the run ended, s.
-    limit_violations
-        Ticks over a joint's velocity or position limit.
-    command_limit_violations
-        Commands beyond the arm's velocity, acceleration or jerk limits.
-    tick_us_median, tick_us_p99
-        The controller's time per tick, µs (measured: not reproducible).
+        When the goal was reached (the run ends there), s; None if it was not.
+
+    The others as :class:`StrikeCheck`'s (:func:`true_contact_fields`, :func:`_run_fields`).
 
     The contacts' judgement by power and force limiting: :class:`TouchCounts`'s fields.
     """
