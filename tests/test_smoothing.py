@@ -51,9 +51,13 @@ def jerks(robot: Robot) -> np.ndarray:
     return np.array([table.get(n, np.inf) for n in robot.joint_names])
 
 
-def ramp_after(robot: Robot, dt: float, braking: Braking, *commands: np.ndarray) -> CommandRamp:
-    """A ramp that has sent ``commands`` (oldest first) from rest."""
-    ramp = CommandRamp(robot, dt, braking)
+def ramp_after(
+    robot: Robot, dt: float, braking: Braking, *commands: np.ndarray, reaction_s: float = 0.0
+) -> CommandRamp:
+    """A ramp that has sent ``commands`` (oldest first) from rest, for an arm reacting after
+    ``reaction_s`` (0, the default here: the joints move by each command at once,
+    q += u dt, as :func:`real_stop` moves them)."""
+    ramp = CommandRamp(robot, dt, braking, reaction_time_s=reaction_s)
     for u in commands:
         ramp.commit(u, stopping=False)
     return ramp
@@ -250,6 +254,125 @@ def test_the_box_by_hand() -> None:
     assert ramp.box(q)[1][0] == pytest.approx(0.3013698630, abs=1e-10)
 
 
+def test_the_room_leaves_out_the_commands_in_flight() -> None:
+    """An arm reacting r periods after a command is still carried by the last r commands
+    when the next one begins: the room to brake is counted from where they leave it.
+
+    iiwa at 100 Hz, reaction 5 ms: r = ⌈0.005 / 0.01⌉ = 1. A1 at 0.39 rad/s steadily,
+    0.02 rad short of its limit, b = a = 8.57 rad/s²: in flight 0.39 · 0.01 = 0.0039 rad;
+      T = (0.39 + 0.0857) / 8.57 = 0.0555075846 s,   H = 0.01 + T/2 = 0.0377537923 s,
+      u ≤ (0.02 − 0.0039) / H = 0.4264472261 rad/s
+    (counted from q, 0.02 / H = 0.5297 rad/s: the acceleration row's 0.4757 would hold, and
+    the stop would end 3.9 mrad further on, within 0.4757 H = 0.01796 + 0.0039 = 21.9 mrad
+    of 20). At 500 Hz r = ⌈2.5⌉ = 3: the last three commands are in flight."""
+    iiwa = arm("iiwa14")
+    q = (iiwa.q_min + iiwa.q_max) / 2
+    q[0] = iiwa.q_max[0] - 0.02
+    u = np.zeros(iiwa.nv)
+    u[0] = 0.39
+    braking = accelerations(iiwa)
+    ramp = ramp_after(iiwa, 0.01, braking, u, u, reaction_s=iiwa.arm.reaction_time_s)
+    assert ramp.in_flight == 1
+    assert ramp.braking_horizon() == pytest.approx(0.0377537923, abs=1e-10)
+    lo, hi = ramp.box(q)
+    assert hi[0] == pytest.approx(0.4264472261, abs=1e-10)
+    assert lo[0] == pytest.approx(0.39 - 0.0857, abs=1e-12)
+    assert ramp_after(iiwa, 0.01, braking, u, u).box(q)[1][0] == pytest.approx(0.4757)
+    # a command undone (never sent) is not in flight; a reset arm has none
+    ramp.commit(2 * u, stopping=False)
+    ramp.undo()
+    np.testing.assert_array_equal(ramp.box(q)[1], hi)
+    ramp.reset()
+    np.testing.assert_array_equal(ramp.box(q)[1], ramp_after(iiwa, 0.01, braking).box(q)[1])
+    # 500 Hz: 3 in flight, A1 at 0.1, 0.11, 0.12 rad/s (0.66 mrad in flight):
+    #   T = (0.12 + 0.01714) / 8.57 = 0.0160023337 s,   H = 0.002 + T/2 = 0.0100011669 s;
+    #   1.3 mrad short: (0.0013 − 0.00066) / H = 0.064 < 0.12 − 0.01714: no room;
+    #   1.9 mrad short: u ≤ (0.0019 − 0.00066) / H = 0.1239855312 rad/s
+    sent = [np.where(np.arange(iiwa.nv) == 0, v, 0.0) for v in (0.09, 0.1, 0.11, 0.12)]
+    ramp = ramp_after(iiwa, 0.002, braking, *sent, reaction_s=iiwa.arm.reaction_time_s)
+    assert ramp.in_flight == 3
+    assert ramp.braking_horizon() == pytest.approx(0.0100011669, abs=1e-10)
+    q[0] = iiwa.q_max[0] - 0.0013
+    lo, hi = ramp.box(q)
+    assert hi[0] == lo[0] == pytest.approx(0.12 - 0.01714)  # no room: as hard as it may
+    q[0] = iiwa.q_max[0] - 0.0019
+    assert ramp.box(q)[1][0] == pytest.approx(0.1239855326, abs=1e-9)
+
+
+def delayed_stop(
+    ramp: CommandRamp, flying: list[np.ndarray], u: np.ndarray, q: np.ndarray, most: int
+) -> np.ndarray:
+    """Send ``u``, then brake() + commit(stopping=True) to rest (at most ``most`` ticks), to
+    an arm that follows each command ``len(flying)`` ticks after it is sent (``flying``:
+    the commands sent before ``u`` it is still to follow, oldest first): the joint angles
+    after each tick (n, nv), until the arm is at rest."""
+    pending = list(flying)
+    path = [q]
+    ramp.commit(u, stopping=False)
+    pending.append(u)
+    while any(c.any() for c in pending):
+        path.append(path[-1] + pending.pop(0) * ramp.dt)
+        u = ramp.brake()
+        ramp.commit(u, stopping=True)
+        pending.append(u)
+        assert len(path) <= most, "no rest in time"
+    return np.array(path)
+
+
+def delayed_room_sweep(name: str, dt: float, told_s: float, cases: int, seed: int) -> float:
+    """Random states of an arm reacting after its description's reaction time at period
+    ``dt``: every joint moving towards a limit (steady, or speeding up or slowing within
+    its acceleration over the commands in flight), most of them within reach of it; the
+    ramp told the reaction ``told_s``; each joint sent to its box's end, then the real stop
+    through the arm's delay. The farthest past a limit (rad) of a joint whose box's end was
+    the room to brake (not the acceleration or jerk rows, nor no room at all)."""
+    robot = arm(name)
+    a = per_joint(robot.arm.max_acceleration_radps2, robot.joint_names)
+    rng = np.random.default_rng(seed)
+    flying = int(np.ceil(robot.arm.reaction_time_s / dt - 1e-9))
+    worst, bound = -np.inf, 0
+    for case in range(cases):
+        sign = rng.choice([-1.0, 1.0], robot.nv)
+        speed = rng.uniform(0.1, 0.8, robot.nv) * robot.dq_max
+        step = (0.0, 0.8, -0.8, 0.3)[case % 4] * a * dt
+        sent = [
+            sign * np.clip(speed - (flying + 1 - i) * step, 0.0, None) for i in range(flying + 2)
+        ]
+        travel = sum(sent[len(sent) - flying :], np.zeros(robot.nv)) * dt
+        ramp = ramp_after(robot, dt, accelerations(robot), *sent, reaction_s=told_s)
+        H = ramp.braking_horizon()
+        # room for a speed about the last command's, within about a tick's acceleration
+        reach = sign * sent[-1] + rng.uniform(-1.2, 1.2, robot.nv) * a * dt
+        gap = np.abs(travel) + np.maximum(reach, 0.0) * H
+        q = np.where(sign > 0, robot.q_max - gap, robot.q_min + gap)
+        lo, hi = ramp.box(q)
+        reach_lo, reach_hi = (
+            ramp_after(robot, dt, accelerations(robot), *sent).u1 + d for d in (-a * dt, a * dt)
+        )
+        u = np.where(sign > 0, hi, lo)
+        by_room = np.where(
+            sign > 0, (hi < reach_hi - 1e-12) & (hi > lo), (lo > reach_lo + 1e-12) & (lo < hi)
+        )
+        path = delayed_stop(ramp, sent[len(sent) - flying :] if flying else [], u, q, 10_000)
+        past = np.maximum(path - robot.q_max, robot.q_min - path).max(axis=0)
+        if by_room.any():
+            worst = max(worst, float(past[by_room].max()))
+        bound += int(by_room.sum())
+    assert bound > cases // 3, bound  # the room set many boxes' ends
+    return worst
+
+
+@pytest.mark.parametrize("name", ["iiwa14", "ur5", "panda"])  # 5, 8, 1 ms
+@pytest.mark.parametrize("dt", [0.01, 0.002])  # 1 or 2 in flight at 100 Hz, 1 to 4 at 500
+def test_a_stop_through_the_arms_reaction_keeps_its_room(name: str, dt: float) -> None:
+    """:func:`delayed_room_sweep`, 40 cases: told the arm's reaction, no joint whose box's
+    end was its room passes its limit; told none (the room counted from the joint angles
+    the controller reads), some do."""
+    robot = arm(name)
+    assert delayed_room_sweep(name, dt, robot.arm.reaction_time_s, 40, 5) <= 1e-12
+    assert delayed_room_sweep(name, dt, 0.0, 40, 5) > 1e-4
+
+
 def real_stop(ramp: CommandRamp, u: np.ndarray, q: np.ndarray, most: int) -> np.ndarray:
     """Send ``u`` (one tick), then brake() + commit(stopping=True) to rest (at most ``most``
     ticks), the joint angles moving by each command for a tick (q += u dt): the joint
@@ -437,7 +560,7 @@ def moving_ramp(
 ) -> tuple[CommandRamp, CommandCheck]:
     """A ramp brought from rest to ``target`` (joint angles mid-range) and held there one
     tick (steady), every command checked."""
-    ramp = CommandRamp(robot, dt, braking)
+    ramp = CommandRamp(robot, dt, braking, reaction_time_s=0.0)  # q += u dt at once
     check = CommandCheck(CommandLimits.of(robot, dt))
     q = (robot.q_min + robot.q_max) / 2  # held: far from the limits, whatever the speed
     for _ in range(10_000):
@@ -524,7 +647,7 @@ def test_a_stop_begun_while_accelerating_keeps_the_limits(name: str, dt: float) 
     and within the limits; where the jerk limit allows the acceleration to drop to zero in
     a tick (a dt ≤ j dt²: the Franka arms at 500 Hz, the iiwa), it never speeds up."""
     robot = arm(name)
-    ramp = CommandRamp(robot, dt, accelerations(robot))
+    ramp = CommandRamp(robot, dt, accelerations(robot), reaction_time_s=0.0)
     check = CommandCheck(CommandLimits.of(robot, dt))
     q, target = (robot.q_min + robot.q_max) / 2, 0.8 * robot.dq_max
     for _ in range(8):

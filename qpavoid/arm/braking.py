@@ -100,6 +100,13 @@ class BrakingConfig:
         )
 
 
+def reaction_ticks(reaction_time_s: float, dt: float) -> int:
+    """The arm's reaction in control periods: a command sent at tick k becomes its target
+    at tick ``k + reaction_ticks`` (the reaction time rounded up to whole periods of
+    ``dt`` s; 0 for an arm that follows at once)."""
+    return int(np.ceil(reaction_time_s / dt - 1e-9))
+
+
 def per_joint(
     values: tuple[tuple[str, float], ...] | None, joint_names: Sequence[str]
 ) -> np.ndarray:
@@ -211,7 +218,7 @@ class ArmResponse:
         self.a_dt = self.a_max * dt
         self.dt = dt
         nv = len(joint_names)
-        delay = int(np.ceil(cfg.reaction_time_s / dt - 1e-9))
+        delay = reaction_ticks(cfg.reaction_time_s, dt)
         self._pending: deque[np.ndarray] = deque([np.zeros(nv)] * delay)
         self.dq = np.zeros(nv)
         #: Wall-clock mode: from a command's send time to it becoming the target, s.

@@ -154,7 +154,12 @@ class Controller:
         warm_up()  # law_kernels, before the first tick
         #: The commands so far and the reach of the next (None: the paper's steps).
         self.ramp = (
-            CommandRamp(robot, self.config.control_period_s, self._braking())
+            CommandRamp(
+                robot,
+                self.config.control_period_s,
+                self._braking(),
+                reaction_time_s=robot.arm.reaction_time_s,
+            )
             if self.config.smooth
             else None
         )

@@ -8,13 +8,16 @@ limits, per joint j:
     |u_k|                    ≤ v_j                       velocity (the arm's; eq. 3's below)
     |u_k − u_{k−1}|          ≤ a_j dt                    acceleration
     |u_k − 2u_{k−1} + u_{k−2}| ≤ j_j dt²                   jerk, where the arm publishes one
-    |u_k| H ≤ the room to q_min, q_max                  room to brake before the limit
+    |u_k| H ≤ the room to q_min, q_max − dt Σ u_{k−i}   room to brake before the limit
 
 (a_j the acceleration limit, b_j ≤ a_j the braking deceleration of speed and separation
 monitoring, j_j the jerk limit, H the time over which a stop begun after u_k may carry a
 joint at its speed, :meth:`CommandRamp.braking_horizon`: the description's ``[arm]``, or
 tighter ones an arm's
-interface imposes, :meth:`CommandRamp.tighten`). These rows form the *reachable box*
+interface imposes, :meth:`CommandRamp.tighten`; the sum, over the r commands sent but not yet
+followed, i = 1 … r, is the travel still in flight: an arm reacting r = ⌈T_r / dt⌉ periods
+after a command, :func:`~qpavoid.arm.braking.reaction_ticks`, is still carried by them when
+``u_k`` begins). These rows form the *reachable box*
 ``lo ≤ u_k ≤ hi`` of :meth:`CommandRamp.box`: the
 QP takes it as bounds (:class:`~qpavoid.control.qp.limits.acceleration.AccelerationLimit`);
 where a limit (a velocity limit eq. 3 just lowered, a joint limit) lies outside the box, the
@@ -33,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from qpavoid.arm.braking import ArmResponse, BrakingConfig, per_joint
+from qpavoid.arm.braking import ArmResponse, BrakingConfig, per_joint, reaction_ticks
 from qpavoid.arm.model import Robot
 
 __all__ = ["CommandRamp", "smooth_rate_limit_hz"]
@@ -62,10 +65,21 @@ class CommandRamp:
     braking_radps2
         ``(joint, b_j)`` pairs: the braking deceleration of a stop, rad/s² (speed and
         separation monitoring's, :meth:`~qpavoid.laws.ssm.SSMConfig.resolve`).
+    reaction_time_s
+        From a command to the arm following it, s (the description's ``[arm]
+        reaction_time_s``, as :class:`~qpavoid.arm.braking.ArmResponse` counts it): the
+        commands sent within it still move the joints when the next one begins, and the
+        room to brake leaves their travel out. No default: an arm that follows at once (0)
+        is a choice to make, not to fall into.
     """
 
     def __init__(
-        self, robot: Robot, dt: float, braking_radps2: tuple[tuple[str, float], ...]
+        self,
+        robot: Robot,
+        dt: float,
+        braking_radps2: tuple[tuple[str, float], ...],
+        *,
+        reaction_time_s: float,
     ) -> None:
         names = robot.joint_names
         self.dt = dt
@@ -81,8 +95,13 @@ class CommandRamp:
         self._constants()
         self.u1 = np.zeros(robot.nv)  # the last command, rad/s
         self.u2 = np.zeros(robot.nv)  # the one before
+        #: How many of the last commands the arm is still to follow when the next is sent.
+        self.in_flight = reaction_ticks(reaction_time_s, dt)
+        self._sent: tuple[np.ndarray, ...] = ()  # those commands (at most in_flight), rad/s
         self.at_stop: float | None = None  # the speed (∞-norm) the ramp started from
-        self._before: tuple[np.ndarray, np.ndarray, float | None] | None = None
+        self._before: tuple[np.ndarray, np.ndarray, float | None, tuple[np.ndarray, ...]] | None = (
+            None
+        )
 
     def tighten(
         self,
@@ -119,22 +138,24 @@ class CommandRamp:
         """Forget the last :meth:`commit`: its command was never sent (a tick that missed
         its deadline is replaced by a braking one)."""
         if self._before is not None:
-            self.u1, self.u2, self.at_stop = self._before
+            self.u1, self.u2, self.at_stop, self._sent = self._before
             self._before = None
 
     def reset(self) -> None:
         """Forget the commands: the arm is at rest."""
-        self.u1[:], self.u2[:], self.at_stop = 0.0, 0.0, None
+        self.u1[:], self.u2[:], self.at_stop, self._sent = 0.0, 0.0, None, ()
 
     def box(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The reachable box ``(lo, hi)`` of the next command (nv,), rad/s, at joint angles
         ``q``: acceleration, jerk and room to brake before the joint limits."""
         lo, hi = self._reach()
-        # room to brake: a stop begun after this command (every joint on one line, at the
-        # pace of the slowest, the jerk's lag included) carries a joint at u at most u H
+        # room to brake: where the commands in flight leave the joints when this one
+        # begins; then a stop begun after it (every joint on one line, at the pace of the
+        # slowest, the jerk's lag included) carries a joint at u at most u H
+        ahead = q + self.dt * sum(self._sent, np.zeros_like(q)) if self._sent else q
         inv_h = 1.0 / self.braking_horizon()
-        up = np.minimum((self.q_max - q).clip(0.0) * inv_h, self.v_max)
-        down = np.minimum((q - self.q_min).clip(0.0) * inv_h, self.v_max)
+        up = np.minimum((self.q_max - ahead).clip(0.0) * inv_h, self.v_max)
+        down = np.minimum((ahead - self.q_min).clip(0.0) * inv_h, self.v_max)
         return (-down).clip(lo, hi), up.clip(lo, hi)
 
     def braking_horizon(self) -> float:
@@ -199,8 +220,10 @@ class CommandRamp:
     def commit(self, u: np.ndarray, stopping: bool) -> float:
         """``u`` is the command sent; the fraction of the stop's start speed it keeps
         (1 while not ``stopping``, falling to 0 along a stop ramp)."""
-        self._before = (self.u1, self.u2, self.at_stop)
+        self._before = (self.u1, self.u2, self.at_stop, self._sent)
         self.u2, self.u1 = self.u1, np.array(u, dtype=float)
+        if self.in_flight:
+            self._sent = (*self._sent, self.u1)[-self.in_flight :]
         if not stopping:
             self.at_stop = None
             return 1.0
