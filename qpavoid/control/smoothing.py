@@ -5,20 +5,18 @@ reflexes, a UR protective stop). :class:`CommandRamp` keeps the controller's com
 ``u_k`` (one per control period dt, from rest: ``u_{-1} = u_{-2} = 0``) within the arm's
 limits, per joint j:
 
-    |u_k|                    ≤ v_j                       velocity (the arm's; eq. 3's below)
-    |u_k − u_{k−1}|          ≤ a_j dt                    acceleration
-    |u_k − 2u_{k−1} + u_{k−2}| ≤ j_j dt²                   jerk, where the arm publishes one
-    |u_k| H ≤ the room to q_min, q_max − dt Σ u_{k−i}   room to brake before the limit
+    |u_k|                      ≤ v_j                  velocity (the arm's; eq. 3's below)
+    |u_k − u_{k−1}|            ≤ a_j dt               acceleration
+    |u_k − 2u_{k−1} + u_{k−2}| ≤ j_j dt²              jerk, where the arm publishes one
+    |u_k| H ≤ the room from q + dt Σ_{i=1..r} u_{k−i} to q_min, q_max     room to brake
 
 (a_j the acceleration limit, b_j ≤ a_j the braking deceleration of speed and separation
 monitoring, j_j the jerk limit, H the time over which a stop begun after u_k may carry a
 joint at its speed, :meth:`CommandRamp.braking_horizon`: the description's ``[arm]``, or
-tighter ones an arm's
-interface imposes, :meth:`CommandRamp.tighten`; the sum, over the r commands sent but not yet
-followed, i = 1 … r, is the travel still in flight: an arm reacting r = ⌈T_r / dt⌉ periods
-after a command, :func:`~qpavoid.arm.braking.reaction_ticks`, is still carried by them when
-``u_k`` begins). These rows form the *reachable box*
-``lo ≤ u_k ≤ hi`` of :meth:`CommandRamp.box`: the
+tighter ones an arm's interface imposes, :meth:`CommandRamp.tighten`; the sum is the travel
+still in flight: an arm reacting r = ⌈T_r / dt⌉ periods after a command,
+:func:`~qpavoid.arm.braking.reaction_ticks`, is still carried by the last r when ``u_k``
+begins). These rows form the *reachable box* ``lo ≤ u_k ≤ hi`` of :meth:`CommandRamp.box`: the
 QP takes it as bounds (:class:`~qpavoid.control.qp.limits.acceleration.AccelerationLimit`);
 where a limit (a velocity limit eq. 3 just lowered, a joint limit) lies outside the box, the
 box's nearest end holds: the arm slows as fast as it may, never faster. The analytic
