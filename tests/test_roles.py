@@ -89,9 +89,9 @@ def test_the_renamed_copy_has_no_iiwa_name_left(other, robot):
 
 @pytest.mark.parametrize(
     "controller, safety",
-    [  # two in the default suite, the other two with the slow ones
+    [  # one in the default suite (its time), the other three with the slow ones
         ("analytic", "ssm"),
-        ("qp", "paper"),
+        pytest.param("qp", "paper", marks=pytest.mark.slow),  # the default suite's time
         pytest.param("qp", "ssm", marks=pytest.mark.slow),
         pytest.param("analytic", "paper", marks=pytest.mark.slow),
     ],
