@@ -39,6 +39,9 @@ from qpavoid.arm.model import Robot
 
 __all__ = ["CommandRamp", "smooth_rate_limit_hz"]
 
+#: What a commit changes: the last two commands, the stop's start speed, the commands in flight.
+_Sent = tuple[np.ndarray, np.ndarray, float | None, tuple[np.ndarray, ...]]
+
 
 def smooth_rate_limit_hz(robot: Robot) -> float:
     """The highest control rate at which every stop ramp keeps the arm's jerk limits
@@ -97,9 +100,7 @@ class CommandRamp:
         self.in_flight = reaction_ticks(reaction_time_s, dt)
         self._sent: tuple[np.ndarray, ...] = ()  # those commands (at most in_flight), rad/s
         self.at_stop: float | None = None  # the speed (∞-norm) the ramp started from
-        self._before: tuple[np.ndarray, np.ndarray, float | None, tuple[np.ndarray, ...]] | None = (
-            None
-        )
+        self._before: _Sent | None = None  # u1, u2, at_stop and those before the last commit
 
     def tighten(
         self,
