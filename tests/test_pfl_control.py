@@ -185,6 +185,16 @@ def test_the_judge_s_speed_is_the_true_distance_s_rate_of_change(robot, human):
     assert checked >= 10
 
 
+def test_a_contact_names_its_person_by_id(robot, human):
+    from qpavoid.loop.crowd import Crowd
+
+    q = _start(robot)
+    away, touching = _hand_near(robot, q, "L2", 0.4), _hand_near(robot, q, "L2", -0.005)
+    crowd = Crowd({2: _Still(away), 5: _Still(touching)})  # the one touching comes second
+    contacts = TrueClearance(robot, human, crowd).contacts(q, np.zeros(robot.nv), 0.0)
+    assert contacts and {c.person for c in contacts} == {5}
+
+
 def _contact(
     region="hand_finger", permitted=True, clamped=False, speed=0.1, limit=1.0, part="right_hand"
 ):
@@ -195,7 +205,7 @@ def _contact(
 
 
 def test_contact_metrics_by_hand():
-    moving = np.array([True, True, False, True, True])
+    moving = np.array([True, False, False, True, True])
     contacts = {
         0: [_contact()],  # within
         1: [_contact(speed=1.2)],  # above
@@ -217,6 +227,10 @@ def test_contact_metrics_by_hand():
     assert m["max_speed_mps"] == 1.2 and m["max_speed_ratio"] == 1.2
     assert m["by_region"] == {"chest": 1, "face": 1, "hand_finger": 4}
     assert contact_metrics({}, moving, t)["max_force_n"] is None
+    # a robot that stops on the touch moved into it: the tick before counts too
+    face = {1: [_contact("face", permitted=False, speed=0.0, limit=0.0, part="head")]}
+    assert contact_metrics(face, np.array([True, False]), t[:2])["ticks_moving_protected"] == 1
+    assert contact_metrics(face, np.array([False, False]), t[:2])["ticks_moving_protected"] == 0
 
 
 def test_a_robot_that_keeps_advancing_into_a_hand_pushes_it_and_into_a_pinned_one_is_above():
@@ -244,6 +258,7 @@ def test_a_robot_that_keeps_advancing_into_a_hand_pushes_it_and_into_a_pinned_on
     }
     m = contact_metrics(press, moving, t)  # 1 mm in, then held: above from the first tick
     assert m["ticks_above_limit"] == 10
+    assert m["ticks_pushed"] == 0  # a pinned part is not pushed along: it is above
 
 
 @pytest.mark.slow  # two 10 s runs; the default suite has the bounds tick by tick

@@ -91,6 +91,21 @@ def test_moving_apart_transfers_no_force_and_nan_stays_nan():
     assert np.isnan(transient_speed_limit_mps(280.0, 75_000.0, 0.6, np.nan))
 
 
+def test_a_pinned_part_takes_the_robot_s_whole_energy():
+    # a hand that cannot recoil, 0.5 m/s from 5 kg: μ = m_R, F = 0.5 √(5 × 75 000) = 306.19 N
+    # (free: μ = 0.6 × 5 / 5.6 = 0.5357 kg, 100.2 N); an immovable point gives 0 N at rest
+    f = contact_force_n(
+        [0.5, 0.5, 0.0, 0.1],
+        75_000.0,
+        0.6,
+        [5.0, 5.0, np.inf, np.inf],
+        pinned=[True, False, True, True],
+    )
+    assert f[0] == pytest.approx(306.186218, rel=1e-8)
+    assert f[1] == pytest.approx(100.222966, rel=1e-8)
+    assert f[2] == 0.0 and f[3] == np.inf
+
+
 @pytest.mark.parametrize(
     ("call", "name", "value"),
     [
@@ -207,6 +222,7 @@ def test_a_region_checks_its_own_values():
     assert BodyRegion(**fields, **numbers) == hand
     for key, bad in (
         ("transient_factor", 0.5),
+        ("transient_factor", 2.5),  # beyond the TS's twice the quasi-static limit
         ("effective_mass_kg", math.nan),
         ("max_force_n", True),
     ):

@@ -85,9 +85,10 @@ CONTACT_KINDS = ("transient", "none")
 MAX_REGIONS_FILE_BYTES = 1 << 20
 #: Plausible bounds of a region's numbers (beyond them, a unit error: a spring constant in N/m
 #: where N/mm is asked reads 1000 times too stiff): the TS's forces are 65-220 N, its spring
-#: constants 10-150 N/mm, its masses 0.6-75 kg, its transient factor 2.
+#: constants 10-150 N/mm, its masses 0.6-75 kg. The transient factor is the TS's own bound:
+#: transient contact may reach at most twice the quasi-static limit, never more.
 MAX_FORCE_N, MAX_SPRING_N_PER_MM, MAX_MASS_KG = 1000.0, 1000.0, 200.0
-MIN_TRANSIENT_FACTOR, MAX_TRANSIENT_FACTOR = 1.0, 10.0
+MIN_TRANSIENT_FACTOR, MAX_TRANSIENT_FACTOR = 1.0, 2.0
 _NAME = re.compile(r"[a-z][a-z0-9_]*\Z")
 
 
@@ -107,7 +108,7 @@ class BodyRegion:
     max_force_n
         F_max: the maximum permissible force of quasi-static contact, N (Table A.2).
     transient_factor
-        c: transient contact may reach ``c F_max`` (the TS's 2), at least 1.
+        c: transient contact may reach ``c F_max``, from 1 to the TS's 2.
     spring_constant_n_per_mm
         k: the region's effective spring constant, N/mm (Table A.3; in N/m:
         :attr:`spring_constant_n_per_m`).
@@ -327,7 +328,11 @@ def transient_speed_limit_mps(
 
 
 def contact_force_n(
-    speed_mps: ArrayLike, spring_n_per_m: ArrayLike, m_h_kg: ArrayLike, m_r_kg: ArrayLike
+    speed_mps: ArrayLike,
+    spring_n_per_m: ArrayLike,
+    m_h_kg: ArrayLike,
+    m_r_kg: ArrayLike,
+    pinned: ArrayLike = False,
 ) -> np.ndarray:
     """F = v √(μ k), N, element-wise: the peak force of a transient contact at the relative
     speed v (the inverse of :func:`transient_speed_limit_mps`; from ``½ μ v² = F² / (2k)``,
@@ -339,6 +344,10 @@ def contact_force_n(
         v: the robot point's speed towards the region, m/s.
     spring_n_per_m, m_h_kg, m_r_kg
         As for :func:`transient_speed_limit_mps`.
+    pinned
+        The region cannot recoil (clamped against a fixed surface): the robot's energy
+        ``½ m_R v²`` goes into the tissue alone, μ = m_R (infinite force from an
+        immovable robot point approaching at all).
 
     Raises
     ------
@@ -350,7 +359,11 @@ def contact_force_n(
         bad = v[np.isinf(v)].flat[0]
         raise InputError(f"speed_mps must be finite, got {bad}", name="speed_mps", value=speed_mps)
     k = _positive(spring_n_per_m, "spring_n_per_m")
-    return np.maximum(v, 0.0) * np.sqrt(reduced_mass_kg(m_h_kg, m_r_kg) * k)
+    mu = np.where(pinned, _positive(m_r_kg, "m_r_kg", inf=True), reduced_mass_kg(m_h_kg, m_r_kg))
+    with np.errstate(invalid="ignore"):  # 0 m/s into an immovable point: 0 N, not 0 × inf
+        return np.where(
+            v > 0.0, np.maximum(v, 0.0) * np.sqrt(mu * k), np.where(np.isnan(v), v, 0.0)
+        )
 
 
 def compression_allowance_m(force_n: ArrayLike, spring_n_per_m: ArrayLike) -> np.ndarray:

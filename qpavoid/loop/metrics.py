@@ -146,7 +146,9 @@ def contact_metrics(
     Returns tick counts (a tick counts once, by its worst pair):
 
     * ``ticks_moving_protected``: the arm moving while touching a region that permits no
-      contact (head, face, neck, trunk); must be zero in every mode;
+      contact (head, face, neck, trunk), at that tick or the one before (the motion that
+      made the contact: a robot that stops on the touch moved into it); must be zero in
+      every mode;
     * ``ticks_above_limit``: a permitted region (arm, hand) touched faster than its
       transient limit (or with no limit known), or a clamped one approached or advanced
       into (quasi-static: no approach at all); must be zero;
@@ -182,7 +184,7 @@ def contact_metrics(
                 advance[key] + before.approach_mps * dt if before is not None else c.speed_mps * dt,
             )
         advance, last, previous = now, {(c.person, c.set_name, c.part): c for c in pairs}, k
-        if bool(moving[k]) and any(not c.permitted for c in pairs):
+        if bool(moving[k] or (k > 0 and moving[k - 1])) and any(not c.permitted for c in pairs):
             protected += 1
         touched = [c for c in pairs if c.permitted]
         clamped += any(c.clamped for c in touched)

@@ -17,7 +17,7 @@ distance (coal) of the set's capsule.
 limiting (ISO/TS 15066 Annex A): per robot set × body part pair in contact, the part's body
 region, the robot point's true speed towards it (the arm's real joint velocity through the
 point's Jacobian, along the normal from the part's axis to the point), the region's
-transient speed limit at that point (the arm's true effective mass there, eq. A.6,
+transient speed limit at that point (the arm's true effective mass there, eq. A.5,
 :mod:`qpavoid.laws.pfl`) and the force that speed would transfer.
 """
 
@@ -242,7 +242,8 @@ class TrueContact:
     Attributes
     ----------
     person
-        Which of the people present (0: the only one).
+        Who: the person's stable id in a crowd (:class:`~qpavoid.human.people.People`),
+        0 for the only one.
     set_name, part
         The pair.
     region
@@ -269,8 +270,8 @@ class TrueContact:
     spring_n_per_m
         The region's k, N/m (NaN without a region).
     force_n
-        The force the contact's speed transfers (:func:`~qpavoid.laws.pfl.contact_force_n`),
-        N.
+        The force the contact's speed transfers (:func:`~qpavoid.laws.pfl.contact_force_n`;
+        a clamped part cannot recoil: μ = m_R), N.
     """
 
     person: int
@@ -304,7 +305,11 @@ class TrueContact:
         """The robot advanced ``advance_m`` (m) into a free part, further than its allowance
         δ (and :data:`ADVANCE_TOLERANCE_M`): it pushed the part along, which a free part
         bears as a transient contact (it recoils) but a pinned one would not."""
-        return self.permitted and advance_m > self.allowance_m + ADVANCE_TOLERANCE_M
+        return (
+            self.permitted
+            and not self.clamped
+            and advance_m > self.allowance_m + ADVANCE_TOLERANCE_M
+        )
 
 
 class TrueClearance:
@@ -351,10 +356,17 @@ class TrueClearance:
 
     def _geometries(self, t: float) -> list[HumanGeometry]:
         """The true geometry of everybody present at run time ``t``."""
-        if isinstance(self.motion, Crowd):  # the nearest of everybody present
-            people = self.motion.true_frames(t, true_frame).frames
-            return [self.human.geometry(f) for f in people]
-        return [self.human.geometry(true_frame(self.motion, self.t0 + t))]
+        return [geo for _, geo in self._people(t)]
+
+    def _people(self, t: float) -> list[tuple[int, HumanGeometry]]:
+        """Everybody present at run time ``t``: their stable id (0: the only person) and
+        true geometry."""
+        if isinstance(self.motion, Crowd):
+            people = self.motion.true_frames(t, true_frame)
+            return [
+                (i, self.human.geometry(f)) for i, f in zip(people.ids, people.frames, strict=True)
+            ]
+        return [(0, self.human.geometry(true_frame(self.motion, self.t0 + t)))]
 
     def _one(self, kin: Kinematics, geometry: HumanGeometry) -> np.ndarray:
         """(S,) one person's true distance per set, m."""
@@ -369,7 +381,7 @@ class TrueClearance:
         velocity that made the contact and the one after it)."""
         kin = self.robot.kinematics(q)
         out: list[TrueContact] = []
-        for person, geo in enumerate(self._geometries(t)):
+        for person, geo in self._people(t):
             table = self.capsules(kin, geo)
             distance, point = table.distance.copy(), table.robot_point.copy()
             normal = table.vector.copy()  # coal's, from the part to the robot
@@ -459,5 +471,5 @@ class TrueClearance:
             0.0 if clamped and np.isfinite(limit) else limit,
             float(compression_allowance_m(force, spring)) if permitted and not clamped else 0.0,
             float(spring),
-            float(contact_force_n(speed, spring, m_h, m_robot)),
+            float(contact_force_n(speed, spring, m_h, m_robot, pinned=clamped)),
         )
