@@ -361,9 +361,7 @@ def contact_force_n(
     k = _positive(spring_n_per_m, "spring_n_per_m")
     mu = np.where(pinned, _positive(m_r_kg, "m_r_kg", inf=True), reduced_mass_kg(m_h_kg, m_r_kg))
     with np.errstate(invalid="ignore"):  # 0 m/s into an immovable point: 0 N, not 0 × inf
-        return np.where(
-            v > 0.0, np.maximum(v, 0.0) * np.sqrt(mu * k), np.where(np.isnan(v), v, 0.0)
-        )
+        return np.where(v > 0.0, v * np.sqrt(mu * k), np.where(np.isnan(v), v, 0.0))
 
 
 def compression_allowance_m(force_n: ArrayLike, spring_n_per_m: ArrayLike) -> np.ndarray:
