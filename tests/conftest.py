@@ -22,6 +22,14 @@ from qpavoid.loop.camera import CameraConfig
 from qpavoid.perception import _kernels as perception_kernels
 from qpavoid.perception.tracker import PerceptionConfig
 
+#: This interpreter, for a subprocess that must import the installed package: ``-P``
+#: (Python 3.11+) keeps the working directory off its ``sys.path``. pytest runs in the
+#: checkout, whose own ``qpavoid/`` a plain ``python -m``/``-c`` imports instead of the
+#: package under test: a non-editable install's subprocesses ran the source tree, and
+#: compiled its kernels afresh (their numba cache is the source tree's, cold in a new
+#: clone: about 14 s of a cold suite's time).
+PYTHON = (sys.executable, "-P") if sys.version_info >= (3, 11) else (sys.executable,)
+
 #: The fusion's kernels compiled (or loaded) in a process of their own.
 WARM_UP_FUSION = (
     "from qpavoid.fusion import person; from qpavoid.human.kinect_v2 import KINECT_V2; "
@@ -36,7 +44,7 @@ def pytest_configure(config):
     from the disk cache)."""
     if not hasattr(config, "workerinput"):  # pytest-xdist's controller, or no xdist
         # the largest kernel (about half of a fresh install's 20 s) compiled beside the rest
-        fusion = subprocess.Popen([sys.executable, "-c", WARM_UP_FUSION])
+        fusion = subprocess.Popen([*PYTHON, "-c", WARM_UP_FUSION])
         perception_kernels.warm_up(KINECT_V2)
         body_kernels.warm_up(KINECT_V2)
         distance_kernels.warm_up()

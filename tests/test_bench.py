@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 
 import pytest
+from conftest import PYTHON
 
 
 @pytest.mark.slow
 def test_bench_writes_every_documented_key(tmp_path):
     out = tmp_path / "bench.json"
     r = subprocess.run(
-        [sys.executable, "-m", "qpavoid", "bench", "--quick", "--json", str(out)],
+        [*PYTHON, "-m", "qpavoid", "bench", "--quick", "--json", str(out)],
         capture_output=True,
         text=True,
         timeout=600,

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PYTHON
 
 from qpavoid.cli.commands import build_parser
 from qpavoid.core.errors import InputError
@@ -139,10 +140,9 @@ def test_a_ray_that_cannot_be_reached_is_an_input_error(monkeypatch, address):
 @pytest.mark.slow  # the default suite's time; a CLI sweep runs there too (SIGTERM's test)
 def test_qpavoid_sweep_from_the_command_line(tmp_path):
     import subprocess
-    import sys
 
     out = tmp_path / "c"
-    cmd = [sys.executable, "-m", "qpavoid", "sweep", "--n", "1", "--controller", "analytic"]
+    cmd = [*PYTHON, "-m", "qpavoid", "sweep", "--n", "1", "--controller", "analytic"]
     r = subprocess.run([*cmd, "--seed", "4", "--out", str(out)], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
@@ -175,7 +175,6 @@ def test_sigterm_during_a_ray_sweep_is_one_line_and_status_143(tmp_path, when):
     fixed 5 s this test waited fell sometimes in ray.init, sometimes in ray.get, where it
     fails: found in this session's CI runs, 1 of 3)."""
     import subprocess
-    import sys
     import time
 
     def ray_workers(pid: int) -> bool:
@@ -198,7 +197,7 @@ def test_sigterm_during_a_ray_sweep_is_one_line_and_status_143(tmp_path, when):
         return False
 
     out = tmp_path / "c"
-    cmd = [sys.executable, "-m", "qpavoid", "sweep", "--n", "6", "--controller", "qp"]
+    cmd = [*PYTHON, "-m", "qpavoid", "sweep", "--n", "6", "--controller", "qp"]
     proc = subprocess.Popen(
         [*cmd, "--executor", "ray", "-q", "--out", str(out)],
         stdout=subprocess.PIPE,

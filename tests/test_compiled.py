@@ -6,12 +6,12 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 import types
 from pathlib import Path
 
 import numba
 import numpy as np
+from conftest import PYTHON
 
 from qpavoid.core.compiling import kernel_input, recompile_if_stale
 from qpavoid.fusion import person as fusion_person
@@ -89,7 +89,7 @@ print(json.dumps({
 
 
 def test_the_loop_uses_only_the_kernels_warm_up_compiled():
-    r = subprocess.run([sys.executable, "-c", LOOP], capture_output=True, text=True, timeout=300)
+    r = subprocess.run([*PYTHON, "-c", LOOP], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout.strip().splitlines()[-1])
     counts = out["signatures"]

@@ -5,7 +5,6 @@
 from __future__ import annotations
 
 import subprocess
-import sys
 from importlib import resources
 from pathlib import Path
 
@@ -16,6 +15,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 import tomllib
+from conftest import PYTHON
 
 import qpavoid
 from qpavoid.control.analytic import AnalyticConfig
@@ -51,7 +51,7 @@ def test_the_old_top_level_names_are_the_stages_objects():
 def test_import_qpavoid_qp_and_robots_in_a_fresh_interpreter():
     """What the quick start's check runs (``python -P -c "import qpavoid.qp, qpavoid.robots"``)."""
     done = subprocess.run(
-        [sys.executable, "-P", "-c", "import qpavoid.qp, qpavoid.robots; print('ok')"],
+        [*PYTHON, "-c", "import qpavoid.qp, qpavoid.robots; print('ok')"],
         capture_output=True,
         text=True,
         cwd="/",

@@ -13,7 +13,6 @@ from __future__ import annotations
 import io
 import pickle
 import subprocess
-import sys
 import tracemalloc
 import zipfile
 from collections.abc import Callable
@@ -21,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PYTHON
 from numpy.lib import format as npy_format
 
 from qpavoid.core import file_bounds
@@ -326,7 +326,7 @@ def test_the_command_line_refuses_a_huge_npz_and_writes_nothing(tmp_path):
     _zip(tmp_path / "big.npz", base | {"joints": _header(HUGE_JOINTS, "<f8")})
     r = subprocess.run(
         [
-            sys.executable,
+            *PYTHON,
             "-m",
             "qpavoid",
             "run",

@@ -13,12 +13,12 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PYTHON
 
 from qpavoid.experiments.run_spec import RunSpec
 from qpavoid.experiments.runs import build_controller, simulate_one, spec_robot
@@ -111,7 +111,7 @@ def test_the_command_line_on_franky_sim_ends_cleanly_on_sigterm(tmp_path):
     """`qpavoid run test1 --robot fr3 --arm franka:HOST`, SIGTERM while it runs: one line,
     no traceback, the run written (or, before the loop began, nothing), no process left."""
     address, out = host(3), tmp_path / "run"
-    cmd = [sys.executable, "-m", "qpavoid", "run", "test1", "--robot", "fr3"]
+    cmd = [*PYTHON, "-m", "qpavoid", "run", "test1", "--robot", "fr3"]
     cmd += ["--arm", f"franka:{address}", "--out", str(out), "--no-plots", "--no-view", "-q"]
     with FrankySim(address):
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

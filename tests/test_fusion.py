@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import PYTHON
 
 from qpavoid.core.errors import CalibrationError, InputError
 from qpavoid.fusion.association import torso_centre
@@ -289,17 +290,16 @@ def test_frames_of_other_types_fuse_as_float64_ones():
 def test_the_example_and_qpavoid_fuse_write_a_fused_recording(tmp_path):
     """examples/two_sensors.py, then `qpavoid fuse` as a user types them."""
     import subprocess
-    import sys
     from pathlib import Path
 
     example = Path(__file__).parents[1] / "examples" / "two_sensors.py"
     r = subprocess.run(
-        [sys.executable, str(example), str(tmp_path)], capture_output=True, text=True, timeout=120
+        [*PYTHON, str(example), str(tmp_path)], capture_output=True, text=True, timeout=120
     )
     assert r.returncode == 0, r.stderr
     files = [str(tmp_path / "kinect_left.npz"), str(tmp_path / "kinect_right.npz")]
     out = tmp_path / "fused.npz"
-    cmd = [sys.executable, "-m", "qpavoid", "fuse", *files]
+    cmd = [*PYTHON, "-m", "qpavoid", "fuse", *files]
     cmd += ["--sensors", str(tmp_path / "calib.toml"), "--out", str(out)]
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr

@@ -8,14 +8,13 @@ import re
 import signal
 import socket
 import subprocess
-import sys
 import time
 from pathlib import Path
 from urllib.request import urlopen
 
 import numpy as np
 import pytest
-from conftest import write_calibration
+from conftest import PYTHON, write_calibration
 
 from qpavoid.cli.commands import main as cli_main
 from qpavoid.control.qp import QPController
@@ -260,7 +259,7 @@ def listening(tmp_path: Path, *extra: str) -> tuple[subprocess.Popen, int, Path]
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     out = tmp_path / "live"
-    cmd = [sys.executable, "-m", "qpavoid", "run", "--listen", f"127.0.0.1:{port}"]
+    cmd = [*PYTHON, "-m", "qpavoid", "run", "--listen", f"127.0.0.1:{port}"]
     cmd += ["--sensors", str(calib), "--out", str(out), "--rate", "100", "--no-plots", "-q"]
     cmd += list(extra)
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

@@ -10,14 +10,13 @@ import random
 import socket
 import struct
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import write_calibration
+from conftest import PYTHON, write_calibration
 
 from qpavoid.cli.commands import main as cli_main
 from qpavoid.core.checks import is_loopback
@@ -462,7 +461,7 @@ def test_the_sender_example_signs_frames_a_listener_accepts(tmp_path):
     # frames 5 s old still fresh: a loaded machine may take tenths of a second to deliver
     with Listener(("127.0.0.1", 0), load_calibration(calib), max_age_s=5.0) as listener:
         to = f"127.0.0.1:{listener.address[1]}"
-        cmd = [sys.executable, str(example), calib, "b", to, "0.3"]
+        cmd = [*PYTHON, str(example), calib, "b", to, "0.3"]
         result = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
         time.sleep(0.2)
         counts = listener.counters

@@ -10,17 +10,17 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import textwrap
 
 import pytest
+from conftest import PYTHON
 
 from qpavoid.core.signals import Interruption, held, stops_raise
 
 
 def python(code: str) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-c", textwrap.dedent(code)],
+        [*PYTHON, "-c", textwrap.dedent(code)],
         capture_output=True,
         text=True,
         timeout=120,

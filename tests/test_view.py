@@ -10,7 +10,6 @@ import shutil
 import signal
 import socket
 import subprocess
-import sys
 import time
 from importlib import resources
 from pathlib import Path
@@ -19,6 +18,7 @@ from urllib.request import urlopen
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import PYTHON
 from PIL import Image
 
 import qpavoid
@@ -407,7 +407,7 @@ def test_qpavoid_run_view_follows_a_live_run_in_a_browser(browser, tmp_path):
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    cmd = [sys.executable, "-m", "qpavoid", "run", "--listen", f"127.0.0.1:{port}", "--sensors"]
+    cmd = [*PYTHON, "-m", "qpavoid", "run", "--listen", f"127.0.0.1:{port}", "--sensors"]
     cmd += [str(calib), "--view", "--out", str(tmp_path / "live"), "--rate", "100", "-q"]
     cmd += ["--allow-unauthenticated"]  # no sensor: the opt-in path, on loopback
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
