@@ -52,6 +52,10 @@ __all__ = ["LiveView"]
 
 # Bytes of URL-safe randomness in the token (128 bits: not guessed in a lifetime of tries).
 TOKEN_BYTES = 16
+#: How often the serving thread looks for :meth:`LiveView.close`'s shutdown, s: a run's end
+#: waits at most this long for it (the standard library's 0.5 s held every run's end, and
+#: every test of the view, for up to half a second; a wake-up every 50 ms costs nothing).
+SHUTDOWN_POLL_S = 0.05
 
 
 class LiveView:
@@ -134,7 +138,9 @@ class LiveView:
         self.hosts = allowed_hosts(netloc, port)
         self.url = "http" + f"://{netloc}:{port}/{self.token}/"
         self._thread = threading.Thread(
-            target=self.server.serve_forever, name="qpavoid-view", daemon=True
+            target=partial(self.server.serve_forever, poll_interval=SHUTDOWN_POLL_S),
+            name="qpavoid-view",
+            daemon=True,
         )
         self._thread.start()
 
