@@ -51,11 +51,12 @@ import numpy as np
 import pinocchio as pin
 
 import qpavoid
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import load_robot
+from qpavoid.control.path import ArcPath
 from qpavoid.control.qp import QPConfig, QPController
 from qpavoid.control.qp.backends import WARM_START_FLOOR, PersistentOSQP
 from qpavoid.control.qp.solver_kernels import flush_tiny
-from qpavoid.control.task import ArcPath, inverse_kinematics
 from qpavoid.human._kernels import point_segment_distance
 from qpavoid.human.kinect_v2 import JointType
 from qpavoid.human.people import People

@@ -52,10 +52,10 @@ from numba.core.registry import CPUDispatcher
 sys.path.insert(0, str(Path(__file__).parent))
 import peers  # the peers, their loop and the floor: this benchmark builds on them
 
+from qpavoid.control.path import pose_error
 from qpavoid.control.qp import QPConfig, QPController
 from qpavoid.control.qp.backends import WARM_START_FLOOR
 from qpavoid.control.qp.solver_kernels import flush_tiny, hard_excess
-from qpavoid.control.task import pose_error
 from qpavoid.laws._kernels import limit_crossed
 
 #: Kernels a single pass calls after the solve (there, not in the one call).

@@ -16,8 +16,8 @@ from __future__ import annotations
 import numpy as np
 
 from qpavoid import ControllerConfig, load_robot
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.control.analytic import AnalyticController
-from qpavoid.control.task import inverse_kinematics
 from qpavoid.loop.camera import Camera, CameraConfig
 from qpavoid.scenarios.generated import make_scenario
 

@@ -17,8 +17,8 @@ intrinsics, exactly as below. docs/sensors.md ("MediaPipe Pose with depth") says
 import numpy as np
 
 import qpavoid
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.control.analytic import AnalyticController
-from qpavoid.control.task import inverse_kinematics
 from qpavoid.human.landmarks import LandmarkMap, skeleton_format
 from qpavoid.human.posture import Operator
 from qpavoid.sensing.depth_lift import Intrinsics, lift_landmarks

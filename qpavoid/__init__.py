@@ -24,10 +24,11 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the names as type checkers and editors see them
     from .arm.description import ControlSet
+    from .arm.ik import inverse_kinematics
     from .arm.model import Kinematics, Robot, load_robot
     from .control.analytic import AnalyticConfig, AnalyticController
+    from .control.path import ArcPath
     from .control.qp import QPConfig, QPController
-    from .control.task import ArcPath, inverse_kinematics
     from .control.tick import Command, ControllerConfig
     from .core.errors import (
         IKNotConvergedError,
@@ -57,7 +58,7 @@ if TYPE_CHECKING:  # the names as type checkers and editors see them
 _LAZY = {
     "AnalyticConfig": "control.analytic",
     "AnalyticController": "control.analytic",
-    "ArcPath": "control.task",
+    "ArcPath": "control.path",
     "AvoidanceConfig": "laws.avoidance",
     "BodyModel": "human.body",
     "BodyPart": "human.body",
@@ -86,7 +87,7 @@ _LAZY = {
     "TrackingState": "human.kinect_v2",
     "capsule_distances": "distance.methods",
     "distance_method": "distance.methods",
-    "inverse_kinematics": "control.task",
+    "inverse_kinematics": "arm.ik",
     "load_robot": "arm.model",
     "simulate": "loop.simulation",
     "sphere_distances": "distance.methods",

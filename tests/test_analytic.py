@@ -9,8 +9,9 @@ import pytest
 from conftest import ideal_sim, paper_config
 
 from qpavoid.arm.braking import per_joint, stop_time
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.control.analytic import AnalyticController, enforce_limits
-from qpavoid.control.task import ArcPath, inverse_kinematics
+from qpavoid.control.path import ArcPath
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.experiments.sweep import check_log
 from qpavoid.human.kinect_v2 import JointType
@@ -181,7 +182,7 @@ def test_nobody_near_is_eq8(robot):
     q = inverse_kinematics(robot, path.reference(5.0)[0]) + 0.01
     cmd = ctrl.step(q, Operator().rest(), None, 5.0)
     kin = robot.kinematics(q)
-    from qpavoid.control.task import pose_error
+    from qpavoid.control.path import pose_error
 
     T_ref, twist = path.reference(5.0)
     target = twist + 5.0 * pose_error(T_ref, kin.ee_placement)

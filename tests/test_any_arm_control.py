@@ -26,12 +26,14 @@ from scipy.linalg import null_space
 from test_witness_jacobians import EXTRA_SETS, SIX_SETS, load_arm, six_set_description
 
 import qpavoid
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.control.analytic import AnalyticController
+from qpavoid.control.path import ArcPath, PlannedPath
 from qpavoid.control.qp import QPController
 from qpavoid.control.qp.config import REDUNDANT
 from qpavoid.control.qp.limits.velocity_damper import VelocityDamper
 from qpavoid.control.qp.tasks.posture import PostureTask
-from qpavoid.control.task import ArcPath, PlannedPath, default_task, inverse_kinematics
+from qpavoid.control.task import default_task
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.core.errors import IKNotConvergedError
 from qpavoid.experiments.runs import RunSpec, build_controller

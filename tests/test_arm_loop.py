@@ -11,9 +11,9 @@ import time
 import numpy as np
 import pytest
 
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.control.analytic import AnalyticController
 from qpavoid.control.qp import QPController
-from qpavoid.control.task import inverse_kinematics
 from qpavoid.core.errors import ArmError
 from qpavoid.drive.interface import Arm, ArmState
 from qpavoid.drive.limits import CommandCheck, CommandLimits

@@ -20,8 +20,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from qpavoid.control.path import ArcPath
 from qpavoid.control.qp import QPController
-from qpavoid.control.task import ArcPath
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.human.body import KinectHuman
 from qpavoid.human.posture import Operator

@@ -5,9 +5,9 @@ simulated camera of each format, and the controller fed each format."""
 import numpy as np
 import pytest
 
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import load_robot
 from qpavoid.control.analytic import AnalyticController
-from qpavoid.control.task import inverse_kinematics
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.core.errors import InputError, SkeletonFormatError
 from qpavoid.experiments.run_spec import RunSpec

@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import load_robot
 from qpavoid.control.analytic import AnalyticController
-from qpavoid.control.task import inverse_kinematics
 from qpavoid.core.errors import InputError
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.landmarks import landmark_map

@@ -14,8 +14,10 @@ import pytest
 
 from qpavoid.arm.description import mesh_dirs
 from qpavoid.arm.fit import fit_description
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import load_robot
-from qpavoid.control.task import arm_reach, default_task, inverse_kinematics, shoulder_centre
+from qpavoid.arm.reach import arm_reach, shoulder_centre
+from qpavoid.control.task import default_task
 from qpavoid.experiments.campaign import campaign_spec
 from qpavoid.experiments.run_spec import RunSpec
 from qpavoid.experiments.runs import simulate_one
@@ -55,8 +57,8 @@ max_point_speed_mps = "the loader's ceiling"
 aim = "shoulder_pan_joint"
 # the branch of the UR5's start configuration (the seed a user finds by solving the pose
 # on the UR5)
-angles = { shoulder_lift_joint = -1.08, elbow_joint = 1.385, wrist_1_joint = 5.449, \
-wrist_2_joint = 1.42, wrist_3_joint = 4.8 }
+angles = { shoulder_lift_joint = -1.08, elbow_joint = 1.385, wrist_1_joint = -0.834, \
+wrist_2_joint = 1.42, wrist_3_joint = -1.483 }
 wrist_to_tool_m = 0.0922
 """
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from qpavoid import ControllerConfig
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.control.analytic import AnalyticController
 from qpavoid.control.qp import QPController
-from qpavoid.control.task import inverse_kinematics
 from qpavoid.core.errors import InputError
 from qpavoid.human.people import People, as_people
 from qpavoid.human.posture import Operator

@@ -72,7 +72,7 @@ def test_generated_motions_are_always_fresh(robot):
 
 def test_a_person_holding_the_robot_off_its_goal_is_named(robot):
     """A hand resting near the goal: the run ends at the cap and says who held it."""
-    from qpavoid.control.task import ArcPath
+    from qpavoid.control.path import ArcPath
     from qpavoid.human.posture import Operator
 
     goal = ArcPath().reference(ArcPath().duration_s)[0][:3, 3]

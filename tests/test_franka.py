@@ -27,8 +27,9 @@ import numpy as np
 import pytest
 
 import qpavoid
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import Robot
-from qpavoid.control.task import default_task, inverse_kinematics
+from qpavoid.control.task import default_task
 from qpavoid.core.errors import ArmError, InputError
 from qpavoid.drive import franka, franka_sim
 from qpavoid.drive.franka import LOCK_TOLERANCE_RAD, REST_RADPS, FrankaArm, FrankaJoints

@@ -227,8 +227,9 @@ def test_limit_crossed_equals_the_numpy_check():
 
 def test_a_command_past_a_limit_or_not_finite_is_a_stop(robot):
     """The last-resort layer: the joint that would cross is named; NaN is never sent."""
+    from qpavoid.arm.ik import inverse_kinematics
     from qpavoid.control.analytic import AnalyticController
-    from qpavoid.control.task import ArcPath, inverse_kinematics
+    from qpavoid.control.path import ArcPath
     from qpavoid.human.posture import Operator
 
     path = ArcPath()

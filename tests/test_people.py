@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from qpavoid.arm.ik import inverse_kinematics
+from qpavoid.control.path import ArcPath
 from qpavoid.control.qp import QPController
-from qpavoid.control.task import ArcPath, inverse_kinematics
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.experiments.runs import RunSpec, simulate_one
 from qpavoid.fusion.fuser import Fuser

@@ -13,7 +13,8 @@ import pinocchio as pin
 import pytest
 
 import qpavoid
-from qpavoid.control.task import default_task, inverse_kinematics
+from qpavoid.arm.ik import inverse_kinematics
+from qpavoid.control.task import default_task
 from qpavoid.experiments.run_spec import RunSpec
 from qpavoid.experiments.runs import simulate_one
 from qpavoid.laws.pfl import PFLConfig, clampable, transient_speed_limit_mps

@@ -11,8 +11,10 @@ import qpsolvers
 from conftest import ideal_sim, paper_config
 
 import qpavoid
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.cli.commands import main
 from qpavoid.control.analytic import AnalyticController
+from qpavoid.control.path import ArcPath
 from qpavoid.control.qp import (
     DirectDAQP,
     PersistentOSQP,
@@ -23,7 +25,6 @@ from qpavoid.control.qp import (
 )
 from qpavoid.control.qp.limits.velocity import VelocityLimit
 from qpavoid.control.qp.tasks.elbow import ElbowClearanceTask
-from qpavoid.control.task import ArcPath, inverse_kinematics
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.distance.methods import PointDistance
 from qpavoid.experiments.run_spec import CONTROLLERS, DISTANCES

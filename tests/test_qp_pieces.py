@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 from conftest import random_q
 
+from qpavoid.arm.ik import inverse_kinematics
+from qpavoid.control.path import ArcPath
 from qpavoid.control.qp import QPConfig, QPController, QPProblem
 from qpavoid.control.qp.barriers.separation import SeparationLimit
 from qpavoid.control.qp.config import REDUNDANT
@@ -17,7 +19,6 @@ from qpavoid.control.qp.limits.velocity_damper import VelocityDamper
 from qpavoid.control.qp.problem import Assembler
 from qpavoid.control.qp.solver_kernels import hard_excess, problem_defect
 from qpavoid.control.qp.tasks.posture import PostureTask
-from qpavoid.control.task import ArcPath, inverse_kinematics
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.core.errors import InputError
 from qpavoid.human.posture import Operator

@@ -332,8 +332,8 @@ def test_the_seed_reaches_targets_in_front_elbow_up_with_eq6_well_conditioned(na
     forearm's points is well conditioned, but at a point on the elbow's own axis (the
     UR5's forearm capsule runs into the elbow joint, as the iiwa's L2 capsule starts at
     A4: the damped inverse of eq. (6) takes that one)."""
+    from qpavoid.arm.ik import inverse_kinematics
     from qpavoid.arm.model import joint_columns
-    from qpavoid.control.task import inverse_kinematics
 
     r = _arm(name)
     columns = joint_columns(r, None, "repelled_joints")

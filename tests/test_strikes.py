@@ -120,7 +120,8 @@ def test_an_arm_never_seen_that_appears_inside_the_robot_finds_it_stationary(
     """An adversarial tester's case: the right arm NotTracked from the first frame, then
     seen already inside the end effector (7 ticks in true contact before the arm was
     bounded by the reach of the tracked shoulder)."""
-    from qpavoid.control.task import ArcPath, inverse_kinematics
+    from qpavoid.arm.ik import inverse_kinematics
+    from qpavoid.control.path import ArcPath
     from qpavoid.experiments.runs import simulate_one
     from qpavoid.human.kinect_v2 import JointType as J
     from qpavoid.human.posture import Operator

@@ -10,20 +10,11 @@ import pinocchio as pin
 import pytest
 
 import qpavoid
-from qpavoid.control.task import (
-    A_FIN,
-    A_IN,
-    ArcPath,
-    BodyTarget,
-    Task,
-    WaypointPath,
-    default_task,
-    inverse_kinematics,
-    load_task,
-    orthonormalize,
-    quintic,
-)
+from qpavoid.arm.ik import inverse_kinematics
+from qpavoid.control.path import A_FIN, A_IN, ArcPath, WaypointPath, quintic
+from qpavoid.control.task import BodyTarget, Task, default_task, load_task
 from qpavoid.core.errors import InputError, RobotDescriptionError
+from qpavoid.core.geometry import orthonormalize
 from qpavoid.human.posture import Operator
 
 

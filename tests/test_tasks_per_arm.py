@@ -20,17 +20,13 @@ import pinocchio as pin
 import pytest
 
 import qpavoid
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import Robot
+from qpavoid.arm.reach import arm_reach, shoulder_centre
 from qpavoid.control.analytic import AnalyticController
+from qpavoid.control.path import ArcPath
 from qpavoid.control.qp import QPController
-from qpavoid.control.task import (
-    ArcPath,
-    Task,
-    arm_reach,
-    default_task,
-    inverse_kinematics,
-    shoulder_centre,
-)
+from qpavoid.control.task import Task, default_task
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.core.errors import RobotDescriptionError
 from qpavoid.distance.methods import distance_method

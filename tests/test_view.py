@@ -25,7 +25,7 @@ import qpavoid
 from qpavoid.arm.description import Roles
 from qpavoid.arm.meshes import collision_geometry
 from qpavoid.cli.commands import main
-from qpavoid.control.task import ArcPath
+from qpavoid.control.path import ArcPath
 from qpavoid.experiments.runs import RunSpec, run_one
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.laws.avoidance import AvoidanceConfig

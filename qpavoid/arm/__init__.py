@@ -1,5 +1,5 @@
 """The arm: its description (URDF, roles, capsules, dynamics), its Pinocchio model and
-kinematics, and how it brakes.
+kinematics, its inverse kinematics and reach, and how it brakes.
 
 May import: core.
 """

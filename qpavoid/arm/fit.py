@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from scipy.optimize import minimize
+from scipy.optimize import minimize, minimize_scalar
 from scipy.spatial import ConvexHull, QhullError
 
 from qpavoid.arm.description import build_urdf_model, check_lock_angle, check_urdf_joints
@@ -128,6 +128,12 @@ def _volume(x: np.ndarray, points: np.ndarray, frame: tuple[np.ndarray, ...]) ->
 #: polished (tight) with restarts; tolerances in units of the cloud's size (its farthest
 #: point from the centroid is 1).
 FIRST_PASS = {"xatol": 1e-4, "fatol": 1e-7, "maxiter": 1000}
+#: The first pass's initial simplex: steps of 0.1 (a tenth of the cloud's size) in each
+#: parameter. SciPy's default steps 0.00025 from a zero parameter, which widens the radius
+#: (x₄²) by 6e-8: the search never tried a wider, shorter capsule, and on the iiwa's squat
+#: link 6 (a 0.06 m radius, 0.081 m cylinder) it ended, with scipy 1.17 and numpy 2.4, in
+#: the 0.0724 m sphere instead of the 0.0661 m capsule (issue 40).
+FIRST_STEP = 0.1
 POLISH = {"xatol": 1e-9, "fatol": 1e-12, "maxiter": 4000}
 
 
@@ -147,9 +153,10 @@ def fit_capsule(
     a function of the line and r alone, minimised with Nelder-Mead over five
     parameters: the direction's tilt from a start axis (2), the line's offset across it
     (2) and r = max_i d_i + x² (1). The starts are the cloud's three principal axes
-    through its centroid with r = max_i d_i; a loose first pass from each, then the best
-    polished with restarts. A search only ever keeps a smaller volume, so the result is
-    never worse than the principal-axis capsule.
+    through its centroid, each with the radius of least volume on that axis (a bounded
+    scalar search); a loose first pass from each (its initial simplex :data:`FIRST_STEP`
+    wide), then each polished with restarts, the smallest kept. A search only ever keeps a
+    smaller volume, so the result is never worse than the principal-axis capsule.
     Only the points' convex hull matters (a capsule is convex), so the search runs on
     the hull's vertices.
 
@@ -179,16 +186,29 @@ def fit_capsule(
     for u0 in axes:  # a first pass from each principal axis
         frame = (np.zeros(3), u0, *_basis(u0), np.einsum("ij,ij->i", hull, hull))
         x, value = np.zeros(5), _volume(np.zeros(5), hull, frame)
-        result = minimize(_volume, x, (hull, frame), method="Nelder-Mead", options=FIRST_PASS)
+        # the radius first, on the axis as it is (a squat link's best capsule is wider
+        # than its rim): a bounded scalar search over x₄ in [0, 1]
+        widen = minimize_scalar(
+            lambda s, f=frame: _volume(np.array([0.0, 0.0, 0.0, 0.0, s]), hull, f),
+            bounds=(0.0, 1.0),
+            method="bounded",
+        )
+        if widen.fun < value:
+            x, value = np.array([0.0, 0.0, 0.0, 0.0, float(widen.x)]), float(widen.fun)
+        simplex = np.vstack([x, x + FIRST_STEP * np.eye(5)])
+        options = FIRST_PASS | {"initial_simplex": simplex}
+        result = minimize(_volume, x, (hull, frame), method="Nelder-Mead", options=options)
         if result.fun < value:
             x, value = np.asarray(result.x), float(result.fun)
         starts.append((value, x, frame))
-    value, x, frame = min(starts, key=lambda start: start[0])
-    for _ in range(1 + restarts):  # the best polished
-        result = minimize(_volume, x, (hull, frame), method="Nelder-Mead", options=POLISH)
-        if result.fun < value:
-            x, value = np.asarray(result.x), float(result.fun)
-    best = (value, x, frame)
+    polished = []
+    for value, x, frame in starts:  # each polished: a loose pass may stop short of its best
+        for _ in range(1 + restarts):
+            result = minimize(_volume, x, (hull, frame), method="Nelder-Mead", options=POLISH)
+            if result.fun < value:
+                x, value = np.asarray(result.x), float(result.fun)
+        polished.append((value, x, frame))
+    best = min(polished, key=lambda start: start[0])
     a, b, r = _capsule_of(hull, best[1], best[2])
     a, b = centroid + scale * a, centroid + scale * b
     # the radius at the true scale, from every point (rounding of the scaling aside)

@@ -8,7 +8,7 @@ import numpy as np
 
 from qpavoid.arm.model import Robot, joint_columns
 from qpavoid.control.controller import Controller
-from qpavoid.control.task import PlannedPath
+from qpavoid.control.path import PlannedPath
 from qpavoid.control.tick import Command, ControllerConfig, Tick
 from qpavoid.core.errors import InputError
 from qpavoid.human.body import BodyModel

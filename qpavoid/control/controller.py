@@ -24,8 +24,9 @@ from numpy.typing import ArrayLike
 
 from qpavoid.arm.model import Kinematics, Robot, joint_columns
 from qpavoid.control.contact import ContactLimits
+from qpavoid.control.path import PlannedPath, pose_error
 from qpavoid.control.smoothing import CommandRamp
-from qpavoid.control.task import PlannedPath, default_task, pose_error
+from qpavoid.control.task import default_task
 from qpavoid.control.tick import Command, ControllerConfig, Tick
 from qpavoid.core.checks import finite_number
 from qpavoid.core.compiling import kernel_input

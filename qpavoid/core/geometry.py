@@ -1,9 +1,11 @@
-"""Vector helpers shared by the modules (the lowest module: it imports only numpy)."""
+"""Vector and rotation helpers shared by the modules (numpy, and core's argument checks)."""
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike
+
+from qpavoid.core.checks import as_array
 
 #: The library's one "tiny": a norm below which :func:`unit` returns its ``fallback``
 #: direction, a segment shorter than which is its end point
@@ -50,3 +52,16 @@ def unit(
     out = v / np.where(small, 1.0, norm)[..., None]
     out[small] = fallback
     return out
+
+
+def orthonormalize(R: ArrayLike) -> np.ndarray:
+    """Nearest rotation matrix (the paper prints its matrices to 3-4 digits): ``U diag(1,
+    1, det(U Vᵀ)) Vᵀ`` of the SVD ``R = U Σ Vᵀ``.
+
+    Raises
+    ------
+    InputError
+        If ``R`` is not a finite (3, 3) array (the SVD would fail on a non-finite one).
+    """
+    U, _, Vt = np.linalg.svd(as_array(R, (3, 3), "R (rotation matrix)"))
+    return U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt

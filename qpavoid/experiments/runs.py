@@ -23,13 +23,13 @@ import numpy as np
 
 from qpavoid.arm.braking import BrakingConfig
 from qpavoid.arm.description import description_reference
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import Robot, load_robot
 from qpavoid.control.analytic import AnalyticConfig, AnalyticController
 from qpavoid.control.controller import Controller
 from qpavoid.control.qp import QPConfig, QPController
 from qpavoid.control.qp.config import REDUNDANT
 from qpavoid.control.smoothing import smooth_rate_limit_hz
-from qpavoid.control.task import inverse_kinematics
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.core.errors import InputError
 from qpavoid.drive.connect import open_arm

@@ -41,8 +41,8 @@ import numpy as np
 import pinocchio as pin
 
 from qpavoid.arm.braking import ArmResponse, BrakingConfig, WallClockArm
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.control.controller import Controller
-from qpavoid.control.task import inverse_kinematics
 from qpavoid.core.errors import ArmError, InputError
 from qpavoid.core.signals import Interruption
 from qpavoid.distance.methods import distance_method

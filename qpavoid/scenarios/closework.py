@@ -51,8 +51,10 @@ from itertools import pairwise
 
 import numpy as np
 
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import Robot, load_robot
-from qpavoid.control.task import PlannedPath, Task, default_task, inverse_kinematics, smoothstep
+from qpavoid.control.path import PlannedPath, smoothstep
+from qpavoid.control.task import Task, default_task
 from qpavoid.core.checks import check_choice
 from qpavoid.core.errors import InputError
 from qpavoid.core.geometry import unit
@@ -230,7 +232,7 @@ class HandTrack:
         ``"right"`` or ``"left"``.
     keyframes
         ``(t_s, position (3,) m)`` in increasing time: straight lines between them with
-        the quintic time law (:func:`~qpavoid.control.task.smoothstep`), held before the
+        the quintic time law (:func:`~qpavoid.control.path.smoothstep`), held before the
         first and after the last.
     radius_m, period_s, phase_rad
         A horizontal circle of this radius, m, and period, s, around the keyframes'

@@ -33,15 +33,10 @@ from itertools import pairwise
 
 import numpy as np
 
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import Robot
-from qpavoid.control.task import (
-    ArcPath,
-    PlannedPath,
-    Task,
-    default_task,
-    inverse_kinematics,
-    smoothstep,
-)
+from qpavoid.control.path import ArcPath, PlannedPath, smoothstep
+from qpavoid.control.task import Task, default_task
 from qpavoid.core.errors import InputError
 from qpavoid.core.geometry import unit
 from qpavoid.distance.methods import distance_method
@@ -70,7 +65,7 @@ class ScriptedReach:
     keyframes
         ``(t_s, target)`` pairs in increasing time; ``target`` (3,) m is where the hand
         is at that time (``None`` = its rest position). Between keyframes the hand moves
-        on a straight line with the quintic time law (:func:`~qpavoid.control.task.quintic`);
+        on a straight line with the quintic time law (:func:`~qpavoid.control.path.quintic`);
         before the first and after the last it holds.
     """
 

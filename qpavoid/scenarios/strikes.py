@@ -25,7 +25,8 @@ import numpy as np
 import pinocchio as pin
 
 from qpavoid.arm.model import Robot, load_robot
-from qpavoid.control.task import PlannedPath, Task, default_task
+from qpavoid.control.path import PlannedPath
+from qpavoid.control.task import Task, default_task
 from qpavoid.core.errors import InputError
 from qpavoid.human.posture import ARM
 from qpavoid.loop.camera import CameraConfig, CameraFault

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import Robot
 from qpavoid.control.controller import Controller
+from qpavoid.control.path import PlannedPath
 from qpavoid.control.qp.backends import make_backend
 from qpavoid.control.qp.barriers.repulsion import EERepulsionTask, RepelledRepulsionTask
 from qpavoid.control.qp.barriers.separation import SeparationLimit
@@ -23,7 +25,6 @@ from qpavoid.control.qp.tasks.elbow import ElbowClearanceTask
 from qpavoid.control.qp.tasks.posture import PostureTask
 from qpavoid.control.qp.tasks.regularization import Regularization
 from qpavoid.control.qp.variables import Variables
-from qpavoid.control.task import PlannedPath, inverse_kinematics
 from qpavoid.control.tick import Command, ControllerConfig, Tick
 from qpavoid.core.errors import InputError
 from qpavoid.distance.methods import PointDistance
