@@ -158,6 +158,11 @@ class Tracker:
         self._perceived: Perceived | None = None
         warm_up(skeleton)
 
+    @property
+    def latest(self) -> Perceived | None:
+        """What the last frame taken gave (None before the first)."""
+        return self._perceived
+
     def update(
         self, frame: HumanFrame, capture_time_s: float, extra_m: np.ndarray | None = None
     ) -> Perceived:
@@ -231,13 +236,26 @@ class PeopleTracker:
         frames: tuple[HumanFrame, ...],
         capture_time_s: float,
         extra_m: np.ndarray | None = None,
+        held: bool = False,
     ) -> list[Perceived]:
-        """Each person's :meth:`Tracker.update`, in the order of ``ids``."""
+        """Each person's :meth:`Tracker.update`, in the order of ``ids``; the people not
+        listed are forgotten.
+
+        ``held``: the frame is the one in hand, already taken
+        (:class:`~qpavoid.perception.freshness.FrameClock`), under another list of people
+        (the fusion dropped or admitted someone with no newer capture): a person tracked
+        already is as their tracker last saw them (it learns nothing from the frame), a
+        person new to the list is tracked from it.
+        """
         self.trackers = {i: self.person(i) for i in ids}
-        return [
-            self.trackers[i].update(f, capture_time_s, extra_m)
-            for i, f in zip(ids, frames, strict=True)
-        ]
+        out = []
+        for i, frame in zip(ids, frames, strict=True):
+            tracker = self.trackers[i]
+            latest = tracker.latest if held else None
+            if latest is None:
+                latest = tracker.update(frame, capture_time_s, extra_m)
+            out.append(latest)
+        return out
 
 
 def part_velocities(
