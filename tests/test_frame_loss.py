@@ -1,7 +1,7 @@
 """Loss on the path (issue 40): a sensor's frame counts only when every body its signed
 manifest lists came, and a frame missing or incomplete makes that sensor's older frames
 stale at once. The live attack is ``test_attacks.py`` (slow); these are its rules, one by
-one, without a clock."""
+one, none of them timed (the last goes through the receiver process, on loopback)."""
 
 from __future__ import annotations
 
