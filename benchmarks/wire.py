@@ -11,7 +11,15 @@ one body of the seated operator (about 1 kB), median and p99 over ``--n`` calls 
 * ``v2 forged``: a signed-looking one whose tag does not verify (a forger without the
   key): dropped before any JSON is read;
 * ``v2 unknown key``, ``v2 replayed``, ``unsigned refused``, ``junk``: the other drops, in
-  the order they are checked.
+  the order they are checked;
+* ``v2 valid, assembled``: the receiver's whole per-datagram work since issue 40, a
+  signed datagram of a frame of six bodies verified (:meth:`~qpavoid.sensing.signing.Verifier.read`)
+  and put into its frame (:func:`qpavoid.sensing.assembly.assemble`).
+
+It also prints the datagrams' sizes with their manifests: one body of the seated
+operator alone and in a frame of six, and the widest a body can be, one of ten of the
+ZED's 38 joints, every coordinate at its widest (``-4.123456``), against the 1472 bytes
+of a UDP datagram in one Ethernet frame (IPv4).
 """
 
 from __future__ import annotations
@@ -27,7 +35,8 @@ from collections.abc import Callable
 import numpy as np
 
 from qpavoid.human.posture import Operator
-from qpavoid.sensing.calibration import Calibration, SensorCalibration
+from qpavoid.sensing.assembly import SensorFrames, assemble
+from qpavoid.sensing.calibration import Calibration, SensorCalibration, known_formats
 from qpavoid.sensing.keys import SensorKeys
 from qpavoid.sensing.per_sensor import BodyFrame
 from qpavoid.sensing.signing import Signer, Verifier
@@ -77,6 +86,23 @@ def main() -> None:
             times.append((time.perf_counter_ns() - t0) / 1e3)
         return times
 
+    six = []  # frames of six bodies
+    for k in range(args.n // 6 + 1):
+        six += signer.encode_frame([frame._replace(t=1.0 + k, body=b) for b in range(6)])
+    six = six[: args.n]
+
+    def assembling() -> Callable[[bytes], object]:
+        """A new receiver's check and its frames' assembly."""
+        read, state = Verifier(cal, workspace).read, [SensorFrames()]
+
+        def call(data: bytes) -> object:
+            step = assemble(state[0], *read(data))
+            state[0] = step.state
+            return step
+
+        return call
+
+    widest = widest_datagram_bytes()
     cases = {  # (a new receiver's check, its inputs)
         "v1 decode": (lambda: lambda d: decode(d, cal, workspace), [v1] * args.n),
         "v2 valid": (fresh, valid),
@@ -85,9 +111,19 @@ def main() -> None:
         "v2 replayed": (having_seen_one, [valid[0]] * args.n),
         "unsigned refused": (fresh, [v1] * args.n),
         "junk": (fresh, [b"\x00garbage"] * args.n),
+        "v2 valid, assembled": (assembling, six),
     }
-    results = {"bytes": len(valid[0]), "n": args.n, "machine": platform.processor() or ""}
-    print(f"one body: {len(valid[0])} bytes signed, {len(v1)} unsigned; {args.n} calls each")
+    results = {
+        "bytes": len(valid[0]),
+        "bytes_of_six": len(six[0]),
+        "bytes_widest": widest,
+        "n": args.n,
+        "machine": platform.processor() or "",
+    }
+    print(
+        f"one body: {len(valid[0])} bytes signed ({len(six[0])} in a frame of six), "
+        f"{len(v1)} unsigned; the widest: {widest} bytes (of 1472); {args.n} calls each"
+    )
     print(f"{'case':<18} {'median us':>10} {'p99 us':>8}")
     for name, (receiver, inputs) in cases.items():
         timed(receiver(), inputs[:500])  # warm-up, on a receiver of its own
@@ -99,6 +135,22 @@ def main() -> None:
         with open(args.json, "w") as handle:
             json.dump(results, handle, indent=2)
         print(f"wrote {args.json}")
+
+
+def widest_datagram_bytes() -> int:
+    """The largest signed datagram of one body (sensor ``zed_left``): one of ten of a ZED's
+    38 joints (the most joints and bodies of the formats), every coordinate
+    ``-4.123456``."""
+    name = "zed_body_38"
+    fmt = known_formats()[name]
+    keys = SensorKeys.generate("zed_left")
+    signer = Signer("bench", keys, first_sequence=time.time_ns() // 1000)
+    joints = np.full((fmt.n_joints, 3), -4.123456)
+    bodies = [
+        BodyFrame("zed_left", b, 1.0, joints, np.full(fmt.n_joints, 2, np.int8), name)
+        for b in range(fmt.sensor.max_bodies)
+    ]
+    return max(len(d) for d in signer.encode_frame(bodies))
 
 
 if __name__ == "__main__":

@@ -6,7 +6,9 @@ Sends SENSOR's view of the seated operator at rest (one body, 30 frames a second
 `qpavoid run --listen HOST:PORT --sensors CALIB.toml`. A real camera's process does the
 same with its body tracker's joints: joints in the camera's frame (m), its capture time
 on the shared clock (s), and one `Signer` per sensor, kept for the process's life (its
-sequence numbers count on). docs/security.md says what the signature covers.
+sequence numbers count on). A frame of several bodies goes as
+`signer.encode_frame(bodies)`, one datagram per body sent back to back: the listener takes
+the frame only once all of them came. docs/security.md says what the signature covers.
 """
 
 import socket

@@ -1,10 +1,12 @@
-"""An attacker on the cell's network, live on loopback (issue 24; slow suite).
+"""An attacker on the cell's network, live on loopback (issues 24 and 40; slow suite).
 
 Each run: two simulated Kinects film a known motion and are replayed in real time over
 UDP to a listener (:class:`~qpavoid.loop.live_input.Listener`), whose frames drive the QP controller
 (SSM on) and a simulated arm at 100 Hz; an attacker sends from another process at the
-same time. Safety is judged afterwards against the truth: the motion at each tick's
-wall time, against the arm's real geometry (:class:`~qpavoid.loop.truth.TrueClearance`).
+same time, or sits on the path between the sensors and the listener (a proxy process that
+forwards what it chooses). Safety is judged afterwards against the truth: the motion at
+each tick's wall time, against the arm's real geometry
+(:class:`~qpavoid.loop.truth.TrueClearance`).
 """
 
 from __future__ import annotations
@@ -23,12 +25,14 @@ import pytest
 from qpavoid.control.path import ArcPath
 from qpavoid.control.qp import QPController
 from qpavoid.control.tick import ControllerConfig
+from qpavoid.fusion.association import torso_centre
 from qpavoid.human.body import KinectHuman
 from qpavoid.human.posture import Operator
+from qpavoid.loop.crowd import Crowd
 from qpavoid.loop.live_input import Listener, LiveSource
 from qpavoid.loop.simulation import SimConfig, simulate
 from qpavoid.loop.truth import TrueClearance
-from qpavoid.scenarios.generated import nominal_configurations, reach_and_return
+from qpavoid.scenarios.generated import Working, nominal_configurations, reach_and_return
 from qpavoid.sensing.calibration import Calibration
 from qpavoid.sensing.keys import SensorKeys
 from qpavoid.sensing.per_sensor import BodyFrame
@@ -44,12 +48,13 @@ FILMED_S = 5.0  #: the motion filmed and replayed, s (it ends before the run doe
 START_S = 0.6  #: when the replay begins after the run is set up, s
 
 
-def hand_on_the_path(robot):
+def hand_on_the_path(robot, back=(60.0, 61.0)):
     """The operator's right hand reaches, by 1.5 s, to where the end effector's planned
-    path will be at 4 s, and holds it there: the robot must stop before it."""
+    path will be at 4 s, and holds it there (until ``back[0]``, at rest again by
+    ``back[1]``, s): the robot must stop before it."""
     q = nominal_configurations(robot, ArcPath(), np.array([4.0]))[0]
     target = robot.end_effector(q)[:3, 3]
-    return reach_and_return(Operator(), "right", target, (0.3, 1.5, 60.0, 61.0))
+    return reach_and_return(Operator(), "right", target, (0.3, 1.5, *back))
 
 
 def camera_frame(calibration: Calibration, sensor: str, joints: np.ndarray, t: float, body=0):
@@ -206,12 +211,17 @@ def tamper(calibration: Calibration) -> Callable[[int, bytes], list[bytes]]:
     return mangle
 
 
-def live_run(robot, motion, attack=None, signed=True, mangle_real=None):
-    """Replay ``motion`` filmed by two simulated Kinects to a live listener while
-    ``attack(sock, address, go, until)`` runs in another process; the run's log, the
-    listener's report, the number of real datagrams sent, and each tick's true distance
-    per robot set (m, against the motion at the tick's wall time)."""
-    data = two_sensor_data([motion], FILMED_S, TwoSensorConfig(seed=7))
+def live_run(robot, motion, attack=None, signed=True, mangle_real=None, bystander=None, path=None):
+    """Replay ``motion`` (and ``bystander``'s, a second person, if given) filmed by two
+    simulated Kinects to a live listener while ``attack(sock, address, go, until)`` runs
+    in another process, the sensors' datagrams going through ``path(datagram, s since the
+    replay's start) -> forward it?`` (a proxy process, if given); the run's log, the
+    listener's report (with the proxy's ``path_forwarded``, ``path_dropped``, and
+    ``run_start_s``: the run's time 0 after the replay's start, s), the number
+    of real datagrams sent, and each tick's true distance per robot set (m, against the
+    people's motion at the tick's wall time)."""
+    motions = [motion] if bystander is None else [motion, bystander]
+    data = two_sensor_data(motions, FILMED_S, TwoSensorConfig(seed=7))
     calibration = data.calibration
     if not signed:  # the opt-in: a calibration without keys
         calibration = dataclasses.replace(calibration, cell="", keys={})
@@ -224,6 +234,24 @@ def live_run(robot, motion, attack=None, signed=True, mangle_real=None):
         go = time.time() + START_S
         until = go + RUN_S
         children = []
+        to = listener.address
+        if path is not None:  # the sensors send to the proxy, which forwards to the listener
+            proxy = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            proxy.bind(("127.0.0.1", 0))
+            to = proxy.getsockname()[:2]
+            path_reader, path_writer = os.pipe()
+            pid = os.fork()
+            if pid == 0:  # the device on the path
+                os.close(path_reader)
+                counts = (0, 0)
+                try:
+                    counts = on_path(proxy, listener.address, path, go, until)
+                finally:
+                    os.write(path_writer, json.dumps(counts).encode())
+                    os._exit(0)
+            children.append(pid)
+            proxy.close()
+            os.close(path_writer)
         reader, writer = os.pipe()
         pid = os.fork()
         if pid == 0:  # the sensors
@@ -236,9 +264,7 @@ def live_run(robot, motion, attack=None, signed=True, mangle_real=None):
                 sent[0] += 1
                 return mangle_real(i, datagram) if mangle_real else [datagram]
 
-            stream(
-                recordings, listener.address, 30.0, calibration, mangle=count, unsigned=not signed
-            )
+            stream(recordings, to, 30.0, calibration, mangle=count, unsigned=not signed)
             os.write(writer, str(sent[0]).encode())
             os._exit(0)
         children.append(pid)
@@ -265,7 +291,13 @@ def live_run(robot, motion, attack=None, signed=True, mangle_real=None):
         os.close(reader)
         time.sleep(0.2)  # the receiver's last counts
         report = source.report()
-    truth = TrueClearance(robot, KinectHuman(), motion)
+        report["run_start_s"] = source.start_s - go  # run time 0 on the replay's clock, s
+        if path is not None:
+            forwarded, dropped = json.loads(os.read(path_reader, 64) or b"[0, 0]")
+            os.close(path_reader)
+            report.update(path_forwarded=forwarded, path_dropped=dropped)
+    people = motion if bystander is None else Crowd(dict(enumerate(motions)))
+    truth = TrueClearance(robot, KinectHuman(), people)
     true = np.array(
         [
             truth(robot.kinematics(q, jacobians=False), source.start_s + t - go)
@@ -273,6 +305,51 @@ def live_run(robot, motion, attack=None, signed=True, mangle_real=None):
         ]
     )
     return sim, report, real_sent, true
+
+
+def on_path(
+    sock: socket.socket, to: tuple, forward: Callable[[bytes, float], bool], go: float, until: float
+) -> tuple[int, int]:
+    """A device on the path: each datagram that reaches ``sock`` is sent on to ``to`` if
+    ``forward(datagram, s since go)``, until ``until`` (wall time); (forwarded, dropped)."""
+    sock.settimeout(0.05)
+    forwarded = dropped = 0
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+        while time.time() < until:
+            try:
+                data = sock.recv(65536)
+            except TimeoutError:
+                continue
+            if forward(data, time.time() - go):
+                out.sendto(data, to)
+                forwarded += 1
+            else:
+                dropped += 1
+    return forwarded, dropped
+
+
+def drop_the_near_person(calibration: Calibration, until_s: float) -> Callable:
+    """The selective drop of issue 40: until ``until_s`` after the replay's start, the
+    datagrams of any body whose torso is within 1.5 m of the robot's base are dropped, the
+    others forwarded. The skeletons travel in clear: the device reads each datagram's
+    joints and places them with the sensors' poses (public: an attacker can learn them by
+    watching)."""
+
+    def forward(datagram: bytes, since_go_s: float) -> bool:
+        if since_go_s >= until_s:
+            return True
+        sensor, _, _, _, payload = fields(datagram)
+        rows = np.array(json.loads(payload)["joints"], dtype=float)
+        joints = calibration[sensor].to_base(rows[:, :3])
+        joints[rows[:, 3] == 0] = np.nan
+        return not np.linalg.norm(torso_centre(joints)) <= 1.5
+
+    return forward
+
+
+def bystander_far_away() -> Working:
+    """A second person at work 1.9 m behind the operator's seat (2.95 m from the base)."""
+    return Working(Operator(distance_m=2.95))
 
 
 def every_real_frame_taken(report: dict, real_sent: int) -> bool:
@@ -352,3 +429,48 @@ def test_a_flood_without_a_key_leaves_every_real_frame_accepted(robot, honest, f
     baseline = honest[0].metrics["realtime_overruns"]
     assert sim.metrics["realtime_overruns"] <= baseline + len(sim.log["t"]) // 50, flood
     assert not sim.log["input_alert"].any()
+
+
+#: How long the device on the path drops the near person's datagrams, from the replay's
+#: start, s: the whole time the hand is on the robot's path (from 1 s to 2.8 s).
+SELECTIVE_DROP_S = 3.0
+
+
+def stopped_s(sim, moving: np.ndarray, when: np.ndarray) -> float:
+    """The time the robot stood still (no joint velocity) within the ticks ``when``, s."""
+    return float(np.sum(np.diff(sim.log["t"], append=sim.log["t"][-1])[when & ~moving]))
+
+
+def test_a_device_on_the_path_dropping_the_near_persons_datagrams_only_stops_the_robot(robot):
+    """Issue 40: the skeletons travel in clear, one body per datagram; a device on the path
+    dropped only the datagrams of the person near the robot and forwarded a bystander's:
+    the input stayed fresh, the near person vanished, and the robot moved in true contact
+    (the issue measured 492 ticks, -110 mm; this scene before the fix: 157, -75 mm). A
+    frame now counts only when every body its sensor reported in it came, and a frame
+    lost makes its sensor's older frames stale at once: the robot stops while datagrams
+    are missing, says why, and works again once they come."""
+    motion = hand_on_the_path(robot, back=(2.5, 3.0))
+    bystander = bystander_far_away()
+    data = two_sensor_data([motion, bystander], 0.1, TwoSensorConfig(seed=7))
+    path = drop_the_near_person(data.calibration, SELECTIVE_DROP_S)
+    sim, report, _, true = live_run(robot, motion, bystander=bystander, path=path)
+    moving = np.any(sim.log["dq"] != 0.0, axis=1)
+    since_go = sim.log["t"] + report["run_start_s"]  # each tick on the replay's clock, s
+    during = (since_go >= 0.0) & (since_go < SELECTIVE_DROP_S)
+    after = (since_go >= SELECTIVE_DROP_S) & (since_go < FILMED_S)  # the replay goes on
+    alerted = np.char.find(sim.log["input_alert"].astype(str), "lost") >= 0
+    contact = moving_in_contact(sim, true)
+    print(
+        f"selective drop: {report['path_dropped']} datagrams dropped, "
+        f"{report['path_forwarded']} forwarded, {report.get('lost_frames', 0)} frames lost; "
+        f"{contact} ticks moving in true contact; smallest true clearance moving "
+        f"{true.min(axis=1)[moving].min() * 1000:.0f} mm; stopped "
+        f"{stopped_s(sim, moving, during):.2f} s of the attack's {SELECTIVE_DROP_S} s, "
+        f"{stopped_s(sim, moving, after):.2f} s of the {FILMED_S - SELECTIVE_DROP_S} s after "
+        f"it; loss alert {alerted[during].sum()} ticks during, {alerted[after].sum()} after"
+    )
+    assert report["path_dropped"] > 100, report  # the device dropped the near person ...
+    assert true.min() < 0.0  # ... whose hand went into the robot's path
+    assert contact == 0
+    assert moving[after].sum() > 50  # it works again once the datagrams come ...
+    assert alerted[during].any() and report["lost_frames"] > 0  # ... and said why it stopped

@@ -58,6 +58,12 @@ class Admission:
         if self.first_s is None:
             self.first_s = t
 
+    def lost(self, sensor: str, before_t: float) -> None:
+        """``sensor``'s frames captured before ``before_t`` (controller clock, s) are stale:
+        heard before it, it is not fresh."""
+        if self._heard.get(sensor, -math.inf) < before_t:
+            self._heard[sensor] = -math.inf
+
     def tick(self, t: float) -> None:
         """A fusion at time ``t``: the bucket refills for the time since the last."""
         refill = self.cfg.max_new_people_per_s * max(t - self._tokens_s, 0.0)

@@ -131,6 +131,9 @@ class Fuser:
         # each body's newest frames (a few, so that a fusion time just before the newest
         # frame still finds the one before it), oldest first
         self._latest: dict[str, dict[int, list[_Frame]]] = {s: {} for s in calibration.names}
+        # each sensor's frames captured before this (controller clock, s) are stale: it lost
+        # a frame on the way (:meth:`lose`)
+        self._stale_before = dict.fromkeys(calibration.names, -math.inf)
         self._assigned: dict[str, dict[int, int]] = {s: {} for s in calibration.names}
         self._next_id = 0
         self._admission = Admission(calibration, self.cfg, self.counters)
@@ -200,6 +203,22 @@ class Fuser:
         self._admission.heard(frame.sensor, t)
         return True
 
+    def lose(self, sensor: str, before_t: float) -> None:
+        """``sensor`` lost a frame (a datagram missing on the way): its frames captured
+        before ``before_t`` (s, its own clock, as :meth:`add`'s) are stale from now on, as
+        if it had been silent for ``max_age_s`` (a camera dropout: its people's joints are
+        then seen by the others, or missing, never held on its old frames).
+
+        Raises
+        ------
+        CalibrationError
+            If the sensor is not in the calibration.
+        """
+        t = finite_number(before_t, "before_t (capture time, s)")
+        t += self.calibration[sensor].time_offset_s
+        self._stale_before[sensor] = max(self._stale_before[sensor], t)
+        self._admission.lost(sensor, t)
+
     def fuse(self, t: float) -> FusedFrame:
         """Every known person at time ``t`` (s, controller clock), from frames captured by ``t``."""
         cfg = self.cfg
@@ -212,10 +231,11 @@ class Fuser:
                 c = next((c for c in reversed(history) if c.t <= t), None)
                 if c is not None:
                     newest[body] = c
+            oldest = max(t - cfg.max_age_s, self._stale_before[sensor])
             bodies = {
                 body: c
                 for body, c in newest.items()
-                if t - cfg.max_age_s <= c.t and not math.isnan(c.centre[0])
+                if oldest <= c.t and not math.isnan(c.centre[0])
             }
             self._renumbered(sensor, bodies)
             centres = {body: c.centre for body, c in bodies.items()}

@@ -8,7 +8,9 @@ work: each tick takes at most one frame per (sensor, body), the newest (measured
 docs/sensors.md).
 
 :class:`LiveSource` is what the control loop asks each tick: it takes those frames,
-moves each frame's time stamp onto the run clock, fuses (:class:`~qpavoid.fusion.fuser.Fuser`)
+moves each frame's time stamp onto the run clock, makes the frames of a sensor that lost
+one stale at once (:meth:`~qpavoid.fusion.fuser.Fuser.lose`: a frame missing or incomplete
+on the way, :mod:`qpavoid.sensing.assembly`), fuses (:class:`~qpavoid.fusion.fuser.Fuser`)
 and returns everybody with the capture time of the newest frame used, so the controller
 judges the age of what it sees: no fresh frame for the stale limit, and it stops.
 
@@ -30,9 +32,10 @@ from qpavoid.core.checks import is_loopback
 from qpavoid.core.errors import InputError
 from qpavoid.fusion.fuser import Fuser, FusionConfig
 from qpavoid.human.people import People
+from qpavoid.sensing.assembly import LossConfig, LossWatch
 from qpavoid.sensing.calibration import Calibration
 from qpavoid.sensing.per_sensor import BodyFrame
-from qpavoid.sensing.receiver import KEY_CHECK_S, SlotTable, serve
+from qpavoid.sensing.receiver import KEY_CHECK_S, SensorLoss, SlotTable, serve
 from qpavoid.sensing.signing import FUTURE_TOLERANCE_S
 from qpavoid.sensing.wire import Workspace
 
@@ -178,8 +181,14 @@ class Listener:
             self._process.join()
 
     def drain(self) -> list[BodyFrame]:
-        """Each body's newest valid frame received since the last call, oldest first."""
+        """Each body's newest valid frame received since the last call, oldest first (of
+        whole frames only: :mod:`qpavoid.sensing.assembly`)."""
         return self._table.take()
+
+    def losses(self) -> dict[str, SensorLoss]:
+        """Each sensor's lost frames so far and the capture time before which its frames
+        are stale (ask after :meth:`drain`: every loss of a frame drained is then seen)."""
+        return self._table.losses()
 
 
 def check_listening(
@@ -227,12 +236,16 @@ class LiveSource:
         An event another thread (the live view's server) sets to ask that the people
         flagged as suspect be cleared (:meth:`~qpavoid.fusion.fuser.Fuser.clear_flagged`); done
         at the next :meth:`frame_at`, in the control loop's thread.
+    losses
+        When a sensor's lost frames raise the alert
+        (:class:`~qpavoid.sensing.assembly.LossConfig`).
 
     Attributes
     ----------
     alert
-        Why someone in view is suspect, after the last :meth:`frame_at` ("" if nobody
-        is): logged every tick (``input_alert``) and shown by the live view.
+        Why the input is suspect, after the last :meth:`frame_at` ("" if it is not): a
+        sensor that keeps losing frames, someone in view flagged; logged every tick
+        (``input_alert``) and shown by the live view.
     """
 
     def __init__(
@@ -241,6 +254,7 @@ class LiveSource:
         fusion: FusionConfig | None = None,
         clock: Callable[[], float] = time.time,
         clear: threading.Event | None = None,
+        losses: LossConfig | None = None,
     ):
         self.listener = listener
         self.fuser = Fuser(listener.calibration, fusion)
@@ -250,6 +264,8 @@ class LiveSource:
         self.counters = self.fuser.counters  # out of order, duplicates, outliers, late
         self.alert = ""
         self._captured = float("-inf")
+        self._losses = LossWatch(losses)
+        self._stale_before = {name: float("-inf") for name in listener.calibration.names}
 
     def report(self) -> dict[str, int]:
         """What came in and what was dropped, by reason (``metrics.json``: ``input``)."""
@@ -272,11 +288,18 @@ class LiveSource:
                 self.counters["from_the_future"] += 1
             else:
                 self.fuser.add(frame)
+        losses = self.listener.losses()  # after the frames: every loss they showed is seen
+        for sensor, loss in losses.items():
+            if loss.stale_before_s > self._stale_before[sensor]:
+                self._stale_before[sensor] = loss.stale_before_s
+                self.fuser.lose(sensor, loss.stale_before_s - self.start_s)
         if self.clear is not None and self.clear.is_set():
             self.clear.clear()
             self.fuser.clear_flagged()
         fused = self.fuser.fuse(t)
-        self.alert = "; ".join(f"person {p.id}: {p.flag}" for p in fused.people if p.flag)
+        lost = self._losses.alert(t, {sensor: loss.frames for sensor, loss in losses.items()})
+        flags = [f"person {p.id}: {p.flag}" for p in fused.people if p.flag]
+        self.alert = "; ".join([lost, *flags] if lost else flags)
         if fused.captured_s > self._captured:
             self._captured = fused.captured_s
         people = People(tuple(p.id for p in fused.people), tuple(p.frame for p in fused.people))

@@ -1,13 +1,16 @@
-"""The receiving side of a live listener, in a process of its own: datagrams in, the newest
-frame of each body out, in shared memory.
+"""The receiving side of a live listener, in a process of its own: datagrams in, each
+sensor's whole frames out (the newest of each body, in shared memory), and its losses.
 
 A flood of datagrams must not delay the control loop. In a thread, receiving and
 checking them competes with the loop for Python's interpreter lock (measured in
 docs/sensors.md: 73 overruns in 6 s under a flood of valid datagrams). So :func:`serve`
 runs in a child process (``multiprocessing``, spawn), at a lower priority than the loop
 (``nice`` +10), and does all the work per datagram: receive, check
-(:func:`~qpavoid.sensing.wire.decode`, drops counted by reason), and keep each body's newest frame
-in a :class:`SlotTable`, one fixed slot per (sensor, body).
+(:func:`~qpavoid.sensing.wire.decode`, drops counted by reason), assemble each sensor's camera
+frames (:func:`~qpavoid.sensing.assembly.assemble`: a frame is delivered only once every body
+its manifest lists came) and keep each body's newest frame in a :class:`SlotTable`, one
+fixed slot per (sensor, body), with each sensor's lost frames and the capture time before
+which its frames are stale (:meth:`SlotTable.losses`).
 
 Each datagram is verified first (:class:`~qpavoid.sensing.wire.Verifier`: length, header, key,
 the tag in constant time before any JSON, the sequence number against a replay window,
@@ -15,17 +18,22 @@ then the skeleton); then, its time stamp now authenticated, a frame captured mor
 fusion's ``max_age_s`` before now is dropped (``late``), one captured more than
 ``future_tolerance_s`` after now too (``from_the_future``: a sensor stamps its capture
 before it sends, so a clock ahead of ours must not poison the order), and one not newer
-than its body's last (``out_of_order_or_duplicate``); the others are
-``accepted``, and one replaced before the loop took it is counted ``superseded``:
-``received`` is ``accepted`` plus every drop. The loop's side (:meth:`SlotTable.take`)
-costs the same whatever arrives: one lock, one copy of at most sensors × bodies slots (the
-most ``max_bodies`` of the sensors' formats a sensor, six for the Kinect v2). Each slot is
-as wide as the cell's widest format; a sensor's frames fill its format's share of it.
+than its body's last, or of a frame already closed (``out_of_order_or_duplicate``); the
+others wait for the rest of their frame and are ``accepted`` when it is whole, or, when a
+later frame shows it incomplete, counted ``incomplete_frame`` (``lost_frames`` counts the
+frames found incomplete or missing). One replaced before the loop took it is counted
+``superseded``: ``received`` is ``accepted`` plus every drop, plus the datagrams of the
+frames still incomplete (at most a frame's bodies less one per sensor). The loop's side
+(:meth:`SlotTable.take`) costs the same whatever arrives: one lock, one copy of at most
+sensors × bodies slots (the most ``max_bodies`` of the sensors' formats a sensor, six for
+the Kinect v2). Each slot is as wide as the cell's widest format; a sensor's frames fill
+its format's share of it.
 """
 
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import socket
 import time
@@ -33,20 +41,21 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from multiprocessing.context import SpawnContext
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from qpavoid.core.errors import CalibrationError
 from qpavoid.core.signals import worker_process
 from qpavoid.human.skeleton import SkeletonFormat
+from qpavoid.sensing.assembly import SensorFrames, Step, assemble
 from qpavoid.sensing.calibration import Calibration, known_formats
 from qpavoid.sensing.calibration_file import load_calibration
 from qpavoid.sensing.per_sensor import BodyFrame
 from qpavoid.sensing.signing import FUTURE_TOLERANCE_S, Verifier
 from qpavoid.sensing.wire import REASONS, SKELETON, WireError, Workspace
 
-__all__ = ["COUNTERS", "SlotTable", "serve"]
+__all__ = ["COUNTERS", "SensorLoss", "SlotTable", "serve"]
 
 #: The time window's drops, counted under their own names (not ``dropped_...``).
 TIME_REASONS = ("late", "from_the_future")
@@ -63,6 +72,8 @@ COUNTERS = (
     "dropped_unreadable",
     "keys_reloaded",
     "keys_reload_failed",
+    "lost_frames",
+    "incomplete_frame",
 )
 #: How often the receiver looks whether the calibration or a key file changed, s (a
 #: rotation is taken within a second, without a stop; a stat of three files costs µs).
@@ -72,6 +83,15 @@ KEY_CHECK_S = 1.0
 SLOT_HEAD = 3
 #: Priority the receiver drops to, so that the control loop gets the CPU first.
 NICE = 10
+
+
+class SensorLoss(NamedTuple):
+    """A sensor's losses so far (:meth:`SlotTable.losses`): frames found missing or
+    incomplete, and the capture time (s, the sensor's clock; -inf: none) before which its
+    frames are stale."""
+
+    frames: int
+    stale_before_s: float
 
 
 @dataclass
@@ -89,8 +109,11 @@ class SlotTable:
         The slots (a multiprocessing Array of doubles, sensors × max_bodies × slot width).
     counts
         The counters (a multiprocessing Array of int64, in :data:`COUNTERS` order).
+    lost
+        Each sensor's :class:`SensorLoss` (a multiprocessing Array of doubles, two a
+        sensor, in slot order).
     lock
-        Guards both.
+        Guards the three.
     n_joints, max_bodies
         Joints per frame and bodies per sensor of the slots: the most of the sensors'
         formats.
@@ -102,6 +125,7 @@ class SlotTable:
     sensors: tuple[str, ...]
     values: Any
     counts: Any
+    lost: Any
     lock: Any
     n_joints: int
     max_bodies: int
@@ -137,8 +161,9 @@ class SlotTable:
         n = len(names) * max_bodies * (SLOT_HEAD + 4 * n_joints)
         values = context.Array("d", n, lock=False)
         counts = context.Array("q", len(COUNTERS), lock=False)
+        lost = context.Array("d", [0.0, -math.inf] * len(names), lock=False)
         lock = context.Lock()
-        return cls(names, values, counts, lock, n_joints, max_bodies, tuple(formats))
+        return cls(names, values, counts, lost, lock, n_joints, max_bodies, tuple(formats))
 
     def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
         width = SLOT_HEAD + 4 * self.n_joints
@@ -151,6 +176,17 @@ class SlotTable:
         with self.lock:
             values = counts.tolist()
         return dict(zip(COUNTERS, values, strict=True))
+
+    def losses(self) -> dict[str, SensorLoss]:
+        """Each sensor's losses so far (the loop's side). Read after :meth:`take`: a loss
+        is written with the frame that showed it, so every loss of a frame taken is seen."""
+        lost = np.frombuffer(self.lost, dtype=np.float64)
+        with self.lock:
+            values = lost.tolist()
+        return {
+            name: SensorLoss(int(values[2 * i]), values[2 * i + 1])
+            for i, name in enumerate(self.sensors)
+        }
 
     def take(self) -> list[BodyFrame]:
         """The frames written since the last call, oldest first (the loop's side)."""
@@ -299,10 +335,12 @@ def _receive(
     parent_pid: int,
 ) -> None:
     rows, counts = table._arrays()
+    lost = np.frombuffer(table.lost, dtype=np.float64).reshape(-1, 2)
     index = {name: i for i, name in enumerate(table.sensors)}
     formats = {name: table._format(i).name for i, name in enumerate(table.sensors)}
     code = {name: i for i, name in enumerate(COUNTERS)}
     newest = np.full(len(rows), -np.inf)
+    assembly = {name: SensorFrames() for name in table.sensors}
     bodies, states = table.max_bodies, SLOT_HEAD + 3 * table.n_joints
     while not stop.is_set() and os.getppid() == parent_pid:
         reread = watch.changed()
@@ -318,27 +356,42 @@ def _receive(
             continue
         except OSError:  # closed under us
             return
+        step: Step | None = None  # what the datagram did to its sensor's frames, if taken
+        reason = "out_of_order_or_duplicate"  # why not, if not
         try:
-            frame = verifier.decode(data)
+            frame, place = verifier.read(data)
             if frame.format != formats[frame.sensor]:  # a table not made for this calibration
                 raise WireError(f"format {frame.format!r}", reason="wrong_format")
-            slot = index[frame.sensor] * bodies + int(frame.body)
-            n = len(frame.state)
-            reason = "out_of_order_or_duplicate" if frame.t <= newest[slot] else None
+            newer = frame.t > newest[index[frame.sensor] * bodies + int(frame.body)]
+            if newer and place is None:  # unsigned: no sequence number, a frame of its own
+                step = Step(SensorFrames(), (frame,))
+            elif newer and place is not None:
+                step = assemble(assembly[frame.sensor], frame, place)
+                assembly[frame.sensor] = step.state
+                step = None if step.closed else step
         except WireError as exc:
             reason = exc.reason if exc.reason in TIME_REASONS else f"dropped_{exc.reason}"
         except Exception:  # a datagram must never end the receiver: dropped, counted
             reason = "dropped_unreadable"
         with table.lock:
             counts[0] += 1
-            if reason is not None:
+            if step is None:
                 counts[code[reason]] += 1
                 continue
-            row = rows[slot]
-            counts[code["accepted"]] += 1
-            counts[code["superseded"]] += row[0] > row[1]  # the last one was never taken
-            row[0] += 1.0
-            row[2] = frame.t
-            row[SLOT_HEAD : SLOT_HEAD + 3 * n] = np.ravel(frame.joints)
-            row[states : states + n] = frame.state
-        newest[slot] = frame.t
+            if step.lost:
+                sensor = lost[index[frame.sensor]]
+                sensor[0] += 1
+                sensor[1] = max(sensor[1], step.stale_before_s)
+                counts[code["lost_frames"]] += 1
+                counts[code["incomplete_frame"]] += step.discarded
+            for whole in step.complete:
+                slot = index[whole.sensor] * bodies + int(whole.body)
+                n = len(whole.state)
+                row = rows[slot]
+                counts[code["accepted"]] += 1
+                counts[code["superseded"]] += row[0] > row[1]  # the last one was never taken
+                row[0] += 1.0
+                row[2] = whole.t
+                row[SLOT_HEAD : SLOT_HEAD + 3 * n] = np.ravel(whole.joints)
+                row[states : states + n] = whole.state
+                newest[slot] = whole.t

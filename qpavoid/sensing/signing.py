@@ -11,9 +11,18 @@ A datagram is a binary header, a JSON payload and an HMAC-SHA256 tag (big-endian
     6+n     4      key id (unsigned): which of the sensor's keys signed it
     10+n    8      sequence number (unsigned), one more per datagram of this sensor
     18+n    8      capture time t, s (IEEE double), on the sensor's clock
-    26+n    ...    payload: {"body": 0, "joints": [[x, y, z, state], ... 25 rows]}
-                   (and "format": "k4abt", then its 32 rows, for a format not the Kinect v2's)
+    26+n    ...    payload: {"body": 3, "bodies": [0, 3], "joints": [[x, y, z, state],
+                   ... 25 rows]} (and "format": "k4abt", then its 32 rows, for a format
+                   not the Kinect v2's)
     end-32  32     tag = HMAC-SHA256(key, DOMAIN || len(cell) || cell || every byte before it)
+
+``bodies`` is the frame's manifest (:mod:`qpavoid.sensing.wire`): the body ids of all the
+datagrams of its camera frame, which carry consecutive sequence numbers in that order, so
+that the frame's number is ``sequence - bodies.index(body)``; :meth:`Signer.encode_frame`
+sends a camera frame's bodies so, and the receiver delivers a frame only once every body
+it lists came (:mod:`qpavoid.sensing.assembly`). The manifest is in the payload, so the tag
+covers it and the header is as it was: no new version (the choice and its reasons:
+:mod:`qpavoid.sensing.wire`, docs/security.md §2).
 
 The tag covers a domain string (so that no other message signed with the key can pass for
 a datagram), the cell's name from the calibration file (so that one cell's datagrams are
@@ -25,10 +34,10 @@ numbers (a sensor sends some 200 datagrams a second, far fewer than a million).
 :class:`Signer` writes them; :class:`Verifier` checks them in the cheap order, **all but
 the last before any JSON is parsed**: length, header, key, the tag (constant-time
 compare), the sequence number against a replay window, the capture time against the time
-window, and only then the payload. A sequence number is marked seen only once its
-datagram has passed the time window: an old genuine datagram (a recording of the cell's
-traffic) is ``late`` and moves nothing (an adversarial tester's: one week-old datagram
-per sensor had blinded both for good).
+window, and only then the payload and its manifest (:meth:`Verifier.read`). A sequence
+number is marked seen only once its datagram has passed the time window: an old genuine
+datagram (a recording of the cell's traffic) is ``late`` and moves nothing (an
+adversarial tester's: one week-old datagram per sensor had blinded both for good).
 
 HMAC-SHA256, not an AEAD, and why: docs/security.md §2.
 """
@@ -40,7 +49,7 @@ import json
 import math
 import struct
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 from qpavoid.core.errors import InputError
@@ -50,10 +59,12 @@ from qpavoid.sensing.per_sensor import BodyFrame
 from qpavoid.sensing.replay_window import ReplayWindow
 from qpavoid.sensing.wire import (
     MAX_DATAGRAM_BYTES,
+    Manifest,
     WireError,
     Workspace,
     decode,
     json_object,
+    manifest,
     payload,
     skeleton,
 )
@@ -63,6 +74,7 @@ __all__ = [
     "FUTURE_TOLERANCE_S",
     "MAGIC",
     "VERSION_2",
+    "Datagram",
     "Fields",
     "Signer",
     "Verifier",
@@ -136,14 +148,55 @@ class Signer:
         body = self._head + _IDS.pack(self.key_id, sequence, t) + payload
         return body + hmac.digest(self._secret, self._prefix + body, "sha256")
 
-    def encode(self, frame: BodyFrame) -> bytes:
-        """One signed datagram of ``frame`` (of this sensor: joints in its camera frame)."""
-        if frame.sensor != self.sensor:
+    def encode_frame(self, bodies: Sequence[BodyFrame]) -> list[bytes]:
+        """The signed datagrams of one camera frame: one per body of ``bodies`` (this
+        sensor's, captured at one time, joints in its camera frame), in their order, each
+        with the frame's manifest (module docstring). A real camera's process sends every
+        body of each frame it captures so: the receiver delivers the frame only once all
+        came.
+
+        Raises
+        ------
+        InputError
+            For no body, another sensor's body, bodies of several capture times, or one
+            body twice.
+        """
+        if not bodies:
+            raise InputError("a frame of no body: send nothing", name="bodies", value=0)
+        for frame in bodies:
+            if frame.sensor != self.sensor:
+                raise InputError(
+                    f"a frame of sensor {frame.sensor!r} signed as {self.sensor!r}",
+                    name="sensor",
+                    value=frame.sensor,
+                )
+        times = {float(f.t) for f in bodies}
+        ids = [int(f.body) for f in bodies]
+        if len(times) > 1 or len(set(ids)) != len(ids):
             raise InputError(
-                f"a frame of sensor {frame.sensor!r} signed as {self.sensor!r}", name="sensor"
+                f"one frame's bodies {ids} captured at {sorted(times)} s: a frame's bodies "
+                "are distinct and share its capture time",
+                name="bodies",
+                value=ids,
             )
-        message = payload(frame)
-        return self.seal(float(frame.t), json.dumps(message, separators=(",", ":")).encode())
+        datagrams = []
+        for frame in bodies:  # consecutive sequence numbers, in the order of ids
+            message = json.dumps(payload(frame, ids), separators=(",", ":")).encode()
+            datagrams.append(self.seal(float(frame.t), message))
+        return datagrams
+
+    def encode(self, frame: BodyFrame) -> bytes:
+        """One signed datagram of ``frame`` (of this sensor: joints in its camera frame),
+        a frame of that one body (:meth:`encode_frame` sends a frame of several)."""
+        return self.encode_frame([frame])[0]
+
+
+class Datagram(NamedTuple):
+    """A datagram read by :meth:`Verifier.read`: its body's frame, and where it stands
+    among its sensor's frames (None for an unsigned datagram: no sequence number)."""
+
+    frame: BodyFrame
+    manifest: Manifest | None
 
 
 class Fields(NamedTuple):
@@ -238,7 +291,12 @@ class Verifier:
         self._windows = {k: w for k, w in self._windows.items() if k in kept}
 
     def decode(self, data: bytes) -> BodyFrame:
-        """The :class:`BodyFrame` of a datagram, verified and checked.
+        """The :class:`BodyFrame` of a datagram, verified and checked (:meth:`read`)."""
+        return self.read(data).frame
+
+    def read(self, data: bytes) -> Datagram:
+        """A datagram verified and checked: its body's frame and, if signed, its manifest
+        (checked against the datagram's own body and sequence number).
 
         Raises
         ------
@@ -253,7 +311,7 @@ class Verifier:
                 raise WireError("an unsigned (version 1) datagram", reason="unauthenticated")
             frame = decode(data, self.calibration, self.workspace)
             self._check_time(frame.sensor, frame.t, self.clock())
-            return frame
+            return Datagram(frame, None)
         end = _name_end(data)
         raw_name = data[6:end]
         name = self._sensors.get(raw_name)
@@ -275,7 +333,9 @@ class Verifier:
         self._check_time(name, t, now)
         window.mark(sequence)  # only now: an old or future datagram moves nothing
         message = json_object(body[end + _IDS.size :])
-        return skeleton(message, name, self.calibration, self.workspace, t)
+        frame = skeleton(message, name, self.calibration, self.workspace, t)
+        max_bodies = self.calibration[name].skeleton.sensor.max_bodies
+        return Datagram(frame, manifest(message, frame.body, key_id, sequence, max_bodies))
 
     def _check_time(self, sensor: str, t: float, now: float) -> None:
         """:class:`WireError` ``late`` or ``from_the_future`` outside the time window

@@ -5,16 +5,16 @@ from __future__ import annotations
 
 import socket
 import time
-from collections.abc import Callable, Sequence
-from itertools import pairwise
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from itertools import groupby, pairwise
 
 from qpavoid.core.errors import InputError
 from qpavoid.sensing.calibration import Calibration
-from qpavoid.sensing.per_sensor import SensorRecording
+from qpavoid.sensing.per_sensor import BodyFrame, SensorRecording
 from qpavoid.sensing.signing import Signer
 from qpavoid.sensing.wire import encode
 
-__all__ = ["stream"]
+__all__ = ["camera_frames", "stream"]
 
 
 def stream(
@@ -31,7 +31,10 @@ def stream(
 
     Each datagram is signed with its sensor's key from ``calibration`` (wire format
     version 2), or, with ``unsigned``, sent as an unsigned version-1 datagram (for a
-    listener that accepts them, on loopback).
+    listener that accepts them, on loopback). The bodies a sensor's recording has at one
+    time are one camera frame, sent back to back with the frame's manifest
+    (:meth:`~qpavoid.sensing.signing.Signer.encode_frame`): the listener takes the frame
+    only once all of them came.
 
     Frames go in the order of their capture times (each sensor's time stamps plus its
     ``time_offset_s`` in ``calibration``, 0 without one), paced so that the median frame
@@ -66,8 +69,10 @@ def stream(
             )
         signers = {name: Signer(calibration.cell, keys) for name, keys in calibration.keys.items()}
 
+    # by capture time; a sensor's bodies of one time (one camera frame) side by side
     frames = sorted(
-        (f for rec in recordings for f in rec.frames()), key=lambda f: f.t + offset(f.sensor)
+        (f for rec in recordings for f in rec.frames()),
+        key=lambda f: (f.t + offset(f.sensor), f.sensor),
     )
     if not frames:
         return 0
@@ -78,17 +83,37 @@ def stream(
     steps = sorted(b - a for times in streams.values() for a, b in pairwise(times) if b > a)
     scale = (1.0 / rate_hz) / steps[len(steps) // 2] if steps else 1.0
     family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
-    sent = 0
+    sent = i = 0
     with socket.socket(family, socket.SOCK_DGRAM) as sock:
         start, t0 = clock(), frames[0].t + offset(frames[0].sensor)
-        for i, frame in enumerate(frames):
-            due = start + (frame.t + offset(frame.sensor) - t0) * scale
+        for group in camera_frames(frames):
+            sensor = group[0].sensor
+            due = start + (group[0].t + offset(sensor) - t0) * scale
             wait = due - clock()
             if wait > 0:
                 sleep(wait)
-            stamped = frame._replace(t=clock() - offset(frame.sensor))
-            data = encode(stamped) if unsigned else signers[frame.sensor].encode(stamped)
-            for datagram in mangle(i, data) if mangle else (data,):
-                sock.sendto(datagram, address)
-                sent += 1
+            now = clock() - offset(sensor)
+            bodies = [f._replace(t=now) for f in group]
+            if unsigned:
+                datagrams = [encode(f) for f in bodies]
+            else:
+                datagrams = signers[sensor].encode_frame(bodies)
+            for data in datagrams:
+                for datagram in mangle(i, data) if mangle else (data,):
+                    sock.sendto(datagram, address)
+                    sent += 1
+                i += 1
     return sent
+
+
+def camera_frames(frames: Iterable[BodyFrame]) -> Iterator[list[BodyFrame]]:
+    """``frames`` (in order) as camera frames: the bodies one sensor has at one time, side
+    by side; a body that comes again (a recording given twice) starts another frame."""
+    for _, group in groupby(frames, key=lambda f: (f.sensor, f.t)):
+        frame: list[BodyFrame] = []
+        for body in group:
+            if any(f.body == body.body for f in frame):
+                yield frame
+                frame = []
+            frame.append(body)
+        yield frame

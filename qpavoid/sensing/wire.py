@@ -2,7 +2,8 @@
 
 A datagram is signed (version 2, the default: :mod:`qpavoid.sensing.signing` wraps the skeleton
 below in a header and a tag, docs/security.md) or, only by an explicit opt-in on
-loopback, unsigned (version 1). The skeleton itself is JSON in both.
+loopback, unsigned (version 1). The skeleton itself is JSON in both; a signed one also
+carries its frame's **manifest** (below).
 
 **Version 1, unsigned** (only with an explicit opt-in, on loopback): one UTF-8 JSON
 object::
@@ -11,8 +12,8 @@ object::
      "joints": [[x, y, z, state], ... one row per joint of the Kinect v2 format]}
 
 In both (in a signed datagram the sensor's name and the capture time are in the header,
-and the payload is ``{"body", "joints"}``, with ``"format"`` for a format other than the
-Kinect v2's):
+and the payload is ``{"body", "bodies", "joints"}``, ``bodies`` the manifest below, with
+``"format"`` for a format other than the Kinect v2's):
 
 * ``sensor``: the sensor's name, as in the calibration file.
 * ``format`` (optional): the skeleton format of ``joints``, a name of
@@ -30,6 +31,41 @@ Kinect v2's):
   converts an SDK's millimetres and confidence); ``state`` 0 (not tracked: the
   coordinates are ignored), 1 (inferred) or 2 (tracked).
 
+**The manifest** (signed payloads only; issue 40): the skeletons travel in clear, one body
+per datagram, so a device on the path can tell the person near the robot from a bystander
+and drop only the former's datagrams. Each datagram of a camera frame therefore says, inside
+the signed bytes, what the whole frame holds:
+
+* ``bodies``: the body ids the sensor reported in that frame, one per datagram, in the
+  order of their datagrams (distinct; their count is the frame's, 1 to the format's
+  ``max_bodies``).
+
+The frame's datagrams carry consecutive sequence numbers (signed header) in that order, so
+a datagram's place in its frame is its body's index in ``bodies``, and the **frame's
+number** is the sequence number of its first datagram, ``sequence - bodies.index(body)``;
+the sensor's next frame is numbered ``frame + len(bodies)``. A datagram is thereby
+verifiably part of one frame (its own body not listed: ``bad_manifest``), and a forged or
+altered manifest fails the tag. The receiver (:mod:`qpavoid.sensing.assembly`) delivers a
+frame only once all its bodies came, and a frame missing or incomplete makes the sensor's
+older frames stale at once. A signed payload without ``bodies`` (a sender before issue
+40) is a frame of its one body at its own sequence number: a gap in the numbers still
+shows. An unsigned datagram has no sequence number and no manifest: it is delivered as it
+comes (docs/security.md §3).
+
+**Why a manifest in each datagram, not a whole camera frame in one.** A body's datagram
+stays inside one Ethernet frame: 926 bytes for a Kinect v2 body of a frame of six, and at
+most 1433 for one of ten ZED bodies of 38 joints with every coordinate at its widest
+(``benchmarks/wire.py``), under the 1452 bytes of a UDP payload in one IPv6 frame (1472 on
+IPv4); six to ten bodies in one datagram (up to 14 kB) would be cut into IP fragments, any
+one of which lost loses the frame, and would pass :data:`MAX_DATAGRAM_BYTES`. The per-body
+slots, counters and senders stay as they were. The manifest costs 13 to 31 bytes, and its
+check and the frame's assembly about 5 µs per datagram; a frame in one datagram would save
+a tag per body (4 µs of the 50-90 a body costs to verify and parse). The frame's number
+is the sequence number the header already signs, not a second counter in the payload (16
+more bytes, which would take the widest datagram over the IPv6 frame). And the version-2
+header is unchanged: the manifest is a key of the payload, which the tag covers and an
+older receiver ignores, so no new version is needed.
+
 JSON is chosen over a binary layout for the skeleton because every language and tool
 reads it and a datagram of one body (about 1 kB) is parsed in tens of microseconds
 (docs/sensors.md); a forged one is refused by its tag in a few (docs/security.md).
@@ -42,7 +78,9 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -56,11 +94,13 @@ __all__ = [
     "MAX_DATAGRAM_BYTES",
     "REASONS",
     "VERSION",
+    "Manifest",
     "WireError",
     "Workspace",
     "decode",
     "encode",
     "json_object",
+    "manifest",
     "payload",
     "rows",
     "skeleton",
@@ -94,6 +134,7 @@ REASONS = (
     "bad_field",
     "non_finite",
     "outside_workspace",
+    "bad_manifest",
 )
 
 
@@ -121,6 +162,57 @@ class Workspace:
         return np.all((points >= self.lower_m) & (points <= self.upper_m), axis=1)
 
 
+class Manifest(NamedTuple):
+    """Where a signed datagram stands among its sensor's frames (module docstring).
+
+    Attributes
+    ----------
+    key_id
+        The key that signed it (a new key counts afresh, as its replay window does).
+    sequence
+        Its sequence number.
+    frame
+        Its frame's number: the sequence number of the frame's first datagram
+        (``sequence - bodies.index(body)``).
+    bodies
+        The frame's body ids, in the order of its datagrams.
+    """
+
+    key_id: int
+    sequence: int
+    frame: int
+    bodies: tuple[int, ...]
+
+
+def manifest(msg: dict, body: int, key_id: int, sequence: int, max_bodies: int) -> Manifest:
+    """The manifest of a signed payload ``msg`` whose skeleton is ``body``'s and whose
+    header says ``key_id`` and ``sequence`` (a payload without ``bodies``, from a sender
+    before manifests: a frame of its one body).
+
+    Raises
+    ------
+    WireError
+        ``bad_manifest``: ``bodies`` not 1 to ``max_bodies`` distinct body ids, ``body``
+        not among them, or a frame that would start below sequence number 0.
+    """
+    if "bodies" not in msg:
+        return Manifest(key_id, sequence, sequence, (body,))
+    bodies = msg["bodies"]
+    ids = tuple(bodies) if isinstance(bodies, list) else ()
+    if (
+        not 1 <= len(ids) <= max_bodies
+        or not all(_is_int(b) and 0 <= b < max_bodies for b in ids)
+        or len(set(ids)) != len(ids)
+    ):
+        raise WireError(f"bodies {str(bodies)[:60]}", reason="bad_manifest")
+    if body not in ids or sequence < ids.index(body):
+        raise WireError(
+            f"body {body}, sequence number {sequence}, in a frame of bodies {list(ids)}",
+            reason="bad_manifest",
+        )
+    return Manifest(key_id, sequence, sequence - ids.index(body), ids)
+
+
 def rows(frame: BodyFrame) -> list[list[float]]:
     """The joints as sent: camera frame, to the micrometre, NaN joints as state 0."""
     joints = np.asarray(frame.joints, dtype=float)
@@ -134,10 +226,13 @@ def rows(frame: BodyFrame) -> list[list[float]]:
     return out
 
 
-def payload(frame: BodyFrame) -> dict:
-    """What a datagram of ``frame`` says of its skeleton: ``body``, ``format`` (for a format
-    other than the Kinect v2's) and ``joints`` (:func:`rows`)."""
+def payload(frame: BodyFrame, bodies: Sequence[int] | None = None) -> dict:
+    """What a datagram of ``frame`` says of its skeleton: ``body``, its camera frame's
+    ``bodies`` (the manifest, if given), ``format`` (for a format other than the Kinect
+    v2's) and ``joints`` (:func:`rows`)."""
     message: dict = {"body": int(frame.body)}
+    if bodies is not None:
+        message["bodies"] = [int(b) for b in bodies]
     if frame.format != DEFAULT_FORMAT:
         message["format"] = frame.format
     message["joints"] = rows(frame)
@@ -257,6 +352,11 @@ class _NonFiniteError(ValueError):
 
 def _refuse_constant(name: str) -> float:
     raise _NonFiniteError(name)
+
+
+def _is_int(value: object) -> bool:
+    """A JSON integer (not a boolean)."""
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def _all_numbers(rows: object) -> bool:
