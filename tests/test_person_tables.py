@@ -49,8 +49,9 @@ CELLS = (Cell(1), Cell(2))
 
 
 class Listener:
-    """What :class:`~qpavoid.loop.live_input.LiveSource` reads of a listener: the sensors
-    and the frames received since the last :meth:`drain` (put in by the test). (The live
+    """What :class:`~qpavoid.loop.live_input.LiveSource` reads of a listener: the sensors,
+    the frames received since the last :meth:`drain` (put in by the test) and the frames
+    lost on the way (none). (The live
     source's run clock is then the test's with ``clock=lambda: DT``: its first call is at
     ``t = DT``.)"""
 
@@ -62,6 +63,9 @@ class Listener:
     def drain(self) -> list[BodyFrame]:
         frames, self.inbox = self.inbox, []
         return frames
+
+    def losses(self) -> dict:  # none lost on the way (the frames are put in whole)
+        return {}
 
 
 @pytest.mark.parametrize("distance", ["capsules", "spheres"])
