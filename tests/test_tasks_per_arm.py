@@ -120,6 +120,23 @@ def hand_distances(robot, joints, configurations, method="spheres") -> np.ndarra
     )
 
 
+@pytest.mark.parametrize("name", ARMS)
+def test_every_shipped_arm_loads_its_task(name):
+    """``default_task(load_robot(name))`` for every shipped arm, never skipped: the test
+    command installs the dev extra, which brings the packages of the arms' URDFs and
+    meshes (example-robot-data, franky-sim), so an arm whose description or task does not
+    load with the versions installed (the newest, or the oldest pyproject.toml allows:
+    .ci/run runs this suite on both) fails here, whatever the tests below skip. Loading
+    a task checks each waypoint reachable (inverse kinematics from the description's
+    seed, within the joint limits)."""
+    robot = qpavoid.load_robot(name)
+    task = default_task(robot)
+    assert robot.name == name
+    assert task.file == robot.path.parent / "task.toml"  # the installed description's
+    assert task.file.read_bytes() == (ROBOTS / name / "task.toml").read_bytes()
+    assert task.path.duration_s > 0.0
+
+
 def test_the_iiwas_task_file_is_the_papers_arc_bit_for_bit(robot):
     task = default_task(robot)
     paper = ArcPath()
