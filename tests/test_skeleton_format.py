@@ -14,12 +14,17 @@ import pytest
 from qpavoid.core.errors import InputError
 from qpavoid.human import kinect_v2
 from qpavoid.human.kinect_v2 import KINECT_V2, KINECT_V2_FILE, JointType, TrackingState
+from qpavoid.human.landmarks import FORMAT_NAMES
 from qpavoid.human.skeleton import (
+    BASES,
+    EVIDENCED,
     FORMATS_DIR,
     MAX_FORMAT_FILE_BYTES,
+    Evidence,
     SkeletonFormat,
     SkeletonFormatError,
 )
+from qpavoid.sensing.calibration import known_formats
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -257,3 +262,42 @@ def test_every_format_file_ships_in_the_wheel():
     for f in files:
         assert any(fnmatch.fnmatch(f"formats/{f.name}", g) for g in globs), f.name
     assert "qpavoid.human" in pyproject["tool"]["setuptools"]["packages"]
+
+
+# --- [sensor.evidence]: how each number was obtained (issue 41) ---
+
+LATENCY_EVIDENCE = re.compile(r"^latency_s = \{ basis = .*$", re.M)
+
+
+@pytest.mark.parametrize(
+    ("line", "match"),
+    [
+        ('latency_s = { basis = "measured" }', "a measured number needs its source"),
+        ('latency_s = { basis = "vendor", source = "  " }', "a vendor number needs its source"),
+        ('latency_s = { basis = "estimate" }', "an estimate needs its note"),
+        ('latency_s = { basis = "guess", note = "x" }', r"basis must be one of \['measured'"),
+        ('latency_s = { basis = "measured", source = 3 }', "source must be text"),
+        ('latency_s = { basis = "measured", source = "a", doi = "b" }', "unknown key"),
+        ("latency_s = 0.06", "must be a table"),
+        ('latency = { basis = "estimate", note = "x" }', "latency names no number"),
+        ("", "sensor.evidence.latency_s is missing"),
+    ],
+)
+def test_a_number_without_its_evidence_is_refused(tmp_path, line, match):
+    assert LATENCY_EVIDENCE.search(TEXT)
+    refused(tmp_path, LATENCY_EVIDENCE.sub(line, TEXT), match)
+
+
+def test_a_measured_number_with_its_source_is_taken(tmp_path):
+    line = 'latency_s = { basis = "measured", source = "Doe 2030, Sensors 1(1) 1" }'
+    fmt = load(tmp_path, LATENCY_EVIDENCE.sub(line, TEXT))
+    assert fmt.sensor.basis("latency_s") == Evidence("measured", "Doe 2030, Sensors 1(1) 1")
+
+
+@pytest.mark.parametrize("name", FORMAT_NAMES)
+def test_every_shipped_camera_says_how_its_safety_numbers_were_obtained(name):
+    sensor = known_formats()[name].sensor
+    for key in EVIDENCED:
+        evidence = sensor.basis(key)
+        assert evidence.basis in BASES
+        assert evidence.source if evidence.basis != "estimate" else evidence.note

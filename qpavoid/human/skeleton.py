@@ -32,12 +32,15 @@ from qpavoid.core.file_bounds import read_toml as read_toml_file
 from qpavoid.human.conversion import Confidence, LandmarkRule, is_number, only_keys, parse_rule
 
 __all__ = [
+    "BASES",
+    "EVIDENCED",
     "FORMATS_DIR",
     "INFERRED",
     "NOT_TRACKED",
     "TRACKED",
     "TRACKING_STATES",
     "CameraSpec",
+    "Evidence",
     "SkeletonFormat",
     "SkeletonFormatError",
 ]
@@ -86,6 +89,68 @@ AXIS_DIRECTIONS = {
 _JOINT_KEYS = ("id", "name", "parent", "max_bone_m")
 
 
+#: How a camera's number was obtained (``[sensor.evidence]``): a published measurement,
+#: the maker's documentation, or our estimate.
+BASES = ("measured", "vendor", "estimate")
+#: The numbers of ``[sensor]`` that safety rests on (speed and separation's latency term,
+#: Z_d, the simulated noise): each must say how it was obtained.
+EVIDENCED = ("latency_s", "noise_m", "tracked_uncertainty_m")
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """How one number of a camera's ``[sensor]`` table was obtained (``[sensor.evidence]``).
+
+    Attributes
+    ----------
+    basis
+        ``"measured"`` (a published measurement: cited in ``source``), ``"vendor"`` (the
+        maker's documentation: cited in ``source``) or ``"estimate"`` (ours: ``note`` says
+        why, and what was searched and not found).
+    source
+        The citation: authors, title, venue, year and DOI or URL (an SDK issue's number),
+        with what exactly was measured.
+    note
+        What the number is and why this value: for an estimate, its reasoning.
+    """
+
+    basis: str
+    source: str = ""
+    note: str = ""
+
+    @classmethod
+    def read(cls, key: str, value: object) -> Evidence:
+        """``[sensor.evidence]``'s entry for ``key``, checked: a table with a known
+        ``basis``, a ``source`` where it is measured or the maker's, a ``note`` where it is
+        ours."""
+        where = f"sensor.evidence.{key}"
+        if not isinstance(value, dict):
+            _fail(f"{where} must be a table {{ basis, source, note }}, got {value!r}", where, value)
+        only_keys(value, ("basis", "source", "note"), f"{where}.")
+        basis = value.get("basis")
+        if basis not in BASES:
+            _fail(f"{where}.basis must be one of {list(BASES)}, got {basis!r}", where, basis)
+        for field_ in ("source", "note"):
+            if not isinstance(value.get(field_, ""), str):
+                _fail(f"{where}.{field_} must be text", f"{where}.{field_}", value[field_])
+        evidence = cls(basis, value.get("source", "").strip(), value.get("note", "").strip())
+        if basis != "estimate" and not evidence.source:
+            _fail(
+                f"{where}: a {basis} number needs its source (authors, title, venue, year, "
+                "DOI or URL, and what was measured)",
+                f"{where}.source",
+                value,
+            )
+        if basis == "estimate" and not evidence.note:
+            _fail(
+                f"{where}: an estimate needs its note (why this value, and what was searched "
+                "and not found)",
+                f"{where}.note",
+                value,
+            )
+        return evidence
+
+
 @dataclass(frozen=True)
 class CameraSpec:
     """The body-tracking camera's numbers, as its format file's ``[sensor]`` table gives
@@ -116,6 +181,9 @@ class CameraSpec:
         (MediaPipe) when it cannot see the face.
     left_right_swap_s
         How long such a swap lasts, s.
+    evidence
+        How each number was obtained, by key (``[sensor.evidence]``, :class:`Evidence`):
+        every one of :data:`EVIDENCED` at least.
     """
 
     frame_rate_hz: float
@@ -128,6 +196,7 @@ class CameraSpec:
     noise_reference_range_m: float = 0.0
     left_right_swap_per_s: float = 0.0
     left_right_swap_s: float = 0.5
+    evidence: tuple[tuple[str, Evidence], ...] = ()
 
     def __post_init__(self) -> None:
         for key, low, value in (
@@ -166,6 +235,28 @@ class CameraSpec:
                 "sensor.max_bodies",
                 self.max_bodies,
             )
+        given = dict(self.evidence)
+        numbers = [f.name for f in fields(self) if f.name != "evidence"]
+        unknown = [k for k in given if k not in numbers]
+        if unknown:
+            _fail(
+                f"sensor.evidence.{unknown[0]} names no number of [sensor]; they are "
+                f"{', '.join(numbers)}",
+                f"sensor.evidence.{unknown[0]}",
+                given[unknown[0]],
+            )
+        missing = [k for k in EVIDENCED if k not in given]
+        if missing:
+            _fail(
+                f"sensor.evidence.{missing[0]} is missing: say how the number was obtained "
+                f"(basis = one of {list(BASES)}, with its source or note)",
+                f"sensor.evidence.{missing[0]}",
+                None,
+            )
+
+    def basis(self, key: str) -> Evidence:
+        """How the number ``key`` was obtained (KeyError if the file does not say)."""
+        return dict(self.evidence)[key]
 
 
 @dataclass(frozen=True)
@@ -531,8 +622,12 @@ class SkeletonFormat:
         for group, roles in groups.items():
             if not isinstance(roles, dict):
                 _fail(f"groups.{group} must be a table, got {roles!r}", f"groups.{group}", roles)
-        sensor = _require(data, "sensor", dict, "a table")
+        sensor = dict(_require(data, "sensor", dict, "a table"))
         only_keys(sensor, tuple(CameraSpec.__dataclass_fields__), "sensor.")
+        evidence = sensor.pop("evidence", {})
+        if not isinstance(evidence, dict):
+            _fail(f"sensor.evidence must be a table, got {evidence!r}", "sensor.evidence", evidence)
+        sensor["evidence"] = tuple((k, Evidence.read(k, v)) for k, v in evidence.items())
         missing = [
             k
             for k, f in CameraSpec.__dataclass_fields__.items()
