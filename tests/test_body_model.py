@@ -185,6 +185,11 @@ tracked_uncertainty_m = 0.01
 field_of_view_deg = [90.0, 60.0]
 range_m = [0.2, 3.0]
 max_bodies = 2
+
+[sensor.evidence]
+latency_s = { basis = "estimate", note = "a test's camera" }
+noise_m = { basis = "estimate", note = "a test's camera" }
+tracked_uncertainty_m = { basis = "estimate", note = "a test's camera" }
 """
 STICK_BODY = """
 format = "stick"

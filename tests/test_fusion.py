@@ -121,9 +121,46 @@ def test_a_person_lost_next_to_the_robot_is_kept_until_seen_again():
     for t in (0.5, 1.5, 10.0, 60.0):
         (kept,) = fuser.fuse(t).people
         assert kept.id == 0 and np.isnan(kept.frame.joints).all()
+        ((pid, unseen, where),) = fuser.kept_unseen(t)  # what the live view's alert says
+        assert pid == 0 and unseen == pytest.approx(t)
+        assert where == pytest.approx(np.linalg.norm(torso_centre(near)), abs=1e-9)
+    assert fuser.kept_unseen(0.05) == ()  # within max_age_s it is not unseen yet
     fuser.add(body(cal, "a", 60.1, near + np.array([0.1, 0.0, 0.0]), body_id=3))  # a new body id
     (back,) = fuser.fuse(60.1).people
     assert back.id == 0 and np.isfinite(back.frame.joints).all()
+
+
+@pytest.mark.parametrize("unseen_s", [0.3, 0.45, 0.6])
+def test_a_person_who_walked_on_while_unseen_is_the_same_person(unseen_s):
+    """Issue 40's network adversary: 27 datagrams dropped while the operator stood up and
+    walked away (0.45 s, 0.9 m) made them a second person when seen again, and the first,
+    last seen near the robot, was kept unseen for good. The gate grows by 2 m/s unseen."""
+    cal = calibration("a")
+    seat = Operator().rest()
+    cfg = FusionConfig(max_age_s=0.1, smooth=False)
+    fuser = Fuser(cal, cfg)
+    fuser.add(body(cal, "a", 0.0, seat))
+    (first,) = fuser.fuse(0.0).people
+    walked = seat + np.array([0.0, 0.9 * unseen_s / 0.45, 0.0])  # 2 m/s away from the robot
+    assert np.linalg.norm(torso_centre(walked) - torso_centre(seat)) > cfg.association_gate_m
+    fuser.add(body(cal, "a", unseen_s, walked))
+    (again,) = fuser.fuse(unseen_s).people  # one person, not a new one beside a ghost
+    assert again.id == first.id and np.isfinite(again.frame.joints).all()
+    # seen now, the gate is back to 0.6 m: a body 0.9 m away one frame later is someone else
+    fuser.add(body(cal, "a", unseen_s + 1 / 30, walked))
+    fuser.add(body(cal, "a", unseen_s + 1 / 30, walked + np.array([0.9, 0.0, 0.0]), body_id=1))
+    assert len(fuser.fuse(unseen_s + 1 / 30).people) == 2
+
+
+def test_the_gate_of_a_person_unseen_long_stops_growing():
+    cal = calibration("a")
+    seat = Operator().rest()
+    fuser = Fuser(cal, FusionConfig(max_age_s=0.1, smooth=False))
+    fuser.add(body(cal, "a", 0.0, seat))
+    fuser.fuse(0.0)
+    far = seat + np.array([0.0, 1.6, 0.0])  # beyond the 1.5 m cap, however long unseen
+    fuser.add(body(cal, "a", 30.0, far, body_id=2))
+    assert [p.id for p in fuser.fuse(30.0).people] == [0, 1]
 
 
 def test_a_person_seen_again_after_a_gap_is_not_extrapolated_across_it():

@@ -121,6 +121,22 @@ def test_frozen_frames_are_counted_and_out_of_order_frames_ignored():
     np.testing.assert_array_equal(old.frame.joints, moved)
 
 
+def test_a_person_unseen_is_not_a_frozen_sensor():
+    """Frames with no usable joint (a person the fusion keeps unseen: all alike) are not a
+    sensor repeating itself: counted, they stopped the robot as "frozen" until the person
+    was seen again (issue 40's network adversary); their joints' growing uncertainty
+    bounds them instead."""
+    rest = Operator().rest()
+    tracker = Tracker()
+    tracker.update(frame(rest), 0.0)
+    nobody = np.full_like(rest, np.nan)
+    lost = np.zeros(len(rest), dtype=np.int8)
+    seen = [tracker.update(frame(nobody, lost), k / 30) for k in range(1, 30)]
+    assert [p.identical for p in seen] == [0] * 29
+    radius = [float(p.joint_radius[HAND]) for p in seen]
+    assert radius == sorted(radius) and radius[-1] > radius[0] + 1.0  # 2 m/s for ~1 s
+
+
 def test_velocity_filter_lag_and_noise_on_a_known_motion():
     """A hand moving at 1 m/s, seen at 30 Hz with 2 mm noise: the α-β estimate converges
     within 0.3 s and its noise stays below 0.1 m/s (docs/safety.md has the full numbers)."""

@@ -380,7 +380,8 @@ def test_phantoms_from_one_sensor_cannot_push_out_the_person_the_other_sees():
 
 
 def test_a_flood_of_near_phantoms_keeps_the_fusion_bounded_and_those_seen_now():
-    fuser = Fuser(cell(), FusionConfig(association_gate_m=0.05))  # every phantom is new
+    # every phantom is new: no gate, not even an unseen person's, reaches the next one
+    fuser = Fuser(cell(), FusionConfig(association_gate_m=0.05, max_association_gate_m=0.05))
     for k in range(200):  # six new phantoms every frame, each at a new place near the base
         t = k / 30
         for i in range(6):

@@ -142,7 +142,7 @@ def associate(
     centres: Mapping[int, Sequence[float]],
     track_centres: Mapping[int, Sequence[float]],
     previous: dict[int, int],
-    gate_m: float,
+    gate_m: float | Mapping[int, float],
 ) -> dict[int, int | None]:
     """Assign one sensor's bodies to people.
 
@@ -155,13 +155,16 @@ def associate(
     previous
         This sensor's earlier assignment, body id → track id.
     gate_m
-        Farthest a body may be from a person's centre to be that person, m.
+        Farthest a body may be from a person's centre to be that person, m: one for all,
+        or each person's by track id (wider for a person unseen a while:
+        :meth:`~qpavoid.fusion.fuser.Fuser.fuse`).
 
     Returns
     -------
     dict
         Body id → track id, or None for a body that fits nobody (a new person).
     """
+    gates = gate_m if isinstance(gate_m, Mapping) else dict.fromkeys(track_centres, gate_m)
     out: dict[int, int | None] = {}
     used: set[int] = set()
     for body, c in centres.items():  # a body keeps its person while within the gate
@@ -170,7 +173,7 @@ def associate(
             tid is not None
             and tid in track_centres
             and tid not in used
-            and _dist(c, track_centres[tid]) <= gate_m
+            and _dist(c, track_centres[tid]) <= gates[tid]
         ):
             out[body] = tid
             used.add(tid)
@@ -178,10 +181,11 @@ def associate(
     free = [tid for tid in track_centres if tid not in used]
     if bodies and free:
         cost = np.array([[_dist(centres[b], track_centres[tid]) for tid in free] for b in bodies])
+        inside = cost <= np.array([gates[tid] for tid in free])
         big = 1e6
-        rows, cols = linear_sum_assignment(np.where(cost <= gate_m, cost, big))
+        rows, cols = linear_sum_assignment(np.where(inside, cost, big))
         for r, c in zip(rows, cols, strict=True):
-            if cost[r, c] <= gate_m:
+            if inside[r, c]:
                 out[bodies[r]] = free[c]
     for b in bodies:
         out.setdefault(b, None)

@@ -34,7 +34,16 @@ class FusionConfig:
         their left and right (the track is swapped if it started from a sensor behind
         them), s (0.2: six Kinect frames, both sensors' first ones).
     association_gate_m
-        Farthest a body's torso centre may be from a person's to be that person, m.
+        Farthest a body's torso centre may be from a person's to be that person, m, for a
+        person seen now.
+    unseen_gate_speed_mps, max_association_gate_m
+        A person unseen for t s is theirs within ``association_gate_m + v t`` (v 2.0 m/s:
+        ISO 13855's hand speed, the tracker's bound on how far an unseen person's joints
+        may have gone), at most ``max_association_gate_m`` (1.5 m: ``forget_beyond_m``'s
+        reach). With the fixed 0.6 m gate, a person who walked 0.9 m during a 0.45 s
+        dropout came back as a second person, and the first, last seen near the robot,
+        was kept unseen and held the robot for good (issue 40's network adversary: 27
+        datagrams dropped on the path).
     same_frame_s
         Bodies of one camera frame share its time stamp: a body whose newest frame is older
         than its sensor's newest by more than this is not in that frame, s (0.005: far
@@ -89,6 +98,8 @@ class FusionConfig:
     mirror_margin_m: float = 0.05
     settle_s: float = 0.2
     association_gate_m: float = 0.6
+    unseen_gate_speed_mps: float = 2.0
+    max_association_gate_m: float = 1.5
     same_frame_s: float = 0.005
     person_timeout_s: float = 2.0
     forget_beyond_m: float = 1.5

@@ -225,6 +225,13 @@ class Fuser:
         self._admission.tick(t)
         per_track: dict[int, list[_Contribution]] = {}
         track_centres = {tr.id: tuple(tr.centre().tolist()) for tr in self.tracks}
+        gates = {  # wider for a person unseen a while: they may have walked on meanwhile
+            tr.id: min(
+                cfg.association_gate_m + cfg.unseen_gate_speed_mps * max(t - tr.seen_s, 0.0),
+                max(cfg.max_association_gate_m, cfg.association_gate_m),
+            )
+            for tr in self.tracks
+        }
         for sensor in self.calibration.names:
             newest: dict[int, _Frame] = {}  # each body's newest frame captured by t
             for body, history in self._latest[sensor].items():
@@ -239,9 +246,7 @@ class Fuser:
             }
             self._renumbered(sensor, bodies)
             centres = {body: c.centre for body, c in bodies.items()}
-            mapping = associate(
-                centres, track_centres, self._assigned[sensor], cfg.association_gate_m
-            )
+            mapping = associate(centres, track_centres, self._assigned[sensor], gates)
             self._assigned[sensor] = {b: tid for b, tid in mapping.items() if tid is not None}
             for body, tid in mapping.items():
                 tc, joints, state, centre = bodies[body]
@@ -250,6 +255,7 @@ class Fuser:
                     if track is None:
                         continue
                     track_centres[track.id] = centre
+                    gates[track.id] = cfg.association_gate_m
                     self._assigned[sensor][body] = tid = track.id
                 per_track.setdefault(tid, []).append(_Contribution(sensor, joints, state, t - tc))
         for track in self._admission.room(self.tracks, set(per_track)):
@@ -282,6 +288,17 @@ class Fuser:
                 value=fmt.name,
             )
         return mapped
+
+    def kept_unseen(self, t: float) -> tuple[tuple[int, float, float], ...]:
+        """The people kept while no sensor sees them because they were last seen near the
+        robot (within ``forget_beyond_m``: they may be hidden next to it), unseen for more
+        than ``max_age_s`` at run time ``t``: ``(id, unseen s, last seen from the base m)``
+        each. Their growing uncertainty holds the robot until a sensor sees them again."""
+        return tuple(
+            (tr.id, t - tr.seen_s, float(np.linalg.norm(tr.centre())))
+            for tr in self.tracks
+            if t - tr.seen_s > self.cfg.max_age_s and not self._far(tr)
+        )
 
     def clear_flagged(self) -> tuple[int, ...]:
         """Drop every flagged person (an operator who has looked and found nobody there);

@@ -244,7 +244,8 @@ class LiveSource:
     ----------
     alert
         Why the input is suspect, after the last :meth:`frame_at` ("" if it is not): a
-        sensor that keeps losing frames, someone in view flagged; logged every tick
+        sensor that keeps losing frames, someone in view flagged, someone kept unseen near
+        the robot (:meth:`~qpavoid.fusion.fuser.Fuser.kept_unseen`); logged every tick
         (``input_alert``) and shown by the live view.
     """
 
@@ -299,7 +300,12 @@ class LiveSource:
         fused = self.fuser.fuse(t)
         lost = self._losses.alert(t, {sensor: loss.frames for sensor, loss in losses.items()})
         flags = [f"person {p.id}: {p.flag}" for p in fused.people if p.flag]
-        self.alert = "; ".join([lost, *flags] if lost else flags)
+        unseen = [
+            f"person {pid} unseen for {gone:.1f} s, last seen {where:.2f} m from the robot: "
+            "it waits until a sensor sees them again"
+            for pid, gone, where in self.fuser.kept_unseen(t)
+        ]
+        self.alert = "; ".join(([lost] if lost else []) + flags + unseen)
         if fused.captured_s > self._captured:
             self._captured = fused.captured_s
         people = People(tuple(p.id for p in fused.people), tuple(p.frame for p in fused.people))

@@ -59,7 +59,8 @@ class PerceptionConfig:
         Uncertainty of an Inferred joint, m, on top of its growth since last Tracked
         (docs/safety.md: the error of inferred joints is several times that of tracked ones).
     max_identical_frames
-        More consecutive bit-identical skeletons than this are a frozen sensor (stale);
+        More consecutive bit-identical skeletons than this, each with a usable joint, are
+        a frozen sensor (stale);
         None switches the check off (for a perfect simulated sensor, whose still person
         is bit-identical). Default 3: 0.1 s at 30 Hz.
     velocity_alpha, velocity_beta
@@ -177,8 +178,13 @@ class Tracker:
         if last is not None and self._perceived is not None:
             # bit for bit (a repeated frame is a copy; NaN equals NaN): 20 µs less than
             # np.array_equal(..., equal_nan=True)
+            # a frame with no usable joint (a person the fusion keeps unseen) is not a
+            # sensor repeating itself: its lost joints are bounded by their growing
+            # uncertainty instead (an unseen person's frames are all alike; counted, they
+            # stopped the robot as "frozen" until seen again: issue 40's network adversary)
             same = (
-                frame.joints.tobytes() == last.joints.tobytes()
+                bool(frame.state.any())
+                and frame.joints.tobytes() == last.joints.tobytes()
                 and frame.state.tobytes() == last.state.tobytes()
             )
             identical = self._perceived.identical + 1 if same else 0
