@@ -23,11 +23,16 @@ the square of the hand's range over the reference range. The estimate must be wi
 from __future__ import annotations
 
 import math
+import subprocess
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PYTHON
 
 from qpavoid.arm.ik import inverse_kinematics
+from qpavoid.arm.model import load_robot
 from qpavoid.cli.commands import main
 from qpavoid.control.task import default_task
 from qpavoid.core.errors import InputError, RecordingError
@@ -393,3 +398,34 @@ def test_the_command_prints_the_latency_and_what_to_run_with(files, monkeypatch,
     suggested = float(lines[2].split("--latency ")[1].split()[0])
     assert 0.08 < suggested < 0.085
     assert sorted(p.name for p in d.iterdir()) == before  # nothing written
+
+
+@pytest.mark.slow  # seconds of subprocesses and of an arm in real time: with the slow suite
+def test_the_examples_and_the_command_as_a_user_types_them(tmp_path):
+    """examples/latency_simulated.py, then `qpavoid latency` on what it wrote; then
+    examples/latency_excitation.py on the simulated arm (2 s)."""
+    examples = Path(__file__).parents[1] / "examples"
+    r = subprocess.run(
+        [*PYTHON, str(examples / "latency_simulated.py"), str(tmp_path), "--latency", "0.09"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.returncode == 0, r.stderr
+    cmd = [*PYTHON, "-m", "qpavoid", "latency", "--camera-recording", str(tmp_path / "camera.npz")]
+    r = subprocess.run(
+        [*cmd, "--arm-log", str(tmp_path / "arm.npz")], capture_output=True, text=True, timeout=120
+    )
+    assert r.returncode == 0, r.stderr
+    measured = float(r.stdout.split("camera latency ")[1].split(" ms")[0])
+    assert abs(measured - 90.0) < 6.0, r.stdout  # the k4abt's 5 mm: 5 σ_τ is about 6 ms
+    excite = [*PYTHON, str(examples / "latency_excitation.py"), "sim", "--seconds", "2"]
+    r = subprocess.run(
+        [*excite, "--out", str(tmp_path / "excited.npz")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.returncode == 0, r.stderr
+    log = read_arm_log(tmp_path / "excited.npz", load_robot("iiwa14"))
+    assert log.t.size == 1002 and abs(log.t[0] - time.time()) < 60.0  # on the wall clock
