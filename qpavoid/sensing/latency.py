@@ -83,6 +83,7 @@ __all__ = [
     "flange_positions",
     "landmark_index",
     "measure_latency",
+    "nearest_body",
     "read_arm_log",
     "save_arm_log",
 ]
@@ -525,9 +526,10 @@ def estimate_latency(
     keep = inside & np.isfinite(h).all(axis=1)
     if keep.sum() < cfg.min_frames:
         seen = f"{t[0]:.3f} to {t[-1]:.3f} s" if t.size else "nothing"
+        hand = cfg.landmark.replace("_", " ")
         raise InputError(
-            f"only {int(keep.sum())} frames with the {cfg.landmark} seen lie within the arm "
-            f"log's time at every lag searched ({cfg.min_lag_s:g} to {cfg.max_lag_s:g} s): at "
+            f"only {int(keep.sum())} frames with the {hand} seen lie within the arm log's "
+            f"time at every lag searched ({cfg.min_lag_s:g} to {cfg.max_lag_s:g} s): at "
             f"least {cfg.min_frames} are needed; the recording spans {seen}, the arm log "
             f"{ta[0]:.3f} to {ta[-1]:.3f} s: are they on one clock?",
             name="frames",
@@ -666,16 +668,9 @@ def _check_fit(
     residual: float,
     explained: float,
 ) -> None:
-    """Refuse a fit that gives no latency (module docstring), the likeliest cause first."""
+    """Refuse a fit that gives no latency (module docstring): too many outliers (the rest
+    is too few to judge), no motion, a hand off the flange, a lag at an end of the range."""
     name = cfg.landmark.replace("_", " ")
-    if motion < cfg.min_motion_m:
-        raise InputError(
-            f"the flange moved {motion * 1e3:.1f} mm RMS over the frames fitted: at least "
-            f"{cfg.min_motion_m * 1e3:g} mm are needed to see a lag (record while the arm "
-            "moves its excitation)",
-            name="motion_m",
-            value=motion,
-        )
     share = outliers / (frames + outliers)
     if share > cfg.max_outlier_fraction or frames < cfg.min_frames:
         raise InputError(
@@ -684,6 +679,14 @@ def _check_fit(
             "whole recording, facing the camera",
             name="outliers",
             value=outliers,
+        )
+    if motion < cfg.min_motion_m:
+        raise InputError(
+            f"the flange moved {motion * 1e3:.1f} mm RMS over the frames fitted: at least "
+            f"{cfg.min_motion_m * 1e3:g} mm are needed to see a lag (record while the arm "
+            "moves its excitation)",
+            name="motion_m",
+            value=motion,
         )
     if residual > cfg.max_residual_m or explained < cfg.min_explained:
         raise InputError(
