@@ -23,7 +23,9 @@ from conftest import PYTHON
 
 from qpavoid.cli.commands import main
 from qpavoid.human.posture import Operator
+from qpavoid.sensing.latency import ArmLog, save_arm_log
 from qpavoid.sensing.per_sensor import SensorRecording, save_sensor_npz
+from qpavoid.sensing.recording import Recording, save_npz
 
 
 def qpavoid_cli(*args: str, cwd) -> subprocess.CompletedProcess:
@@ -109,11 +111,70 @@ BAD_INPUTS = [
     (["bench", "--json", "."], "--json"),
     (["bench", "--json", "afile/x.json"], "--json"),
     (["bench", "--json", "missing/x.json"], "--json"),
+    # a camera's latency measured (issue 41)
+    (["latency", "--arm-log", "arm.npz"], "--camera-recording"),
+    (["latency", "--camera-recording", "rest.npz"], "--arm-log"),
+    (["latency", "--camera-recording", "rest.npz", "--arm-log", "text.npz"], "text.npz"),
+    (["latency", "--camera-recording", "rest.npz", "--arm-log", "missing.csv"], "missing.csv"),
+    (["latency", "--camera-recording", "text.npz", "--arm-log", "arm.npz"], "text.npz"),
+    (["latency", "--camera-recording", "a.npz", "--arm-log", "arm.npz"], "--sensors"),
+    (["latency", "--camera-recording", "rest.npz", "--arm-log", "arm.npz"], "only 0 frames"),
+    (["latency", "--camera-recording", "rest.npz", "--arm-log", "a.npz"], "no array 'q'"),
+    (
+        ["latency", "--camera-recording", "rest.npz", "--arm-log", "arm.npz", "--robot", "ur5"],
+        "another arm",
+    ),
+    (
+        ["latency", "--camera-recording", "rest.npz", "--arm-log", "arm.npz", "--robot", "nosuch"],
+        "unknown robot 'nosuch'",
+    ),
+    (
+        ["latency", "--camera-recording", "rest.npz", "--arm-log", "arm.npz", "--landmark", "nose"],
+        "--landmark",
+    ),
+    (
+        ["latency", "--camera-recording", "rest.npz", "--arm-log", "arm.npz", "--max-lag", "5"],
+        "max_lag_s",
+    ),
+    (
+        ["latency", "--camera-recording", "rest.npz", "--arm-log", "arm.npz", "--max-lag", "x"],
+        "--max-lag",
+    ),
+    (
+        [
+            "latency",
+            "--camera-recording",
+            "rest.npz",
+            "--arm-log",
+            "arm.npz",
+            "--sensors",
+            "calib.toml",
+        ],
+        "base-frame recording",
+    ),
+    (
+        ["latency", "--camera-recording", "a.npz", "--arm-log", "arm.npz", "--sensors", "bad.toml"],
+        "not rigid",
+    ),
+    (
+        [
+            "latency",
+            "--camera-recording",
+            "a.npz",
+            "--arm-log",
+            "arm.npz",
+            "--sensors",
+            "calib.toml",
+            "--sensor",
+            "zz",
+        ],
+        "no frame of sensor 'zz'",
+    ),
 ]
 
 
 @pytest.fixture(scope="module")
-def workdir(tmp_path_factory):
+def workdir(tmp_path_factory, robot):
     d = tmp_path_factory.mktemp("cli")
     (d / "afile").write_text("")
     (d / "dangling").symlink_to(d / "nowhere")
@@ -128,6 +189,9 @@ def workdir(tmp_path_factory):
     for name in ("a", "zz"):
         rec = SensorRecording([name], [0.0], [0], rest[None], np.full((1, 25), 2))
         save_sensor_npz(d / f"{name}.npz", rec)
+    save_npz(d / "rest.npz", Recording([0.0], rest[None], np.full((1, 25), 2)))  # base frame
+    t = np.arange(0.0, 2.0, 0.002)  # an arm log of the iiwa (at rest, 2 s later)
+    save_arm_log(d / "arm.npz", ArmLog(t + 2.0, np.zeros((t.size, robot.nq))), robot)
     return d
 
 

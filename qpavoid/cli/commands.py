@@ -8,6 +8,7 @@
     qpavoid compare [--scenarios NAME ...] [--human FILE ...] [--random N] [--out DIR]
     qpavoid fuse A.npz B.npz --sensors calib.toml --out fused.npz
     qpavoid replay A.npz B.npz --to HOST:PORT [--rate 30]
+    qpavoid latency --camera-recording FILE --arm-log FILE [--robot NAME] [--sensors calib.toml]
     qpavoid sweep --n N --controller analytic|qp [--executor local|ray] --out DIR
     qpavoid bench [--json FILE] [--quick]
     qpavoid robot fit URDF --out DIR | qpavoid robot check NAME|PATH
@@ -41,6 +42,7 @@ from qpavoid.cli.args import (
 )
 from qpavoid.cli.bench import add_bench_command
 from qpavoid.cli.campaign import add_campaign_command
+from qpavoid.cli.latency import add_latency_command
 from qpavoid.cli.robot import add_robot_command
 from qpavoid.cli.sensors import add_sensor_commands
 from qpavoid.cli.view import add_view_command
@@ -206,6 +208,7 @@ def build_parser() -> Parser:
     _add_common(cmp)
     cmp.set_defaults(parser=cmp)
     add_sensor_commands(sub)
+    add_latency_command(sub)
     add_campaign_command(sub)
     add_bench_command(sub)
     add_view_command(sub)

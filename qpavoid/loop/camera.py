@@ -203,6 +203,13 @@ class Camera:
         frame = self.motion.frame_at(max(captured, 0.0))
         return frame if isinstance(frame, (HumanFrame, People)) else HumanFrame.check(*frame)
 
+    def frame(self, k: int) -> tuple[HumanFrame | People, float, float, bool]:
+        """Frame k as the camera makes it: (content, capture time, delivery time, dropped),
+        times on the run clock, s (the same frame whenever asked: its noise, jitter and
+        dropout come from the seed and k). A recorder's view: frame k is available from its
+        delivery time on (:mod:`qpavoid.loop.excitation` stamps it so)."""
+        return self._frame(k)
+
     def _frame(self, k: int) -> tuple[HumanFrame | People, float, float, bool]:
         """Frame k: (content, capture time, delivery time, dropped)."""
         if k in self._cache:
