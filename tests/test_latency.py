@@ -96,11 +96,12 @@ def kinect(robot):
 @pytest.mark.parametrize(
     "fmt, latency, seed",
     [
-        ("kinect_v2", 0.03, 1),
-        ("kinect_v2", 0.15, 2),
+        # two with the default suite, every format with the slow one (its time budget)
+        pytest.param("kinect_v2", 0.03, 1, marks=pytest.mark.slow),
+        pytest.param("kinect_v2", 0.15, 2, marks=pytest.mark.slow),
         ("k4abt", 0.10, 3),
-        ("zed_body_34", 0.12, 4),
-        ("zed_body_38", 0.045, 5),
+        pytest.param("zed_body_34", 0.12, 4, marks=pytest.mark.slow),
+        pytest.param("zed_body_38", 0.045, 5, marks=pytest.mark.slow),
         ("mediapipe_pose", 0.07, 6),
     ],
 )

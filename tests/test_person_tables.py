@@ -273,9 +273,10 @@ def churn_many(robot, start: tuple[PlannedPath, np.ndarray], seeds: range, ticks
 
 
 def test_no_sequence_of_people_entering_and_leaving_breaks_a_tick(robot, start):
-    """200 random sequences of 30 ticks (:func:`churn`): every tick's invariants hold, on
-    some 700 ticks that held a frame under another list of people."""
-    assert churn_many(robot, start, range(200), 30) > 500
+    """100 random sequences of 30 ticks (:func:`churn`): every tick's invariants hold, on
+    some 340 ticks that held a frame under another list of people (the slow suite: 1000
+    sequences of 60)."""
+    assert churn_many(robot, start, range(100), 30) > 250
 
 
 @pytest.mark.slow
