@@ -93,7 +93,7 @@ def test_the_loop_drives_an_arm_and_leaves_it_at_rest(robot, kind):
 def test_a_stalled_arm_ends_the_run(robot):
     ctrl, q0 = start(robot)
     arm = RecordingArm(robot, q0, stall_after_s=0.3)
-    m = simulate(ctrl, make_scenario("free", robot), SimConfig(max_time_s=3.0), arm=arm).metrics
+    m = simulate(ctrl, make_scenario("free", robot), SimConfig(max_time_s=4.0), arm=arm).metrics
     assert m["end_reason"].startswith("arm stalled: the arm's state has not changed for")
     assert m["duration_s"] < 1.5  # ended on the stall, not the time cap
     assert arm.stopped == 1
@@ -102,7 +102,7 @@ def test_a_stalled_arm_ends_the_run(robot):
 def test_an_arm_fault_ends_the_run_in_one_line(robot):
     ctrl, q0 = start(robot)
     arm = RecordingArm(robot, q0, fail_after=50)
-    m = simulate(ctrl, make_scenario("free", robot), SimConfig(max_time_s=3.0), arm=arm).metrics
+    m = simulate(ctrl, make_scenario("free", robot), SimConfig(max_time_s=4.0), arm=arm).metrics
     assert m["end_reason"] == "arm fault: reflex: cartesian_reflex"
     assert len(arm.sent) == 50 and arm.stopped == 1
 
@@ -230,7 +230,7 @@ def test_an_arm_reporting_nan_is_ramped_to_rest_and_named(robot):
             return state
 
     arm = NaNArm(robot, q0)
-    m = simulate(ctrl, make_scenario("test1", robot), SimConfig(max_time_s=3.0), arm=arm).metrics
+    m = simulate(ctrl, make_scenario("test1", robot), SimConfig(max_time_s=4.0), arm=arm).metrics
     assert m["end_reason"].startswith("input error: ")
     assert np.abs(arm.sent[399]).max() > 1e-3  # it was moving
     assert not np.any(arm.sent[-1]) and len(arm.sent) >= 401  # then a ramp to rest
@@ -248,3 +248,133 @@ def test_a_stream_is_checked_as_its_commands_one_by_one(robot):
         whole.stream(commands)
         assert one.counts == whole.counts
         assert one.worst == pytest.approx(whole.worst, abs=1e-12)
+
+
+class FakeTime:
+    """The loop's clock, run by hand: ``sleep`` moves it on, every reading takes 10 µs, and
+    ``stall(s)`` makes the work in hand take ``s`` s more (a loaded machine, on cue)."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def perf_counter(self) -> float:
+        self.now += 1e-5
+        return self.now
+
+    def perf_counter_ns(self) -> int:
+        return int(self.perf_counter() * 1e9)
+
+    def monotonic(self) -> float:
+        return self.perf_counter()
+
+    def sleep(self, seconds: float) -> None:
+        self.now += max(seconds, 0.0)
+
+    def stall(self, seconds: float) -> None:
+        self.now += seconds
+
+
+class QuietWatchdog:
+    """The watchdog of a run on a hand-run clock: the arm's own hold stands for it."""
+
+    fired = False
+
+    def __init__(self, timeout_s, on_timeout) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+    def kick(self) -> None:
+        pass
+
+
+class TimedArm(RecordingArm):
+    """A recording arm on the hand-run clock that also keeps when each command came, and
+    whose reads may take long on cue (``slow_reads``: read number → s)."""
+
+    def __init__(self, robot, q0, clock: FakeTime, slow_reads=None):
+        SimulatedArm.__init__(self, robot, q0, clock=clock.perf_counter)
+        self.sent, self.stopped, self.stall_after_s, self.fail_after = [], 0, None, None
+        self.times: list[float] = []
+        self.fake, self.slow_reads, self.reads = clock, dict(slow_reads or {}), 0
+
+    def read(self) -> ArmState:
+        self.reads += 1
+        self.fake.stall(self.slow_reads.get(self.reads, 0.0))
+        return SimulatedArm.read(self)
+
+    def send(self, dq: np.ndarray) -> None:
+        super().send(dq)
+        self.times.append(self.fake.now)
+
+
+def held_segments_within_limits(robot, arm: TimedArm, hold_s: float) -> int:
+    """Commands beyond the limits in what the arm was sent, each run of commands between
+    two gaps longer than the arm's hold (after which it had braked to rest on its own)
+    checked from rest."""
+    broken, check = 0, None
+    for k, u in enumerate(arm.sent):
+        if check is None or arm.times[k] - arm.times[k - 1] > hold_s:
+            check = CommandCheck(CommandLimits.of(robot, 0.002))
+        broken += bool(check(u))
+    return broken
+
+
+# (step → s of extra compute, read → s of extra reading, the step SIGTERM comes on; from the
+# 1900th step the iiwa moves at more than 2.5 ticks' acceleration: a restart from rest
+# that the check does not know of breaks its limits)
+LATENESS = {
+    "one late tick": ({1900: 0.005}, {}, None),
+    "two late ticks in a row": ({1900: 0.005, 1901: 0.004}, {}, None),
+    "a late tick, then SIGTERM": ({1900: 0.005}, {}, 1900),
+    "a late tick, SIGTERM on the next": ({1900: 0.005}, {}, 1901),
+    "a tick past the arm's hold": ({1900: 0.105}, {}, None),
+    "a tick past the hold, then SIGTERM": ({1900: 0.105}, {}, 1901),
+    "a slow read past the hold": ({}, {1900: 0.12}, None),
+    "late, then a slow read: 0.1 s between reads, not sends": ({1900: 0.06}, {1902: 0.045}, None),
+}
+
+
+@pytest.mark.parametrize("case", list(LATENESS))
+def test_every_command_sent_is_within_limits_however_late_the_ticks(robot, monkeypatch, case):
+    """On a hand-run clock (no dependence on the machine's speed): ticks late by a few ms,
+    two in a row, a late tick then SIGTERM, a tick or a read past the arm's 0.1 s hold of a
+    command, a late tick at the end of the run: every command the loop sends keeps the
+    arm's limits from the one before (or from rest, where the arm held none for 0.1 s and
+    stopped on its own), and the run ends with the arm ramped to rest."""
+    from qpavoid.loop import simulation
+
+    compute, reads, term_at = LATENESS[case]
+    clock = FakeTime()
+    monkeypatch.setattr(simulation, "time", clock)
+    monkeypatch.setattr(simulation, "Watchdog", QuietWatchdog)
+    ctrl, q0 = start(robot)
+    step, calls = ctrl.step, []
+
+    def loaded_step(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == term_at:
+            os.kill(os.getpid(), signal.SIGTERM)
+        out = step(*args, **kwargs)
+        clock.stall(compute.get(len(calls), 0.0))
+        return out
+
+    ctrl.step = loaded_step
+    arm = TimedArm(robot, q0, clock, reads)
+    m = simulate(ctrl, make_scenario("test1", robot), SimConfig(max_time_s=4.0), arm=arm).metrics
+    a_dt = arm.limits.acceleration_radps2 * 0.002
+    moving = np.max(np.abs(arm.sent[1890]) / a_dt)
+    assert moving > 2.5, moving  # fast enough that a jump from rest breaks the limits
+    assert m["command_limit_violations"] == {"velocity": 0, "acceleration": 0, "jerk": 0}
+    assert held_segments_within_limits(robot, arm, 0.1) == 0
+    assert not np.any(arm.sent[-1]) and arm.stopped == 1
+    assert m["end_reason"] == ("interrupted" if term_at else "time cap")
+    if term_at:
+        assert len(calls) == term_at
+    past_hold = any(s > 0.1 for s in (*compute.values(), *reads.values()))
+    assert m["loop"]["loop_stalls"] == past_hold  # (then the arm stopped by itself)
+    assert np.diff(arm.times[:-1]).min() > 0.0019  # never two within a period (then stop)

@@ -81,26 +81,30 @@ def test_fr3_in_franky_sim_keeps_clear_of_a_strike_and_reaches_its_goal(controll
 
 
 def test_sigterm_mid_motion_ramps_the_fr3_to_rest_and_writes_the_run(tmp_path):
-    """SIGTERM 3 s into the motion (on a tick, not a timer): the controller's ramp brings
+    """SIGTERM 3 s into the path (on the tick whose path clock τ reaches 3 s of the path's
+    15, not a timer nor a tick count: a loaded machine ticks slower while τ follows the
+    wall clock, so the 1500th tick came after the goal there): the controller's ramp brings
     the FR3 to rest within its limits, and the run ends as "interrupted"."""
     address = host(2)
     spec = RunSpec(scenario="free", robot="fr3", max_time_s=40.0, arm=f"franka:{address}")
     robot = spec_robot(spec)
     controller = build_controller(spec, robot)
-    step, ticks = controller.step, []
+    step, sent = controller.step, []
+    assert controller.path.duration_s > 6.0  # τ = 3 s is mid-motion
 
-    def step_then_term(*args, **kwargs):
-        ticks.append(1)
-        if len(ticks) == 1500:
+    def step_then_term(q, joints, state=None, t=0.0, *args, **kwargs):
+        if t >= 3.0 and not sent:  # t: the path clock τ
+            sent.append(t)
             os.kill(os.getpid(), signal.SIGTERM)
-        return step(*args, **kwargs)
+        return step(q, joints, state, t, *args, **kwargs)
 
     controller.step = step_then_term
     with FrankySim(address):
         run = simulate_one(spec, robot=robot, controller=controller)
         log, m = run.sim.log, run.metrics
         after = joint_angles_for(robot, address, 0.5)  # the simulator's arm, after the run
-    assert m["end_reason"] == "interrupted"
+    assert m["end_reason"] == "interrupted" and sent
+    assert log["tau"][-1] < controller.path.duration_s
     moving = np.abs(log["dq_command"]).max(axis=1)
     assert moving[-1] > 0.01, (moving[-10:], log["stop_reason"][-10:])  # moving at the signal
     assert m["command_limit_violations"] == {"velocity": 0, "acceleration": 0, "jerk": 0}

@@ -141,8 +141,9 @@ class CommandRamp:
             self._before = None
 
     def reset(self) -> None:
-        """Forget the commands: the arm is at rest."""
-        self.u1[:], self.u2[:], self.at_stop, self._sent = 0.0, 0.0, None, ()
+        """Forget the commands: the arm is at rest (and an :meth:`undo` has nothing to undo)."""
+        self.u1, self.u2 = np.zeros_like(self.u1), np.zeros_like(self.u2)
+        self.at_stop, self._sent, self._before = None, (), None
 
     def box(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The reachable box ``(lo, hi)`` of the next command (nv,), rad/s, at joint angles

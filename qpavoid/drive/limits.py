@@ -99,6 +99,12 @@ class CommandCheck:
         self.last = self._check(np.asarray(dq, dtype=float)[None, :])
         return self.last
 
+    def restart(self) -> None:
+        """The arm came to rest on its own (it held the last command past its hold, or was
+        stopped): the stream starts again from rest (``u_{k-1} = u_{k-2} = 0``); the counts
+        are kept."""
+        self._u1, self._u2 = np.zeros_like(self._u1), np.zeros_like(self._u2)
+
     def stream(self, commands: np.ndarray) -> None:
         """Check a whole stream of commands (T, nv) at once, as :meth:`__call__` one by one
         (an offline run's, after it: the same counts and ratios, vectorised)."""

@@ -259,10 +259,11 @@ def simulate(
     measured = np.zeros(robot.nv)  # the arm's reported velocity
     stall = StallCheck(cfg.stall_timeout_s)
     dog = Watchdog(cfg.watchdog_s, arm.stop) if arm is not None else None
+    held = _Held(cfg.watchdog_s, controller, checked)  # the arm's hold of the last command
     wall0 = time.perf_counter()
     watching = False  # the watchdog starts with the first command (not the warm-up tick)
     try:
-        began, last_began, tick_start = -math.inf, math.inf, -math.inf  # (no tick yet)
+        began, tick_start, not_before = -math.inf, -math.inf, -math.inf  # (no tick yet)
         for k in range(n_max):
             t = k * dt
             if realtime:
@@ -270,7 +271,8 @@ def simulate(
                     break
                 due = wall0 + t
                 if arm is not None:  # never two commands within a period: a late loop
-                    due = max(due, tick_start + dt)  # skips ticks rather than bursting them
+                    due = max(due, tick_start + dt, not_before)  # skips ticks rather
+                    # than bursting them (a late tick's command: the next a period after it)
                     if due - wall0 > cfg.max_time_s:
                         break
                 wait = due - time.perf_counter()
@@ -286,10 +288,8 @@ def simulate(
                 try:
                     state = stall(arm.read(), began)
                     began = time.perf_counter()  # the command's deadline runs from its state
-                    if began - last_began > cfg.watchdog_s:  # the loop itself stalled: the
-                        controller.at_rest()  # arm stopped on its own; start from rest
-                        timing.stalled(began - last_began)
-                    last_began = began
+                    if (gap := held.ran_out(began)) is not None:  # the loop itself stalled:
+                        timing.stalled(gap)  # the arm stopped on its own; start from rest
                 except ArmError as exc:
                     ended_by = f"arm {exc.reason or 'error'}: {exc}"
                     break
@@ -315,8 +315,14 @@ def simulate(
                 ended_by = f"input error: {exc}"
                 break
             tick_us = (time.perf_counter_ns() - t0) / 1e3
-            if arm is not None and (late := timing.late(began, time.perf_counter())) is not None:
-                cmd = controller.brake(f"missed deadline ({late * 1e3:.1f} ms late)", instead=True)
+            late = None
+            if arm is not None and (late := timing.late(began, now := time.perf_counter())):
+                why = f"missed deadline ({late * 1e3:.1f} ms late)"
+                if (gap := held.ran_out(now)) is not None:  # so late that the arm stopped
+                    timing.stalled(gap)  # on its own meanwhile: its ramp is over, at rest
+                    cmd = controller.brake(why)
+                else:  # the arm still follows the last command: this is a step from it
+                    cmd = controller.brake(why, instead=True)
             if arm is not None and checked(cmd.dq):  # never sent (the arm would fault); logged
                 ended_by = f"command beyond the arm's limits: {checked.last}"
             elif arm is not None:
@@ -325,7 +331,10 @@ def simulate(
                 except ArmError as exc:
                     ended_by = f"arm {exc.reason or 'error'}: {exc}"
                     break
-                timing.sent(time.perf_counter() - wall0, captured_s)
+                held.sent(sent_at := time.perf_counter())
+                timing.sent(sent_at - wall0, captured_s)
+                if sent_at - tick_start > 0.5 * dt:  # late in its period (a slow read or
+                    not_before = sent_at + dt  # step): the next is not due at once
                 assert dog is not None
                 if not watching:
                     dog.__enter__()
@@ -388,7 +397,7 @@ def simulate(
 
         if arm is not None and not ended_by:  # however it ended: a ramp to rest, on time
             assert dog is not None
-            ended_by = _ramp_down(controller, arm, checked, dt, dog.kick)
+            ended_by = _ramp_down(controller, arm, checked, dt, dog.kick, held)
     finally:
         interrupt.restore()
         if dog is not None and watching:
@@ -451,13 +460,55 @@ def simulate(
     )
 
 
+class _Held:
+    """When the last command went to the arm, and whether the arm still follows it.
+
+    An arm holds a command for ``hold_s`` (franky's hold, the watchdog's timeout,
+    :class:`~qpavoid.drive.simulated.SimulatedArm`'s ``hold_s``), then brakes to rest on its
+    own. A command sent after that is the first of a new stream, from rest: the
+    controller's ramp and the command check start again from rest, together. Judged from
+    the time of the last *send*, as the arm judges it, not from when a tick began: a late
+    tick sends long after it began, and the arm still follows that command after it.
+    """
+
+    def __init__(self, hold_s: float, controller: Controller, checked: CommandCheck):
+        self.hold_s, self.controller, self.checked = hold_s, controller, checked
+        self.at: float | None = None  # when the command the arm holds was sent, if one
+        self.last = -math.inf  # when the last command was sent (the next: a period later)
+
+    def sent(self, now: float) -> None:
+        """A command went to the arm at ``now`` (wall clock, s)."""
+        self.at = self.last = now
+
+    def ran_out(self, now: float) -> float | None:
+        """If the arm's hold of the last command ran out by ``now``: the controller and
+        the check then start from rest; the time since that command, s (else None)."""
+        if self.at is None or now - self.at <= self.hold_s:
+            return None
+        gap, self.at = now - self.at, None
+        self.controller.at_rest()
+        self.checked.restart()
+        return gap
+
+
 def _ramp_down(
-    controller: Controller, arm: Arm, checked: CommandCheck, dt: float, kick: Callable[[], None]
+    controller: Controller,
+    arm: Arm,
+    checked: CommandCheck,
+    dt: float,
+    kick: Callable[[], None],
+    held: _Held,
 ) -> str:
-    """The controller's braking ramp sent to ``arm`` once a period until it commands rest
-    (at most 10 s); "at rest", or why it could not finish."""
-    start = time.perf_counter()
-    for k in range(1, int(10.0 / dt) + 1):
+    """The controller's braking ramp sent to ``arm`` once a period (a period after the last
+    command, the loop's included) until it commands rest (at most 10 s); "at rest", or why
+    it could not finish. Where the arm's hold of the last command ran out meanwhile, it
+    stopped on its own: the ramp is over."""
+    start = max(time.perf_counter(), held.last + dt)
+    for k in range(int(10.0 / dt)):
+        wait = start + k * dt - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+        held.ran_out(time.perf_counter())
         cmd = controller.brake("end of run")
         if checked(cmd.dq):
             return f"command beyond the arm's limits: {checked.last}"
@@ -465,12 +516,10 @@ def _ramp_down(
             arm.send(cmd.dq)
         except ArmError as exc:
             return f"arm {exc.reason or 'error'}: {exc}"
+        held.sent(time.perf_counter())
         kick()  # (the watchdog, if it runs)
         if not np.any(cmd.dq):
             return "at rest"
-        wait = start + k * dt - time.perf_counter()
-        if wait > 0:
-            time.sleep(wait)
     return "at rest"
 
 
