@@ -415,6 +415,31 @@ def test_a_phantom_near_the_robot_is_flagged_still_stops_and_can_be_cleared():
     assert all(p.id != flagged[0].id for p in fuser.fuse(6.3).people)
 
 
+def test_a_sensor_silent_where_the_other_sees_someone_raises_the_alert():
+    """Issue 40's third network adversary silenced one camera whole: no frame is lost when
+    a camera sends nothing (it may see nobody), so nothing was said. Silence where the
+    other camera sees someone in the silent one's view is said; silence alone is not."""
+    fuser = Fuser(cell(view=True))
+    for k in range(60):  # the operator seen by both sensors, 2 s
+        for s in "ab":
+            fuser.add(body(s, k / 30, 0))
+        fuser.fuse(k / 30)
+        assert fuser.silent_sensors(k / 30) == ()
+    quiet = []
+    for k in range(60, 90):  # then "a" sends nothing for 1 s; "b" still sees the operator
+        fuser.add(body("b", k / 30, 0))
+        fuser.fuse(k / 30)
+        quiet.append(fuser.silent_sensors(k / 30))
+    assert all(q == () for q in quiet[:14])  # within 0.5 s: a dropout's business
+    ((sensor, silent_s, person, other),) = quiet[-1]
+    assert (sensor, person, other) == ("a", 0, "b") and silent_s == pytest.approx(89 / 30 - 59 / 30)
+    empty = Fuser(cell(view=True))  # "a" never sends; "b" sees someone out of its view
+    empty.add(body("b", 0.0, 0, shift=(0.0, 10.0, 0.0)))  # 10 m on: beyond its 4.5 m
+    for k in range(60):
+        empty.fuse(k / 30)
+    assert empty.silent_sensors(59 / 30) == ()
+
+
 def test_a_body_one_sensor_sees_where_the_other_looks_is_flagged():
     fuser = Fuser(cell(view=True))
     for k in range(60):

@@ -50,11 +50,13 @@ class Admission:
         self.first_s: float | None = None  # the first frame's capture time
         self._tokens, self._tokens_s = float(config.new_people_burst), -math.inf
         self._heard: dict[str, float] = {}  # each sensor's newest capture time
+        self._sent: dict[str, float] = {}  # the same, a loss aside (what it last sent)
 
     def heard(self, sensor: str, t: float) -> None:
         """``sensor`` sent a frame captured at ``t`` (controller clock, s); the first frame
         starts the grace (the fusion may run long before any sensor sends)."""
         self._heard[sensor] = max(t, self._heard.get(sensor, -math.inf))
+        self._sent[sensor] = max(t, self._sent.get(sensor, -math.inf))
         if self.first_s is None:
             self.first_s = t
 
@@ -103,6 +105,29 @@ class Admission:
         )
         self.counters["forgotten_for_room"] += min(excess, len(unseen))
         return unseen[:excess]
+
+    def silent(
+        self, seen: dict[int, tuple[PersonTrack, set[str]]], t: float
+    ) -> tuple[tuple[str, float, int, str], ...]:
+        """The sensors that sent nothing for more than ``silent_after_s`` at ``t`` while a
+        person seen now (``seen``: track id → the track and the sensors that saw it) stands
+        in their view: ``(sensor, silent s, person id, a sensor that sees them)`` each,
+        after the start-up grace. A camera that sees nobody sends nothing, so silence alone
+        is no fault; silence where another camera sees someone is (a camera down, or its
+        datagrams dropped on the way: issue 40's third network adversary)."""
+        cfg = self.cfg
+        if self.first_s is None or t - self.first_s <= cfg.phantom_grace_s:
+            return ()
+        out = []
+        for name in self.calibration.names:
+            quiet = t - self._sent.get(name, -math.inf)
+            if quiet <= cfg.silent_after_s:
+                continue
+            for tid, (track, sensors) in seen.items():
+                if name not in sensors and self.calibration[name].sees(track.centre()):
+                    out.append((name, quiet, tid, sorted(sensors)[0]))
+                    break
+        return tuple(out)
 
     def coverage_flag(self, track: PersonTrack, t: float) -> str:
         """Once ``track`` has settled, its flag if a single sensor saw them while another,

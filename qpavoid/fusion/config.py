@@ -81,6 +81,12 @@ class FusionConfig:
         sensor, fresh, has them in its view (``field_of_view_deg``, ``range_m`` in the
         calibration). A flag changes nothing in what the robot does (an unexplained body
         near it still stops it): it tells the operator why, who may clear it.
+    silent_after_s
+        A sensor that sent nothing for this long while a person another sensor sees
+        stands in its view raises the input alert
+        (:meth:`~qpavoid.fusion.fuser.Fuser.silent_sensors`), s (0.5: fifteen Kinect
+        frames, past any dropout the frames' own loss rules see; a silenced camera left
+        the robot on one camera with nothing said: issue 40's third network adversary).
     velocity_alpha, velocity_beta
         Gains of the α-β filter on each person's fused joints (measured: docs/sensors.md).
     smooth
@@ -108,6 +114,7 @@ class FusionConfig:
     max_new_people_per_s: float = 2.0
     new_people_burst: int = 6
     phantom_grace_s: float = 1.0
+    silent_after_s: float = 0.5
     velocity_alpha: float = 0.3
     velocity_beta: float = 0.05
     smooth: bool = True

@@ -127,6 +127,7 @@ class Fuser:
             np.array(a) for a in (skeleton.parent, skeleton.mirror, skeleton.sided)
         )
         self.tracks: list[PersonTrack] = []
+        self._seen_now: dict[int, tuple[PersonTrack, set[str]]] = {}  # the last fusion's
         self.counters: Counter[str] = Counter()
         # each body's newest frames (a few, so that a fusion time just before the newest
         # frame still finds the one before it), oldest first
@@ -270,6 +271,11 @@ class Fuser:
             else:
                 unseen = np.zeros(self.skeleton.n_joints)
                 people.append(FusedPerson(track.id, self._nobody, unseen, (), (), (), track.flag))
+        self._seen_now = {
+            tr.id: (tr, {c.sensor for c in per_track[tr.id]})
+            for tr in self.tracks
+            if tr.id in per_track
+        }
         ages = [c.age for cs in per_track.values() for c in cs]
         return FusedFrame(float(t), tuple(people), float(t - min(ages)) if ages else -np.inf)
 
@@ -289,15 +295,23 @@ class Fuser:
             )
         return mapped
 
+    def silent_sensors(self, t: float) -> tuple[tuple[str, float, int, str], ...]:
+        """After :meth:`fuse` at ``t``: the sensors that sent nothing for more than
+        ``silent_after_s`` while someone the last fusion saw stands in their view,
+        ``(sensor, silent s, person id, a sensor that sees them)`` each (the input alert's;
+        :meth:`~qpavoid.fusion.admission.Admission.silent`)."""
+        return self._admission.silent(self._seen_now, t)
+
     def kept_unseen(self, t: float) -> tuple[tuple[int, float, float], ...]:
         """The people kept while no sensor sees them because they were last seen near the
-        robot (within ``forget_beyond_m``: they may be hidden next to it), unseen for more
-        than ``max_age_s`` at run time ``t``: ``(id, unseen s, last seen from the base m)``
-        each. Their growing uncertainty holds the robot until a sensor sees them again."""
+        robot (within ``forget_beyond_m``: they may be hidden next to it), unseen for longer
+        than ``person_timeout_s`` (when anybody else would have been dropped) at run time
+        ``t``: ``(id, unseen s, last seen from the base m)`` each. Their growing
+        uncertainty holds the robot until a sensor sees them again."""
         return tuple(
             (tr.id, t - tr.seen_s, float(np.linalg.norm(tr.centre())))
             for tr in self.tracks
-            if t - tr.seen_s > self.cfg.max_age_s and not self._far(tr)
+            if t - tr.seen_s > self.cfg.person_timeout_s and not self._far(tr)
         )
 
     def clear_flagged(self) -> tuple[int, ...]:

@@ -244,8 +244,10 @@ class LiveSource:
     ----------
     alert
         Why the input is suspect, after the last :meth:`frame_at` ("" if it is not): a
-        sensor that keeps losing frames, someone in view flagged, someone kept unseen near
-        the robot (:meth:`~qpavoid.fusion.fuser.Fuser.kept_unseen`); logged every tick
+        sensor that keeps losing frames, a sensor silent where another sees someone
+        (:meth:`~qpavoid.fusion.fuser.Fuser.silent_sensors`), someone in view flagged,
+        someone kept unseen near the robot
+        (:meth:`~qpavoid.fusion.fuser.Fuser.kept_unseen`); logged every tick
         (``input_alert``) and shown by the live view.
     """
 
@@ -305,7 +307,12 @@ class LiveSource:
             "it waits until a sensor sees them again"
             for pid, gone, where in self.fuser.kept_unseen(t)
         ]
-        self.alert = "; ".join(([lost] if lost else []) + flags + unseen)
+        silent = [
+            f"{sensor} sent nothing for {quiet:.1f} s while person {pid}, in its view, is "
+            f"seen by {other} (the camera down, or its datagrams dropped on the way)"
+            for sensor, quiet, pid, other in self.fuser.silent_sensors(t)
+        ]
+        self.alert = "; ".join(([lost] if lost else []) + silent + flags + unseen)
         if fused.captured_s > self._captured:
             self._captured = fused.captured_s
         people = People(tuple(p.id for p in fused.people), tuple(p.frame for p in fused.people))
