@@ -28,7 +28,7 @@ the seed (Euclidean in joint space, rad). A start that stalls (its error not dow
 early.
 
 Measured (``python benchmarks/ik.py``, 100 forward-kinematics targets of random
-configurations per arm, from the description's seed): docs/robot.md §IK.
+configurations per arm, from the description's seed): docs/robot.md, "Inverse kinematics".
 """
 
 from __future__ import annotations
