@@ -365,6 +365,7 @@ def test_an_excitation_beyond_a_joint_limit_is_refused(robot):
         Excitation(joints=("nosuch", "A2")).columns(robot)
 
 
+@pytest.mark.slow  # 1.5 s of real time, on an arm that integrates on the wall clock
 def test_driving_the_excitation_logs_the_arm_on_the_wall_clock(robot):
     """On the simulated arm in real time (1.5 s): every state stamped, the log the
     excitation's path; too fast an excitation is refused before the arm moves."""
@@ -373,7 +374,7 @@ def test_driving_the_excitation_logs_the_arm_on_the_wall_clock(robot):
     arm = SimulatedArm.ideal(robot, q0, 0.005)
     log = drive_excitation(arm, robot, exc, period_s=0.005)
     assert isinstance(log, ArmLog) and log.t.size == 302
-    assert 1.4 < log.t[-1] - log.t[0] < 3.0
+    assert log.t[-1] - log.t[0] > 1.4 and np.all(np.diff(log.t) > 0)  # never faster
     planned, _ = exc.trajectory(robot, q0, np.arange(302) * 0.005)
     assert np.abs(log.q - planned).max() < 0.01
     fast = Excitation(frequencies_hz=((20.0, 30.0), (20.0, 30.0)), duration_s=1.0, ramp_s=0.5)
