@@ -59,7 +59,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from qpavoid.arm.model import Robot
-from qpavoid.core.checks import as_array
+from qpavoid.core.checks import as_array, check_range, finite_number
 from qpavoid.core.errors import InputError, RecordingError
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.landmarks import landmark_map
@@ -175,29 +175,18 @@ class LatencyConfig:
 
     def __post_init__(self) -> None:
         landmark_index(self.landmark)
-        for name, low, high in (
-            ("min_lag_s", -1.0, 1.0),
-            ("max_lag_s", -1.0, 1.0),
-            ("grid_step_s", 1e-4, 0.05),
-            ("min_motion_m", 0.0, 1.0),
-            ("max_residual_m", 0.0, 1.0),
-            ("min_explained", 0.0, 1.0),
-            ("outlier_factor", 1.0, 100.0),
-            ("outlier_floor_m", 0.0, 1.0),
-            ("max_outlier_fraction", 0.0, 1.0),
+        for name, low, high, unit in (
+            ("min_lag_s", -1.0, 1.0, "s"),
+            ("max_lag_s", -1.0, 1.0, "s"),
+            ("grid_step_s", 1e-4, 0.05, "s"),
+            ("min_motion_m", 0.0, 1.0, "m"),
+            ("max_residual_m", 0.0, 1.0, "m"),
+            ("min_explained", 0.0, 1.0, "(a fraction)"),
+            ("outlier_factor", 1.0, 100.0, "(times the median)"),
+            ("outlier_floor_m", 0.0, 1.0, "m"),
+            ("max_outlier_fraction", 0.0, 1.0, "(a fraction)"),
         ):
-            value = getattr(self, name)
-            if not (
-                isinstance(value, (int, float))
-                and not isinstance(value, bool)
-                and low <= value <= high
-            ):
-                flag = " (--max-lag)" if name == "max_lag_s" else ""
-                raise InputError(
-                    f"{name}{flag} must be a number from {low:g} to {high:g}, got {value!r}",
-                    name=name,
-                    value=value,
-                )
+            check_range(name, finite_number(getattr(self, name), name), low, high, unit)
         if self.max_lag_s - self.min_lag_s < 4 * self.grid_step_s:
             raise InputError(
                 f"the lags searched, {self.min_lag_s:g} to {self.max_lag_s:g} s (--max-lag), "
