@@ -339,7 +339,16 @@ LATENESS = {
 }
 
 
-@pytest.mark.parametrize("case", list(LATENESS))
+#: The cases the default suite runs (its time budget: 1.4 s each); the slow one runs all.
+QUICK = (
+    "a tick past the hold, then SIGTERM",
+    "late, then a slow read: 0.1 s between reads, not sends",
+)
+
+
+@pytest.mark.parametrize(
+    "case", [c if c in QUICK else pytest.param(c, marks=pytest.mark.slow) for c in LATENESS]
+)
 def test_every_command_sent_is_within_limits_however_late_the_ticks(robot, monkeypatch, case):
     """On a hand-run clock (no dependence on the machine's speed): ticks late by a few ms,
     two in a row, a late tick then SIGTERM, a tick or a read past the arm's 0.1 s hold of a

@@ -51,7 +51,12 @@ def converged_count(robot: qpavoid.Robot, targets: list[np.ndarray]) -> int:
     return count
 
 
-@pytest.mark.parametrize("name", ARMS)
+#: The arms the default suite's IK tests run on (its time budget); the slow suite runs all.
+QUICK = ("ur5", "panda")
+SPLIT = [a if a in QUICK else pytest.param(a, marks=pytest.mark.slow) for a in ARMS]
+
+
+@pytest.mark.parametrize("name", SPLIT)
 def test_random_reachable_targets_are_reached_from_the_seed(name):
     robot = load(name)
     targets = random_targets(robot, 10, seed=2040)
@@ -99,7 +104,7 @@ def test_the_ur5s_start_from_its_first_seed_and_from_todays():
     assert_reaches(robot, q, start)
 
 
-@pytest.mark.parametrize("name", ARMS)
+@pytest.mark.parametrize("name", SPLIT)
 def test_where_the_seed_fails_the_nearest_converged_restart_is_returned(name):
     """Brute force over the same starts: the answer reaches the target and no converged
     start's solution is nearer the seed."""

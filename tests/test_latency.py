@@ -119,6 +119,7 @@ def test_the_estimate_is_within_its_noise_of_the_true_latency(robot, fmt, latenc
     assert estimate.suggested_latency_s >= estimate.latency_s + 2 * estimate.uncertainty_s
 
 
+@pytest.mark.slow  # (the default suite's time budget)
 def test_a_varying_delay_gives_its_mean(robot):
     """Frames delayed by latency + U(0, jitter): the estimate is latency + jitter / 2."""
     camera = CameraConfig.of("kinect_v2", latency_s=0.06, jitter_s=0.03, seed=8)
@@ -128,7 +129,14 @@ def test_a_varying_delay_gives_its_mean(robot):
     assert abs(estimate.latency_s - 0.075) < 0.002, estimate
 
 
-@pytest.mark.parametrize("shift", [0.0137, -0.041, 0.25])
+@pytest.mark.parametrize(
+    "shift",
+    [
+        0.0137,
+        pytest.param(-0.041, marks=pytest.mark.slow),
+        pytest.param(0.25, marks=pytest.mark.slow),
+    ],
+)
 def test_shifting_the_arm_log_shifts_the_estimate_by_exactly_that(kinect, shift):
     """Arm samples stamped ``shift`` later: the camera lags them by ``shift`` less (and
     stamps of the camera ``shift`` later: it lags by ``shift`` more). Only frames inside the
