@@ -30,6 +30,7 @@ from qpavoid.loop.camera import Camera, CameraConfig
 from qpavoid.perception.tracker import PerceptionConfig
 from qpavoid.scenarios.generated import make_scenario
 from qpavoid.sensing.calibration import Calibration, SensorCalibration
+from qpavoid.sensing.recording_files import csv_header
 
 #: The SDKs' joint orders, copied from their documentation (an independent reference):
 #: k4abttypes.h's k4abt_joint_id_t, pyzed's BODY_34_PARTS, MediaPipe's PoseLandmark.
@@ -535,9 +536,19 @@ def test_a_runs_controller_knows_its_cells_cameras(tmp_path):
     k4abt = landmark_map(skeleton_format("k4abt")).uncertainty_m
     np.testing.assert_array_equal(config.perception.landmark_uncertainty_m, k4abt)
     assert config.ssm.sensing_uncertainty_m == skeleton_format("k4abt").sensor.tracked_uncertainty_m
-    alone = build_controller(RunSpec("test1", camera="mediapipe_pose"), robot).config
+    # one camera of another format: its own body model on its own joints, nothing widened
+    alone = build_controller(RunSpec("test1", camera="mediapipe_pose"), robot)
+    assert alone.human.skeleton.name == "mediapipe_pose"
+    assert alone.config.perception.landmark_uncertainty_m == ()
+    assert alone.config.ssm.sensing_uncertainty_m == 0.05  # mediapipe_pose.toml's Z_d
+    # ... but a recording of derived landmarks keeps the landmarks' path, widened
     mediapipe = landmark_map(skeleton_format("mediapipe_pose")).uncertainty_m
-    np.testing.assert_array_equal(alone.perception.landmark_uncertainty_m, mediapipe)
+    recorded = tmp_path / "mp.csv"  # its format is read from the header alone
+    recorded.write_text(",".join(csv_header(skeleton_format("mediapipe_pose"))) + "\n")
+    replay = build_controller(
+        RunSpec(human_file=str(recorded), camera="mediapipe_pose"), robot
+    ).config
+    np.testing.assert_array_equal(replay.perception.landmark_uncertainty_m, mediapipe)
     kinect = build_controller(RunSpec("test1"), robot).config
     assert kinect.perception == PerceptionConfig()  # a Kinect v2 cell: as before
     assert kinect.ssm.sensing_uncertainty_m == KINECT_V2.sensor.tracked_uncertainty_m

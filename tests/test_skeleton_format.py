@@ -253,11 +253,15 @@ def test_every_format_file_ships_in_the_wheel():
     files = sorted(FORMATS_DIR.iterdir())
     assert [f.name for f in files if f.suffix == ".toml"] == [
         "k4abt.toml",
+        "k4abt_body.toml",
         "kinect_v2.toml",
         "kinect_v2_body.toml",
         "mediapipe_pose.toml",
+        "mediapipe_pose_body.toml",
         "zed_body_34.toml",
+        "zed_body_34_body.toml",
         "zed_body_38.toml",
+        "zed_body_38_body.toml",
     ]
     for f in files:
         assert any(fnmatch.fnmatch(f"formats/{f.name}", g) for g in globs), f.name

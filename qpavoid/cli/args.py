@@ -84,13 +84,15 @@ def add_robot_option(parser: argparse.ArgumentParser) -> None:
 
 
 def add_camera_option(parser: argparse.ArgumentParser) -> None:
-    """``--camera FORMAT``, the simulated camera of every command that simulates one."""
+    """``--camera FORMAT``, the simulated camera of every command that simulates one: a
+    shipped format's name or a format file of the user's (checked by the run's spec)."""
     parser.add_argument(
         "--camera",
-        choices=FORMAT_NAMES,
+        metavar="FORMAT",
         default=FORMAT_NAMES[0],
         help="the simulated camera's skeleton format, with its latency, noise, joints and "
-        "failure modes (docs/sensors.md)",
+        f"failure modes: one of {', '.join(FORMAT_NAMES)}, or a format file FILE.toml with "
+        "its body model FILE's <name>_body.toml beside it (docs/sensors.md, docs/formats.md)",
     )
 
 

@@ -18,6 +18,7 @@ from qpavoid.control.tick import SAFETY_MODES
 from qpavoid.core.checks import check_choice, check_range
 from qpavoid.core.errors import InputError
 from qpavoid.drive.connect import parse_arm
+from qpavoid.human.body import body_model
 from qpavoid.human.landmarks import FORMAT_NAMES, skeleton_format
 from qpavoid.loop.live_input import parse_address
 from qpavoid.scenarios import motions
@@ -177,7 +178,11 @@ class RunSpec:
         check_choice("distance method", self.distance, DISTANCES)
         check_choice("safety mode (--safety)", self.safety, SAFETY_MODES)
         check_choice("bench (--bench)", self.bench, BENCHES)
-        check_choice("camera (--camera)", self.camera, FORMAT_NAMES)
+        if not str(self.camera).endswith(".toml"):
+            check_choice("camera (--camera)", self.camera, FORMAT_NAMES)
+        fmt = skeleton_format(self.camera)  # a format file: read and checked (one line)
+        if fmt.body:
+            body_model(fmt)  # its body model on its own joints, checked
         if self.latency_s is not None:
             check_range("the sensor latency (--latency)", self.latency_s, 0.0, 1.0, "s")
         check_choice("limit mode", self.limit_mode, LIMIT_MODES)

@@ -37,6 +37,7 @@ from qpavoid.experiments.run_spec import (
     STALE_AFTER_LATENCY_S,
     RunSpec,
 )
+from qpavoid.human.body import BodyModel, body_model
 from qpavoid.human.landmarks import landmark_map, skeleton_format
 from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.laws.pfl import PFLConfig
@@ -80,8 +81,12 @@ ARM_COMPUTE_BUDGET_S = 0.01
 
 
 def build_controller(spec: RunSpec, robot: Robot) -> Controller:
-    """The controller ``spec`` names, on ``robot``, at the spec's control rate."""
+    """The controller ``spec`` names, on ``robot``, at the spec's control rate, with the
+    body model of the cell's camera on its own joints where it has one format
+    (:func:`cell_body`), else the paper's on the body's landmarks."""
     cameras = cell_formats(spec)
+    human = cell_body(spec)
+    uncertainty = () if human is not None else cell_uncertainty_m(cameras)
     config = ControllerConfig(
         distance=spec.distance,
         control_period_s=1.0 / spec.rate_hz,
@@ -90,21 +95,35 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
         safety=spec.safety,
         perception=PerceptionConfig(max_identical_frames=None)
         if spec.bench == "ideal"
-        else PerceptionConfig(landmark_uncertainty_m=cell_uncertainty_m(cameras)),
+        else PerceptionConfig(landmark_uncertainty_m=uncertainty),
         # Z_d: the position error of a tracked joint of the cell's cameras, the largest
         ssm=SSMConfig(sensing_uncertainty_m=max(c.sensor.tracked_uncertainty_m for c in cameras)),
         pfl=PFLConfig(payload_kg=spec.payload_kg),
     )
     if spec.controller == "analytic":
         return AnalyticController(
-            robot, config=config, analytic=AnalyticConfig(limit_mode=spec.limit_mode)
+            robot, config=config, human=human, analytic=AnalyticConfig(limit_mode=spec.limit_mode)
         )
     qp = QPConfig(
         backend="qpsolvers" if spec.solver else "persistent", solver=spec.solver or "osqp"
     )
     if spec.redundant:  # the redundancy mode's weights (docs/qp.md), same solver
         qp = replace(REDUNDANT, backend=qp.backend, solver=qp.solver)
-    return QPController(robot, config=config, qp=qp)
+    return QPController(robot, config=config, human=human, qp=qp)
+
+
+def cell_body(spec: RunSpec) -> BodyModel | None:
+    """The body model on the run's camera's own joints (:func:`~qpavoid.human.body.body_model`)
+    where the cell sees the person through that one camera of another format than the
+    Kinect v2's (the simulated camera of ``--camera``, not ``--sensors``' fusion; a replayed
+    recording of the body's own landmarks); None: the paper's model on the body's landmarks,
+    which the fusion of several formats and a recording's derived landmarks need."""
+    fmt = skeleton_format(spec.camera)
+    if spec.bench != "real" or spec.sensors is not None or spec.listen is not None or not fmt.body:
+        return None
+    if spec.human_file is not None and recording_format(spec.human_file).body:
+        return None  # a recording's derived landmarks: the landmarks' path, widened
+    return body_model(fmt)
 
 
 def cell_formats(spec: RunSpec) -> list[SkeletonFormat]:

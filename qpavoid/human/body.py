@@ -18,10 +18,19 @@ radius.
 A part's *reach* joints (a hand's fingers: HandTip, Thumb) are not model points (the
 paper's 21 points and spheres stay as published), but the capsule method widens the
 part's capsule by however far they stick out of it.
+
+A model's *centres* are points of its own format's joints that no joint is (the middle of
+the shoulders for a camera without a spine joint): each is the mean of its joints, usable
+when all of them are, as uncertain as the most uncertain of them (a mean of points each
+within r of the truth is within r of the true mean) and moving at the mean of their
+velocities. Parts name them as they name joints. Each camera's body model is on its own
+joints (``formats/<format>_body.toml``, :func:`body_model`): nothing is mapped from
+another format, so nothing is widened for a mapping.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -44,6 +53,7 @@ __all__ = [
     "BodyPart",
     "HumanGeometry",
     "KinectHuman",
+    "body_model",
 ]
 
 #: A joint of a part: its name in the skeleton format, or its id (row).
@@ -52,7 +62,7 @@ Joint = str | int
 #: The paper's model on the Kinect v2.
 KINECT_V2_BODY_FILE = FORMATS_DIR / "kinect_v2_body.toml"
 
-_BODY_KEYS = ("format", "points", "parts")
+_BODY_KEYS = ("format", "points", "centres", "parts")
 _PART_KEYS = (
     "name",
     "chain",
@@ -169,6 +179,9 @@ class BodyModel:
     point_order
         Joints that are model points, in point order; a part's chain joint missing here
         comes after them, in format order. The parts' mid-points follow, in part order.
+    centres
+        ``(name, joints)`` pairs: points that are the mean of two or more of the format's
+        joints (module docstring); parts and ``point_order`` name them as joints.
 
     Attributes
     ----------
@@ -188,6 +201,7 @@ class BodyModel:
     parts: tuple[BodyPart, ...]
     skeleton: SkeletonFormat
     point_order: tuple[Joint, ...] = ()
+    centres: tuple[tuple[str, tuple[Joint, ...]], ...] = ()
     # derived in __post_init__ (not compared: two models of the same parts are equal)
     joint_ids: np.ndarray = field(init=False, repr=False, compare=False)
     point_part: np.ndarray = field(init=False, repr=False, compare=False)
@@ -196,17 +210,21 @@ class BodyModel:
     _members: np.ndarray = field(init=False, repr=False, compare=False)
     _reach: np.ndarray = field(init=False, repr=False, compare=False)
     _radii: np.ndarray = field(init=False, repr=False, compare=False)
+    _centre_of: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         parts, skeleton = self.parts, self.skeleton
         self._check_parts()
+        object.__setattr__(self, "_centre_of", self._read_centres())
         chains = [[self._joint(j, f"{p.name}.chain") for j in p.chain] for p in parts]
         mids = [[self._joint(j, f"{p.name}.mid") for j in p.mid] for p in parts]
         reaches = [[self._joint(j, f"{p.name}.reach") for j in p.reach] for p in parts]
         order = [self._joint(j, "point_order") for j in self.point_order]
-        members = np.zeros((len(parts), skeleton.n_joints), dtype=bool)
+        members = np.zeros((len(parts), self.n_nodes), dtype=bool)
         for k in range(len(parts)):
             members[k, [*chains[k], *mids[k], *reaches[k]]] = True
+        n = skeleton.n_joints  # a centre's joints are its parts' too (the fastest of them)
+        members[:, :n] |= (members[:, n:].astype(int) @ self._centre_of) > 0
         used = {j for k in range(len(parts)) for j in (*chains[k], *mids[k])}
         joints = [j for j in order if j in used] + sorted(used - set(order))
         member = np.zeros((len(joints) + len(parts), len(parts)), dtype=bool)
@@ -271,17 +289,53 @@ class BodyModel:
                     value=(p.chain, p.mid),
                 )
 
-    def _joint(self, joint: Joint, key: str) -> int:
-        """The id of ``joint`` (a name or an id) in the format, or SkeletonFormatError."""
+    def _read_centres(self) -> np.ndarray:
+        """(C, J) bool: the joints each centre is the mean of, checked."""
+        skeleton, names = self.skeleton, [name for name, _ in self.centres]
+        out = np.zeros((len(self.centres), skeleton.n_joints), dtype=bool)
+        for c, (name, joints) in enumerate(self.centres):
+            key = f"centres.{name}"
+            if not isinstance(name, str) or not name.strip() or name in skeleton.joints:
+                raise SkeletonFormatError(
+                    f"{key}: a centre needs a name that is no joint of the {skeleton.name} "
+                    f"format, got {name!r}",
+                    name=key,
+                    value=name,
+                )
+            if names.count(name) > 1:
+                raise SkeletonFormatError(f"two centres are called {name!r}", name=key, value=names)
+            ids = [self._joint(j, key, centres=False) for j in joints]
+            if len(set(ids)) < 2:
+                raise SkeletonFormatError(
+                    f"{key}: a centre is the mean of two or more different joints, got "
+                    f"{list(joints)!r}",
+                    name=key,
+                    value=list(joints),
+                )
+            out[c, ids] = True
+        return out
+
+    @property
+    def n_nodes(self) -> int:
+        """The format's joints and then the model's centres: the rows the kernels see."""
+        return self.skeleton.n_joints + len(self.centres)
+
+    def _joint(self, joint: Joint, key: str, centres: bool = True) -> int:
+        """The id of ``joint`` (a name or an id) in the format, a centre's (after the
+        format's joints), or SkeletonFormatError."""
         skeleton = self.skeleton
         if isinstance(joint, str) and joint in skeleton.joints:
             return skeleton.index(joint)
+        names = [name for name, _ in self.centres]
+        if centres and isinstance(joint, str) and joint in names:
+            return skeleton.n_joints + names.index(joint)
         is_id = isinstance(joint, (int, np.integer)) and not isinstance(joint, bool)
         if is_id and 0 <= int(joint) < skeleton.n_joints:
             return int(joint)
         raise SkeletonFormatError(
-            f"{key}: {joint!r} is not a joint of the {skeleton.name} format; its joints are "
-            f"{list(skeleton.joints)}",
+            f"{key}: {joint!r} is not a joint of the {skeleton.name} format"
+            + (f" nor a centre of the model ({names})" if centres and names else "")
+            + f"; its joints are {list(skeleton.joints)}",
             name=key,
             value=joint,
         )
@@ -305,7 +359,7 @@ class BodyModel:
             For a file that cannot be read, is not TOML, lacks a key or has an unknown
             one, or names a joint its format does not have; the message names the file.
         """
-        points, parts, format_name = read_body_file(path)
+        points, parts, format_name, centres = read_body_file(path)
         if skeleton is None:
             try:
                 skeleton = SkeletonFormat.load(Path(path).with_name(f"{format_name}.toml"))
@@ -324,7 +378,7 @@ class BodyModel:
                 value=format_name,
             )
         try:
-            return cls(parts, skeleton, points)
+            return cls(parts, skeleton, points, centres)
         except SkeletonFormatError as exc:
             raise SkeletonFormatError(
                 f"{path}: {exc}", path=path, name=exc.name, value=exc.value
@@ -380,9 +434,14 @@ class BodyModel:
 
         Each part's capsule runs between the first and last usable joints of its chain;
         how far the fingers stick out of it widens it (:func:`qpavoid.human._kernels.capsules`)."""
+        joints, state = frame.joints, frame.state
+        if self.centres:
+            joints, state, joint_radius, joint_velocity = self._with_centres(
+                joints, state, np.asarray(joint_radius), np.asarray(joint_velocity)
+            )
         points, point_valid, segments, segment_valid, reach, margin, velocity = tracked_body(
-            kernel_input(frame.joints, np.float64),
-            kernel_input(frame.state, np.int8),
+            kernel_input(joints, np.float64),
+            kernel_input(state, np.int8),
             kernel_input(joint_radius, np.float64),
             kernel_input(joint_velocity, np.float64),
             self.joint_ids,
@@ -395,9 +454,32 @@ class BodyModel:
         geometry = HumanGeometry(points, point_valid, segments, segment_valid, margin, reach)
         return geometry, velocity
 
+    def _with_centres(
+        self, joints: np.ndarray, state: np.ndarray, radius: np.ndarray, velocity: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The frame's rows followed by the centres' (module docstring): each the mean of
+        its joints (NaN and not tracked unless all are usable), the largest of their
+        uncertainty radii, the mean of their velocities."""
+        of = self._centre_of
+        count = of.sum(axis=1)
+        usable = (state != 0) & np.isfinite(joints).all(axis=1)
+        whole = (of & usable).sum(axis=1) == count
+        mean = (of @ np.nan_to_num(joints)) / count[:, None]
+        mean[~whole] = np.nan
+        c_state = np.where(whole, np.where(of, state, 127).min(axis=1), 0).astype(np.int8)
+        c_radius = np.where(of, radius, 0.0).max(axis=1)
+        c_velocity = (of @ np.nan_to_num(velocity)) / count[:, None]
+        return (
+            np.vstack([joints, mean]),
+            np.concatenate([state, c_state]),
+            np.concatenate([radius, c_radius]),
+            np.vstack([velocity, c_velocity]),
+        )
+
     def part_joints(self) -> np.ndarray:
-        """(K, J) bool: the joints of each part (chain, mid-point ends and reach)."""
-        return self._members.copy()
+        """(K, J) bool: the joints of each part (chain, mid-point ends and reach; a centre's
+        joints for a part that names the centre)."""
+        return self._members[:, : self.skeleton.n_joints].copy()
 
     def geometry(
         self, joints: object, state: object = None, joint_radius: np.ndarray | None = None
@@ -415,8 +497,11 @@ class BodyModel:
         return self.tracked_geometry(frame, radius, np.zeros((n, 3)))[0]
 
 
-def read_body_file(path: str | Path) -> tuple[tuple[str, ...], tuple[BodyPart, ...], str]:
-    """The point order, the parts and the format's name of the body file at ``path``.
+def read_body_file(
+    path: str | Path,
+) -> tuple[tuple[str, ...], tuple[BodyPart, ...], str, tuple[tuple[str, tuple[Joint, ...]], ...]]:
+    """The point order, the parts, the format's name and the centres of the body file at
+    ``path``.
 
     Raises
     ------
@@ -445,6 +530,16 @@ def read_body_file(path: str | Path) -> tuple[tuple[str, ...], tuple[BodyPart, .
         raise fail(f"points must be an array of joint names, got {points!r}", "points", points)
     if not isinstance(rows, list) or not rows:
         raise fail(f"parts must be an array of tables ([[parts]]), got {rows!r}", "parts", rows)
+    table = data.get("centres", {})
+    if not isinstance(table, dict) or not all(
+        isinstance(v, list) and all(isinstance(j, str) for j in v) for v in table.values()
+    ):
+        raise fail(
+            f"centres must be a table of names to arrays of joint names, got {table!r}",
+            "centres",
+            table,
+        )
+    centres = tuple((name, tuple(joints)) for name, joints in table.items())
     parts = []
     for k, row in enumerate(rows):
         if not isinstance(row, dict):
@@ -493,10 +588,10 @@ def read_body_file(path: str | Path) -> tuple[tuple[str, ...], tuple[BodyPart, .
                 region,
             )
         )
-    return tuple(points), tuple(parts), format_name
+    return tuple(points), tuple(parts), format_name, centres
 
 
-_POINTS, _PARTS, _FORMAT = read_body_file(KINECT_V2_BODY_FILE)
+_POINTS, _PARTS, _FORMAT, _ = read_body_file(KINECT_V2_BODY_FILE)
 if KINECT_V2.name != _FORMAT:
     raise SkeletonFormatError(
         f"{KINECT_V2_BODY_FILE}: the body is on the {_FORMAT!r} format, not {KINECT_V2.name!r}",
@@ -530,3 +625,28 @@ class KinectHuman(BodyModel):
     parts: tuple[BodyPart, ...] = UPPER_BODY
     skeleton: SkeletonFormat = KINECT_V2
     point_order: tuple[Joint, ...] = _POINTS
+
+
+@functools.cache
+def body_model(skeleton: SkeletonFormat) -> BodyModel:
+    """The body model on ``skeleton``'s own joints (the file ``<format>_body.toml`` beside
+    the format's file, ``formats/`` for the shipped ones; the Kinect v2's is
+    :class:`KinectHuman`), read once per process.
+
+    Raises
+    ------
+    SkeletonFormatError
+        If the format has no body file, or its body file is wrong (naming the file).
+    """
+    if skeleton.name == KINECT_V2.name:
+        return KinectHuman()
+    where = Path(skeleton.source).parent if skeleton.source else FORMATS_DIR
+    path = where / f"{skeleton.name}_body.toml"
+    if not path.is_file():
+        raise SkeletonFormatError(
+            f"the {skeleton.name} format has no body model ({path.name} beside its file)",
+            path=path,
+            name="format",
+            value=skeleton.name,
+        )
+    return BodyModel.load(path, skeleton)

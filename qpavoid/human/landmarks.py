@@ -63,9 +63,24 @@ def _load(path: Path) -> SkeletonFormat:
     return SkeletonFormat.load(path)
 
 
+@cache
+def _user_format(path: Path) -> SkeletonFormat:
+    """A format file of the user's: read, and its landmarks' map built (both checked)."""
+    fmt = SkeletonFormat.load(path)
+    if fmt.body and fmt.body != KINECT_V2.name:
+        raise SkeletonFormatError(
+            f"{path}: body must be {KINECT_V2.name!r} (the body's landmarks), got {fmt.body!r}",
+            path=path,
+            name="body",
+            value=fmt.body,
+        )
+    return fmt
+
+
 def skeleton_format(name: str | SkeletonFormat) -> SkeletonFormat:
-    """The skeleton format called ``name`` (one of :data:`FORMAT_NAMES`; a format is
-    returned as it is). Each file is read once per process.
+    """The skeleton format called ``name`` (one of :data:`FORMAT_NAMES`, or the path of a
+    format file ``*.toml``: a camera of the user's; a format is returned as it is). Each
+    file is read once per process.
 
     Raises
     ------
@@ -76,6 +91,8 @@ def skeleton_format(name: str | SkeletonFormat) -> SkeletonFormat:
         return name
     if name == KINECT_V2.name:
         return KINECT_V2
+    if isinstance(name, str) and name.endswith(".toml"):  # a camera's own format file
+        return _user_format(Path(name).resolve())
     if not isinstance(name, str) or name not in FORMAT_NAMES:
         raise InputError(
             f"unknown skeleton format {name!r}; the formats are {', '.join(FORMAT_NAMES)}",

@@ -18,7 +18,7 @@ joints through it (:attr:`~SkeletonFormat.parent`, :attr:`~SkeletonFormat.mirror
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import MISSING, dataclass, fields
+from dataclasses import MISSING, dataclass, field, fields, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any, NoReturn
@@ -306,6 +306,9 @@ class SkeletonFormat:
     simulate
         ``((joint, rule), ...)``: each joint of this format from the body's landmarks, for
         the format's simulated camera.
+    source
+        The file the format was read from (``""``: built in code): its body model is the
+        file ``<name>_body.toml`` beside it (:func:`~qpavoid.human.body.body_model`).
 
     Raises
     ------
@@ -329,6 +332,7 @@ class SkeletonFormat:
     body: str = ""
     landmarks: tuple[tuple[str, LandmarkRule], ...] = ()
     simulate: tuple[tuple[str, LandmarkRule], ...] = ()
+    source: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         for key in ("name", "title"):
@@ -586,7 +590,7 @@ class SkeletonFormat:
         """
         data = read_toml(path)
         try:
-            return cls.from_mapping(data)
+            return replace(cls.from_mapping(data), source=str(path))
         except SkeletonFormatError as exc:
             raise SkeletonFormatError(
                 f"{path}: {exc}", path=path, name=exc.name, value=exc.value

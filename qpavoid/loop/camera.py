@@ -42,7 +42,7 @@ from qpavoid.human.frames import HumanFrame, HumanMotion
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.landmarks import LandmarkMap, landmark_map, skeleton_format
 from qpavoid.human.people import People
-from qpavoid.human.skeleton import INFERRED, NOT_TRACKED
+from qpavoid.human.skeleton import INFERRED, NOT_TRACKED, SkeletonFormat
 from qpavoid.sensing.recording import Recording
 
 #: Kinect v2 latency, s, from its format file (``sensor.latency_s``, with its source:
@@ -166,9 +166,16 @@ class Camera:
         The true motion (a scenario, or a recording taken as the truth).
     cfg
         Timing and errors.
+    skeleton
+        The skeleton the frames are given in: the body's landmarks (None, the default: a
+        camera of another format is mapped onto them) or the camera's own format (its
+        joints as it reports them, for a controller whose body model is on them:
+        :func:`~qpavoid.human.body.body_model`).
     """
 
-    def __init__(self, motion: HumanMotion, cfg: CameraConfig):
+    def __init__(
+        self, motion: HumanMotion, cfg: CameraConfig, skeleton: SkeletonFormat | None = None
+    ):
         self.motion, self.cfg = motion, cfg
         self.recording = motion if isinstance(motion, Recording) else None
         self.t0 = float(self.recording.t[0]) if self.recording is not None else 0.0
@@ -179,6 +186,8 @@ class Camera:
         fmt = skeleton_format(cfg.format)
         self._films: LandmarkMap | None = None if not fmt.body else LandmarkMap.simulated(fmt)
         self._maps = landmark_map(fmt)
+        #: frames in the camera's own joints (not mapped back onto the body's landmarks)
+        self.native = self._films is not None and skeleton is not None and skeleton.name == fmt.name
         self._sensor = fmt.sensor
         self._mirror = fmt.mirror
         body = self._maps.target
@@ -287,7 +296,7 @@ class Camera:
         cam = self._films.map(joints, state)
         points, seen = cam.joints, cam.state
         # what the rules cannot recover of this body, noiseless: replaced by the anatomy
-        bias = np.nan_to_num(self._maps.map(points, seen).joints - joints)
+        bias = 0.0 if self.native else np.nan_to_num(self._maps.map(points, seen).joints - joints)
         order = self._body_order
         sensor = self._sensor
         if sensor.left_right_swap_per_s > 0.0:  # windows of swap_s, each swapped or not
@@ -303,6 +312,8 @@ class Camera:
                 far = np.linalg.norm(points - np.asarray(self.cfg.sensor_position_m), axis=1)
                 sigma = sigma * np.nan_to_num(far / sensor.noise_reference_range_m) ** 2
             points = points + rng.normal(0.0, 1.0, points.shape) * sigma[:, None]
+        if self.native:  # the camera's joints as it reports them: nothing mapped
+            return HumanFrame(points, seen)
         back = self._maps.map(points, seen)
         offset = self._anatomy(pid) - bias
         return HumanFrame(back.joints + offset[order], back.state)

@@ -61,7 +61,7 @@ from qpavoid.loop.metrics import (
 )
 from qpavoid.loop.run_log import TEXT_KEYS, finished, new_log, repulsion_keys
 from qpavoid.loop.timing import LoopTiming, StallCheck
-from qpavoid.loop.truth import TrueClearance
+from qpavoid.loop.truth import TrueClearance, truth_body
 
 
 @dataclass(frozen=True)
@@ -222,7 +222,7 @@ def simulate(
     if source is not None:
         feed = source
     elif motion is not None:
-        feed = Camera(motion, cfg.camera)
+        feed = Camera(motion, cfg.camera, controller.human.skeleton)
     else:
         raise InputError("simulate needs a motion or a frame source", name="motion")
     arm_model = (
@@ -231,7 +231,7 @@ def simulate(
         else ArmResponse(cfg.braking.resolve(robot.arm), robot.joint_names, dt)
     )
     truth = (
-        TrueClearance(robot, controller.human, motion, controller.config.pfl)
+        TrueClearance(robot, truth_body(controller.human), motion, controller.config.pfl)
         if cfg.measure_truth and motion is not None
         else None
     )

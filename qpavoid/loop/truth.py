@@ -35,7 +35,7 @@ from qpavoid.arm.meshes import collision_geometry, object_vertices
 from qpavoid.arm.model import Kinematics, Robot
 from qpavoid.core.geometry import unit
 from qpavoid.distance.capsules import CapsuleDistance, axis_rotation
-from qpavoid.human.body import BodyModel, HumanGeometry
+from qpavoid.human.body import BodyModel, HumanGeometry, KinectHuman
 from qpavoid.human.frames import HumanFrame, HumanMotion
 from qpavoid.laws.pfl import (
     PFLConfig,
@@ -310,6 +310,15 @@ class TrueContact:
             and not self.clamped
             and advance_m > self.allowance_m + ADVANCE_TOLERANCE_M
         )
+
+
+def truth_body(human: BodyModel) -> BodyModel:
+    """The body the truth is judged with: the controller's ``human`` where it is on the
+    body's landmarks (the true motion's skeleton, the Kinect v2's), else the paper's model
+    on them (:class:`~qpavoid.human.body.KinectHuman`): a controller on a camera's own
+    joints is judged against the true body, not against its own model of it."""
+    true_motion = KinectHuman()
+    return human if human.skeleton.name == true_motion.skeleton.name else true_motion
 
 
 class TrueClearance:

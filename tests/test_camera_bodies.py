@@ -1,0 +1,201 @@
+"""Each camera's body model on its own joints (issue 41): it covers the true body, its
+centres are what they say, a cell of one camera runs on it, and a wrong file is refused
+in one line with exit 2."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from qpavoid.arm.model import load_robot
+from qpavoid.core.errors import SkeletonFormatError
+from qpavoid.experiments.run_spec import RunSpec
+from qpavoid.human.body import BodyModel, KinectHuman, body_model
+from qpavoid.human.frames import HumanFrame
+from qpavoid.human.landmarks import FORMAT_NAMES, LandmarkMap, skeleton_format
+from qpavoid.human.skeleton import FORMATS_DIR, INFERRED, NOT_TRACKED, TRACKED
+from qpavoid.loop.camera import Camera, CameraConfig
+from qpavoid.scenarios.generated import make_scenario
+from qpavoid.scenarios.strikes import strike_case, strike_motion
+
+CAMERAS = [name for name in FORMAT_NAMES if name != "kinect_v2"]
+
+
+def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    ab = b - a
+    u = np.clip(np.dot(p - a, ab) / max(float(np.dot(ab, ab)), 1e-12), 0.0, 1.0)
+    return float(np.linalg.norm(p - (a + u * ab)))
+
+
+@pytest.fixture(scope="module")
+def true_frames() -> list[HumanFrame]:
+    """The true body in the scenarios' and strikes' poses (seated, reaching, striking)."""
+    robot = load_robot()
+    frames = []
+    for name in ("free", "test1", "test2", "random:0", "random:1", "random:2"):
+        motion = make_scenario(name, robot)
+        frames += [HumanFrame.check(*_pair(motion.frame_at(t))) for t in np.arange(0, 20, 0.5)]
+    for seed in range(12):
+        motion = strike_motion(strike_case(seed, robot=robot), robot)
+        frames += [HumanFrame.check(*motion.frame_at(t)) for t in np.arange(0, 9, 0.3)]
+    return frames
+
+
+def _pair(frame: object) -> tuple[np.ndarray, np.ndarray]:
+    if isinstance(frame, HumanFrame):
+        return frame.joints, frame.state
+    return frame  # type: ignore[return-value]
+
+
+@pytest.mark.parametrize("camera", CAMERAS)
+def test_each_cameras_capsules_hold_the_true_bodys(camera, true_frames):
+    """Where the camera puts its joints (its ``[simulate]`` table), each part's capsule
+    on them holds the truth judge's whole capsule (both ends of its axis, its radius and
+    its fingers' reach): a capsule is convex, so its ends inside suffice. The needed
+    radius is within 1 cm of the file's, so the model is not needlessly fat either."""
+    fmt = skeleton_format(camera)
+    body, truth, films = body_model(fmt), KinectHuman(), LandmarkMap.simulated(fmt)
+    assert body.part_names == truth.part_names and body.regions == truth.regions
+    assert body.body_parts == truth.body_parts == ("head", "trunk")
+    need = np.zeros(len(body.parts))
+    for frame in true_frames:
+        true = truth.geometry(frame)
+        seen = films.map(frame.joints, frame.state)
+        mine = body.geometry(seen.joints, seen.state)
+        for k in range(len(body.parts)):
+            a, b = mine.segments[k]
+            r_true = truth.capsule_radii[k] + true.reach_margin[k]
+            for end in true.segments[k]:
+                need[k] = max(need[k], _segment_distance(end, a, b) + r_true - mine.reach_margin[k])
+    radii, measured = body.capsule_radii, dict(zip(body.part_names, need.round(3), strict=True))
+    assert np.all(need <= radii + 1e-9), measured
+    assert np.all(radii - need < 0.01 + 1e-9), measured
+
+
+def test_a_centre_is_the_mean_of_its_joints_as_uncertain_as_the_worst():
+    """mediapipe_pose's trunk runs between two centres: hand-computed mean, state, radius
+    and velocity; one of its joints lost and the centre is not usable."""
+    fmt = skeleton_format("mediapipe_pose")
+    body = body_model(fmt)
+    ls, rs, lh, rh = fmt.indices(["LEFT_SHOULDER", "RIGHT_SHOULDER", "LEFT_HIP", "RIGHT_HIP"])
+    joints = np.zeros((fmt.n_joints, 3))
+    joints[[ls, rs]] = [[0.2, 0.0, 1.4], [-0.2, 0.0, 1.4]]
+    joints[[lh, rh]] = [[0.1, 0.0, 0.9], [-0.1, 0.0, 0.9]]
+    state = np.full(fmt.n_joints, TRACKED, dtype=np.int8)
+    state[rs] = INFERRED
+    radius = np.zeros(fmt.n_joints)
+    radius[[ls, rs]] = [0.01, 0.07]
+    velocity = np.zeros((fmt.n_joints, 3))
+    velocity[[ls, rs]] = [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+    geometry, part_velocity = body.tracked_geometry(HumanFrame(joints, state), radius, velocity)
+    trunk = body.part_names.index("trunk")
+    np.testing.assert_allclose(geometry.segments[trunk], [[0.0, 0.0, 1.4], [0.0, 0.0, 0.9]])
+    assert geometry.part_margin[trunk] == pytest.approx(0.07)  # the worse shoulder's
+    # the part's velocity: its fastest member, the left shoulder (the centre moves at 0.5)
+    np.testing.assert_allclose(part_velocity[trunk], [1.0, 0.0, 0.0])
+    assert body.part_joints()[trunk, [ls, rs, lh, rh]].all()
+    joints[lh], state[lh] = np.nan, NOT_TRACKED
+    lost = body.geometry(joints, state)
+    # HIPS lost: the capsule shrinks to the shoulders' centre, never a NaN
+    np.testing.assert_allclose(lost.segments[trunk], [[0.0, 0.0, 1.4], [0.0, 0.0, 1.4]])
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        (('ELBOW_LEFT"]', 'ELBOW_LFT"]'), "'ELBOW_LFT' is not a joint of the k4abt format"),
+        (("capsule_radius_m = 0.13", "capsule_radius_m = 0"), "must be a number > 0"),
+        (("capsule_radius_m = 0.13", "capsule_radius_m = -0.1"), "must be a number > 0"),
+        (
+            ('CLAVICLES = ["CLAVICLE_LEFT", "CLAVICLE_RIGHT"]', 'CLAVICLES = ["CLAVICLE_LEFT"]'),
+            "a centre is the mean of two or more",
+        ),
+        (
+            ('CLAVICLES = ["CLAVICLE_LEFT", "CLAVICLE_RIGHT"]', 'NECK = ["CLAVICLE_LEFT", "HEAD"]'),
+            "a centre needs a name that is no joint",
+        ),
+    ],
+)
+def test_a_wrong_body_file_is_refused_naming_the_key(tmp_path, edit, match):
+    text = (FORMATS_DIR / "k4abt_body.toml").read_text()
+    assert edit[0] in text
+    path = tmp_path / "k4abt_body.toml"
+    path.write_text(text.replace(edit[0], edit[1], 1))
+    with pytest.raises(SkeletonFormatError, match=match):
+        BodyModel.load(path, skeleton_format("k4abt"))
+
+
+def _user_camera(tmp_path: Path, fmt_edit=None, body_edit=None) -> Path:
+    for name, edit in (("k4abt.toml", fmt_edit), ("k4abt_body.toml", body_edit)):
+        text = (FORMATS_DIR / name).read_text()
+        if edit is not None:
+            assert edit[0] in text
+            text = text.replace(edit[0], edit[1], 1)
+        (tmp_path / name).write_text(text)
+    return tmp_path / "k4abt.toml"
+
+
+BAD_USER_FILES = [
+    (None, ('ELBOW_LEFT"]', 'ELBOW_LFT"]'), "'ELBOW_LFT' is not a joint"),
+    (None, ("capsule_radius_m = 0.13", "capsule_radius_m = 0"), "must be a number > 0"),
+    (("latency_s = 0.10", "latency_s = -0.1"), None, "latency_s must be a number >= 0"),
+    (
+        ('latency_s = { basis = "estimate"', 'latency_s = { basis = "measured"'),
+        None,
+        "a measured number needs its source",
+    ),
+]
+
+
+@pytest.mark.parametrize(("fmt_edit", "body_edit", "match"), BAD_USER_FILES)
+def test_a_users_camera_file_is_refused_by_the_runs_spec(tmp_path, fmt_edit, body_edit, match):
+    """``--camera FILE.toml``: the issue's bad inputs, refused where the run is specified."""
+    path = _user_camera(tmp_path, fmt_edit, body_edit)
+    with pytest.raises(SkeletonFormatError, match=match):
+        RunSpec("free", camera=str(path))
+
+
+@pytest.mark.parametrize(("fmt_edit", "body_edit", "match"), BAD_USER_FILES[::3])
+def test_a_users_camera_file_gets_one_line_and_exit_2(tmp_path, fmt_edit, body_edit, match):
+    """... and on the command line: one line on stderr, exit 2."""
+    path = _user_camera(tmp_path, fmt_edit, body_edit)
+    done = subprocess.run(
+        [sys.executable, "-m", "qpavoid", "run", "free", "--camera", str(path), "--max-time", "1"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and match in lines[0], done.stderr
+
+
+def test_a_users_camera_without_its_body_file_is_refused(tmp_path):
+    path = _user_camera(tmp_path)
+    (tmp_path / "k4abt_body.toml").unlink()
+    with pytest.raises(SkeletonFormatError, match="has no body model"):
+        body_model(skeleton_format(str(path)))
+    shutil.copy(FORMATS_DIR / "k4abt_body.toml", tmp_path)
+    assert body_model(skeleton_format(str(path))).part_names == KinectHuman().part_names
+
+
+def test_a_camera_films_its_own_joints_for_a_body_on_them():
+    """A camera of another format gives the controller on its own body model its joints
+    as its ``[simulate]`` table puts them (noise 0): nothing mapped back, nothing added."""
+    robot = load_robot()
+    motion = make_scenario("test1", robot)
+    fmt = skeleton_format("zed_body_38")
+    cfg = CameraConfig.of("zed_body_38", noise_m=0.0)
+    native = Camera(motion, cfg, fmt)
+    mapped = Camera(motion, cfg)
+    frame, captured, _, _ = native.frame(40)
+    truth = HumanFrame.check(*_pair(motion.frame_at(captured)))
+    expected = LandmarkMap.simulated(fmt).map(truth.joints, truth.state)
+    assert frame.joints.shape == (fmt.n_joints, 3)
+    np.testing.assert_allclose(frame.joints, expected.joints)
+    assert mapped.frame(40)[0].joints.shape == (25, 3)  # the landmarks' path, as before
