@@ -1,6 +1,8 @@
 """What each camera costs: the time to the goal through each format's simulated camera.
 
-    python benchmarks/cameras.py [--random 10] [--rate 100] [--out FILE.json]
+    python benchmarks/cameras.py [--random 10] [--controllers qp analytic] [--safety ssm|pfl]
+                                 [--at-kinect-latency] [--rate 100] [--out FILE.json]
+    python benchmarks/cameras.py --budget     # the longest latency free passes, per camera
     python benchmarks/cameras.py --terms      # what each term costs, in free at 60 ms
 
 For each skeleton format (its latency, noise, joint set, derived landmarks widened by their
@@ -17,11 +19,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from qpavoid.control.analytic import AnalyticController
+from qpavoid.control.controller import Controller
 from qpavoid.control.qp import QPController
 from qpavoid.experiments.runs import RunSpec, build_controller, simulate_one, spec_robot
 from qpavoid.human.kinect_v2 import KINECT_V2
@@ -29,9 +35,24 @@ from qpavoid.human.landmarks import FORMAT_NAMES
 from qpavoid.loop.camera import CameraConfig
 
 
-def run(spec: RunSpec) -> dict:
-    """One run's productivity and safety."""
-    m = simulate_one(spec).metrics
+def run(spec: RunSpec, ssm: dict | None = None) -> dict:
+    """One run's productivity and safety; ``ssm``: speed and separation's constants to
+    change (the human motion model's options, docs/safety.md §7b)."""
+    if ssm:
+        robot = spec_robot(spec)
+        base = build_controller(spec, robot)
+        config = replace(base.config, ssm=replace(base.config.ssm, **ssm))
+        controller: Controller
+        if isinstance(base, QPController):
+            controller = QPController(robot, config=config, human=base.human, qp=base.qp)
+        else:
+            assert isinstance(base, AnalyticController)
+            controller = AnalyticController(
+                robot, config=config, human=base.human, analytic=base.analytic
+            )
+        m = simulate_one(spec, robot=robot, controller=controller).metrics
+    else:
+        m = simulate_one(spec).metrics
     return {
         "reached_goal": m["reached_goal"],
         "duration_s": m["duration_s"],
@@ -87,63 +108,142 @@ def terms(camera: str, rate_hz: float) -> dict:
     return out
 
 
+def _row(runs: dict[str, dict]) -> dict:
+    """One camera's and controller's runs: the named scenarios and the random ones' sums."""
+    randoms = [r for s, r in runs.items() if s.startswith("random:")]
+    row = {s: runs[s] for s in ("free", "test1", "test2")}
+    row["random"] = {
+        "mean_duration_s": float(np.mean([r["duration_s"] for r in randoms])),
+        "mean_stopped_s": float(np.mean([r["stopped_s"] for r in randoms])),
+        "reached_goal": sum(r["reached_goal"] for r in randoms),
+        "runs": len(randoms),
+        "ticks_moving_in_true_contact": sum(r["ticks_moving_in_true_contact"] for r in randoms),
+    }
+    return row
+
+
+def _print(label: str, row: dict) -> None:
+    cells = [
+        f"{row[s]['duration_s']:.2f} s ({row[s]['stopped_s']:.2f})"
+        + ("" if row[s]["reached_goal"] else " cap")
+        for s in ("free", "test1", "test2")
+    ]
+    r = row["random"]
+    print(
+        f"{label:38s} " + " | ".join(cells) + f" | random {r['mean_duration_s']:.2f} s / "
+        f"{r['mean_stopped_s']:.2f} s, {r['reached_goal']}/{r['runs']}, "
+        f"contact ticks {r['ticks_moving_in_true_contact']}",
+        flush=True,
+    )
+
+
+def budget(
+    camera: str, controller: str, safety: str, rate_hz: float, ssm: dict | None = None
+) -> float | None:
+    """The longest latency (in 10 ms steps from 0) at which ``free`` reaches its goal within
+    16 s through ``camera``, s; None if not even at 0."""
+    best = None
+    for ms in range(0, 200, 10):
+        spec = RunSpec(
+            "free",
+            controller=controller,
+            safety=safety,
+            camera=camera,
+            latency_s=ms / 1000.0,
+            rate_hz=rate_hz,
+            max_time_s=16.0,
+        )
+        if not run(spec, ssm)["reached_goal"]:
+            break
+        best = ms / 1000.0
+    return best
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--random", type=int, default=10, help="random approaches per camera")
     ap.add_argument("--rate", type=float, default=100.0, help="control rate, Hz")
     ap.add_argument("--out", type=Path, help="write the results as JSON")
     ap.add_argument("--terms", action="store_true", help="what each term costs (free, 60 ms)")
+    ap.add_argument("--controllers", nargs="+", default=["qp"], choices=["qp", "analytic"])
+    ap.add_argument("--safety", default="ssm", choices=["ssm", "pfl"])
+    ap.add_argument("--cameras", nargs="+", default=list(FORMAT_NAMES), choices=FORMAT_NAMES)
+    ap.add_argument(
+        "--at-kinect-latency", action="store_true", help="also each camera at the Kinect v2's"
+    )
+    ap.add_argument(
+        "--budget",
+        action="store_true",
+        help="the longest latency at which free reaches its goal within 16 s, per camera",
+    )
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes")
+    ap.add_argument("--body-speed", type=float, help="the head's and trunk's speed, m/s")
+    ap.add_argument(
+        "--body-acceleration", type=float, help="SaRA's acceleration model on, m/s² (off)"
+    )
+    ap.add_argument("--speed-error", type=float, help="its tracked speed's error, m/s")
     args = ap.parse_args()
+    ssm = {
+        key: value
+        for key, value in (
+            ("body_speed_mps", args.body_speed),
+            ("body_acceleration_mps2", args.body_acceleration),
+            ("speed_error_mps", args.speed_error),
+        )
+        if value is not None
+    }
     if args.terms:
-        found = {c: terms(c, args.rate) for c in FORMAT_NAMES if c != KINECT_V2.name}
+        found = {c: terms(c, args.rate) for c in args.cameras if c != KINECT_V2.name}
         if args.out:
             args.out.write_text(json.dumps(found, indent=1))
         return
-    scenarios = ["free", "test1", "test2"] + [f"random:{k}" for k in range(args.random)]
     out: dict = {}
-    for camera in FORMAT_NAMES:
-        latencies = {"own": None, "kinect_v2": KINECT_V2.sensor.latency_s}
+    if args.budget:
+        with ProcessPoolExecutor(args.jobs) as pool:
+            budgets = {
+                (c, k): pool.submit(budget, c, k, args.safety, args.rate, ssm)
+                for c in args.cameras
+                for k in args.controllers
+            }
+            for (c, k), job in budgets.items():
+                out[f"{c}/{k}"] = job.result()
+                print(f"{c:15s} {k:8s} free within 16 s up to {out[f'{c}/{k}']} s", flush=True)
+        if args.out:
+            args.out.write_text(json.dumps(out, indent=1))
+        return
+    scenarios = ["free", "test1", "test2"] + [f"random:{k}" for k in range(args.random)]
+    cases = []
+    for camera in args.cameras:
+        latencies: dict[str, float | None] = {"own": None}
+        if args.at_kinect_latency and camera != KINECT_V2.name:
+            latencies["kinect_v2"] = KINECT_V2.sensor.latency_s
         for which, latency in latencies.items():
-            if camera == KINECT_V2.name and which != "own":
-                continue
-            runs = {
-                s: run(
-                    RunSpec(
-                        s,
-                        controller="qp",
-                        safety="ssm",
-                        camera=camera,
-                        latency_s=latency,
-                        rate_hz=args.rate,
-                        max_time_s=40.0,
-                    )
-                )
-                for s in scenarios
-            }
-            randoms = [r for s, r in runs.items() if s.startswith("random:")]
-            row = {s: runs[s] for s in ("free", "test1", "test2")}
-            row["random"] = {
-                "mean_duration_s": float(np.mean([r["duration_s"] for r in randoms])),
-                "mean_stopped_s": float(np.mean([r["stopped_s"] for r in randoms])),
-                "reached_goal": sum(r["reached_goal"] for r in randoms),
-                "runs": len(randoms),
-                "ticks_moving_in_true_contact": sum(
-                    r["ticks_moving_in_true_contact"] for r in randoms
+            for controller in args.controllers:
+                cases.append((camera, which, latency, controller))
+    with ProcessPoolExecutor(args.jobs) as pool:
+        jobs = {
+            (case, s): pool.submit(
+                run,
+                RunSpec(
+                    s,
+                    controller=case[3],
+                    safety=args.safety,
+                    camera=case[0],
+                    latency_s=case[2],
+                    rate_hz=args.rate,
+                    max_time_s=40.0,
                 ),
-            }
-            out[f"{camera}/{which} latency"] = row
-            cells = [
-                f"{row[s]['duration_s']:.2f} s ({row[s]['stopped_s']:.2f})"
-                + ("" if row[s]["reached_goal"] else " cap")
-                for s in ("free", "test1", "test2")
-            ]
-            r = row["random"]
-            print(
-                f"{camera:15s} {which:9s} latency: " + " | ".join(cells) + f" | random "
-                f"{r['mean_duration_s']:.2f} s / {r['mean_stopped_s']:.2f} s, "
-                f"{r['reached_goal']}/{r['runs']}",
-                flush=True,
+                ssm,
             )
+            for case in cases
+            for s in scenarios
+        }
+        for case in cases:
+            camera, which, _, controller = case
+            row = _row({s: jobs[(case, s)].result() for s in scenarios})
+            key = f"{camera}/{controller}/{which} latency"
+            out[key] = row
+            _print(key, row)
     if args.out:
         args.out.write_text(json.dumps(out, indent=1))
 

@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 
 from qpavoid.arm.dynamics import ArmDynamics, StoppingData
+from qpavoid.core.errors import InputError
 from qpavoid.laws.ssm import (
     SSMConfig,
     StopTimeBudget,
+    accelerated_reach,
     human_speed,
     joint_speed_limits,
     max_approach_speed,
@@ -131,3 +133,44 @@ def test_an_arm_with_jerk_limits_adds_their_lag_to_the_reaction_time():
     )
     assert SSMConfig().resolve(arm).reaction_time_s == pytest.approx(0.009)
     assert SSMConfig(reaction_time_s=0.02).resolve(arm).reaction_time_s == 0.02  # as given
+
+
+# --- the body's reachable occupancy under an acceleration bound (issue 41, off by default) ---
+
+
+def test_accelerated_reach_by_hand():
+    # from rest, a = 25 m/s², v_max = 1.6 m/s: t1 = 0.064 s, D(0.2) = 0.0512 + 1.6 · 0.136
+    assert accelerated_reach(0.2, 0.0, 1.6, 25.0) == pytest.approx(0.2688)
+    assert accelerated_reach(0.05, 0.0, 1.6, 25.0) == pytest.approx(0.5 * 25.0 * 0.05**2)
+    # at 0.5 m/s: t1 = 0.044 s, D(0.1) = 0.022 + 0.0242 + 1.6 · 0.056
+    assert accelerated_reach(0.1, 0.5, 1.6, 25.0) == pytest.approx(0.022 + 0.0242 + 0.0896)
+    # at or above v_max it is ISO's v_max T
+    assert accelerated_reach(0.2, 3.0, 1.6, 25.0) == pytest.approx(0.32)
+
+
+def test_accelerated_reach_never_exceeds_iso_and_its_rate_is_the_capped_speed():
+    rng = np.random.default_rng(0)
+    t, v0 = rng.uniform(0.0, 0.5, 500), rng.uniform(0.0, 2.5, 500)
+    a = rng.uniform(1.0, 60.0, 500)
+    reach = accelerated_reach(t, v0, 1.6, a)
+    assert np.all(reach <= 1.6 * t + 1e-12) and np.all(reach >= np.minimum(v0, 1.6) * t - 1e-12)
+    h = 1e-7  # dD/dT = min(v_max, v0 + a T), by central differences
+    rate = (accelerated_reach(t + h, v0, 1.6, a) - accelerated_reach(t - h, v0, 1.6, a)) / (2 * h)
+    np.testing.assert_allclose(rate, np.minimum(1.6, np.minimum(v0, 1.6) + a * t), atol=1e-5)
+
+
+def test_the_acceleration_model_loosens_only_the_body_and_only_when_asked():
+    d = np.array([[0.4, 0.4], [0.8, 0.8]])
+    body = np.array([[True, False]])
+    speed = np.zeros_like(d)
+    iso = max_approach_speed(d, 0.1, CFG, body)
+    np.testing.assert_array_equal(max_approach_speed(d, 0.1, CFG, body, speed), iso)  # off
+    on = replace(CFG, body_acceleration_mps2=25.0, speed_error_mps=0.0)
+    loose = max_approach_speed(d, 0.1, on, body, speed)
+    np.testing.assert_array_equal(loose[:, 1], iso[:, 1])  # an arm: ISO's speed as before
+    gain = accelerated_reach(0.21, 0.0, 1.6, 25.0) - 1.6 * 0.21  # S_h less by v_max² / 2a
+    np.testing.assert_allclose((loose - iso)[:, 0], -gain / (0.01 + 0.05))
+    # a body part already at the body's speed gains nothing
+    np.testing.assert_allclose(max_approach_speed(d, 0.1, on, body, speed + 1.6), iso)
+    with pytest.raises(InputError, match="body_acceleration_mps2"):
+        SSMConfig(body_acceleration_mps2=0.0)

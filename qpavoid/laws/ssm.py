@@ -53,6 +53,7 @@ from numpy.typing import ArrayLike
 
 from qpavoid.arm.braking import jerk_lag_s, per_joint, stop_time
 from qpavoid.arm.description import ArmDynamics
+from qpavoid.core.checks import check_range
 from qpavoid.core.errors import InputError
 from qpavoid.distance.table import DistanceTable
 from qpavoid.human.body import KINECT_V2_BODY_PARTS
@@ -93,6 +94,16 @@ class SSMConfig:
         file's ``sensor.tracked_uncertainty_m``).
     robot_uncertainty_m
         Z_r: the robot's position error (repeatability and the capsules' fit), m.
+    body_acceleration_mps2, speed_error_mps
+        The reachable occupancy of a part moving with the body (SaRA shield's acceleration
+        model, :func:`accelerated_reach`): from its tracked speed plus ``speed_error_mps``,
+        it cannot pass the body's speed sooner than ``body_acceleration_mps2`` allows
+        (SaRA's human model: 20 m/s² for the torso, 25 for the neck and head). None (the
+        default): off, the body's speed for the whole time, because the model is sound
+        only if the tracked speed is within ``speed_error_mps`` of the truth, which no
+        body-tracking camera publishes and a position error Z_d does not give (a lunge of
+        25 m/s² hides within 2 Z_d = 8 cm for 80 ms, long enough to reach 2 m/s): an
+        option for a sensor that measures velocity, weighed in docs/safety.md §7b.
     """
 
     human_speed_near_mps: float = 2.0
@@ -106,6 +117,14 @@ class SSMConfig:
     intrusion_m: float = 0.02
     sensing_uncertainty_m: float = KINECT_V2.sensor.tracked_uncertainty_m
     robot_uncertainty_m: float = 0.005
+    body_acceleration_mps2: float | None = None
+    speed_error_mps: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.body_acceleration_mps2 is not None:
+            # a body's acceleration: above 0, and a human body's far below 1000 m/s²
+            check_range("body_acceleration_mps2", self.body_acceleration_mps2, 1e-3, 1e3, "m/s²")
+        check_range("speed_error_mps", self.speed_error_mps, 0.0, 10.0, "m/s")
 
     def resolve(self, arm: ArmDynamics) -> SSMConfig:
         """This config with the arm's values left at None taken from the robot
@@ -174,6 +193,27 @@ def human_distance(
     )
 
 
+def accelerated_reach(
+    horizon_s: ArrayLike, speed_mps: ArrayLike, max_speed_mps: float, acceleration_mps2: float
+) -> np.ndarray:
+    """How far a point moving at ``speed_mps`` now can travel in ``horizon_s``, m, if it
+    accelerates at most ``acceleration_mps2`` up to ``max_speed_mps`` (SaRA shield's
+    acceleration model under ISO 13855's speed, Schepp et al., ICRA 2022):
+
+        D(T) = ∫₀ᵀ min(v_max, v₀ + a t) dt
+             = v₀ T + a T² / 2                          for T ≤ t₁ = (v_max − v₀) / a
+             = v₀ t₁ + a t₁² / 2 + v_max (T − t₁)        beyond,
+
+    with v₀ = min(speed, v_max): never more than ``v_max T``, ISO's bound, and equal to it
+    for a point already at v_max."""
+    t = np.asarray(horizon_s, dtype=float)
+    v0 = np.minimum(np.asarray(speed_mps, dtype=float), max_speed_mps)
+    t1 = (max_speed_mps - v0) / acceleration_mps2
+    ramp = v0 * t + 0.5 * acceleration_mps2 * t * t
+    capped = v0 * t1 + 0.5 * acceleration_mps2 * t1 * t1 + max_speed_mps * (t - t1)
+    return np.where(t <= t1, ramp, capped)
+
+
 def reaction_distance(robot_speed_mps: ArrayLike, cfg: SSMConfig) -> np.ndarray:
     """S_r = v_r T_r: the robot's travel during its reaction time."""
     return np.asarray(robot_speed_mps, dtype=float) * _t_r(cfg)
@@ -220,18 +260,35 @@ def protective_distance(
 
 
 def max_approach_speed(
-    separation_m: ArrayLike, frame_age_s: ArrayLike, cfg: SSMConfig, body: ArrayLike = False
+    separation_m: ArrayLike,
+    frame_age_s: ArrayLike,
+    cfg: SSMConfig,
+    body: ArrayLike = False,
+    part_speed_mps: ArrayLike | None = None,
 ) -> np.ndarray:
     """The largest v_r with ``S_p(v_r) ≤ d``: ``(d − S_h − C − Z_d − Z_r) / (T_r + T_s/2)``.
 
     Negative where even a robot at rest is too close (it must move away at least that fast,
     or stop); −inf stays −inf and +inf (a part not seen) gives +inf. A frame of infinite
     or unknown age allows no approach at all (−inf; the controller stops on it anyway).
+    With ``cfg.body_acceleration_mps2`` set and the parts' tracked speeds
+    ``part_speed_mps`` given, a ``body`` part's S_h is the smaller of ISO's and
+    :func:`accelerated_reach` from its speed plus ``cfg.speed_error_mps``.
     """
     d = np.asarray(separation_m, dtype=float)
     if not np.all(np.isfinite(frame_age_s)):
         return np.full(d.shape, -np.inf)
-    room = d - human_distance(human_speed(d, cfg, body), frame_age_s, cfg) - fixed_terms(cfg)
+    s_h = human_distance(human_speed(d, cfg, body), frame_age_s, cfg)
+    if cfg.body_acceleration_mps2 is not None and part_speed_mps is not None:
+        horizon = np.asarray(frame_age_s, dtype=float) + _t_r(cfg) + cfg.stop_time_s
+        reach = accelerated_reach(
+            horizon,
+            np.asarray(part_speed_mps, dtype=float) + cfg.speed_error_mps,
+            cfg.body_speed_mps,
+            cfg.body_acceleration_mps2,
+        )
+        s_h = np.where(body, np.minimum(s_h, reach), s_h)
+    room = d - s_h - fixed_terms(cfg)
     return room / (_t_r(cfg) + cfg.stop_time_s / 2.0)
 
 
@@ -276,8 +333,9 @@ def separation_bounds(
     the velocity of the part of the person closest to each set.
     """
     body = _body_mask(tuple(table.part_names), tuple(cfg.body_parts))
-    limit = max_approach_speed(table.distance, frame_age_s, cfg, body)
     v = np.broadcast_to(part_velocity, table.vector.shape)  # (K, 3) or per pair (S, K, 3)
+    speed = None if cfg.body_acceleration_mps2 is None else np.linalg.norm(v, axis=-1)
+    limit = max_approach_speed(table.distance, frame_age_s, cfg, body, speed)
     towards = np.einsum("skx,skx->sk", table.vector, v)  # vector: human -> robot
     return limit, np.maximum(towards, 0.0)
 
