@@ -109,8 +109,8 @@ def test_a_centre_is_the_mean_of_its_joints_as_uncertain_as_the_worst():
     ("edit", "match"),
     [
         (('ELBOW_LEFT"]', 'ELBOW_LFT"]'), "'ELBOW_LFT' is not a joint of the k4abt format"),
-        (("capsule_radius_m = 0.13", "capsule_radius_m = 0"), "must be a number > 0"),
-        (("capsule_radius_m = 0.13", "capsule_radius_m = -0.1"), "must be a number > 0"),
+        (("capsule_radius_m = 0.16", "capsule_radius_m = 0"), "must be a number > 0"),
+        (("capsule_radius_m = 0.16", "capsule_radius_m = -0.1"), "must be a number > 0"),
         (
             ('CLAVICLES = ["CLAVICLE_LEFT", "CLAVICLE_RIGHT"]', 'CLAVICLES = ["CLAVICLE_LEFT"]'),
             "a centre is the mean of two or more",
@@ -142,7 +142,7 @@ def _user_camera(tmp_path: Path, fmt_edit=None, body_edit=None) -> Path:
 
 BAD_USER_FILES = [
     (None, ('ELBOW_LEFT"]', 'ELBOW_LFT"]'), "'ELBOW_LFT' is not a joint"),
-    (None, ("capsule_radius_m = 0.13", "capsule_radius_m = 0"), "must be a number > 0"),
+    (None, ("capsule_radius_m = 0.16", "capsule_radius_m = 0"), "must be a number > 0"),
     (("latency_s = 0.10", "latency_s = -0.1"), None, "latency_s must be a number >= 0"),
     (
         ('latency_s = { basis = "estimate"', 'latency_s = { basis = "measured"'),
