@@ -7,18 +7,21 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import load_robot
-from qpavoid.core.errors import SkeletonFormatError
+from qpavoid.control.qp import QPController
+from qpavoid.core.errors import InputError, SkeletonFormatError
 from qpavoid.experiments.run_spec import RunSpec
 from qpavoid.human.body import BodyModel, KinectHuman, body_model
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.landmarks import FORMAT_NAMES, LandmarkMap, skeleton_format
-from qpavoid.human.skeleton import FORMATS_DIR, INFERRED, NOT_TRACKED, TRACKED
+from qpavoid.human.skeleton import FORMATS_DIR, INFERRED, NOT_TRACKED, TRACKED, SkeletonFormat
 from qpavoid.loop.camera import Camera, CameraConfig
 from qpavoid.scenarios.generated import make_scenario
 from qpavoid.scenarios.strikes import strike_case, strike_motion
@@ -111,6 +114,14 @@ def test_a_centre_is_the_mean_of_its_joints_as_uncertain_as_the_worst():
         (('ELBOW_LEFT"]', 'ELBOW_LFT"]'), "'ELBOW_LFT' is not a joint of the k4abt format"),
         (("capsule_radius_m = 0.16", "capsule_radius_m = 0"), "must be a number > 0"),
         (("capsule_radius_m = 0.16", "capsule_radius_m = -0.1"), "must be a number > 0"),
+        (("capsule_radius_m = 0.16", "capsule_radius_m = 1e300"), "between 0.01 and 1.0 m"),
+        (
+            (
+                'CLAVICLES = ["CLAVICLE_LEFT", "CLAVICLE_RIGHT"]',
+                'CLAVICLES = ["CLAVICLE_LEFT", "CLAVICLE_LEFT", "CLAVICLE_RIGHT"]',
+            ),
+            "named twice",
+        ),
         (
             ('CLAVICLES = ["CLAVICLE_LEFT", "CLAVICLE_RIGHT"]', 'CLAVICLES = ["CLAVICLE_LEFT"]'),
             "a centre is the mean of two or more",
@@ -131,18 +142,27 @@ def test_a_wrong_body_file_is_refused_naming_the_key(tmp_path, edit, match):
 
 
 def _user_camera(tmp_path: Path, fmt_edit=None, body_edit=None) -> Path:
+    """The Azure Kinect's files as a camera of the user's, ``mycam``."""
     for name, edit in (("k4abt.toml", fmt_edit), ("k4abt_body.toml", body_edit)):
         text = (FORMATS_DIR / name).read_text()
+        text = text.replace('name = "k4abt"', 'name = "mycam"').replace(
+            'format = "k4abt"', 'format = "mycam"'
+        )
         if edit is not None:
             assert edit[0] in text
             text = text.replace(edit[0], edit[1], 1)
-        (tmp_path / name).write_text(text)
-    return tmp_path / "k4abt.toml"
+        (tmp_path / name.replace("k4abt", "mycam")).write_text(text)
+    return tmp_path / "mycam.toml"
 
 
 BAD_USER_FILES = [
     (None, ('ELBOW_LEFT"]', 'ELBOW_LFT"]'), "'ELBOW_LFT' is not a joint"),
     (None, ("capsule_radius_m = 0.16", "capsule_radius_m = 0"), "must be a number > 0"),
+    (None, ('region = "face"', 'region = "fcae"'), "fcae"),
+    (('name = "mycam"', 'name = "other"'), None, "name must be the file's name, 'mycam'"),
+    (('body = "kinect_v2"', 'body = "mycam"'), None, "body must be 'kinect_v2'"),
+    (("frame_rate_hz = 30.0", "frame_rate_hz = 1e300"), None, "frame_rate_hz must be at most"),
+    (('NOSE = { lerp = ["Neck", "Head"], t = 1.2 }', ""), None, "simulate"),
     (("latency_s = 0.10", "latency_s = -0.1"), None, "latency_s must be a number >= 0"),
     (
         ('latency_s = { basis = "estimate"', 'latency_s = { basis = "measured"'),
@@ -160,7 +180,7 @@ def test_a_users_camera_file_is_refused_by_the_runs_spec(tmp_path, fmt_edit, bod
         RunSpec("free", camera=str(path))
 
 
-@pytest.mark.parametrize(("fmt_edit", "body_edit", "match"), BAD_USER_FILES[::3])
+@pytest.mark.parametrize(("fmt_edit", "body_edit", "match"), BAD_USER_FILES[::5])
 def test_a_users_camera_file_gets_one_line_and_exit_2(tmp_path, fmt_edit, body_edit, match):
     """... and on the command line: one line on stderr, exit 2."""
     path = _user_camera(tmp_path, fmt_edit, body_edit)
@@ -177,11 +197,78 @@ def test_a_users_camera_file_gets_one_line_and_exit_2(tmp_path, fmt_edit, body_e
 
 def test_a_users_camera_without_its_body_file_is_refused(tmp_path):
     path = _user_camera(tmp_path)
-    (tmp_path / "k4abt_body.toml").unlink()
+    (tmp_path / "mycam_body.toml").unlink()
     with pytest.raises(SkeletonFormatError, match="has no body model"):
         body_model(skeleton_format(str(path)))
-    shutil.copy(FORMATS_DIR / "k4abt_body.toml", tmp_path)
+    _user_camera(tmp_path)
     assert body_model(skeleton_format(str(path))).part_names == KinectHuman().part_names
+
+
+def test_a_users_camera_may_not_take_a_shipped_formats_name(tmp_path):
+    for name in ("k4abt", "kinect_v2"):
+        text = (
+            (FORMATS_DIR / "k4abt.toml").read_text().replace('name = "k4abt"', f'name = "{name}"')
+        )
+        (tmp_path / f"{name}.toml").write_text(text)
+        with pytest.raises(SkeletonFormatError, match="a format the library ships"):
+            skeleton_format(str(tmp_path / f"{name}.toml"))
+
+
+def test_a_body_whose_joints_the_tracker_cannot_bound_is_refused(tmp_path):
+    """An adversarial tester's case: MediaPipe's hips were roots of their own, so a hip never
+    seen was bounded by nothing and the trunk shrank to the shoulders. Now the body's
+    joints must be in one tree of the format (the hips hang from the shoulders)."""
+    text = (FORMATS_DIR / "mediapipe_pose.toml").read_text()
+    old = '{ id = 23, name = "LEFT_HIP", parent = "LEFT_SHOULDER", max_bone_m = 0.90 }'
+    new = '{ id = 23, name = "LEFT_HIP" }'
+    assert old in text
+    text = text.replace(old, new).replace(
+        '{ id = 24, name = "RIGHT_HIP", parent = "RIGHT_SHOULDER", max_bone_m = 0.90 }',
+        '{ id = 24, name = "RIGHT_HIP" }',
+    )
+    (tmp_path / "mediapipe_pose.toml").write_text(text)
+    shutil.copy(FORMATS_DIR / "mediapipe_pose_body.toml", tmp_path)
+    with pytest.raises(SkeletonFormatError, match="in 3 trees of the mediapipe_pose format"):
+        BodyModel.load(tmp_path / "mediapipe_pose_body.toml")
+
+
+def test_a_hip_never_seen_keeps_mediapipes_trunk_whole():
+    """The same case through a controller: the trunk, 0.3 m from the end effector, with
+    a hip lost from the first frame on, still stops the robot (the hip bounded by its
+    shoulder), as it does with every joint seen."""
+    robot = load_robot()
+    fmt = skeleton_format("mediapipe_pose")
+    q = None
+    for lost in ((), ("LEFT_HIP",)):
+        controller = QPController(robot, human=body_model(fmt))
+        if q is None:
+            q = inverse_kinematics(robot, controller.path.reference(0.0)[0])
+        ee = robot.kinematics(q).ee_placement[:3, 3]
+        truth = HumanFrame.check(*_pair(make_scenario("test1", robot).frame_at(0.0)))
+        seen = LandmarkMap.simulated(fmt).map(truth.joints, truth.state)
+        joints, state = seen.joints.copy(), seen.state.copy()
+        hips = joints[fmt.indices(["LEFT_HIP", "RIGHT_HIP"])].mean(axis=0)
+        chest = joints[fmt.indices(["LEFT_SHOULDER", "RIGHT_SHOULDER"])].mean(axis=0)
+        joints += ee + np.array([0.0, 0.30, 0.0]) - (hips + 0.25 * (chest - hips))
+        joints[fmt.indices(list(lost))], state[fmt.indices(list(lost))] = np.nan, NOT_TRACKED
+        assert controller.step(q, joints, state, 0.0, frame_age_s=0.01).stopped, lost
+
+
+def test_a_frame_of_another_format_of_the_same_name_is_refused():
+    """An adversarial tester's case: a file called k4abt with NECK and HEAD swapped was read
+    in the shipped k4abt's order. A format of the body's name that is not the body's own
+    (any difference) is refused; an equal one (the same file read again) is the body's."""
+    robot = load_robot()
+    shipped = skeleton_format("k4abt")
+    controller = QPController(robot, human=body_model(shipped))
+    q = inverse_kinematics(robot, controller.path.reference(0.0)[0])
+    frame = np.tile([1.5, 0.0, 0.5], (32, 1))
+    again = SkeletonFormat.load(FORMATS_DIR / "k4abt.toml")
+    assert again is not shipped
+    controller.step(q, frame, None, 0.0, frame_age_s=0.01, camera_format=again)
+    other = replace(again, title="a k4abt of another file")
+    with pytest.raises(InputError, match="not the body model's 'k4abt' format"):
+        controller.step(q, frame, None, 0.0, frame_age_s=0.01, camera_format=other)
 
 
 def test_a_camera_films_its_own_joints_for_a_body_on_them():

@@ -232,6 +232,13 @@ class Controller:
         body = self.human.skeleton
         fmt = body if camera_format is None else skeleton_format(camera_format)
         if fmt.name == body.name:
+            if fmt is not body and fmt != body:  # two formats of one name: not its joints
+                raise InputError(
+                    f"a frame of a format called {fmt.name!r} that is not the body model's "
+                    f"{body.name!r} format (another file: {fmt.source or 'built in code'})",
+                    name="camera_format",
+                    value=fmt.name,
+                )
             self._camera_extra_m = None
             return as_people(joints, state, body)
         seen = as_people(joints, state, fmt)

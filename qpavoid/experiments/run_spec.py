@@ -16,10 +16,11 @@ from qpavoid.control.analytic import LIMIT_MODES
 from qpavoid.control.qp.backends import check_solver
 from qpavoid.control.tick import SAFETY_MODES
 from qpavoid.core.checks import check_choice, check_range
-from qpavoid.core.errors import InputError
+from qpavoid.core.errors import InputError, SkeletonFormatError
 from qpavoid.drive.connect import parse_arm
-from qpavoid.human.body import body_model
+from qpavoid.human.body import BodyModel, body_model
 from qpavoid.human.landmarks import FORMAT_NAMES, skeleton_format
+from qpavoid.laws.pfl import PFLConfig
 from qpavoid.loop.live_input import parse_address
 from qpavoid.scenarios import motions
 from qpavoid.scenarios.generated import SCENARIOS, check_scenario_name
@@ -182,7 +183,7 @@ class RunSpec:
             check_choice("camera (--camera)", self.camera, FORMAT_NAMES)
         fmt = skeleton_format(self.camera)  # a format file: read and checked (one line)
         if fmt.body:
-            body_model(fmt)  # its body model on its own joints, checked
+            check_regions(body_model(fmt))  # its body model on its own joints, checked
         if self.latency_s is not None:
             check_range("the sensor latency (--latency)", self.latency_s, 0.0, 1.0, "s")
         check_choice("limit mode", self.limit_mode, LIMIT_MODES)
@@ -234,3 +235,17 @@ class RunSpec:
         if self.listen is not None:
             return "live"
         return self.scenario if self.scenario is not None else Path(str(self.human_file)).stem
+
+
+def check_regions(body: BodyModel) -> None:
+    """Each part's ISO/TS 15066 region is a region of ``qpavoid/laws/body_regions.toml``
+    (power and force limiting reads them; checked when a run is specified, whatever its
+    safety mode), else :class:`~qpavoid.core.errors.SkeletonFormatError` naming the body's
+    file."""
+    try:
+        PFLConfig().part_limits(body.regions)
+    except InputError as exc:
+        where = body.skeleton.source or body.skeleton.name
+        raise SkeletonFormatError(
+            f"the body model of {where}: {exc}", name="region", value=exc.value
+        ) from None

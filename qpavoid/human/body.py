@@ -61,6 +61,8 @@ Joint = str | int
 
 #: The paper's model on the Kinect v2.
 KINECT_V2_BODY_FILE = FORMATS_DIR / "kinect_v2_body.toml"
+#: A part's radius, m: a finger is 1 cm thick; a capsule over 1 m wide covers no body part.
+MIN_RADIUS_M, MAX_RADIUS_M = 0.01, 1.0
 
 _BODY_KEYS = ("format", "points", "centres", "parts")
 _PART_KEYS = (
@@ -225,6 +227,7 @@ class BodyModel:
             members[k, [*chains[k], *mids[k], *reaches[k]]] = True
         n = skeleton.n_joints  # a centre's joints are its parts' too (the fastest of them)
         members[:, :n] |= (members[:, n:].astype(int) @ self._centre_of) > 0
+        self._check_one_tree(np.asarray(members[:, :n].any(axis=0)))
         used = {j for k in range(len(parts)) for j in (*chains[k], *mids[k])}
         joints = [j for j in order if j in used] + sorted(used - set(order))
         member = np.zeros((len(joints) + len(parts), len(parts)), dtype=bool)
@@ -274,6 +277,13 @@ class BodyModel:
                     raise SkeletonFormatError(
                         f"part {p.name!r}: {key} is {r!r}", name=f"{p.name}.{key}", value=r
                     )
+                if not MIN_RADIUS_M <= r <= MAX_RADIUS_M:
+                    raise SkeletonFormatError(
+                        f"part {p.name!r}: {key} must be between {MIN_RADIUS_M} and "
+                        f"{MAX_RADIUS_M} m (a body part's), got {r!r}",
+                        name=f"{p.name}.{key}",
+                        value=r,
+                    )
             if p.region is not None and (not isinstance(p.region, str) or not p.region.strip()):
                 raise SkeletonFormatError(
                     f"part {p.name!r}: region must name a body region (text) or be absent, "
@@ -288,6 +298,26 @@ class BodyModel:
                     name=f"{p.name}.chain",
                     value=(p.chain, p.mid),
                 )
+
+    def _check_one_tree(self, used: np.ndarray) -> None:
+        """The joints the parts use are all in one tree of the format's parents: the
+        tracker bounds a joint never seen by the nearest seen joint along the tree, and a
+        joint in a tree of its own would be bounded by nothing (a part would shrink)."""
+        skeleton = self.skeleton
+        roots: dict[str, str] = {}  # root: the first joint found in its tree
+        for j in np.flatnonzero(used):
+            r = int(j)
+            while skeleton.parent[r] >= 0:
+                r = int(skeleton.parent[r])
+            roots.setdefault(skeleton.joints[r], skeleton.joints[int(j)])
+        if len(roots) > 1:
+            raise SkeletonFormatError(
+                f"the body's joints are in {len(roots)} trees of the {skeleton.name} format "
+                f"(rooted at {', '.join(roots)}): a joint never seen is bounded only by the "
+                "seen joints of its tree; give the roots parents in the format file",
+                name="parts",
+                value=sorted(roots),
+            )
 
     def _read_centres(self) -> np.ndarray:
         """(C, J) bool: the joints each centre is the mean of, checked."""
@@ -305,6 +335,13 @@ class BodyModel:
             if names.count(name) > 1:
                 raise SkeletonFormatError(f"two centres are called {name!r}", name=key, value=names)
             ids = [self._joint(j, key, centres=False) for j in joints]
+            if len(set(ids)) != len(ids):
+                raise SkeletonFormatError(
+                    f"{key}: a joint is named twice in {list(joints)!r} (the mean weighs each "
+                    "joint once)",
+                    name=key,
+                    value=list(joints),
+                )
             if len(set(ids)) < 2:
                 raise SkeletonFormatError(
                     f"{key}: a centre is the mean of two or more different joints, got "
@@ -528,6 +565,14 @@ def read_body_file(
         )
     if not isinstance(points, list) or not all(isinstance(p, str) for p in points):
         raise fail(f"points must be an array of joint names, got {points!r}", "points", points)
+    if len(set(points)) != len(points):
+        raise fail(f"points names a joint twice: {points!r}", "points", points)
+    if not format_name.replace("_", "").replace("-", "").isalnum():
+        raise fail(
+            f"format must be a format's name (letters, digits, _ and -), got {format_name!r}",
+            "format",
+            format_name,
+        )
     if not isinstance(rows, list) or not rows:
         raise fail(f"parts must be an array of tables ([[parts]]), got {rows!r}", "parts", rows)
     table = data.get("centres", {})

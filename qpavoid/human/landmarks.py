@@ -65,15 +65,40 @@ def _load(path: Path) -> SkeletonFormat:
 
 @cache
 def _user_format(path: Path) -> SkeletonFormat:
-    """A format file of the user's: read, and its landmarks' map built (both checked)."""
+    """A camera's format file of the user's, checked whole: read; named as its file (its
+    body model is ``<name>_body.toml`` beside it) and not as a format the library ships; a
+    camera's (``body = "kinect_v2"``, so that the simulation can film the true body with
+    it); its ``[landmarks]`` and ``[simulate]`` tables each one matrix."""
     fmt = SkeletonFormat.load(path)
-    if fmt.body and fmt.body != KINECT_V2.name:
-        raise SkeletonFormatError(
-            f"{path}: body must be {KINECT_V2.name!r} (the body's landmarks), got {fmt.body!r}",
-            path=path,
-            name="body",
-            value=fmt.body,
+
+    def fail(message: str, key: str, value: object) -> SkeletonFormatError:
+        return SkeletonFormatError(f"{path}: {message}", path=path, name=key, value=value)
+
+    if fmt.name != path.stem:
+        raise fail(
+            f"name must be the file's name, {path.stem!r} (its body model is "
+            f"{path.stem}_body.toml beside it), got {fmt.name!r}",
+            "name",
+            fmt.name,
         )
+    if fmt.name in FORMAT_NAMES:
+        raise fail(
+            f"name {fmt.name!r} is a format the library ships; call your camera's another",
+            "name",
+            fmt.name,
+        )
+    if fmt.body != KINECT_V2.name:
+        raise fail(
+            f"body must be {KINECT_V2.name!r}, with [landmarks] and [simulate] tables (a "
+            f"camera's format: docs/formats.md), got {fmt.body!r}",
+            "body",
+            fmt.body,
+        )
+    try:
+        LandmarkMap.to_body(fmt)
+        LandmarkMap.simulated(fmt)
+    except SkeletonFormatError as exc:
+        raise fail(str(exc), exc.name or "landmarks", exc.value) from None
     return fmt
 
 
@@ -92,7 +117,7 @@ def skeleton_format(name: str | SkeletonFormat) -> SkeletonFormat:
     if name == KINECT_V2.name:
         return KINECT_V2
     if isinstance(name, str) and name.endswith(".toml"):  # a camera's own format file
-        return _user_format(Path(name).resolve())
+        return _user_format(Path(name).absolute())  # its body file beside it, not a link's
     if not isinstance(name, str) or name not in FORMAT_NAMES:
         raise InputError(
             f"unknown skeleton format {name!r}; the formats are {', '.join(FORMAT_NAMES)}",

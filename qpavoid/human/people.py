@@ -13,6 +13,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import NamedTuple
 
+import numpy as np
+
 from qpavoid.core.errors import InputError
 from qpavoid.human.frames import HumanFrame, nobody
 from qpavoid.human.kinect_v2 import KINECT_V2
@@ -59,6 +61,13 @@ def as_people(joints: object, state: object = None, skeleton: SkeletonFormat = K
         else People((0,), (HumanFrame.check(joints, state, skeleton),))
     )
     for frame in people.frames:
+        if np.isinf(frame.joints).any():  # a HumanFrame built without HumanFrame.check
+            raise InputError(
+                "a frame with an infinite coordinate (HumanFrame.check refuses it; NaN is "
+                "a lost joint)",
+                name="joints",
+                value=frame.joints,
+            )
         if frame.joints.shape[0] != skeleton.n_joints:
             raise InputError(
                 f"a frame of {frame.joints.shape[0]} joints given where {skeleton.title} "

@@ -92,6 +92,19 @@ _JOINT_KEYS = ("id", "name", "parent", "max_bone_m")
 #: How a camera's number was obtained (``[sensor.evidence]``): a published measurement,
 #: the maker's documentation, or our estimate.
 BASES = ("measured", "vendor", "estimate")
+#: The largest plausible value of each of ``[sensor]``'s numbers: a body-tracking camera
+#: beyond 1 kHz, a latency beyond 1 s (``--latency``'s range), a noise or Z_d beyond 1 m, a
+#: stereo reference beyond 100 m or swaps beyond 10 per second (or lasting over a minute)
+#: is a wrong file.
+SENSOR_CEILINGS = {
+    "frame_rate_hz": 1000.0,
+    "latency_s": 1.0,
+    "noise_m": 1.0,
+    "tracked_uncertainty_m": 1.0,
+    "noise_reference_range_m": 100.0,
+    "left_right_swap_per_s": 10.0,
+    "left_right_swap_s": 60.0,
+}
 #: The numbers of ``[sensor]`` that safety rests on (speed and separation's latency term,
 #: Z_d, the simulated noise): each must say how it was obtained.
 EVIDENCED = ("latency_s", "noise_m", "tracked_uncertainty_m")
@@ -211,6 +224,28 @@ class CameraSpec:
             if not is_number(value) or not (value > low if low is not None else value >= 0):
                 rule = "a number > 0" if low is not None else "a number >= 0"
                 _fail(f"sensor.{key} must be {rule}, got {value!r}", f"sensor.{key}", value)
+            if value > SENSOR_CEILINGS[key]:
+                _fail(
+                    f"sensor.{key} must be at most {SENSOR_CEILINGS[key]} (a camera's), got "
+                    f"{value!r}",
+                    f"sensor.{key}",
+                    value,
+                )
+        reference = self.noise_reference_range_m
+        if 0.0 < reference < 0.1:
+            _fail(
+                "sensor.noise_reference_range_m must be 0 (no growth) or at least 0.1 m, got "
+                f"{reference!r}",
+                "sensor.noise_reference_range_m",
+                reference,
+            )
+        if self.left_right_swap_per_s > 0.0 and not self.left_right_swap_s > 0.0:
+            _fail(
+                "sensor.left_right_swap_s must be > 0 where left_right_swap_per_s is, got "
+                f"{self.left_right_swap_s!r}",
+                "sensor.left_right_swap_s",
+                self.left_right_swap_s,
+            )
         fov = self.field_of_view_deg
         if not _pair(fov) or not all(0.0 < v < 180.0 for v in fov):
             _fail(
