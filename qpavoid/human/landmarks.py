@@ -74,26 +74,30 @@ def _user_format(path: Path) -> SkeletonFormat:
     def fail(message: str, key: str, value: object) -> SkeletonFormatError:
         return SkeletonFormatError(f"{path}: {message}", path=path, name=key, value=value)
 
-    if fmt.name != path.stem:
-        raise fail(
+    for wrong, message, key, value in (
+        (
+            fmt.name != path.stem,
             f"name must be the file's name, {path.stem!r} (its body model is "
             f"{path.stem}_body.toml beside it), got {fmt.name!r}",
             "name",
             fmt.name,
-        )
-    if fmt.name in FORMAT_NAMES:
-        raise fail(
+        ),
+        (
+            fmt.name in FORMAT_NAMES,
             f"name {fmt.name!r} is a format the library ships; call your camera's another",
             "name",
             fmt.name,
-        )
-    if fmt.body != KINECT_V2.name:
-        raise fail(
+        ),
+        (
+            fmt.body != KINECT_V2.name,
             f"body must be {KINECT_V2.name!r}, with [landmarks] and [simulate] tables (a "
             f"camera's format: docs/formats.md), got {fmt.body!r}",
             "body",
             fmt.body,
-        )
+        ),
+    ):
+        if wrong:
+            raise fail(message, key, value)
     try:
         LandmarkMap.to_body(fmt)
         LandmarkMap.simulated(fmt)
