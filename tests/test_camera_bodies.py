@@ -162,7 +162,7 @@ BAD_USER_FILES = [
     (('name = "mycam"', 'name = "other"'), None, "name must be the file's name, 'mycam'"),
     (('body = "kinect_v2"', 'body = "mycam"'), None, "body must be 'kinect_v2'"),
     (("frame_rate_hz = 30.0", "frame_rate_hz = 1e300"), None, "frame_rate_hz must be at most"),
-    (('NOSE = { lerp = ["Neck", "Head"], t = 1.2 }', ""), None, "simulate"),
+    (('NOSE = { lerp = ["Neck", "Head"], t = 1.2, uncertainty_m = 0.05 }', ""), None, "simulate"),
     (("latency_s = 0.10", "latency_s = -0.1"), None, "latency_s must be a number >= 0"),
     (
         ('latency_s = { basis = "estimate"', 'latency_s = { basis = "measured"'),
@@ -273,16 +273,25 @@ def test_a_frame_of_another_format_of_the_same_name_is_refused():
 
 def test_a_camera_films_its_own_joints_for_a_body_on_them():
     """A camera of another format gives the controller on its own body model its joints
-    as its ``[simulate]`` table puts them (noise 0): nothing mapped back, nothing added."""
+    (noise 0): where its ``[simulate]`` table puts them, each off by this person's anatomy,
+    within its rule's ``uncertainty_m``, the same in every frame, none for a joint the
+    table takes as a landmark; nothing mapped back."""
     robot = load_robot()
     motion = make_scenario("test1", robot)
     fmt = skeleton_format("zed_body_38")
     cfg = CameraConfig.of("zed_body_38", noise_m=0.0)
     native = Camera(motion, cfg, fmt)
-    mapped = Camera(motion, cfg)
-    frame, captured, _, _ = native.frame(40)
-    truth = HumanFrame.check(*_pair(motion.frame_at(captured)))
-    expected = LandmarkMap.simulated(fmt).map(truth.joints, truth.state)
-    assert frame.joints.shape == (fmt.n_joints, 3)
-    np.testing.assert_allclose(frame.joints, expected.joints)
-    assert mapped.frame(40)[0].joints.shape == (25, 3)  # the landmarks' path, as before
+    films = LandmarkMap.simulated(fmt)
+    offsets = []
+    for k in (40, 80):
+        frame, captured, _, _ = native.frame(k)
+        truth = HumanFrame.check(*_pair(motion.frame_at(captured)))
+        expected = films.map(truth.joints, truth.state)
+        assert frame.joints.shape == (fmt.n_joints, 3)
+        offsets.append(frame.joints - expected.joints)
+    np.testing.assert_allclose(offsets[0], offsets[1], atol=1e-12)
+    size = np.linalg.norm(offsets[0], axis=1)
+    u = films.uncertainty_m
+    assert np.all(size <= u + 1e-12) and np.all(size[u == 0.0] == 0.0) and size.max() > 0.01
+    assert u[fmt.index("NECK")] == 0.05 and u[fmt.index("LEFT_SHOULDER")] == 0.0
+    assert Camera(motion, cfg).frame(40)[0].joints.shape == (25, 3)  # the landmarks' path

@@ -295,6 +295,8 @@ class Camera:
         assert self._films is not None
         cam = self._films.map(joints, state)
         points, seen = cam.joints, cam.state
+        if self.native:  # where this person's joints really sit, off the rules' points
+            points = points + self._anatomy(pid, self._films.uncertainty_m)
         # what the rules cannot recover of this body, noiseless: replaced by the anatomy
         bias = 0.0 if self.native else np.nan_to_num(self._maps.map(points, seen).joints - joints)
         order = self._body_order
@@ -315,19 +317,19 @@ class Camera:
         if self.native:  # the camera's joints as it reports them: nothing mapped
             return HumanFrame(points, seen)
         back = self._maps.map(points, seen)
-        offset = self._anatomy(pid) - bias
+        offset = self._anatomy(pid, self._maps.uncertainty_m) - bias
         return HumanFrame(back.joints + offset[order], back.state)
 
-    def _anatomy(self, pid: int | None) -> np.ndarray:
-        """(L, 3) how far each of person ``pid``'s derived landmarks is from where the
-        format's rule puts it, m: a random point of the ball of the rule's uncertainty, the
-        same for the whole run (a body's proportions; 0 for a landmark the camera measures).
-        The perception widens each landmark by that uncertainty: the safety campaigns test
-        that it is enough."""
+    def _anatomy(self, pid: int | None, u: np.ndarray) -> np.ndarray:
+        """(L, 3) how far each of person ``pid``'s derived points is from where the
+        format's rule puts it, m: a random point of the ball of the rule's uncertainty
+        ``u`` (L,), the same for the whole run (a body's proportions; 0 for a point the
+        camera measures). On the landmarks, the derived landmarks (the perception widens
+        each by that uncertainty); on a camera's own body, its joints that the ``[simulate]``
+        table places (nothing widens them: the campaigns test the body model's margins)."""
         who = -1 if pid is None else pid
         if who not in self._anatomies:
             rng = np.random.default_rng([self.cfg.seed, who + 1, 11])
-            u = self._maps.uncertainty_m
             direction = rng.normal(size=(len(u), 3))
             direction /= np.linalg.norm(direction, axis=1, keepdims=True)
             radius = u * rng.random(len(u)) ** (1.0 / 3.0)  # uniform in the ball
