@@ -4,6 +4,7 @@ in one line with exit 2."""
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -295,3 +296,51 @@ def test_a_camera_films_its_own_joints_for_a_body_on_them():
     assert np.all(size <= u + 1e-12) and np.all(size[u == 0.0] == 0.0) and size.max() > 0.01
     assert u[fmt.index("NECK")] == 0.05 and u[fmt.index("LEFT_SHOULDER")] == 0.0
     assert Camera(motion, cfg).frame(40)[0].joints.shape == (25, 3)  # the landmarks' path
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        # a bone of unknown length bounds nothing: the arm's joints hang on it
+        (
+            '{ id = 6, name = "ELBOW_LEFT", parent = "SHOULDER_LEFT", max_bone_m = 0.40 }',
+            "has a parent but no max_bone_m",
+        ),
+        # weights far off their joints (lerp's t is bounded to [-1, 2]; so are they now)
+        ("NOSE = { lerp = [", "weights must be joint = weight pairs in [-1, 2]"),
+        ('name = "mycam"', "name must be letters, digits"),
+    ],
+)
+def test_a_second_testers_cases_are_refused(tmp_path, edit, match):
+    """A second adversarial pass: a joint with a parent and no bone bound (the tracker
+    placed a never-seen arm on the shoulder with no uncertainty), ``weights`` that escaped
+    lerp's bound (joints 65 km away), a name that is no plain name."""
+    path = _user_camera(tmp_path)
+    text = path.read_text()
+    if "ELBOW_LEFT" in edit:
+        text = text.replace(edit, edit.replace(", max_bone_m = 0.40", ""))
+        text = text.replace(
+            '{ id = 13, name = "ELBOW_RIGHT", parent = "SHOULDER_RIGHT", max_bone_m = 0.40 }',
+            '{ id = 13, name = "ELBOW_RIGHT", parent = "SHOULDER_RIGHT" }',
+        )
+    elif "NOSE" in edit:
+        text = text.replace(
+            'NOSE = { lerp = ["Neck", "Head"], t = 1.2, uncertainty_m = 0.05 }',
+            "NOSE = { weights = { Head = 1e6, Neck = -999999.0 } }",
+        )
+    else:
+        text = text.replace(edit, 'name = "my cam"')
+        path = tmp_path / "my cam.toml"
+        (tmp_path / "mycam_body.toml").rename(tmp_path / "my cam_body.toml")
+    path.write_text(text)
+    with pytest.raises(SkeletonFormatError, match=re.escape(match)):
+        RunSpec("free", camera=str(path))
+
+
+def test_equal_formats_hash_equal(tmp_path):
+    """The same format read from two places is equal and hashes equal (its source is not
+    part of either): a cache keyed on the format finds it."""
+    shutil.copy(FORMATS_DIR / "k4abt.toml", tmp_path)
+    again = SkeletonFormat.load(tmp_path / "k4abt.toml")
+    shipped = skeleton_format("k4abt")
+    assert again == shipped and hash(again) == hash(shipped) and again in {shipped}

@@ -227,7 +227,7 @@ def test_tracking_states_other_than_the_librarys_are_refused(tmp_path):
         ("latency_s = 0.06", "latency_s = -0.06", "sensor.latency_s must be a number >= 0"),
         ("range_m = [0.5, 4.5]", "range_m = [4.5, 0.5]", "near < far"),
         ("field_of_view_deg = [70.6, 60.0]", "field_of_view_deg = [70.6]", "two angles"),
-        ("max_bodies = 6", "max_bodies = 0", "whole number >= 1"),
+        ("max_bodies = 6", "max_bodies = 0", "whole number from 1 to 100"),
         ("frame_rate_hz = 30.0", 'frame_rate_hz = "30"', "frame_rate_hz must be a number > 0"),
     ],
 )

@@ -297,7 +297,8 @@ def rerun_command(run: CampaignRun, spec: SweepSpec) -> str:
         cap = spec.max_time_s
         if cap is None:
             cap = closework_case(run.seed, load_robot(spec.robot)).duration_s
-        camera = "" if spec.camera == RunSpec.camera else f" --camera {spec.camera}"
+        named = str(Path(spec.camera).absolute()) if spec.camera.endswith(".toml") else spec.camera
+        camera = "" if spec.camera == RunSpec.camera else f" --camera {shlex.quote(named)}"
         latency = "" if spec.latency_s is None else f" --latency {spec.latency_s:g}"
         latency += f" --payload {spec.payload_kg:g}" if spec.payload_kg else ""
         return (

@@ -245,7 +245,10 @@ def check_regions(body: BodyModel) -> None:
     try:
         PFLConfig().part_limits(body.regions)
     except InputError as exc:
-        where = body.skeleton.source or body.skeleton.name
-        raise SkeletonFormatError(
-            f"the body model of {where}: {exc}", name="region", value=exc.value
-        ) from None
+        source = body.skeleton.source
+        where = (
+            Path(source).with_name(f"{body.skeleton.name}_body.toml")
+            if source
+            else f"the {body.skeleton.name} body model"
+        )
+        raise SkeletonFormatError(f"{where}: {exc}", name="region", value=exc.value) from None

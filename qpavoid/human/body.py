@@ -308,6 +308,14 @@ class BodyModel:
         for j in np.flatnonzero(used):
             r = int(j)
             while skeleton.parent[r] >= 0:
+                if not skeleton.bone_bounds_m[r] > 0.0:  # a bone of unknown length
+                    raise SkeletonFormatError(
+                        f"joint {skeleton.joints[r]!r} of the {skeleton.name} format has a "
+                        "parent but no max_bone_m: a joint never seen through it would be "
+                        "bounded by nothing (the body's parts use it)",
+                        name="max_bone_m",
+                        value=skeleton.joints[r],
+                    )
                 r = int(skeleton.parent[r])
             roots.setdefault(skeleton.joints[r], skeleton.joints[int(j)])
         if len(roots) > 1:

@@ -232,9 +232,11 @@ def parse_rule(value: object, key: str) -> LandmarkRule:
             or not table
             or not all(is_number(w) for w in table.values())
             or abs(sum(table.values()) - 1.0) > 1e-9
+            or not all(-1.0 <= w <= 2.0 for w in table.values())
         ):
             _fail(
-                f"{key}.weights must be joint = weight pairs summing to 1, got {table!r}",
+                f"{key}.weights must be joint = weight pairs in [-1, 2] (as lerp's t: no "
+                f"point far off its joints) summing to 1, got {table!r}",
                 f"{key}.weights",
                 table,
             )
@@ -256,5 +258,7 @@ def parse_rule(value: object, key: str) -> LandmarkRule:
         return LandmarkRule(tuple(joints), (1.0 - float(t), float(t)), float(uncertainty))
     if "t" in value:
         _fail(f"{key}: t goes with lerp only", f"{key}.t", value["t"])
+    if len(set(joints)) != len(joints):
+        _fail(f"{key}.{form} names a joint twice: {joints!r}", f"{key}.{form}", joints)
     n = len(joints)
     return LandmarkRule(tuple(joints), (1.0 / n,) * n, float(uncertainty))

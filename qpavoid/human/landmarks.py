@@ -83,6 +83,12 @@ def _user_format(path: Path) -> SkeletonFormat:
             fmt.name,
         ),
         (
+            not fmt.name.replace("_", "").replace("-", "").isalnum(),
+            f"name must be letters, digits, _ and -, got {fmt.name!r}",
+            "name",
+            fmt.name,
+        ),
+        (
             fmt.name in FORMAT_NAMES,
             f"name {fmt.name!r} is a format the library ships; call your camera's another",
             "name",

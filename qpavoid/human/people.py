@@ -61,6 +61,12 @@ def as_people(joints: object, state: object = None, skeleton: SkeletonFormat = K
         else People((0,), (HumanFrame.check(joints, state, skeleton),))
     )
     for frame in people.frames:
+        if np.ndim(frame.joints) != 2 or np.shape(frame.joints)[1:] != (3,):
+            raise InputError(
+                f"a frame's joints must be (J, 3), got {np.shape(frame.joints)}",
+                name="joints",
+                value=np.shape(frame.joints),
+            )
         if np.isinf(frame.joints).any():  # a HumanFrame built without HumanFrame.check
             raise InputError(
                 "a frame with an infinite coordinate (HumanFrame.check refuses it; NaN is "

@@ -246,27 +246,35 @@ class CameraSpec:
                 "sensor.left_right_swap_s",
                 self.left_right_swap_s,
             )
-        fov = self.field_of_view_deg
-        if not _pair(fov) or not all(0.0 < v < 180.0 for v in fov):
+        if self.frame_rate_hz < 1.0:
             _fail(
-                f"sensor.field_of_view_deg must be two angles in (0, 180) degrees, got {fov!r}",
+                "sensor.frame_rate_hz must be at least 1 Hz (a camera's), got "
+                f"{self.frame_rate_hz!r}",
+                "sensor.frame_rate_hz",
+                self.frame_rate_hz,
+            )
+        fov = self.field_of_view_deg
+        if not _pair(fov) or not all(1.0 <= v < 180.0 for v in fov):
+            _fail(
+                f"sensor.field_of_view_deg must be two angles in [1, 180) degrees, got {fov!r}",
                 "sensor.field_of_view_deg",
                 fov,
             )
         near_far = self.range_m
-        if not _pair(near_far) or not 0.0 <= near_far[0] < near_far[1]:
+        if not _pair(near_far) or not 0.0 <= near_far[0] < near_far[1] <= 100.0:
             _fail(
-                f"sensor.range_m must be [near, far] with 0 <= near < far, m, got {near_far!r}",
+                f"sensor.range_m must be [near, far] with 0 <= near < far <= 100, m, got "
+                f"{near_far!r}",
                 "sensor.range_m",
                 near_far,
             )
         if (
             not isinstance(self.max_bodies, int)
             or isinstance(self.max_bodies, bool)
-            or self.max_bodies < 1
+            or not 1 <= self.max_bodies <= 100
         ):
             _fail(
-                f"sensor.max_bodies must be a whole number >= 1, got {self.max_bodies!r}",
+                f"sensor.max_bodies must be a whole number from 1 to 100, got {self.max_bodies!r}",
                 "sensor.max_bodies",
                 self.max_bodies,
             )
@@ -523,7 +531,7 @@ class SkeletonFormat:
 
     @cached_property
     def _hash(self) -> int:
-        return hash(tuple(getattr(self, f.name) for f in fields(self)))
+        return hash(tuple(getattr(self, f.name) for f in fields(self) if f.compare))
 
     @cached_property
     def _ids(self) -> dict[str, int]:
