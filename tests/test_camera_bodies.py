@@ -44,9 +44,9 @@ def true_frames() -> list[HumanFrame]:
     for name in ("free", "test1", "test2", "random:0", "random:1", "random:2"):
         motion = make_scenario(name, robot)
         frames += [HumanFrame.check(*_pair(motion.frame_at(t))) for t in np.arange(0, 20, 0.5)]
-    for seed in range(12):
+    for seed in range(8):
         motion = strike_motion(strike_case(seed, robot=robot), robot)
-        frames += [HumanFrame.check(*motion.frame_at(t)) for t in np.arange(0, 9, 0.3)]
+        frames += [HumanFrame.check(*motion.frame_at(t)) for t in np.arange(0, 9, 0.4)]
     return frames
 
 

@@ -680,7 +680,6 @@ class KinectHuman(BodyModel):
     point_order: tuple[Joint, ...] = _POINTS
 
 
-@functools.cache
 def body_model(skeleton: SkeletonFormat) -> BodyModel:
     """The body model on ``skeleton``'s own joints (the file ``<format>_body.toml`` beside
     the format's file, ``formats/`` for the shipped ones; the Kinect v2's is
@@ -691,9 +690,16 @@ def body_model(skeleton: SkeletonFormat) -> BodyModel:
     SkeletonFormatError
         If the format has no body file, or its body file is wrong (naming the file).
     """
+    # keyed on the file too: two equal formats of two folders have two body files
+    return _body_model(skeleton, skeleton.source)
+
+
+@functools.cache
+def _body_model(skeleton: SkeletonFormat, source: str) -> BodyModel:
+    """:func:`body_model`, read once per format and file."""
     if skeleton.name == KINECT_V2.name:
         return KinectHuman()
-    where = Path(skeleton.source).parent if skeleton.source else FORMATS_DIR
+    where = Path(source).parent if source else FORMATS_DIR
     path = where / f"{skeleton.name}_body.toml"
     if not path.is_file():
         raise SkeletonFormatError(
