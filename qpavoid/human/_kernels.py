@@ -18,6 +18,7 @@ from qpavoid.core.geometry import TINY
 from qpavoid.human.skeleton import SkeletonFormat
 
 __all__ = [
+    "append_centres",
     "capsules",
     "fastest_joint",
     "largest_per_part",
@@ -170,6 +171,48 @@ def tracked_body(
     return points, point_valid, segments, segment_valid, reach, margin, velocity
 
 
+@njit(cache=True)
+def append_centres(
+    joints: np.ndarray,
+    state: np.ndarray,
+    joint_radius: np.ndarray,
+    joint_velocity: np.ndarray,
+    centres: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The frame's rows, then one row per centre (:class:`~qpavoid.human.body.BodyModel`'s
+    ``centres``): each the mean of its joints (``centres`` (C, M) joint ids, padded with
+    −1), usable only if they all are (else NaN, state 0), its state the lowest of theirs,
+    its uncertainty radius the largest of theirs, m, its velocity the mean of theirs, m/s."""
+    n, c_count = joints.shape[0], centres.shape[0]
+    out_j = np.empty((n + c_count, 3))
+    out_s = np.empty(n + c_count, dtype=np.int8)
+    out_r = np.empty(n + c_count)
+    out_v = np.empty((n + c_count, 3))
+    out_j[:n], out_s[:n], out_r[:n], out_v[:n] = joints, state, joint_radius, joint_velocity
+    for c in range(c_count):
+        row, count, whole, low, radius = n + c, 0, True, 127, 0.0
+        mean, velocity = np.zeros(3), np.zeros(3)
+        for m in range(centres.shape[1]):
+            j = centres[c, m]
+            if j < 0:
+                break
+            count += 1
+            p = joints[j]
+            if state[j] == 0 or not np.isfinite(p[0] + p[1] + p[2]):
+                whole = False
+            low = min(low, state[j])
+            radius = max(radius, joint_radius[j])
+            mean += p
+            velocity += joint_velocity[j]
+        if whole:
+            out_j[row], out_s[row] = mean / count, low
+        else:
+            out_j[row], out_s[row] = np.nan, 0
+        out_r[row] = radius
+        out_v[row] = velocity / count
+    return out_j, out_s, out_r, out_v
+
+
 @functools.cache
 def warm_up(skeleton: SkeletonFormat) -> None:
     """Compile (or load from the disk cache) every kernel for frames of ``skeleton``, once
@@ -186,5 +229,6 @@ def warm_up(skeleton: SkeletonFormat) -> None:
         largest_per_part(members, np.zeros(n))
         fastest_joint(members, z)
         tracked_body(z, state, np.zeros(n), z, ids, pairs, pairs, pairs, np.ones(1), members)
+        append_centres(z, state, np.zeros(n), z, pairs)
         for kernel in (point_segment_distance, capsules, tracked_body):
             recompile_if_stale(kernel, geometry)  # they compile geometry.TINY in

@@ -40,7 +40,7 @@ import numpy as np
 
 from qpavoid.core.compiling import kernel_input
 from qpavoid.core.errors import SkeletonFormatError
-from qpavoid.human._kernels import tracked_body, warm_up
+from qpavoid.human._kernels import append_centres, tracked_body, warm_up
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.skeleton import FORMATS_DIR, SkeletonFormat, read_toml
@@ -213,11 +213,17 @@ class BodyModel:
     _reach: np.ndarray = field(init=False, repr=False, compare=False)
     _radii: np.ndarray = field(init=False, repr=False, compare=False)
     _centre_of: np.ndarray = field(init=False, repr=False, compare=False)
+    _centre_ids: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         parts, skeleton = self.parts, self.skeleton
         self._check_parts()
         object.__setattr__(self, "_centre_of", self._read_centres())
+        width = max([int(row.sum()) for row in self._centre_of], default=1)
+        ids = np.full((len(self._centre_of), width), -1, dtype=np.int64)
+        for c, row in enumerate(self._centre_of):  # the kernel's form: ids, padded with -1
+            ids[c, : row.sum()] = np.flatnonzero(row)
+        object.__setattr__(self, "_centre_ids", ids)
         chains = [[self._joint(j, f"{p.name}.chain") for j in p.chain] for p in parts]
         mids = [[self._joint(j, f"{p.name}.mid") for j in p.mid] for p in parts]
         reaches = [[self._joint(j, f"{p.name}.reach") for j in p.reach] for p in parts]
@@ -479,16 +485,16 @@ class BodyModel:
 
         Each part's capsule runs between the first and last usable joints of its chain;
         how far the fingers stick out of it widens it (:func:`qpavoid.human._kernels.capsules`)."""
-        joints, state = frame.joints, frame.state
-        if self.centres:
-            joints, state, joint_radius, joint_velocity = self._with_centres(
-                joints, state, np.asarray(joint_radius), np.asarray(joint_velocity)
-            )
-        points, point_valid, segments, segment_valid, reach, margin, velocity = tracked_body(
-            kernel_input(joints, np.float64),
-            kernel_input(state, np.int8),
+        rows = (
+            kernel_input(frame.joints, np.float64),
+            kernel_input(frame.state, np.int8),
             kernel_input(joint_radius, np.float64),
             kernel_input(joint_velocity, np.float64),
+        )
+        if self.centres:  # their rows after the frame's (module docstring)
+            rows = append_centres(*rows, self._centre_ids)
+        points, point_valid, segments, segment_valid, reach, margin, velocity = tracked_body(
+            *rows,
             self.joint_ids,
             self._mid_ids,
             self._chains,
@@ -498,28 +504,6 @@ class BodyModel:
         )
         geometry = HumanGeometry(points, point_valid, segments, segment_valid, margin, reach)
         return geometry, velocity
-
-    def _with_centres(
-        self, joints: np.ndarray, state: np.ndarray, radius: np.ndarray, velocity: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The frame's rows followed by the centres' (module docstring): each the mean of
-        its joints (NaN and not tracked unless all are usable), the largest of their
-        uncertainty radii, the mean of their velocities."""
-        of = self._centre_of
-        count = of.sum(axis=1)
-        usable = (state != 0) & np.isfinite(joints).all(axis=1)
-        whole = (of & usable).sum(axis=1) == count
-        mean = (of @ np.nan_to_num(joints)) / count[:, None]
-        mean[~whole] = np.nan
-        c_state = np.where(whole, np.where(of, state, 127).min(axis=1), 0).astype(np.int8)
-        c_radius = np.where(of, radius, 0.0).max(axis=1)
-        c_velocity = (of @ np.nan_to_num(velocity)) / count[:, None]
-        return (
-            np.vstack([joints, mean]),
-            np.concatenate([state, c_state]),
-            np.concatenate([radius, c_radius]),
-            np.vstack([velocity, c_velocity]),
-        )
 
     def part_joints(self) -> np.ndarray:
         """(K, J) bool: the joints of each part (chain, mid-point ends and reach; a centre's
