@@ -22,6 +22,7 @@ from qpavoid.experiments.run_spec import RunSpec
 from qpavoid.human.body import BodyModel, KinectHuman, body_model
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.landmarks import FORMAT_NAMES, LandmarkMap, skeleton_format
+from qpavoid.human.people import People
 from qpavoid.human.skeleton import FORMATS_DIR, INFERRED, NOT_TRACKED, TRACKED, SkeletonFormat
 from qpavoid.loop.camera import Camera, CameraConfig
 from qpavoid.scenarios.generated import make_scenario
@@ -344,3 +345,20 @@ def test_equal_formats_hash_equal(tmp_path):
     again = SkeletonFormat.load(tmp_path / "k4abt.toml")
     shipped = skeleton_format("k4abt")
     assert again == shipped and hash(again) == hash(shipped) and again in {shipped}
+
+
+def test_a_frame_built_by_hand_with_an_infinity_or_a_wrong_shape_is_refused():
+    """An adversarial tester's case: a HumanFrame built without HumanFrame.check, one
+    clavicle at infinity, dropped the clavicles' centre and the robot moved; a (J, 2)
+    frame raised a bare ValueError. Both are InputErrors now, alone or among People."""
+    robot = load_robot()
+    controller = QPController(robot, human=body_model(skeleton_format("k4abt")))
+    q = inverse_kinematics(robot, controller.path.reference(0.0)[0])
+    joints = np.tile([1.5, 0.0, 0.5], (32, 1))
+    joints[4] = np.inf
+    state = np.full(32, TRACKED, dtype=np.int8)
+    for frame in (HumanFrame(joints, state), HumanFrame(joints[:, :2], state)):
+        with pytest.raises(InputError, match="HumanFrame's joints must be"):
+            controller.step(q, frame, None, 0.0, frame_age_s=0.01)
+        with pytest.raises(InputError, match="HumanFrame's joints must be"):
+            controller.step(q, People((0,), (frame,)), None, 0.0, frame_age_s=0.01)

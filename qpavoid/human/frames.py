@@ -61,12 +61,23 @@ class HumanFrame(NamedTuple):
         """A frame of ``skeleton`` from raw arrays, checked (``state=None``: every joint
         tracked).
 
+        A :class:`HumanFrame` is returned as it is, after a cheap check of its shape and
+        that no coordinate is infinite (a frame built by hand, not by this method).
+
         Raises
         ------
         InputError
             On a wrong shape, an infinite coordinate or a state outside {0, 1, 2}.
         """
-        if isinstance(joints, HumanFrame) and state is None:
+        if isinstance(joints, HumanFrame) and state is None:  # built already: its shape
+            shape = np.shape(joints.joints)  # and no infinity, cheaply (a tick's hot path)
+            if len(shape) != 2 or shape[1] != 3 or np.isinf(joints.joints).any():
+                raise InputError(
+                    f"a HumanFrame's joints must be (J, 3) with no infinite coordinate, got "
+                    f"shape {shape} (build frames with HumanFrame.check)",
+                    name="joints",
+                    value=joints.joints,
+                )
             return joints
         j = check_joints(joints, skeleton=skeleton)
         s = (

@@ -13,8 +13,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import NamedTuple
 
-import numpy as np
-
 from qpavoid.core.errors import InputError
 from qpavoid.human.frames import HumanFrame, nobody
 from qpavoid.human.kinect_v2 import KINECT_V2
@@ -61,19 +59,8 @@ def as_people(joints: object, state: object = None, skeleton: SkeletonFormat = K
         else People((0,), (HumanFrame.check(joints, state, skeleton),))
     )
     for frame in people.frames:
-        if np.ndim(frame.joints) != 2 or np.shape(frame.joints)[1:] != (3,):
-            raise InputError(
-                f"a frame's joints must be (J, 3), got {np.shape(frame.joints)}",
-                name="joints",
-                value=np.shape(frame.joints),
-            )
-        if np.isinf(frame.joints).any():  # a HumanFrame built without HumanFrame.check
-            raise InputError(
-                "a frame with an infinite coordinate (HumanFrame.check refuses it; NaN is "
-                "a lost joint)",
-                name="joints",
-                value=frame.joints,
-            )
+        if isinstance(joints, People):  # frames built elsewhere: HumanFrame.check's glance
+            HumanFrame.check(frame, None, skeleton)
         if frame.joints.shape[0] != skeleton.n_joints:
             raise InputError(
                 f"a frame of {frame.joints.shape[0]} joints given where {skeleton.title} "
