@@ -5,11 +5,13 @@ in one line with exit 2."""
 from __future__ import annotations
 
 import re
+import shlex
 import shutil
 import subprocess
 import sys
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,6 +20,7 @@ from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import load_robot
 from qpavoid.control.qp import QPController
 from qpavoid.core.errors import InputError, SkeletonFormatError
+from qpavoid.experiments.campaign import campaign_spec, rerun_command
 from qpavoid.experiments.run_spec import RunSpec
 from qpavoid.human.body import BodyModel, KinectHuman, body_model
 from qpavoid.human.frames import HumanFrame
@@ -362,3 +365,15 @@ def test_a_frame_built_by_hand_with_an_infinity_or_a_wrong_shape_is_refused():
             controller.step(q, frame, None, 0.0, frame_age_s=0.01)
         with pytest.raises(InputError, match="HumanFrame's joints must be"):
             controller.step(q, People((0,), (frame,)), None, 0.0, frame_age_s=0.01)
+
+
+def test_a_close_work_rerun_line_names_a_users_camera_file_whole(tmp_path):
+    """A second tester's case: the re-run line of a worst close-work case named a camera
+    file relative and unquoted, so it broke from inside worst/ or on a space."""
+    folder = tmp_path / "dir with space"
+    folder.mkdir()
+    path = _user_camera(folder)
+    spec = campaign_spec("analytic", camera=str(path), motion="closework")
+    line = rerun_command(SimpleNamespace(seed=3), spec)
+    assert f"--camera {shlex.quote(str(path.absolute()))}" in line
+    assert shlex.split(line)[shlex.split(line).index("--camera") + 1] == str(path.absolute())

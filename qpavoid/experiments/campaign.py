@@ -51,6 +51,7 @@ from qpavoid.core.signals import handled_by
 from qpavoid.experiments.run_spec import RunSpec
 from qpavoid.experiments.sweep import CloseWorkCheck, StrikeCheck, SweepSpec, summarize, sweep
 from qpavoid.human.frames import HumanFrame, HumanMotion
+from qpavoid.human.landmarks import format_file
 from qpavoid.output.run_files import staged_output
 from qpavoid.scenarios.closework import closework_case, closework_motion
 from qpavoid.scenarios.strikes import strike_case, strike_motion
@@ -297,7 +298,7 @@ def rerun_command(run: CampaignRun, spec: SweepSpec) -> str:
         cap = spec.max_time_s
         if cap is None:
             cap = closework_case(run.seed, load_robot(spec.robot)).duration_s
-        named = str(Path(spec.camera).absolute()) if spec.camera.endswith(".toml") else spec.camera
+        named = str(format_file(spec.camera) or spec.camera)  # a file: absolute, from worst/
         camera = "" if spec.camera == RunSpec.camera else f" --camera {shlex.quote(named)}"
         latency = "" if spec.latency_s is None else f" --latency {spec.latency_s:g}"
         latency += f" --payload {spec.payload_kg:g}" if spec.payload_kg else ""

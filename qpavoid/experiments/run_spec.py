@@ -19,7 +19,7 @@ from qpavoid.core.checks import check_choice, check_range
 from qpavoid.core.errors import InputError, SkeletonFormatError
 from qpavoid.drive.connect import parse_arm
 from qpavoid.human.body import BodyModel, body_model
-from qpavoid.human.landmarks import FORMAT_NAMES, skeleton_format
+from qpavoid.human.landmarks import FORMAT_NAMES, format_file, skeleton_format
 from qpavoid.laws.pfl import PFLConfig
 from qpavoid.loop.live_input import parse_address
 from qpavoid.scenarios import motions
@@ -179,7 +179,7 @@ class RunSpec:
         check_choice("distance method", self.distance, DISTANCES)
         check_choice("safety mode (--safety)", self.safety, SAFETY_MODES)
         check_choice("bench (--bench)", self.bench, BENCHES)
-        if not str(self.camera).endswith(".toml"):
+        if format_file(self.camera) is None:
             check_choice("camera (--camera)", self.camera, FORMAT_NAMES)
         fmt = skeleton_format(self.camera)  # a format file: read and checked (one line)
         if fmt.body:

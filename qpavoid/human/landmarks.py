@@ -44,6 +44,7 @@ __all__ = [
     "LandmarkMap",
     "body_frame",
     "camera_frame",
+    "format_file",
     "landmark_map",
     "skeleton_format",
 ]
@@ -61,6 +62,13 @@ FORMAT_NAMES = ("kinect_v2", "k4abt", "zed_body_34", "zed_body_38", "mediapipe_p
 @cache
 def _load(path: Path) -> SkeletonFormat:
     return SkeletonFormat.load(path)
+
+
+def format_file(name: object) -> Path | None:
+    """The absolute path of the camera's own format file ``name`` names (``*.toml``; its
+    body file is found beside this path, not beside a link's target), else None (a
+    shipped format's name)."""
+    return Path(name).absolute() if isinstance(name, str) and name.endswith(".toml") else None
 
 
 @cache
@@ -126,8 +134,9 @@ def skeleton_format(name: str | SkeletonFormat) -> SkeletonFormat:
         return name
     if name == KINECT_V2.name:
         return KINECT_V2
-    if isinstance(name, str) and name.endswith(".toml"):  # a camera's own format file
-        return _user_format(Path(name).absolute())  # its body file beside it, not a link's
+    path = format_file(name)
+    if path is not None:  # a camera's own format file
+        return _user_format(path)
     if not isinstance(name, str) or name not in FORMAT_NAMES:
         raise InputError(
             f"unknown skeleton format {name!r}; the formats are {', '.join(FORMAT_NAMES)}",
