@@ -5,14 +5,17 @@
     python benchmarks/cameras.py --budget     # the longest latency free passes, per camera
     python benchmarks/cameras.py --terms      # what each term costs, in free at 60 ms
 
-For each skeleton format (its latency, noise, joint set, derived landmarks widened by their
-uncertainty, failure modes: docs/sensors.md §10), the QP controller with speed and
-separation monitoring on the real bench: the time to the goal and the time stopped in
-``free``, ``test1``, ``test2`` and ``--random`` random approaches, at the format's own
-latency and at the Kinect v2's (60 ms), which tells the latency's share of the cost from
-the derived landmarks'. With ``--terms``, ``free`` at 60 ms for each camera with one term
-switched to the Kinect v2's at a time (noise, no landmark uncertainty, Z_d) and the
-landmark uncertainty scaled by 0.5 and 0.25. The numbers of docs/safety.md §7b.
+For each skeleton format (its latency, noise, joint set, failure modes, and its body model on
+its own joints: docs/sensors.md §10), both controllers with speed and separation monitoring
+(or ``--safety pfl``) on the real bench: the time to the goal and the time stopped in
+``free``, ``test1``, ``test2`` and ``--random`` random approaches, at the format's own latency
+and (``--at-kinect-latency``) at the Kinect v2's (60 ms), which tells the latency's share.
+With ``--budget``, the longest latency at which ``free`` reaches its goal within 16 s, under
+ISO 13855's speeds or the human motion model's options (``--body-speed``,
+``--body-acceleration``, ``--speed-error``). With ``--terms``, ``free`` at 60 ms on the body's
+landmarks (issue 28's path) with one term switched to the Kinect v2's at a time (noise, no
+landmark uncertainty, Z_d) and the landmark uncertainty scaled by 0.5 and 0.25. The numbers
+of docs/safety.md §7b.
 """
 
 from __future__ import annotations
@@ -26,13 +29,33 @@ from pathlib import Path
 
 import numpy as np
 
+from qpavoid.arm.model import Robot
 from qpavoid.control.analytic import AnalyticController
 from qpavoid.control.controller import Controller
 from qpavoid.control.qp import QPController
-from qpavoid.experiments.runs import RunSpec, build_controller, simulate_one, spec_robot
+from qpavoid.control.tick import ControllerConfig
+from qpavoid.experiments.runs import (
+    RunSpec,
+    build_controller,
+    cell_uncertainty_m,
+    simulate_one,
+    spec_robot,
+)
+from qpavoid.human.body import BodyModel
 from qpavoid.human.kinect_v2 import KINECT_V2
-from qpavoid.human.landmarks import FORMAT_NAMES
+from qpavoid.human.landmarks import FORMAT_NAMES, skeleton_format
 from qpavoid.loop.camera import CameraConfig
+
+
+def rebuilt(
+    base: Controller, robot: Robot, config: ControllerConfig, human: BodyModel | None
+) -> Controller:
+    """``base``'s controller again, of the same kind and settings, with ``config`` and
+    ``human`` (None: the paper's model on the body's landmarks)."""
+    if isinstance(base, QPController):
+        return QPController(robot, config=config, human=human, qp=base.qp)
+    assert isinstance(base, AnalyticController)
+    return AnalyticController(robot, config=config, human=human, analytic=base.analytic)
 
 
 def run(spec: RunSpec, ssm: dict | None = None) -> dict:
@@ -42,14 +65,7 @@ def run(spec: RunSpec, ssm: dict | None = None) -> dict:
         robot = spec_robot(spec)
         base = build_controller(spec, robot)
         config = replace(base.config, ssm=replace(base.config.ssm, **ssm))
-        controller: Controller
-        if isinstance(base, QPController):
-            controller = QPController(robot, config=config, human=base.human, qp=base.qp)
-        else:
-            assert isinstance(base, AnalyticController)
-            controller = AnalyticController(
-                robot, config=config, human=base.human, analytic=base.analytic
-            )
+        controller = rebuilt(base, robot, config, base.human)
         m = simulate_one(spec, robot=robot, controller=controller).metrics
     else:
         m = simulate_one(spec).metrics
@@ -62,14 +78,21 @@ def run(spec: RunSpec, ssm: dict | None = None) -> dict:
 
 
 def terms(camera: str, rate_hz: float) -> dict:
-    """``free`` at the Kinect v2's latency with one term at a time as the Kinect v2's."""
+    """``free`` at the Kinect v2's latency with one term at a time as the Kinect v2's, on
+    the body's landmarks (issue 28's question: what the mapping's widening costs; a cell on
+    the camera's own body has none)."""
     latency = KINECT_V2.sensor.latency_s
     spec = RunSpec(
         "free", controller="qp", safety="ssm", camera=camera, latency_s=latency, rate_hz=rate_hz
     )
     robot = spec_robot(spec)
-    base = build_controller(spec, robot)
-    extra = base.config.perception.landmark_uncertainty_m
+    native = build_controller(spec, robot)
+    extra = cell_uncertainty_m([skeleton_format(camera)])
+    on_landmarks = replace(
+        native.config,
+        perception=replace(native.config.perception, landmark_uncertainty_m=extra),
+    )
+    base = rebuilt(native, robot, on_landmarks, None)
     variants = {
         "as is": (base.config, {}),
         "kinect noise": (base.config, {"noise_m": KINECT_V2.sensor.noise_m}),
@@ -98,8 +121,8 @@ def terms(camera: str, rate_hz: float) -> dict:
         )
     out = {}
     for label, (config, camera_fields) in variants.items():
-        controller = QPController(robot, config=config, qp=base.qp)
-        cfg = CameraConfig.of(camera, latency_s=latency, **camera_fields)  # type: ignore[arg-type]
+        controller = rebuilt(base, robot, config, None)
+        cfg = CameraConfig.of(camera, latency_s=latency, **camera_fields)
         m = simulate_one(spec, robot=robot, controller=controller, camera=cfg).metrics
         out[label] = {"duration_s": m["duration_s"], "stopped_s": m["stopped_s"]}
         print(
