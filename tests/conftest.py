@@ -90,6 +90,12 @@ def human():
     return qpavoid.KinectHuman()
 
 
+def seeds(n: int, fast: int) -> list:
+    """Seeds ``0 .. n-1`` as parameters, all but the first ``fast`` in the slow suite: the
+    default suite keeps a few random cases of a sweep, ``-m slow`` runs them all."""
+    return [i if i < fast else pytest.param(i, marks=pytest.mark.slow) for i in range(n)]
+
+
 def random_q(rng: np.random.Generator, robot, margin: float = 0.05) -> np.ndarray:
     """Uniform joint angles inside the position limits (rad)."""
     return rng.uniform(robot.q_min + margin, robot.q_max - margin)

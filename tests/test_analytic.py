@@ -131,7 +131,7 @@ class Corrupted:
 
 
 @pytest.mark.parametrize(
-    "seed", [*range(3), *(pytest.param(s, marks=pytest.mark.slow) for s in range(3, 6))]
+    "seed", [*range(1), *(pytest.param(s, marks=pytest.mark.slow) for s in range(1, 6))]
 )
 def test_invariants_over_random_approaches(robot, seed):
     rng = np.random.default_rng(seed)

@@ -185,9 +185,9 @@ def test_a_users_camera_file_is_refused_by_the_runs_spec(tmp_path, fmt_edit, bod
         RunSpec("free", camera=str(path))
 
 
-@pytest.mark.parametrize(("fmt_edit", "body_edit", "match"), BAD_USER_FILES[::5])
+@pytest.mark.parametrize(("fmt_edit", "body_edit", "match"), BAD_USER_FILES[::10])
 def test_a_users_camera_file_gets_one_line_and_exit_2(tmp_path, fmt_edit, body_edit, match):
-    """... and on the command line: one line on stderr, exit 2."""
+    """... and on the command line: one line on stderr, exit 2 (one file: the others above)."""
     path = _user_camera(tmp_path, fmt_edit, body_edit)
     done = subprocess.run(
         [sys.executable, "-m", "qpavoid", "run", "free", "--camera", str(path), "--max-time", "1"],

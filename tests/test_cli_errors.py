@@ -220,7 +220,7 @@ def assert_refused(status: object, stdout: str, stderr: str, word: str) -> None:
 #: Two of them as a user types them: each subprocess costs a second of the suite, and every
 #: one is refused in-process above.
 THROUGH_THE_ENTRY_POINT = [
-    bad
+    bad if bad[0][0] == "run" else pytest.param(*bad, marks=pytest.mark.slow)
     for bad in BAD_INPUTS
     if bad[0]
     in (

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import seeds
 
 import qpavoid
 from qpavoid.arm.coverage import coverage
@@ -75,7 +76,7 @@ def _principal_axis_capsule(points: np.ndarray) -> float:
 CLOUDS = 12
 
 
-@pytest.mark.parametrize("seed", range(CLOUDS))
+@pytest.mark.parametrize("seed", seeds(CLOUDS, fast=4))  # every shape (seed % 3)
 def test_every_point_lies_inside_and_the_fit_beats_the_principal_axis(seed):
     rng = np.random.default_rng(seed)
     shape = seed % 3
@@ -105,7 +106,7 @@ def test_segment_distances_against_a_dense_sampling_of_the_segment():
     np.testing.assert_allclose(segment_distances(points, a, a), np.linalg.norm(points - a, axis=1))
 
 
-@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("seed", seeds(4, fast=2))
 def test_a_sampled_capsule_gives_back_its_own_capsule(seed):
     rng = np.random.default_rng(100 + seed)
     radius = rng.uniform(0.03, 0.09)

@@ -115,7 +115,9 @@ def test_a_flood_keeps_each_bodys_newest_frame_and_counts_the_rest():
         return stamps[k]
 
     sign, stamps = signer(), []
-    with Listener(("127.0.0.1", 0), CAL) as listener:
+    # the flood's bookkeeping, not lateness: on a loaded machine the receiver (nice +10)
+    # may reach a datagram after the fusion's max_age_s and rightly drop it as late
+    with Listener(("127.0.0.1", 0), CAL, max_age_s=60.0) as listener:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
             for k in range(400):
                 sock.sendto(sign.encode(frame(t=stamp(k))._replace(body=k % 2)), listener.address)
@@ -145,8 +147,8 @@ def test_a_flood_keeps_each_bodys_newest_frame_and_counts_the_rest():
     if received == 409:  # nothing shed by the kernel: exactly the newest of each body
         assert index == [398, 399]
         assert counts["dropped_bad_header"] == 8
-        # the old frame: older than its body's last, or (on a slow machine) too old already
-        assert counts["out_of_order_or_duplicate"] + counts["late"] == 1
+        assert counts["late"] == 0
+        assert counts["out_of_order_or_duplicate"] == 1  # the old frame
 
 
 def test_a_busy_port_is_a_clear_error():

@@ -58,8 +58,8 @@ def _legend(ax) -> list[str]:
     "scenario, kind",
     [
         ("test1", "test1"),
-        ("test2", "test2"),
-        ("free", "other"),
+        pytest.param("test2", "test2", marks=pytest.mark.slow),  # test1's figures, by kind
+        pytest.param("free", "other", marks=pytest.mark.slow),
         pytest.param("random:3", "other", marks=pytest.mark.slow),  # as free's: with the slow
         pytest.param("", "other", marks=pytest.mark.slow),
     ],
