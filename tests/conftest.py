@@ -17,7 +17,7 @@ from qpavoid.fusion import person as fusion_person
 from qpavoid.human import _kernels as body_kernels
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.laws import _kernels as law_kernels
-from qpavoid.loop import simulation
+from qpavoid.loop import plants
 from qpavoid.loop.camera import CameraConfig
 from qpavoid.perception import _kernels as perception_kernels
 from qpavoid.perception.tracker import PerceptionConfig
@@ -57,10 +57,11 @@ def pytest_configure(config):
 
 @pytest.fixture(autouse=True)
 def every_command_within_the_arms_limits(request, monkeypatch):
-    """Every command of every run a test makes (through ``simulate``) is within the arm's
-    velocity, acceleration and jerk limits (issue 27): the run's own check is recorded and
-    the test fails on any broken limit. A test that runs the paper's steps on purpose
-    (``ControllerConfig(smooth=False)``) says so with ``@pytest.mark.paper_steps``."""
+    """Every command of every run a test makes (through ``simulate``'s arms,
+    :mod:`qpavoid.loop.plants`) is within the arm's velocity, acceleration and jerk limits
+    (issue 27): the run's own check is recorded and the test fails on any broken limit.
+    A test that runs the paper's steps on purpose (``ControllerConfig(smooth=False)``)
+    says so with ``@pytest.mark.paper_steps``."""
     checks: list[CommandCheck] = []
 
     class Recorded(CommandCheck):
@@ -68,7 +69,7 @@ def every_command_within_the_arms_limits(request, monkeypatch):
             super().__post_init__()
             checks.append(self)
 
-    monkeypatch.setattr(simulation, "CommandCheck", Recorded)
+    monkeypatch.setattr(plants, "CommandCheck", Recorded)
     yield
     if request.node.get_closest_marker("paper_steps") is None:
         broken = [c.counts for c in checks if c.total()]

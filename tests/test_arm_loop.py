@@ -355,12 +355,13 @@ def test_every_command_sent_is_within_limits_however_late_the_ticks(robot, monke
     command, a late tick at the end of the run: every command the loop sends keeps the
     arm's limits from the one before (or from rest, where the arm held none for 0.1 s and
     stopped on its own), and the run ends with the arm ramped to rest."""
-    from qpavoid.loop import simulation
+    from qpavoid.loop import plants, simulation
 
     compute, reads, term_at = LATENESS[case]
     clock = FakeTime()
     monkeypatch.setattr(simulation, "time", clock)
-    monkeypatch.setattr(simulation, "Watchdog", QuietWatchdog)
+    monkeypatch.setattr(plants, "time", clock)
+    monkeypatch.setattr(plants, "Watchdog", QuietWatchdog)
     ctrl, q0 = start(robot)
     step, calls = ctrl.step, []
 

@@ -9,12 +9,20 @@ body model's skeleton format (one per joint).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 
-from qpavoid.arm.model import Robot
+from qpavoid.arm.model import Kinematics, Robot
+from qpavoid.control.controller import Controller
+from qpavoid.control.tick import Command
+from qpavoid.distance.methods import distance_method
+from qpavoid.human.frames import HumanFrame
+from qpavoid.human.people import People
 from qpavoid.human.skeleton import SkeletonFormat
 
-__all__ = ["TEXT_KEYS", "finished", "new_log", "repulsion_keys"]
+__all__ = ["TEXT_KEYS", "RunLogger", "finished", "new_log", "repulsion_keys"]
 
 #: The arrays of text, one string a tick: why the robot stops ("" while it moves) and why
 #: the input is suspect ("" while it is not: a live source's flagged people).
@@ -75,3 +83,98 @@ def finished(
     for key in TEXT_KEYS:
         out[key] = np.array(texts[key][:n], dtype=str)
     return out
+
+
+class RunLogger:
+    """A run's log beside its loop: a row a tick (:meth:`row`), the stop events, the last
+    guard on what the arm did (:meth:`guard`), a live view's rows (``watch``).
+
+    Parameters
+    ----------
+    n_max
+        Most ticks of the run.
+    controller
+        The run's controller (its robot, body model, distance method and closest frame).
+    watch
+        Called with the tick just logged (its row of every log key, copied, and its
+        ``stop_reason``), at most 30 times a second of run time; None for none.
+    """
+
+    def __init__(
+        self,
+        n_max: int,
+        controller: Controller,
+        watch: Callable[[dict[str, Any]], None] | None = None,
+    ):
+        self.controller = controller
+        self.robot = robot = controller.robot
+        self.log = new_log(n_max, robot, controller.human.skeleton)
+        self.repulsion = repulsion_keys(robot)
+        self.texts: dict[str, list[str]] = {key: [] for key in TEXT_KEYS}
+        self.stop_events: list[dict[str, Any]] = []
+        other = "capsules" if controller.config.distance == "spheres" else "spheres"
+        self.other = distance_method(other, robot, controller.human)  # distance_other
+        self.watch, self.last_watch = watch, -1.0
+        self.vel_violations = self.pos_violations = 0
+        self.n = 0  # the ticks logged
+        self._was_stopped = False
+
+    def guard(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """The last guard: ``dq`` saturated at the joints' velocity limits (a tick that
+        needed it counted), and a tick out of the joint limits counted."""
+        robot = self.robot
+        if np.any(np.abs(dq) > robot.dq_max * (1 + 1e-9)):
+            self.vel_violations += 1
+            dq = np.clip(dq, -robot.dq_max, robot.dq_max)
+        if np.any(q > robot.q_max + 1e-12) or np.any(q < robot.q_min - 1e-12):
+            self.pos_violations += 1
+        return dq
+
+    def row(
+        self,
+        k: int,
+        t: float,
+        kin: Kinematics,
+        dq: np.ndarray,
+        cmd: Command,
+        human: HumanFrame | People,
+        tau: float,
+        tick_us: float,
+        frame_age_s: float,
+        alert: str,
+    ) -> None:
+        """Tick ``k``: at ``t`` (s), the arm at ``kin`` moving at ``dq`` (rad/s), the
+        command, the frame given, the path clock, the tick's time (µs), the frame's age (s)
+        and the source's alert."""
+        log, texts = self.log, self.texts
+        if cmd.stopped and not self._was_stopped:
+            self.stop_events.append({"t": round(t, 6), "reason": cmd.reason})
+        self._was_stopped = cmd.stopped
+        other_table = self.other.closest(kin, self.controller.geometry(human))[0]
+        v_repelled, v_end_effector = self.repulsion
+        log["t"][k], log["q"][k], log["dq"][k], log["dq_command"][k] = t, kin.q, dq, cmd.dq
+        log["joints"][k], log["state"][k] = self.controller.closest_frame or human
+        log["stopped"][k], log["f"][k] = cmd.stopped, cmd.f
+        log["distance"][k], log["distance_other"][k] = cmd.distance, other_table.min_per_set()
+        log[v_repelled][k], log[v_end_effector][k] = cmd.v_repelled, cmd.v_end_effector
+        log["ee_pos"][k], log["ee_ref"][k] = cmd.ee_pos, cmd.ee_ref
+        log["tau"][k], log["tick_us"][k], log["frame_age_s"][k] = tau, tick_us, frame_age_s
+        closest = np.argmin(cmd.table.distance, axis=1)  # each set's closest pair
+        sets = np.arange(len(closest))
+        log["robot_point"][k] = cmd.table.robot_point[sets, closest]
+        log["human_point"][k] = cmd.table.human_point[sets, closest]
+        texts["stop_reason"].append(cmd.reason if cmd.stopped else "")
+        texts["input_alert"].append(alert)
+        if self.watch is not None and t - self.last_watch >= 1.0 / 30.0:
+            self.watch(
+                {key: v[k].copy() for key, v in log.items()} | {x: texts[x][k] for x in texts}
+            )
+            self.last_watch = t
+        self.n = k + 1
+
+    def finished(self) -> dict[str, np.ndarray]:
+        """The log of the ticks logged (and the live view's last row, whenever it came)."""
+        log = finished(self.log, self.n, self.texts)
+        if self.watch is not None and self.n:
+            self.watch({key: v[self.n - 1].copy() for key, v in log.items()})
+        return log

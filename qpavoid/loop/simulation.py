@@ -34,21 +34,21 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 import pinocchio as pin
 
-from qpavoid.arm.braking import ArmResponse, BrakingConfig, WallClockArm
+from qpavoid.arm import braking
+from qpavoid.arm.braking import ArmResponse, BrakingConfig
 from qpavoid.arm.ik import inverse_kinematics
+from qpavoid.arm.model import Robot
 from qpavoid.control.controller import Controller
+from qpavoid.control.tick import Command
 from qpavoid.core.errors import ArmError, InputError
 from qpavoid.core.signals import Interruption
-from qpavoid.distance.methods import distance_method
 from qpavoid.drive.interface import Arm
-from qpavoid.drive.limits import CommandCheck, CommandLimits
-from qpavoid.drive.watchdog import Watchdog
 from qpavoid.human.frames import HumanFrame, HumanMotion
 from qpavoid.human.people import People
 from qpavoid.loop.camera import Camera, CameraConfig
@@ -59,8 +59,9 @@ from qpavoid.loop.metrics import (
     run_metrics,
     truth_metrics,
 )
-from qpavoid.loop.run_log import TEXT_KEYS, finished, new_log, repulsion_keys
-from qpavoid.loop.timing import LoopTiming, StallCheck
+from qpavoid.loop.plants import DrivenArm, KinematicArm, Plant, WallClockArm, offline_limits
+from qpavoid.loop.run_log import RunLogger
+from qpavoid.loop.timing import LoopTiming
 from qpavoid.loop.truth import TrueClearance, truth_body
 
 
@@ -207,227 +208,91 @@ def simulate(
     cfg = config or SimConfig()
     robot, path = controller.robot, controller.path
     dt = 1.0 / cfg.control_rate_hz
-    q = (
-        inverse_kinematics(robot, path.reference(0.0)[0])
-        if q0 is None
-        else robot.check_q(q0).astype(float).copy()
-    )
     n_max = math.floor(cfg.max_time_s * cfg.control_rate_hz + 1e-9) + 1
-    other_name = "capsules" if controller.config.distance == "spheres" else "spheres"
-    other = distance_method(other_name, robot, controller.human)
     feed: FrameSource
-    realtime = realtime or arm is not None
-    if arm is not None:
-        q = arm.read().q.copy()  # the arm is where it is
     if source is not None:
         feed = source
     elif motion is not None:
         feed = Camera(motion, cfg.camera, controller.human.skeleton)
     else:
         raise InputError("simulate needs a motion or a frame source", name="motion")
-    arm_model = (
-        None
-        if cfg.braking is None or arm is not None
-        else ArmResponse(cfg.braking.resolve(robot.arm), robot.joint_names, dt)
-    )
     truth = (
         TrueClearance(robot, truth_body(controller.human), motion, controller.config.pfl)
         if cfg.measure_truth and motion is not None
         else None
     )
-    goal = path.reference(path.duration_s)[0]
-    wall = WallClockArm(arm_model, dt, robot, record=truth is not None and arm is None)
-    if arm is not None:  # what the arm's interface accepts, if tighter
-        lim = arm.limits
-        controller.accept_limits(lim.velocity_radps, lim.acceleration_radps2, lim.jerk_radps3)
-    checked = CommandCheck(  # every command vs the arm's limits
-        CommandLimits.of(robot, dt) if arm is None else replace(arm.limits, dt_s=dt)
+    interrupt = Interruption(realtime or arm is not None)
+    plant = _plant(controller, cfg, dt, realtime, arm, interrupt, record=truth is not None)
+    q = (
+        plant.start()
+        if isinstance(plant, DrivenArm)
+        else inverse_kinematics(robot, path.reference(0.0)[0])
+        if q0 is None
+        else robot.check_q(q0).astype(float).copy()
     )
-
-    log = new_log(n_max, robot, controller.human.skeleton)
-    v_repelled, v_end_effector = repulsion_keys(robot)
-    texts: dict[str, list[str]] = {key: [] for key in TEXT_KEYS}
-    stop_events = []
-    vel_violations = pos_violations = 0
-    tau, was_stopped, last_progress, last_watch = 0.0, False, -1.0, -1.0
-    reached, overruns, n = False, 0, 0
-    interrupt = Interruption(realtime)
-    budget = controller.config.compute_budget_s  # what speed and separation counted
-    deadline_s = cfg.deadline_s if cfg.deadline_s is not None else budget if budget > 0 else dt
-    timing = LoopTiming(dt, deadline_s)
-    ended_by = ""  # an arm's error, if one ended the run
-    measured = np.zeros(robot.nv)  # the arm's reported velocity
-    stall = StallCheck(cfg.stall_timeout_s)
-    dog = Watchdog(cfg.watchdog_s, arm.stop) if arm is not None else None
-    held = _Held(cfg.watchdog_s, controller, checked)  # the arm's hold of the last command
-    wall0 = time.perf_counter()
-    watching = False  # the watchdog starts with the first command (not the warm-up tick)
+    goal = path.reference(path.duration_s)[0]
+    logger = RunLogger(n_max, controller, watch)
+    tau, last_progress, reached = 0.0, -1.0, False
+    cmd: Command | None = None
     try:
-        began, tick_start, not_before = -math.inf, -math.inf, -math.inf  # (no tick yet)
+        plant.begin()
         for k in range(n_max):
-            t = k * dt
-            if realtime:
-                if interrupt.requested and k > 0:
-                    break
-                due = wall0 + t
-                if arm is not None:  # never two commands within a period: a late loop
-                    due = max(due, tick_start + dt, not_before)  # skips ticks rather
-                    # than bursting them (a late tick's command: the next a period after it)
-                    if due - wall0 > cfg.max_time_s:
-                        break
-                wait = due - time.perf_counter()
-                if wait > 0:
-                    time.sleep(wait)
-                else:
-                    overruns += wait < -dt
-                # the run clock is the wall clock: a late tick sees the time it really is,
-                # so the frames it holds are as old as they really are
-                t = max(t, time.perf_counter() - wall0)
-            began = tick_start = time.perf_counter()
-            if arm is not None:
-                try:
-                    state = stall(arm.read(), began)
-                    began = time.perf_counter()  # the command's deadline runs from its state
-                    if (gap := held.ran_out(began)) is not None:  # the loop itself stalled:
-                        timing.stalled(gap)  # the arm stopped on its own; start from rest
-                except ArmError as exc:
-                    ended_by = f"arm {exc.reason or 'error'}: {exc}"
-                    break
-                q, measured = state.q, state.dq
-            human, captured_s = feed.frame_at(t)
+            t_tick = plant.wait(k, k * dt)
+            read = None if t_tick is None else plant.read(q)
+            if t_tick is None or read is None:
+                break
+            human, captured_s = feed.frame_at(t_tick)
             alert = getattr(feed, "alert", "")  # a live source's suspect input, if any
-            if realtime:  # getting the frame took time too: the age is judged now
-                t = max(t, time.perf_counter() - wall0)
-                if arm is None:
-                    q, moved_tau = wall.advance(q, t)  # the arm kept moving until now
-                else:  # the arm held the last command at most watchdog_s
-                    moved_tau = wall.path_advance(t, cfg.watchdog_s)
-                tau = min(tau + moved_tau, path.duration_s)
+            t, q, moved_tau = plant.catch_up(t_tick, read)
+            tau = min(tau + moved_tau, path.duration_s)
             if progress is not None and t - last_progress >= 1.0 / 30.0:
                 progress(t)
                 last_progress = t
             t0 = time.perf_counter_ns()
             try:
                 cmd = controller.step(q, human, None, tau, t - captured_s, captured_s)
-            except InputError as exc:  # (a real arm reporting NaN): stop it, then say why
-                if arm is None:
-                    raise
-                ended_by = f"input error: {exc}"
-                break
+            except InputError as exc:
+                if plant.input_error(exc):
+                    break
+                raise
             tick_us = (time.perf_counter_ns() - t0) / 1e3
-            late = None
-            if arm is not None and (late := timing.late(began, now := time.perf_counter())):
-                why = f"missed deadline ({late * 1e3:.1f} ms late)"
-                if (gap := held.ran_out(now)) is not None:  # so late that the arm stopped
-                    timing.stalled(gap)  # on its own meanwhile: its ramp is over, at rest
-                    cmd = controller.brake(why)
-                else:  # the arm still follows the last command: this is a step from it
-                    cmd = controller.brake(why, instead=True)
-            if arm is not None and checked(cmd.dq):  # never sent (the arm would fault); logged
-                ended_by = f"command beyond the arm's limits: {checked.last}"
-            elif arm is not None:
-                try:
-                    arm.send(cmd.dq)
-                except ArmError as exc:
-                    ended_by = f"arm {exc.reason or 'error'}: {exc}"
-                    break
-                held.sent(sent_at := time.perf_counter())
-                timing.sent(sent_at - wall0, captured_s)
-                if sent_at - tick_start > 0.5 * dt:  # late in its period (a slow read or
-                    not_before = sent_at + dt  # step): the next is not due at once
-                assert dog is not None
-                if not watching:
-                    dog.__enter__()
-                    watching = True
-                dog.kick()
-            kin = robot.kinematics(q, jacobians=False)
-            other_table = other.closest(kin, controller.geometry(human))[0]
-            if truth is not None and arm is None:  # (an arm's: after the run, off its loop)
-                log["true_distance"][k] = truth(kin, t)
-
-            if arm is not None:
-                dq = measured  # what the arm reports
-            elif realtime:
-                dq = wall.command(cmd.dq, t)
-            else:
-                dq = cmd.dq if arm_model is None else arm_model(cmd.dq)
-            if np.any(np.abs(dq) > robot.dq_max * (1 + 1e-9)):
-                vel_violations += 1
-                dq = np.clip(dq, -robot.dq_max, robot.dq_max)
-            if np.any(q > robot.q_max + 1e-12) or np.any(q < robot.q_min - 1e-12):
-                pos_violations += 1
-            if cmd.stopped and not was_stopped:
-                stop_events.append({"t": round(t, 6), "reason": cmd.reason})
-            was_stopped = cmd.stopped
-
-            log["t"][k], log["q"][k], log["dq"][k], log["dq_command"][k] = t, q, dq, cmd.dq
-            log["joints"][k], log["state"][k] = controller.closest_frame or human
-            log["stopped"][k], log["f"][k] = cmd.stopped, cmd.f
-            log["distance"][k], log["distance_other"][k] = cmd.distance, other_table.min_per_set()
-            log[v_repelled][k], log[v_end_effector][k] = cmd.v_repelled, cmd.v_end_effector
-            log["ee_pos"][k], log["ee_ref"][k] = cmd.ee_pos, cmd.ee_ref
-            log["tau"][k], log["tick_us"][k], log["frame_age_s"][k] = tau, tick_us, t - captured_s
-            closest = np.argmin(cmd.table.distance, axis=1)  # each set's closest pair
-            sets = np.arange(len(closest))
-            log["robot_point"][k] = cmd.table.robot_point[sets, closest]
-            log["human_point"][k] = cmd.table.human_point[sets, closest]
-            texts["stop_reason"].append(cmd.reason if cmd.stopped else "")
-            texts["input_alert"].append(alert)
-            if watch is not None and t - last_watch >= 1.0 / 30.0:
-                watch(
-                    {key: v[k].copy() for key, v in log.items()} | {x: texts[x][k] for x in texts}
-                )
-                last_watch = t
-            n = k + 1
-            if ended_by:
+            executed = plant.execute(controller, cmd, t, captured_s)
+            if executed is None:
                 break
-
-            if tau >= path.duration_s and not cmd.stopped:
-                T = robot.end_effector(q)
-                pos_err = np.linalg.norm(T[:3, 3] - goal[:3, 3])
-                rot_err = _rot_err(goal, T)
-                if pos_err < cfg.goal_tolerance_m and rot_err < cfg.goal_tolerance_rad:
-                    reached = True
-                    break
-            if realtime:  # the arm moves on when the next tick comes, however late
-                wall.hold(t, dq, cmd.time_scale)
-            else:
-                q = q + dq * dt
-                tau = min(tau + cmd.time_scale * dt, path.duration_s)
-
-        if arm is not None and not ended_by:  # however it ended: a ramp to rest, on time
-            assert dog is not None
-            ended_by = _ramp_down(controller, arm, checked, dt, dog.kick, held)
+            cmd, dq = executed
+            kin = robot.kinematics(q, jacobians=False)
+            if truth is not None and plant.measured_online:
+                logger.log["true_distance"][k] = truth(kin, t)
+            dq = logger.guard(q, dq)
+            logger.row(k, t, kin, dq, cmd, human, tau, tick_us, t - captured_s, alert)
+            if plant.ended_by:
+                break
+            if tau >= path.duration_s and not cmd.stopped and _at(goal, robot, q, cfg):
+                reached = True
+                break
+            q, moved_tau = plant.move(q, dq, t, cmd)
+            tau = min(tau + moved_tau, path.duration_s)
+        plant.finish(controller)
     finally:
         interrupt.restore()
-        if dog is not None and watching:
-            dog.__exit__(None, None, None)
-        if arm is not None:
-            try:
-                arm.stop()
-            except ArmError as exc:
-                ended_by = ended_by or f"arm {exc.reason or 'error'}: {exc}"
-    log = finished(log, n, texts)
-    if truth is not None and arm is not None:  # where the arm really was, when it was there
+        plant.close()
+    if cmd is None:  # an arm that ended the run before its first command
+        raise ArmError(f"the run ended before its first tick: {plant.ended_by}", value=arm)
+    log = logger.finished()
+    n = logger.n
+    if truth is not None and not plant.measured_online:  # where the arm really was, then
         kinematics = robot.kinematics
         for k in range(n):
             log["true_distance"][k] = truth(kinematics(log["q"][k], jacobians=False), log["t"][k])
-    if watch is not None and n:  # the last tick too, whenever it came
-        watch({key: v[n - 1].copy() for key, v in log.items()})
     avoidance = controller.config.avoidance
     ending = end_of_run(reached, cmd, robot, avoidance, log, goal)
     if interrupt.requested:
         ending["end_reason"] = "interrupted"
-    if ended_by and ended_by != "at rest":
-        ending["end_reason"] = ended_by
-    if realtime:
-        ending["realtime_overruns"] = int(overruns)
-        ending["min_true_clearance_in_gaps_m"] = wall.least_clearance(truth)
-        ending["loop"] = timing.report()
-    if dog is not None and dog.fired:
-        ending["watchdog_fired"] = True
+    if plant.ended_by and plant.ended_by != "at rest":
+        ending["end_reason"] = plant.ended_by
+    ending |= plant.report(truth)
     moving = None if arm is None else measured_motion(robot, log["q"], log["t"])
-    ending |= truth_metrics(log, robot, avoidance, stop_events, dt, moving)
+    ending |= truth_metrics(log, robot, avoidance, logger.stop_events, dt, moving)
     if truth is not None:  # each tick in true contact: its regions, speeds and limits
         touching = np.flatnonzero(np.any(log["true_distance"] <= 0.0, axis=1))
         contacts = {
@@ -438,10 +303,12 @@ def simulate(
         }
         moved = np.any(log["dq"] != 0.0, axis=1) if moving is None else moving
         ending["true_contacts"] = contact_metrics(contacts, moved, log["t"])
+    checked = plant.checked
     if arm is None:  # offline: the whole stream at once, after the run
         checked.stream(log["dq_command"])
     ending["command_limit_violations"] = dict(checked.counts)
     ending["command_limit_worst_ratio"] = {k: round(v, 6) for k, v in checked.worst.items()}
+    vel, pos = plant.violations()
     return SimResult(
         log,
         run_metrics(
@@ -449,9 +316,9 @@ def simulate(
             robot,
             goal,
             reached,
-            stop_events,
-            vel_violations + wall.vel_violations,
-            pos_violations + wall.pos_violations,
+            logger.stop_events,
+            logger.vel_violations + vel,
+            logger.pos_violations + pos,
             controller.name,
             controller.config.distance,
             cfg.control_rate_hz,
@@ -460,67 +327,50 @@ def simulate(
     )
 
 
-class _Held:
-    """When the last command went to the arm, and whether the arm still follows it.
-
-    An arm holds a command for ``hold_s`` (franky's hold, the watchdog's timeout,
-    :class:`~qpavoid.drive.simulated.SimulatedArm`'s ``hold_s``), then brakes to rest on its
-    own. A command sent after that is the first of a new stream, from rest: the
-    controller's ramp and the command check start again from rest, together. Judged from
-    the time of the last *send*, as the arm judges it, not from when a tick began: a late
-    tick sends long after it began, and the arm still follows that command after it.
-    """
-
-    def __init__(self, hold_s: float, controller: Controller, checked: CommandCheck):
-        self.hold_s, self.controller, self.checked = hold_s, controller, checked
-        self.at: float | None = None  # when the command the arm holds was sent, if one
-        self.last = -math.inf  # when the last command was sent (the next: a period later)
-
-    def sent(self, now: float) -> None:
-        """A command went to the arm at ``now`` (wall clock, s)."""
-        self.at = self.last = now
-
-    def ran_out(self, now: float) -> float | None:
-        """If the arm's hold of the last command ran out by ``now``: the controller and
-        the check then start from rest; the time since that command, s (else None)."""
-        if self.at is None or now - self.at <= self.hold_s:
-            return None
-        gap, self.at = now - self.at, None
-        self.controller.at_rest()
-        self.checked.restart()
-        return gap
-
-
-def _ramp_down(
+def _plant(
     controller: Controller,
-    arm: Arm,
-    checked: CommandCheck,
+    cfg: SimConfig,
     dt: float,
-    kick: Callable[[], None],
-    held: _Held,
-) -> str:
-    """The controller's braking ramp sent to ``arm`` once a period (a period after the last
-    command, the loop's included) until it commands rest (at most 10 s); "at rest", or why
-    it could not finish. Where the arm's hold of the last command ran out meanwhile, it
-    stopped on its own: the ramp is over."""
-    start = max(time.perf_counter(), held.last + dt)
-    for k in range(int(10.0 / dt)):
-        wait = start + k * dt - time.perf_counter()
-        if wait > 0:
-            time.sleep(wait)
-        held.ran_out(time.perf_counter())
-        cmd = controller.brake("end of run")
-        if checked(cmd.dq):
-            return f"command beyond the arm's limits: {checked.last}"
-        try:
-            arm.send(cmd.dq)
-        except ArmError as exc:
-            return f"arm {exc.reason or 'error'}: {exc}"
-        held.sent(time.perf_counter())
-        kick()  # (the watchdog, if it runs)
-        if not np.any(cmd.dq):
-            return "at rest"
-    return "at rest"
+    realtime: bool,
+    arm: Arm | None,
+    interrupt: Interruption,
+    record: bool,
+) -> Plant:
+    """The arm the run drives: ``arm``, else the simulated arm on the wall clock
+    (``realtime``) or offline; its response the description's (``cfg.braking``) or exact."""
+    robot = controller.robot
+    response = (
+        None
+        if cfg.braking is None or arm is not None
+        else ArmResponse(cfg.braking.resolve(robot.arm), robot.joint_names, dt)
+    )
+    if arm is None and not realtime:
+        return KinematicArm(robot, dt, offline_limits(robot, dt), response)
+    budget = controller.config.compute_budget_s  # what speed and separation counted
+    deadline_s = cfg.deadline_s if cfg.deadline_s is not None else budget if budget > 0 else dt
+    timing = LoopTiming(dt, deadline_s)
+    wall = braking.WallClockArm(response, dt, robot, record=record and arm is None)
+    if arm is None:
+        return WallClockArm(robot, dt, offline_limits(robot, dt), wall, interrupt, timing)
+    return DrivenArm(
+        robot,
+        dt,
+        controller,
+        wall,
+        interrupt,
+        timing,
+        arm,
+        cfg.max_time_s,
+        cfg.stall_timeout_s,
+        cfg.watchdog_s,
+    )
+
+
+def _at(goal: np.ndarray, robot: Robot, q: np.ndarray, cfg: SimConfig) -> bool:
+    """The end effector at ``q`` is at the goal pose, within the run's tolerances."""
+    T = robot.end_effector(q)
+    pos_err = np.linalg.norm(T[:3, 3] - goal[:3, 3])
+    return bool(pos_err < cfg.goal_tolerance_m and _rot_err(goal, T) < cfg.goal_tolerance_rad)
 
 
 def _rot_err(A: np.ndarray, B: np.ndarray) -> float:
