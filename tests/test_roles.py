@@ -547,6 +547,6 @@ def test_iiwa_defaults_come_from_the_description(robot):
     assert robot.arm.rated_payload_kg == 14.0  # the iiwa 14 R820's
     assert robot.ik_seed.wrist_to_tool_m == 0.126
     ctrl = AnalyticController(robot)  # the settings' None: the description's joints
-    assert robot.joint_names[ctrl.scaled_cols[0]] == "A1"
+    assert robot.joint_names[ctrl.limits.scaled_cols[0]] == "A1"
     assert [robot.joint_names[c] for c in ctrl.repelled_cols] == ["A1", "A2", "A4"]
     assert ctrl.ssm.max_acceleration_radps2 == robot.arm.max_acceleration_radps2

@@ -22,41 +22,32 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from qpavoid.arm.model import Kinematics, Robot, joint_columns
-from qpavoid.control.contact import ContactLimits
-from qpavoid.control.path import PlannedPath, pose_error
+from qpavoid.arm.model import Robot
+from qpavoid.control.path import PlannedPath
 from qpavoid.control.smoothing import CommandRamp
+from qpavoid.control.stages import (
+    Clearances,
+    ClearanceStage,
+    LimitsStage,
+    PerceptionStage,
+    ReferenceStage,
+    Seen,
+)
 from qpavoid.control.task import default_task
 from qpavoid.control.tick import Command, ControllerConfig, Tick
 from qpavoid.core.checks import finite_number
 from qpavoid.core.compiling import kernel_input
 from qpavoid.core.errors import InputError, SolverError
-from qpavoid.distance.methods import distance_method
-from qpavoid.distance.table import DistanceTable
+from qpavoid.distance.capsules import CapsuleDistance
+from qpavoid.distance.methods import SphereDistance
 from qpavoid.human.body import BodyModel, HumanGeometry, KinectHuman
 from qpavoid.human.frames import HumanFrame
-from qpavoid.human.landmarks import landmark_map, skeleton_format
-from qpavoid.human.people import NOBODY, People, as_people
+from qpavoid.human.people import People
 from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.laws._kernels import NOT_FINITE, limit_crossed, warm_up
-from qpavoid.laws.avoidance import (
-    avoidance_terms,
-    l1_factor,
-    law_constants,
-    modified_ik,
-    scaled_velocity_limits,
-    stop_reason,
-)
-from qpavoid.laws.ssm import (
-    StopTimeBudget,
-    joint_speed_limits,
-    reaction_time,
-    separation_bounds,
-    with_stop_time,
-)
-from qpavoid.perception.freshness import FrameClock
+from qpavoid.laws.avoidance import l1_factor, modified_ik, stop_reason
+from qpavoid.laws.ssm import SSMConfig, StopTimeBudget, reaction_time
 from qpavoid.perception.perceiver import Perceiver
-from qpavoid.perception.tracker import Perceived
 
 __all__ = ["Controller"]
 
@@ -119,67 +110,62 @@ class Controller:
         self.path = path or default_task(robot).path
         self.config = config or ControllerConfig()
         self.human = human or KinectHuman()
-        self.distances = distance_method(self.config.distance, robot, self.human)
         self.K = np.r_[[self.config.gain_position] * 3, [self.config.gain_orientation] * 3]
         #: Which set plays which part (the robot description's), and their names in order.
         self.roles = robot.roles
         self.role_names = robot.role_names
-        self.scaled_cols = joint_columns(robot, self.config.scaled_joints, "scaled_joints")
-        self._law_constants = law_constants(self.config.avoidance)  # eqs. (4)-(7), as floats
         #: The sets that play no part in the laws: the robot stops when one touches the
         #: person (their dampers in the QP stop them at contact too).
         self._roleless = np.setdiff1d(np.arange(len(robot.sets)), list(robot.roles.rows))
-        self.perceiver = Perceiver(self.human, self.config.perception)
-        self.frames = FrameClock()  # which frame is new, and the age of the one in hand
         ssm = self.config.ssm.resolve(robot.arm)  # the arm's reaction and accelerations
         period, compute = self.config.control_period_s, self.config.compute_budget_s
-        self.ssm = replace(ssm, reaction_time_s=reaction_time(ssm, period, compute))
-        self.stop_budget = StopTimeBudget(self.ssm, robot.joint_names, self.config.control_period_s)
-        self.accel = joint_speed_limits(replace(ssm, stop_time_s=1.0), robot.joint_names)  # a_j
-        #: (nv,) the joints' velocity limits, rad/s: the description's (tighter with
-        #: :meth:`accept_limits`).
-        self.dq_max = np.array(robot.dq_max, dtype=float)
-        # the paper's rules: no separation bound, no part's own speed (read-only, shared)
-        shape = (len(robot.sets), len(self.human.parts))
-        self._no_bound, self._no_approach = np.full(shape, np.inf), np.zeros(shape)
-        for a in (self._no_bound, self._no_approach):
-            a.setflags(write=False)
-        #: Power and force limiting (``safety="pfl"``): each pair's permitted contact
-        #: speed, and the parts the paper's stop rules still hold for (head, trunk).
-        self.contact = (
-            ContactLimits(robot, self.human, self.config.pfl)
-            if self.config.safety == "pfl"
-            else None
-        )
-        self._protected = None if self.contact is None else np.flatnonzero(self.contact.protected())
+        ssm = replace(ssm, reaction_time_s=reaction_time(ssm, period, compute))
         warm_up()  # law_kernels, before the first tick
         #: The commands so far and the reach of the next (None: the paper's steps).
         self.ramp = (
             CommandRamp(
                 robot,
                 self.config.control_period_s,
-                self._braking(),
+                ssm.max_acceleration_radps2 or (),
                 reaction_time_s=robot.arm.reaction_time_s,
             )
             if self.config.smooth
             else None
         )
+        # the tick's stages, in the order the data flows (control.stages)
+        self.perception = PerceptionStage(self.human, self.config)
+        self.clearance = ClearanceStage(robot, self.human, self.config)
+        self.reference = ReferenceStage(self.path, self.K)
+        self.limits = LimitsStage(robot, self.human, self.config, ssm, self.ramp)
+        #: With ``safety="pfl"``: the parts the paper's stop rules still hold for (head,
+        #: trunk).
+        contact = self.limits.contact
+        self._protected = None if contact is None else np.flatnonzero(contact.protected())
         self._scale_at_stop = 0.0  # the path clock's rate when a stop ramp began
         self._ticks = 0  # the controller's own clock: control periods since it started
         self._clock_s = 0.0  # = _ticks × control_period_s, s
         self.closest_frame: HumanFrame | None = None  # the closest person's, last tick
-        # the last camera frame of another format (its format, ids and content) and its
-        # body (a frame held over ticks maps once), and that format's landmark uncertainty, m
-        self._mapped: tuple[tuple[str, tuple[int, ...], tuple[bytes, ...]], People] | None = None
-        self._camera_extra_m: np.ndarray | None = None
         self._last: Command | None = None  # the last command returned
 
-    def _braking(self) -> tuple[tuple[str, float], ...]:
-        """``(joint, b_j)``: the braking deceleration of a stop (speed and separation's,
-        resolved from the description), rad/s²."""
-        braking = self.ssm.max_acceleration_radps2
-        assert braking is not None  # resolved in __init__
-        return braking
+    @property
+    def perceiver(self) -> Perceiver:
+        """The trackers (the perception stage's)."""
+        return self.perception.perceiver
+
+    @property
+    def distances(self) -> SphereDistance | CapsuleDistance:
+        """The distance method (the clearance stage's)."""
+        return self.clearance.distances
+
+    @property
+    def ssm(self) -> SSMConfig:
+        """Speed and separation's constants, resolved for the arm (the limits stage's)."""
+        return self.limits.ssm
+
+    @property
+    def stop_budget(self) -> StopTimeBudget:
+        """Speed and separation's stopping-time budget (the limits stage's)."""
+        return self.limits.stop_budget
 
     def accept_limits(
         self,
@@ -193,70 +179,17 @@ class Controller:
         command (:meth:`~qpavoid.control.smoothing.CommandRamp.tighten`), and the braking
         deceleration speed and separation counts on, ``b_j ≤ a_j``. Call it before the
         first tick."""
-        names = self.robot.joint_names
-        a = dict(zip(names, np.asarray(acceleration_radps2, dtype=float), strict=True))
-        braking = tuple((n, min(b, a.get(n, b))) for n, b in self._braking())
-        self.ssm = replace(self.ssm, max_acceleration_radps2=braking)
-        self.stop_budget = StopTimeBudget(self.ssm, names, self.config.control_period_s)
-        self.accel = joint_speed_limits(replace(self.ssm, stop_time_s=1.0), names)
-        self.dq_max = np.minimum(self.dq_max, velocity_radps)
+        self.limits.accept(velocity_radps, acceleration_radps2)
         if self.ramp is not None:
+            braking = self.limits.braking()
             self.ramp.tighten(velocity_radps, acceleration_radps2, jerk_radps3, braking)
-
-    def perceive(
-        self,
-        people: People,
-        frame_age_s: float,
-        frame_time_s: float | None = None,
-        new: bool = True,
-    ) -> Perceiver:
-        """Everybody as the trackers see them (:class:`~qpavoid.perception.perceiver.Perceiver`),
-        updated once per ``new`` frame; captured at ``frame_time_s`` or, without one, the
-        controller's clock minus ``frame_age_s``."""
-        captured = self._clock_s - frame_age_s if frame_time_s is None else frame_time_s
-        return self.perceiver.update(people, captured, new, self._camera_extra_m)
 
     def body_of(
         self, joints: object, state: object, camera_format: str | SkeletonFormat | None
     ) -> People:
-        """The people of a frame as the body's landmarks: a frame (or :class:`People`) of
-        ``camera_format`` mapped (:mod:`qpavoid.human.landmarks`; metres, base frame,
-        states 0, 1, 2), or the body's own (None). The format's landmark uncertainty is
-        the perception's from then on.
-
-        Raises
-        ------
-        InputError
-            For an unknown format, or a frame that is not one of it.
-        """
-        body = self.human.skeleton
-        fmt = body if camera_format is None else skeleton_format(camera_format)
-        if fmt.name == body.name:
-            if fmt is not body and fmt != body:  # two formats of one name: not its joints
-                raise InputError(
-                    f"a frame of a format called {fmt.name!r} that is not the body model's "
-                    f"{body.name!r} format (another file: {fmt.source or 'built in code'})",
-                    name="camera_format",
-                    value=fmt.name,
-                )
-            self._camera_extra_m = None
-            return as_people(joints, state, body)
-        seen = as_people(joints, state, fmt)
-        key = tuple(f.joints.tobytes() + f.state.tobytes() for f in seen.frames)
-        if self._mapped is not None and self._mapped[0] == (fmt.name, seen.ids, key):
-            return self._mapped[1]  # the frame in hand, held (the same content): mapped once
-        mapping = landmark_map(fmt)
-        if mapping.target.name != body.name:
-            raise InputError(
-                f"{fmt.title} frames map onto {mapping.target.title} landmarks, not the body "
-                f"model's {body.title}",
-                name="camera_format",
-                value=fmt.name,
-            )
-        people = People(seen.ids, tuple(mapping.map(*f) for f in seen.frames))
-        self._mapped = ((fmt.name, seen.ids, key), people)
-        self._camera_extra_m = np.array(mapping.uncertainty_m)
-        return people
+        """The people of a frame as the body's landmarks
+        (:meth:`~qpavoid.control.stages.PerceptionStage.body_of`)."""
+        return self.perception.body_of(joints, state, camera_format)
 
     def geometry(self, frame: HumanFrame | People) -> list[HumanGeometry]:
         """The geometries used for ``frame`` if last perceived, else its own (raw)."""
@@ -273,8 +206,9 @@ class Controller:
         frame_id: Hashable | None = None,
         camera_format: str | SkeletonFormat | None = None,
     ) -> Tick:
-        """Shared prelude, one step each: the people as perceived, the distances, the laws
-        (eqs. 2-5, 7), speed and separation, the reference, the stop rules.
+        """The tick's measurements, stage by stage (:mod:`qpavoid.control.stages`): the
+        people as perceived, the clearances and the laws (eqs. 2, 4-5, 7), the reference
+        (eq. 8's target), the limits (eq. 3, speed and separation), then the stop rules.
 
         Raises
         ------
@@ -283,111 +217,31 @@ class Controller:
         """
         t = finite_number(t, "t (path time, s)")
         kin = self.robot.kinematics(q)
-        people = self.body_of(joints, state, camera_format)
+        people = self.perception.body_of(joints, state, camera_format)
         self._ticks += 1
         self._clock_s = self._ticks * self.config.control_period_s
         frame_age_s, frame_time_s = _frame_times(frame_age_s, frame_time_s)
-        new, age = self.frames.observe(people, self._clock_s, frame_age_s, frame_time_s, frame_id)
-        percs, geos, v_people = self._perceived(people, age, frame_time_s, new)
-        table, who = self.distances.closest(kin, geos)
-        cfg, roles = self.config.avoidance, self.roles
-        # the minima, eqs. (4)-(5) and (7) in one compiled call (laws.avoidance)
-        dmin, j, v_repelled, v_end_effector = avoidance_terms(
-            kernel_input(table.distance, np.float64),
-            kernel_input(table.vector, np.float64),
-            roles.repelled,
-            roles.end_effector,
-            *self._law_constants,
-        )
-        nearest = (
-            int(who.flat[np.argmin(table.distance)])
-            if len(geos) > 1 and np.isfinite(dmin).any()
-            else 0
-        )
-        frame = self.closest_frame = people.frames[nearest] if people.ids else NOBODY
-        f = float(l1_factor(dmin[roles.scaled], cfg))  # eq. (2)
-        limits = scaled_velocity_limits(self.dq_max, f, self.scaled_cols)  # eq. (3)
-        approach_limit, human_approach, limits, contact = self._separation(
-            kin, table, who, geos, v_people, age, limits
-        )
-        ref_pose, ref_twist = self.path.reference(t)
-        error = pose_error(ref_pose, kin.ee_placement)
+        seen = self.perception(people, self._clock_s, frame_age_s, frame_time_s, frame_id)
+        clear, who = self.clearance(kin, seen)
+        self.closest_frame = clear.frame
+        bounds = self.limits(kin, clear, who, seen)
         return Tick(
-            kin.q,
-            kin,
-            frame,
-            geos[nearest],
-            table,
-            dmin,
-            f,
-            limits,
-            roles,
-            j,
-            v_repelled,
-            v_end_effector,
-            ref_pose,
-            ref_twist,
-            error,
-            ref_twist + self.K * error,
-            self._stop_reason(age, percs, dmin, f, table),
-            percs[nearest],
-            age,
-            approach_limit,
-            human_approach,
-            None if self.ramp is None else self.ramp.box(kin.q),
-            contact,
+            q=kin.q,
+            kin=kin,
+            roles=self.roles,
+            frame_age_s=seen.frame_age_s,
+            reason=self._stop_reason(seen, clear),
+            **clear._asdict(),
+            **self.reference(t, kin)._asdict(),
+            **bounds._asdict(),
         )
 
-    def _perceived(
-        self, people: People, age: float, frame_time_s: float | None, new: bool
-    ) -> tuple[list[Perceived], list[HumanGeometry], np.ndarray]:
-        """Everybody as perceived (the trackers' frames, the bodies, their parts' velocities
-        (P, K, 3), m/s); a stale or NaN-aged frame as it is, which the trackers do not learn
-        from (the robot stops on it)."""
-        if age <= self.config.max_frame_age_s and people.ids:
-            seen = self.perceive(people, age, frame_time_s, new)
-            return seen.perceived, seen.geometry, seen.part_velocity
-        percs = [Perceived.untracked(f) for f in people.frames or (NOBODY,)]
-        return percs, self.geometry(people), np.zeros((len(percs), len(self.human.parts), 3))
-
-    def _separation(
-        self,
-        kin: Kinematics,
-        table: DistanceTable,
-        who: np.ndarray,
-        geos: list[HumanGeometry],
-        v_people: np.ndarray,
-        age: float,
-        limits: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
-        """Speed and separation (``safety="ssm"``, ``"pfl"``): each pair's bound on the
-        robot's approach speed and the part's own approach speed (S, K), m/s, the joint
-        limits within the stopping-time budget (|q̇_j| ≤ a_j T_s), and with ``"pfl"`` each
-        pair's permitted contact speed (:class:`~qpavoid.control.contact.ContactLimits`),
-        which the bound is then at least; with the paper's rules, no bound."""
-        if not self.config.monitors_separation:
-            return self._no_bound, self._no_approach, limits, None
-        ssm = with_stop_time(self.ssm, self.stop_budget.budget())
-        v_parts = v_people[who, np.arange(who.shape[1])[None, :]]  # each pair's person
-        approach_limit, human_approach = separation_bounds(table, v_parts, age, ssm)
-        limits = np.minimum(limits, self.accel * ssm.stop_time_s)
-        if self.contact is None:
-            return approach_limit, human_approach, limits, None
-        contact = self.contact(kin, table, geos, who, ssm, approach_limit)
-        return np.maximum(approach_limit, contact), human_approach, limits, contact
-
-    def _stop_reason(
-        self,
-        age: float,
-        percs: list[Perceived],
-        dmin: np.ndarray,
-        f: float,
-        table: DistanceTable,
-    ) -> str:
+    def _stop_reason(self, seen: Seen, clear: Clearances) -> str:
         """Why the robot must stop this tick ("" if it may move): a stale or frozen frame,
         nobody tracked, the paper's stop rules (Sect. 5.4), a set with no role touching.
         With ``safety="pfl"`` the stop rules and the touch hold for the parts that permit
         no contact (head, trunk): the arms and hands may be touched within their limit."""
+        age, percs, dmin, f = seen.frame_age_s, seen.perceived, clear.distance, clear.f
         frozen = self.config.perception.max_identical_frames
         if not age <= self.config.max_frame_age_s:  # NaN too
             return f"human frame is stale ({age:.3f} s old, max {self.config.max_frame_age_s} s)"
@@ -396,7 +250,7 @@ class Controller:
         if self.config.require_human and not np.isfinite(dmin).any():
             return "no body part of the operator is tracked"
         if self._protected is not None:  # pfl: the rules judge the head and trunk only
-            dmin = table.distance[:, self._protected].min(axis=1, initial=np.inf)
+            dmin = clear.table.distance[:, self._protected].min(axis=1, initial=np.inf)
             f = float(l1_factor(dmin[self.roles.scaled], self.config.avoidance))
         d_rep, d_ee = dmin[self.roles.repelled], dmin[self.roles.end_effector]
         cfg = self.config.avoidance
@@ -471,8 +325,7 @@ class Controller:
             applied = self.ramp.limit(dq, *tick.command_box)
             self.ramp.commit(applied, stopping=False)
             self._scale_at_stop = float(time_scale)
-        if self.config.monitors_separation:
-            self.stop_budget.record(applied)
+        self.limits.record(applied)
         zero3 = np.zeros(3)
         self._last = Command(
             dq=applied,
@@ -522,8 +375,7 @@ class Controller:
                 self.ramp.undo()
             applied = self.ramp.brake()
             time_scale = self._scale_at_stop * self.ramp.commit(applied, stopping=True)
-        if self.config.monitors_separation:
-            self.stop_budget.record(applied)
+        self.limits.record(applied)
         self._last = replace(last, dq=applied, stopped=True, reason=reason, time_scale=time_scale)
         return self._last
 

@@ -165,9 +165,10 @@ class Command:
     info: dict = field(default_factory=dict)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Tick:
-    """One tick's measurements (:meth:`Controller.measure`), given to :meth:`Controller.act`.
+    """One tick's measurements (:meth:`Controller.measure`), given to :meth:`Controller.act`:
+    built by keyword from the records of the tick's stages (:mod:`qpavoid.control.stages`).
 
     The state every piece of the QP reads, as mink's ``Configuration``: the robot sets are
     rows of the distance table, found by the part they play (``roles``), never by name.
