@@ -249,21 +249,24 @@ class DrivenArm(_RealTime):
         self.held = _Held(watchdog_s, controller, checked)  # the arm's hold of the last command
         self.watching = False  # the watchdog starts with the first command (not the warm-up)
         self.measured = np.zeros(robot.nv)  # the arm's reported velocity
-        # when the last tick began and its command read the state; the next not before
-        self.tick_start = self.began = self.not_before = -math.inf
+        # when the last command's deadline began (its state read), and its tick was due
+        self.began = self._due = self._sending = -math.inf  # (and the last send began)
 
     def start(self) -> np.ndarray:
         """The arm is where it is: its joint angles, rad."""
         return self.arm.read().q.copy()
 
     def due(self, t: float) -> float | None:
-        # never two commands within a period: a late loop skips ticks rather than bursting
-        # them (a late tick's command: the next a period after it)
-        due = max(self.wall0 + t, self.tick_start + self.dt, self.not_before)
+        # a late loop skips ticks rather than bursting them: the next tick a period after
+        # the last was due, or now if that is more than a period ago (the sends are a
+        # period apart whatever the ticks do: execute)
+        now = time.perf_counter()
+        due = max(self.wall0 + t, self._due + self.dt)
+        self._due = due = now if now - due > self.dt else due
         return None if due - self.wall0 > self.max_time_s else due
 
     def read(self, q: np.ndarray) -> np.ndarray | None:
-        self.began = self.tick_start = time.perf_counter()
+        self.began = time.perf_counter()
         try:
             state = self.stall(self.arm.read(), self.began)
             self.began = time.perf_counter()  # the command's deadline runs from its state
@@ -296,6 +299,10 @@ class DrivenArm(_RealTime):
         if self.checked(cmd.dq):  # never sent (the arm would fault); logged
             self.ended_by = f"command beyond the arm's limits: {self.checked.last}"
             return cmd, self.measured
+        # never two commands within a period (each is checked, and followed, as a period
+        # after the last): a command ready sooner after the last waits for it
+        _until(self._sending + self.dt)
+        self._sending = time.perf_counter()  # (a send takes its time: the next's from here)
         try:
             self.arm.send(cmd.dq)
         except ArmError as exc:
@@ -303,8 +310,6 @@ class DrivenArm(_RealTime):
             return None
         self.held.sent(sent_at := time.perf_counter())
         self.timing.sent(sent_at - self.wall0, captured_s)
-        if sent_at - self.tick_start > 0.5 * self.dt:  # late in its period (a slow read or
-            self.not_before = sent_at + self.dt  # step): the next is not due at once
         if not self.watching:
             self.dog.__enter__()
             self.watching = True
@@ -327,6 +332,19 @@ class DrivenArm(_RealTime):
 
     def report(self, truth: Callable[[Kinematics, float], np.ndarray] | None) -> dict[str, Any]:
         return super().report(truth) | ({"watchdog_fired": True} if self.dog.fired else {})
+
+
+#: How close to a send's time :func:`_until` stops sleeping and spins, s: ``time.sleep``
+#: overshoots by 0.05-0.2 ms here, which a wait each period would add to every period.
+SPIN_S = 3e-4
+
+
+def _until(deadline: float) -> None:
+    """Return at ``deadline`` (``time.perf_counter``, s), not later by a sleep's overshoot:
+    sleep until :data:`SPIN_S` before it, then spin."""
+    while (left := deadline - time.perf_counter()) > 0:
+        if left > SPIN_S:
+            time.sleep(left - SPIN_S)
 
 
 def offline_limits(robot: Robot, dt: float) -> CommandCheck:
