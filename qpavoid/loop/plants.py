@@ -262,7 +262,10 @@ class DrivenArm(_RealTime):
         # period apart whatever the ticks do: execute)
         now = time.perf_counter()
         due = max(self.wall0 + t, self._due + self.dt)
-        self._due = due = now if now - due > self.dt else due
+        if now - due > self.dt:  # more than a period late: an overrun, counted
+            self.overruns += 1
+            due = now
+        self._due = due
         return None if due - self.wall0 > self.max_time_s else due
 
     def read(self, q: np.ndarray) -> np.ndarray | None:
