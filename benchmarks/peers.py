@@ -258,7 +258,9 @@ class Mink:
         # the joint's frame; fixed links are fused into it)
         ee = full.model.frames[full.ee_frame]
         joint = model.joint(full.model.names[ee.parentJoint])
-        body = spec.body(model.body(model.jnt_bodyid[joint.id]).name)
+        name = model.body(model.jnt_bodyid[joint.id]).name
+        # (spec.body(name) raises for the last link on MuJoCo 3.3.0: looked up by hand)
+        body = next(b for b in spec.bodies if b.name == name)
         quat = pin.Quaternion(ee.placement.rotation).coeffs()  # x, y, z, w
         body.add_site(name=ee.name, pos=ee.placement.translation, quat=np.roll(quat, 1))
         hand = spec.worldbody.add_body(name="person_hand", mocap=True)
