@@ -15,10 +15,14 @@ tick (:meth:`Plant.move`). The arms differ only in those answers:
   (:class:`~qpavoid.arm.braking.WallClockArm`); Ctrl-C ends the run.
 * :class:`DrivenArm`: any :class:`~qpavoid.drive.interface.Arm` (a Franka through libfranka,
   franky-sim's, :class:`~qpavoid.drive.simulated.SimulatedArm`): each tick reads its state,
-  checks the command against its limits and sends it; a missed deadline brakes for a tick,
-  a stalled state or an arm error ends the run, a loop that stops sending has the arm
-  stopped by a watchdog, and however the run ends the controller's braking ramp brings it
-  to rest before :meth:`~qpavoid.drive.interface.Arm.stop`.
+  checks the command against its limits and sends it, never within a period of the last;
+  a missed deadline brakes for a tick, a stalled state or an arm error ends the run, a loop
+  that stops sending has the arm stopped by a watchdog (each time it stops sending). A run
+  that ends on its goal, its time cap, Ctrl-C, SIGTERM or bad input from the arm (NaN
+  joint angles) brings the arm to rest on the controller's braking ramp before
+  :meth:`~qpavoid.drive.interface.Arm.stop`; one that ends on an arm error, or on a command
+  the check refused, has the arm stopped by :meth:`~qpavoid.drive.interface.Arm.stop` alone
+  (its own stop: franky's brakes the arm within its limits).
 
 May import: the stages above the loop (core to control), the drive interface.
 """
@@ -249,6 +253,7 @@ class DrivenArm(_RealTime):
         self.held = _Held(watchdog_s, controller, checked)  # the arm's hold of the last command
         self.watching = False  # the watchdog starts with the first command (not the warm-up)
         self.measured = np.zeros(robot.nv)  # the arm's reported velocity
+        self.arm_failed = False  # the arm failed, or refused a command: no ramp to rest
         # when the last command's deadline began (its state read), and its tick was due
         self.began = self._due = self._sending = -math.inf  # (and the last send began)
 
@@ -277,6 +282,7 @@ class DrivenArm(_RealTime):
                 self.timing.stalled(gap)  # stalled: the arm stopped on its own, from rest
         except ArmError as exc:
             self.ended_by = f"arm {exc.reason or 'error'}: {exc}"
+            self.arm_failed = True
             return None
         self.measured = state.dq
         return state.q
@@ -292,6 +298,13 @@ class DrivenArm(_RealTime):
     def execute(
         self, controller: Controller, cmd: Command, t: float, captured_s: float
     ) -> tuple[Command, np.ndarray] | None:
+        # never two commands within a period (each is checked, and followed, as a period
+        # after the last): a command ready sooner after the last send began waits for it;
+        # a wait of over half a period moves the schedule on by the rest (after a slow
+        # tick the next states are read that much later, so commands are not sent a whole
+        # period after their state ever after); the deadline is judged at the send
+        waited = _until(self._sending + self.dt)
+        self._due += max(waited - 0.5 * self.dt, 0.0)
         if late := self.timing.late(self.began, now := time.perf_counter()):
             why = f"missed deadline ({late * 1e3:.1f} ms late)"
             if (gap := self.held.ran_out(now)) is not None:  # so late that the arm stopped
@@ -301,15 +314,14 @@ class DrivenArm(_RealTime):
                 cmd = controller.brake(why, instead=True)
         if self.checked(cmd.dq):  # never sent (the arm would fault); logged
             self.ended_by = f"command beyond the arm's limits: {self.checked.last}"
+            self.arm_failed = True
             return cmd, self.measured
-        # never two commands within a period (each is checked, and followed, as a period
-        # after the last): a command ready sooner after the last waits for it
-        _until(self._sending + self.dt)
         self._sending = time.perf_counter()  # (a send takes its time: the next's from here)
         try:
             self.arm.send(cmd.dq)
         except ArmError as exc:
             self.ended_by = f"arm {exc.reason or 'error'}: {exc}"
+            self.arm_failed = True
             return None
         self.held.sent(sent_at := time.perf_counter())
         self.timing.sent(sent_at - self.wall0, captured_s)
@@ -320,10 +332,34 @@ class DrivenArm(_RealTime):
         return cmd, self.measured  # what the arm reports
 
     def finish(self, controller: Controller) -> None:
-        if not self.ended_by:  # however it ended: a ramp to rest, on time
-            self.ended_by = _ramp_down(
-                controller, self.arm, self.checked, self.dt, self.dog.kick, self.held
-            )
+        # the goal, the time cap, Ctrl-C, SIGTERM, bad input from the arm: a ramp to rest,
+        # on time; an arm that failed, or a command the check refused, gets arm.stop only
+        if not self.arm_failed:
+            ramp = self._ramp_down(controller)
+            self.ended_by = self.ended_by or ramp
+
+    def _ramp_down(self, controller: Controller) -> str:
+        """The controller's braking ramp sent once a period (each a period after the last
+        send began, the loop's included) until it commands rest (at most 10 s); "at rest",
+        or why it could not finish. Where the arm's hold of the last command ran out
+        meanwhile, it stopped on its own: the ramp starts from rest."""
+        for _ in range(int(10.0 / self.dt)):
+            _until(self._sending + self.dt)
+            self.held.ran_out(time.perf_counter())
+            cmd = controller.brake("end of run")
+            if self.checked(cmd.dq):
+                return f"command beyond the arm's limits: {self.checked.last}"
+            self._sending = time.perf_counter()
+            try:
+                self.arm.send(cmd.dq)
+            except ArmError as exc:
+                return f"arm {exc.reason or 'error'}: {exc}"
+            self.held.sent(time.perf_counter())
+            if self.watching:
+                self.dog.kick()
+            if not np.any(cmd.dq):
+                return "at rest"
+        return "at rest"
 
     def close(self) -> None:
         if self.watching:
@@ -342,12 +378,14 @@ class DrivenArm(_RealTime):
 SPIN_S = 3e-4
 
 
-def _until(deadline: float) -> None:
+def _until(deadline: float) -> float:
     """Return at ``deadline`` (``time.perf_counter``, s), not later by a sleep's overshoot:
-    sleep until :data:`SPIN_S` before it, then spin."""
+    sleep until :data:`SPIN_S` before it, then spin. How long it waited, s (0 if past)."""
+    start = time.perf_counter()
     while (left := deadline - time.perf_counter()) > 0:
         if left > SPIN_S:
             time.sleep(left - SPIN_S)
+    return max(deadline - start, 0.0)
 
 
 def offline_limits(robot: Robot, dt: float) -> CommandCheck:
@@ -384,35 +422,3 @@ class _Held:
         self.controller.at_rest()
         self.checked.restart()
         return gap
-
-
-def _ramp_down(
-    controller: Controller,
-    arm: Arm,
-    checked: CommandCheck,
-    dt: float,
-    kick: Callable[[], None],
-    held: _Held,
-) -> str:
-    """The controller's braking ramp sent to ``arm`` once a period (a period after the last
-    command, the loop's included) until it commands rest (at most 10 s); "at rest", or why
-    it could not finish. Where the arm's hold of the last command ran out meanwhile, it
-    stopped on its own: the ramp is over."""
-    start = max(time.perf_counter(), held.last + dt)
-    for k in range(int(10.0 / dt)):
-        wait = start + k * dt - time.perf_counter()
-        if wait > 0:
-            time.sleep(wait)
-        held.ran_out(time.perf_counter())
-        cmd = controller.brake("end of run")
-        if checked(cmd.dq):
-            return f"command beyond the arm's limits: {checked.last}"
-        try:
-            arm.send(cmd.dq)
-        except ArmError as exc:
-            return f"arm {exc.reason or 'error'}: {exc}"
-        held.sent(time.perf_counter())
-        kick()  # (the watchdog, if it runs)
-        if not np.any(cmd.dq):
-            return "at rest"
-    return "at rest"

@@ -180,8 +180,10 @@ def simulate(
         checks the command against the arm's limits and sends it. A missed deadline
         brakes for a tick (``deadline_misses``), a stalled state or an arm error ends the
         run (``end_reason`` "arm ..."), a loop that stops sending has the arm stopped by
-        the watchdog; however the run ends (goal, time cap, Ctrl-C, SIGTERM, an error),
-        the controller's braking ramp brings the arm to rest before :meth:`Arm.stop`.
+        the watchdog; a run that ends on its goal, time cap, Ctrl-C, SIGTERM or bad input
+        from the arm brings it to rest on the controller's braking ramp before
+        :meth:`Arm.stop`, one that ends on an arm error or a refused command by
+        :meth:`Arm.stop` alone (:class:`~qpavoid.loop.plants.DrivenArm`).
 
     Returns
     -------
@@ -221,20 +223,21 @@ def simulate(
         if cfg.measure_truth and motion is not None
         else None
     )
-    interrupt = Interruption(realtime or arm is not None)
-    plant = _plant(controller, cfg, dt, realtime, arm, interrupt, record=truth is not None)
-    q = (
-        plant.start()
-        if isinstance(plant, DrivenArm)
-        else inverse_kinematics(robot, path.reference(0.0)[0])
-        if q0 is None
-        else robot.check_q(q0).astype(float).copy()
-    )
     goal = path.reference(path.duration_s)[0]
     logger = RunLogger(n_max, controller, watch)
     tau, last_progress, reached = 0.0, -1.0, False
     cmd: Command | None = None
-    try:
+    plant: Plant | None = None
+    interrupt = Interruption(realtime or arm is not None)
+    try:  # (from here on the signal handlers, and the arm, are always released)
+        plant = _plant(controller, cfg, dt, realtime, arm, interrupt, record=truth is not None)
+        q = (
+            plant.start()
+            if isinstance(plant, DrivenArm)
+            else inverse_kinematics(robot, path.reference(0.0)[0])
+            if q0 is None
+            else robot.check_q(q0).astype(float).copy()
+        )
         plant.begin()
         for k in range(n_max):
             t_tick = plant.wait(k, k * dt)
@@ -275,8 +278,9 @@ def simulate(
         plant.finish(controller)
     finally:
         interrupt.restore()
-        plant.close()
-    if cmd is None:  # an arm that ended the run before its first command
+        if plant is not None:
+            plant.close()
+    if cmd is None or logger.n == 0:  # an arm that ended the run before its first command
         raise ArmError(f"the run ended before its first tick: {plant.ended_by}", value=arm)
     log = logger.finished()
     n = logger.n
