@@ -300,15 +300,13 @@ class DrivenArm(_RealTime):
     ) -> tuple[Command, np.ndarray] | None:
         # never two commands within a period (each is checked, and followed, as a period
         # after the last): a command ready sooner after the last send began waits for it;
-        # a wait of over half a period moves the schedule on by the rest (after a slow
-        # tick the next states are read that much later, so commands are not sent a whole
-        # period after their state ever after); the deadline is judged at the send
-        waited = _until(self._sending + self.dt)
-        self._due += max(waited - 0.5 * self.dt, 0.0)
-        if late := self.timing.late(self.began, now := time.perf_counter()):
+        # the deadline is judged at that send, the wait included, and everything is decided
+        # before waiting, so that the send follows the wait at once
+        send_at = max(time.perf_counter(), self._sending + self.dt)
+        if late := self.timing.late(self.began, send_at):
             why = f"missed deadline ({late * 1e3:.1f} ms late)"
-            if (gap := self.held.ran_out(now)) is not None:  # so late that the arm stopped
-                self.timing.stalled(gap)  # on its own meanwhile: its ramp is over, at rest
+            if (gap := self.held.ran_out(send_at)) is not None:  # so late that the arm
+                self.timing.stalled(gap)  # stopped on its own meanwhile: at rest
                 cmd = controller.brake(why)
             else:  # the arm still follows the last command: this is a step from it
                 cmd = controller.brake(why, instead=True)
@@ -316,6 +314,10 @@ class DrivenArm(_RealTime):
             self.ended_by = f"command beyond the arm's limits: {self.checked.last}"
             self.arm_failed = True
             return cmd, self.measured
+        # a wait of over half a period moves the schedule on by the rest: after a slow
+        # tick the next states are read that much later (else every later command would
+        # wait, and go a whole period after its state)
+        self._due += max(_until(send_at) - 0.5 * self.dt, 0.0)
         self._sending = time.perf_counter()  # (a send takes its time: the next's from here)
         try:
             self.arm.send(cmd.dq)
@@ -344,11 +346,12 @@ class DrivenArm(_RealTime):
         or why it could not finish. Where the arm's hold of the last command ran out
         meanwhile, it stopped on its own: the ramp starts from rest."""
         for _ in range(int(10.0 / self.dt)):
-            _until(self._sending + self.dt)
-            self.held.ran_out(time.perf_counter())
+            send_at = max(time.perf_counter(), self._sending + self.dt)
+            self.held.ran_out(send_at)
             cmd = controller.brake("end of run")
             if self.checked(cmd.dq):
                 return f"command beyond the arm's limits: {self.checked.last}"
+            _until(send_at)
             self._sending = time.perf_counter()
             try:
                 self.arm.send(cmd.dq)
