@@ -13,9 +13,9 @@ franky ramps the arm to each new command within its limits: the interpolation be
 qpavoid's commands. The numbers of docs/real-robot.md §3.
 
 ``--beyond-smooth-rate`` lifts, for this measurement only, the command line's refusal of
-``--arm`` above :func:`~qpavoid.control.smoothing.smooth_rate_limit_hz` (500 Hz on the
-Franka arms, where a stop near a joint limit can pass it by a few mrad: docs/real-robot.md):
-the loop's own timing at libfranka's 1 kHz, not a rate a run may use.
+``--arm`` above :func:`~qpavoid.control.smoothing.smooth_rate_limit_hz` (1 kHz on the
+Franka arms, the rate their commands are shown to keep their limits at: docs/real-robot.md):
+the loop's own timing above it, not a rate a run may use.
 """
 
 from __future__ import annotations

@@ -55,6 +55,7 @@ BAD_INPUTS = [
     (["run", "test1", "--rate", "-500"], "--rate"),
     (["run", "test1", "--rate", "inf"], "--rate"),
     (["run", "test1", "--rate", "5"], "--rate"),
+    (["run", "test1", "--robot", "fr3", "--arm", "sim", "--rate", "2000"], "up to 1000 Hz"),
     (["compare", "--rate", "0"], "--rate"),
     (["compare", "--random", "-1"], "--random"),
     (["compare", "--scenarios"], "nothing to compare"),

@@ -37,21 +37,27 @@ import numpy as np
 from qpavoid.arm.braking import ArmResponse, BrakingConfig, per_joint, reaction_ticks
 from qpavoid.arm.model import Robot
 
-__all__ = ["CommandRamp", "smooth_rate_limit_hz"]
+__all__ = ["TESTED_JERK_RATE_HZ", "CommandRamp", "smooth_rate_limit_hz"]
 
 #: What a commit changes: the last two commands, the stop's start speed, the commands in flight.
 _Sent = tuple[np.ndarray, np.ndarray, float | None, tuple[np.ndarray, ...]]
 
 
+#: The highest control rate at which the stop ramps and the room to brake are shown to keep
+#: a jerk-limited arm's limits, Hz: libfranka's own 1 kHz (``tests/test_smoothing.py``: the
+#: room sweeps and the stops at 1 ms, where ``j dt² < a dt`` and the gain is counted).
+TESTED_JERK_RATE_HZ = 1000.0
+
+
 def smooth_rate_limit_hz(robot: Robot) -> float:
-    """The highest control rate at which every stop ramp keeps the arm's jerk limits
-    tick by tick, Hz: ``min_j j_j / a_j`` over the joints with a jerk limit (inf without any;
-    500 Hz for the FR3 and the Panda). Above it a tick's jerk allows less than its
-    acceleration (``j dt² < a dt``) and the end of a ramp can break the jerk limit between
-    ticks (a known limit: docs/real-robot.md)."""
-    accel = dict(robot.arm.max_acceleration_radps2)
-    rates = [j / accel[n] for n, j in robot.arm.max_jerk_radps3 if n in robot.joint_names]
-    return min(rates, default=float("inf"))
+    """The highest control rate at which the arm's commands are shown to keep its limits,
+    Hz: :data:`TESTED_JERK_RATE_HZ` for an arm with jerk limits (where ``j dt² < a dt``,
+    above 500 Hz on the FR3 and the Panda, a stop begun while joints speed up keeps
+    speeding up for a few ticks: the room to brake counts that gain, :meth:`CommandRamp.box`;
+    until 2026-12-02 it did not, and ``--arm`` was refused above 500 Hz there), inf
+    without any."""
+    jerk_limited = any(n in robot.joint_names for n, _ in robot.arm.max_jerk_radps3)
+    return TESTED_JERK_RATE_HZ if jerk_limited else float("inf")
 
 
 class CommandRamp:
@@ -132,6 +138,15 @@ class CommandRamp:
         j = self.j_dt2 / (self.dt * self.dt)
         self._inv_b = 1.0 / b
         self._lag = float(np.max((a + b) ** 2 / (2.0 * j * b), initial=0.0))
+        # where the jerk allows less change per tick than the acceleration (j dt² < a dt: a
+        # Franka above 500 Hz), a stop begun while joints speed up keeps speeding up: each
+        # joint's acceleration turns at its own jerk over a few ticks, and the stop's line
+        # follows the slowest to turn; a joint may gain up to a (max_i a_i / j_i + dt) more
+        # speed, rad/s, which the horizon and the room count (0 where a tick turns it)
+        jerk_bound = self.j_dt2 < self.a_dt * (1.0 - 1e-9)  # (j dt² = a dt: turns in a tick)
+        turn_s = float(np.max(np.where(jerk_bound, a / j, 0.0), initial=0.0))
+        self._jerk_bound = bool(jerk_bound.any())
+        self._gain = a * (turn_s + self.dt) if self._jerk_bound else np.zeros_like(a)
 
     def undo(self) -> None:
         """Forget the last :meth:`commit`: its command was never sent (a tick that missed
@@ -154,8 +169,11 @@ class CommandRamp:
         # slowest, the jerk's lag included) carries a joint at u at most u H
         ahead = q + self.dt * sum(self._sent, np.zeros_like(q)) if self._sent else q
         inv_h = 1.0 / self.braking_horizon()
-        up = np.minimum((self.q_max - ahead).clip(0.0) * inv_h, self.v_max)
-        down = np.minimum((ahead - self.q_min).clip(0.0) * inv_h, self.v_max)
+        up = (self.q_max - ahead).clip(0.0) * inv_h
+        down = (ahead - self.q_min).clip(0.0) * inv_h
+        if self._jerk_bound:  # (|u| + the gain) H within the room
+            up, down = (up - self._gain).clip(0.0), (down - self._gain).clip(0.0)
+        up, down = np.minimum(up, self.v_max), np.minimum(down, self.v_max)
         return (-down).clip(lo, hi), up.clip(lo, hi)
 
     def braking_horizon(self) -> float:
@@ -169,7 +187,7 @@ class CommandRamp:
         with jerk limits the ramp first holds its speed while the joint's acceleration
         turns from +a_j to −b_j, at most ``(a_j + b_j) / j_j``, which costs at most the last
         term more; 0 without jerk limits)."""
-        speed = np.abs(self.u1) + self.a_dt
+        speed = np.abs(self.u1) + self.a_dt + self._gain
         return self.dt + 0.5 * float((speed * self._inv_b).max()) + self._lag
 
     def _reach(self) -> tuple[np.ndarray, np.ndarray]:

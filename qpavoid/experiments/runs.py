@@ -233,9 +233,9 @@ def simulate_one(
     robot = spec_robot(spec) if robot is None else robot
     if spec.arm is not None and spec.rate_hz > (top := smooth_rate_limit_hz(robot)) + 1e-9:
         raise InputError(
-            f"--arm at {spec.rate_hz:g} Hz: above {top:g} Hz the stop ramps of "
-            f"{robot.name!r} can break its jerk limits between ticks (docs/real-robot.md); "
-            f"use --rate {top:g} or lower (the arm's own loop interpolates between commands)",
+            f"--arm at {spec.rate_hz:g} Hz: the commands of {robot.name!r}, a jerk-limited "
+            f"arm, are shown to keep its limits up to {top:g} Hz (docs/real-robot.md); "
+            f"use --rate {top:g} or lower",
             name="--rate",
             value=spec.rate_hz,
         )
