@@ -12,6 +12,7 @@ decided) the process only exits, and a further Ctrl-C or SIGTERM no longer chang
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 from types import FrameType
@@ -21,11 +22,13 @@ from qpavoid.core.signals import handled_by, ignore_until_exit
 
 def _stopped_while_loading(signum: int, frame: FrameType | None) -> None:
     ignore_until_exit()  # the process is ending: a second one must not cut it short
-    if signum == signal.SIGTERM:
-        sys.stderr.write("qpavoid: terminated; nothing written\n")
-        raise SystemExit(143)
-    sys.stderr.write("qpavoid: interrupted; nothing written\n")
-    raise SystemExit(130)
+    word, status = ("terminated", 143) if signum == signal.SIGTERM else ("interrupted", 130)
+    sys.stderr.write(f"qpavoid: {word}; nothing written\n")
+    sys.stderr.flush()
+    # at once, not by SystemExit: raised inside an import, a library's bare ``except:``
+    # (seen in the oldest releases pyproject allows, on a loaded machine) swallowed it,
+    # and the command ran on after saying "nothing written"; nothing is open to close
+    os._exit(status)
 
 
 # Process-wide, but only for the entry point's own loading: put back right after it. A
