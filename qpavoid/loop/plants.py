@@ -310,28 +310,35 @@ class DrivenArm(_RealTime):
                 cmd = controller.brake(why)
             else:  # the arm still follows the last command: this is a step from it
                 cmd = controller.brake(why, instead=True)
-        if self.checked(cmd.dq):  # never sent (the arm would fault); logged
-            self.ended_by = f"command beyond the arm's limits: {self.checked.last}"
-            self.arm_failed = True
-            return cmd, self.measured
-        # a wait of over half a period moves the schedule on by the rest: after a slow
-        # tick the next states are read that much later (else every later command would
-        # wait, and go a whole period after its state)
-        self._due += max(_until(send_at) - 0.5 * self.dt, 0.0)
-        self._sending = time.perf_counter()  # (a send takes its time: the next's from here)
-        try:
-            self.arm.send(cmd.dq)
-        except ArmError as exc:
-            self.ended_by = f"arm {exc.reason or 'error'}: {exc}"
-            self.arm_failed = True
-            return None
-        self.held.sent(sent_at := time.perf_counter())
-        self.timing.sent(sent_at - self.wall0, captured_s)
+        if failed := self._send(cmd.dq, send_at, moves_schedule=True):
+            self.ended_by, self.arm_failed = failed, True
+            refused = failed.startswith("command")  # never sent (the arm would fault): logged
+            return (cmd, self.measured) if refused else None
+        self.timing.sent(self.held.last - self.wall0, captured_s)
         if not self.watching:
             self.dog.__enter__()
             self.watching = True
         self.dog.kick()
         return cmd, self.measured  # what the arm reports
+
+    def _send(self, dq: np.ndarray, send_at: float, moves_schedule: bool = False) -> str:
+        """Check ``dq`` against the arm's limits, wait for ``send_at`` and send it: "", or
+        why it was not sent (refused by the check, or the arm's error). With
+        ``moves_schedule``, a wait of over half a period moves the schedule on by the rest:
+        after a slow tick the next states are read that much later (else every later
+        command would wait, and go a whole period after its state)."""
+        if self.checked(dq):
+            return f"command beyond the arm's limits: {self.checked.last}"
+        waited = _until(send_at)
+        if moves_schedule:
+            self._due += max(waited - 0.5 * self.dt, 0.0)
+        self._sending = time.perf_counter()  # (a send takes its time: the next's from here)
+        try:
+            self.arm.send(dq)
+        except ArmError as exc:
+            return f"arm {exc.reason or 'error'}: {exc}"
+        self.held.sent(time.perf_counter())
+        return ""
 
     def finish(self, controller: Controller) -> None:
         # the goal, the time cap, Ctrl-C, SIGTERM, bad input from the arm: a ramp to rest,
@@ -349,15 +356,8 @@ class DrivenArm(_RealTime):
             send_at = max(time.perf_counter(), self._sending + self.dt)
             self.held.ran_out(send_at)
             cmd = controller.brake("end of run")
-            if self.checked(cmd.dq):
-                return f"command beyond the arm's limits: {self.checked.last}"
-            _until(send_at)
-            self._sending = time.perf_counter()
-            try:
-                self.arm.send(cmd.dq)
-            except ArmError as exc:
-                return f"arm {exc.reason or 'error'}: {exc}"
-            self.held.sent(time.perf_counter())
+            if failed := self._send(cmd.dq, send_at):
+                return failed
             if self.watching:
                 self.dog.kick()
             if not np.any(cmd.dq):
