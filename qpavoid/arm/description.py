@@ -9,8 +9,9 @@ frames over.
 Besides the geometry the file says everything about the arm that the controllers need and
 that differs from arm to arm: which set plays which part in the paper's laws and on which
 joints (:class:`Roles`), how fast the arm reacts and brakes (:class:`ArmDynamics`) and
-where its inverse kinematics starts (:class:`IKSeed`). No code holds a joint name, length
-or limit of a particular arm.
+where its inverse kinematics starts (:class:`IKSeed`) and its home configuration (``home``,
+:meth:`~qpavoid.arm.model.Robot.neutral`). No code holds a joint name, length or limit of a
+particular arm.
 
 :func:`read_description` returns the pieces a :class:`~qpavoid.arm.model.Robot` is made of;
 :func:`qpavoid.arm.model.load_robot` makes the robot from them.
@@ -54,6 +55,7 @@ TOP_KEYS = (
     "arm",
     "ik_seed",
     "coverage",
+    "home",
 )
 #: Most bytes a control-point file may have (the iiwa's has about 4 kB), and a URDF
 #: (the iiwa's has about 5 kB; a detailed arm's, without meshes, well under 1 MB):
@@ -196,6 +198,7 @@ class Description(NamedTuple):
     mesh_dirs: tuple[Path, ...]
     coverage_exclude: dict[str, str]
     path: Path
+    home: dict[str, float]
 
 
 def _bundled_root() -> Path:
@@ -943,6 +946,42 @@ def _ik_seed(cfg: Mapping[str, Any], path: Path, joints: Sequence[str]) -> IKSee
     )
 
 
+def _home(value: object, path: Path, model: pin.Model) -> dict[str, float]:
+    """The file's ``home``: a table of joint angles (rad), each a joint of the URDF at a
+    finite angle within its limits; ``{}`` without one (:meth:`Robot.neutral
+    <qpavoid.arm.model.Robot.neutral>` then puts every joint at 0, or mid-range where 0 is
+    outside its limits)."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise RobotDescriptionError(
+            f"{path}: home must be a table of joint angles (rad), e.g. home = "
+            f"{{ <joint> = -0.785 }}; got {value!r}",
+            path=path,
+            name="home",
+            value=value,
+        )
+    for joint, angle in value.items():
+        if not model.existJointName(joint):
+            raise RobotDescriptionError(
+                f"{path}: home: {joint!r} is not a joint of the URDF; its joints are "
+                f"{list(model.names)[1:]}",
+                path=path,
+                name="home",
+                value=joint,
+            )
+        ok = isinstance(angle, (int, float)) and not isinstance(angle, bool)
+        fault = angle_fault(model, joint, float(angle)) if ok else "not an angle (rad)"
+        if fault:
+            raise RobotDescriptionError(
+                f"{path}: home: {joint} = {angle!r}: {fault}",
+                path=path,
+                name="home",
+                value={joint: angle},
+            )
+    return {str(joint): float(angle) for joint, angle in value.items()}
+
+
 def _coverage(cfg: Mapping[str, Any], path: Path) -> dict[str, str]:
     """The ``[coverage]`` table's exclusions: collision object name -> the reason it may
     lie outside the capsules and spheres (each reason required); ``{}`` without one."""
@@ -1229,6 +1268,7 @@ def read_description(
     roles = _roles(cfg, path, set_cfgs, joints)
     arm = read_arm(cfg, path, joints)
     ik_seed = _ik_seed(cfg, path, joints)
+    home = _home(cfg.get("home"), path, model)
     coverage_exclude = _coverage(cfg, path)
     _add_frames(model, set_cfgs, path, urdf)
     if not model.existFrame(ee_name):
@@ -1259,4 +1299,5 @@ def read_description(
         mesh_dirs(urdf),
         coverage_exclude,
         path,
+        home,
     )

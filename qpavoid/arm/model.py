@@ -35,7 +35,15 @@ from qpavoid.arm.description import (
 from qpavoid.core.checks import as_array
 from qpavoid.core.errors import InputError
 
-__all__ = ["Kinematics", "Robot", "joint_columns", "load_robot"]
+__all__ = ["Q_LIMIT_TOLERANCE_RAD", "Kinematics", "Robot", "joint_columns", "load_robot"]
+
+#: How far beyond a joint's limit :meth:`Robot.check_q` still accepts an angle, rad: a hair
+#: for round-off (a configuration computed at a limit, an inverse kinematics' result clipped
+#: to it, lands within 1e-15 rad of it), far below any mistake a configuration given by
+#: hand makes (an angle of a wrong joint, degrees for radians, the Panda's joint 4 at 0:
+#: 0.07 rad out). The controllers never call it on a measured angle: an arm may read a
+#: little past a limit, and the position-limit rows steer it back.
+Q_LIMIT_TOLERANCE_RAD = 1e-9
 
 
 @dataclass(frozen=True)
@@ -124,6 +132,9 @@ class Robot:
         why (``[coverage] exclude``; :mod:`qpavoid.arm.coverage`).
     path
         The control-point file the robot was read from, or None.
+    home
+        The description's ``home``: angles (rad) of the joints :meth:`neutral` does not put
+        at its default (joints locked here keep their locked angle).
     """
 
     def __init__(
@@ -141,6 +152,7 @@ class Robot:
         mesh_dirs: Sequence[Path] = (),
         coverage_exclude: Mapping[str, str] | None = None,
         path: Path | None = None,
+        home: Mapping[str, float] | None = None,
     ):
         self.model = model
         self.urdf, self.mesh_dirs = urdf, tuple(mesh_dirs)
@@ -156,6 +168,14 @@ class Robot:
         self.q_min = np.array(model.lowerPositionLimit, dtype=float)
         self.q_max = np.array(model.upperPositionLimit, dtype=float)
         self.dq_max = np.array(model.velocityLimit, dtype=float)
+        given = dict(home or {})
+        self._home = np.array(
+            [
+                given[n] if n in given else 0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi)
+                for n, lo, hi in zip(self.joint_names, self.q_min, self.q_max, strict=True)
+            ]
+        )
+        self.check_q(self._home)  # a home given in code: within the limits too
         self.set_names = tuple(s.name for s in self.sets)
         self.point_set = np.concatenate([[k] * len(s.points) for k, s in enumerate(self.sets)])
         self.sphere_radii = np.array([self.sets[k].sphere_radius_m for k in self.point_set])
@@ -244,9 +264,37 @@ class Robot:
                 f"unknown control set {name!r}; sets are {self.set_names}", name="set", value=name
             ) from None
 
-    def check_q(self, q: ArrayLike) -> np.ndarray:
-        """Return ``q`` as a float array of shape (nq,) or raise :class:`InputError`."""
-        return as_array(q, (self.nq,), "q (joint angles, rad)")
+    def check_q(self, q: ArrayLike, tolerance_rad: float = Q_LIMIT_TOLERANCE_RAD) -> np.ndarray:
+        """``q`` as a float array (nq,), a configuration the arm can take: finite and each
+        joint within its limits (:attr:`q_min`, :attr:`q_max`), to ``tolerance_rad``.
+
+        Where a configuration enters as a start or a target: a simulation's and a
+        simulated arm's start, the QP's rest posture, the inverse kinematics' start. The
+        kinematics take any finite ``q`` (finite differences step past a limit; an arm
+        may read a hair past one).
+
+        Raises
+        ------
+        InputError
+            For a wrong shape, a value that is not finite, or an angle outside its joint's
+            limits (by more than ``tolerance_rad``), naming the joint, the angle and the
+            limits (``name="q"``, ``value`` the array).
+        """
+        q = as_array(q, (self.nq,), "q (joint angles, rad)")
+        outside = np.flatnonzero(
+            (q < self.q_min - tolerance_rad) | (q > self.q_max + tolerance_rad)
+        )
+        if outside.size:
+            i = int(outside[0])
+            more = f" (and {outside.size - 1} more joints)" if outside.size > 1 else ""
+            raise InputError(
+                f"q (joint angles, rad): {self.joint_names[i]} = {q[i]:.6g} rad is outside "
+                f"its limits [{self.q_min[i]:.6g}, {self.q_max[i]:.6g}] rad{more} "
+                f"(robot {self.name!r}; robot.neutral() is a configuration within them)",
+                name="q",
+                value=q,
+            )
+        return q
 
     def kinematics(self, q: ArrayLike, jacobians: bool = True) -> Kinematics:
         """Forward kinematics (and Jacobians) of every control point, capsule and the EE.
@@ -258,7 +306,7 @@ class Robot:
         jacobians
             Also compute the Jacobians (needed by the controllers, not by distances).
         """
-        q = self.check_q(q)
+        q = as_array(q, (self.nq,), "q (joint angles, rad)")  # any finite q: check_q's docs
         model, (data, placements, ee_placement) = self.model, self._held
         if jacobians:
             pin.computeJointJacobians(model, data, q)
@@ -290,12 +338,19 @@ class Robot:
         return self.kinematics(q, jacobians=False).ee_placement
 
     def neutral(self) -> np.ndarray:
-        """The zero configuration (nq,)."""
-        return pin.neutral(self.model)
+        """The arm's home configuration (nq,), rad, within the joint limits: the
+        description's ``home`` (the Franka arms' is Franka's ready pose, 0, −π/4, 0,
+        −3π/4, 0, π/2, π/4), each joint it does not name at 0, or in the middle of its
+        range where 0 is outside it (a copy).
+
+        Not Pinocchio's ``pin.neutral(robot.model)``, every joint at 0, which is outside
+        the limits of the Panda's and the FR3's joint 4 (and the FR3's joint 6).
+        """
+        return self._home.copy()
 
     def full_configuration(self, q: ArrayLike) -> dict[str, float]:
         """Angle of every joint of the description, locked ones included, by name (rad)."""
-        q = self.check_q(q)
+        q = as_array(q, (self.nq,), "q (joint angles, rad)")
         out = dict(zip(self.joint_names, q.tolist(), strict=False))
         out.update(self.locked)
         return out

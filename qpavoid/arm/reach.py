@@ -21,7 +21,7 @@ def shoulder_centre(robot: Robot, frame: str) -> np.ndarray:
     """
     model = robot.model
     data = model.createData()
-    pin.computeJointJacobians(model, data, robot.neutral())
+    pin.computeJointJacobians(model, data, pin.neutral(model))  # every joint at 0
     pin.updateFramePlacements(model, data)
     p = data.oMf[model.getFrameId(frame)].translation.copy()
     axis = pin.getJointJacobian(model, data, 1, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[3:, 0]
