@@ -377,3 +377,23 @@ def test_a_close_work_rerun_line_names_a_users_camera_file_whole(tmp_path):
     line = rerun_command(SimpleNamespace(seed=3), spec)
     assert f"--camera {shlex.quote(str(path.absolute()))}" in line
     assert shlex.split(line)[shlex.split(line).index("--camera") + 1] == str(path.absolute())
+
+
+def test_body_model_takes_a_format_name():
+    """Issue 46 (item 6.2): ``body_model("k4abt")`` raised ``AttributeError: 'str' object
+    has no attribute 'source'``. A name, a format and a user's format file's path give the
+    same model; an unknown name is refused naming the formats."""
+    body = body_model("k4abt")
+    assert body is body_model(skeleton_format("k4abt"))  # read once, whichever way named
+    assert body.skeleton.name == "k4abt" and body.part_names == KinectHuman().part_names
+    assert body.centres == (("CLAVICLES", ("CLAVICLE_LEFT", "CLAVICLE_RIGHT")),)
+    head = body.parts[body.part_names.index("head")]
+    assert head.chain == ("CLAVICLES", "NECK", "HEAD") and head.capsule_radius_m == 0.11
+    assert isinstance(body_model("kinect_v2"), KinectHuman)
+    with pytest.raises(InputError, match="unknown skeleton format 'k4'; the formats are kinect_v2"):
+        body_model("k4")
+
+
+def test_body_model_takes_a_users_format_file_by_its_path(tmp_path):
+    path = _user_camera(tmp_path)
+    assert body_model(str(path)) is body_model(skeleton_format(str(path)))

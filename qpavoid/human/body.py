@@ -43,6 +43,7 @@ from qpavoid.core.errors import SkeletonFormatError
 from qpavoid.human._kernels import append_centres, tracked_body, warm_up
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.landmarks import skeleton_format
 from qpavoid.human.skeleton import FORMATS_DIR, SkeletonFormat, read_toml
 
 __all__ = [
@@ -664,18 +665,29 @@ class KinectHuman(BodyModel):
     point_order: tuple[Joint, ...] = _POINTS
 
 
-def body_model(skeleton: SkeletonFormat) -> BodyModel:
+def body_model(skeleton: str | SkeletonFormat) -> BodyModel:
     """The body model on ``skeleton``'s own joints (the file ``<format>_body.toml`` beside
     the format's file, ``formats/`` for the shipped ones; the Kinect v2's is
     :class:`KinectHuman`), read once per process.
 
+    Parameters
+    ----------
+    skeleton
+        A skeleton format, or its name (``"k4abt"``, one of
+        :data:`~qpavoid.human.landmarks.FORMAT_NAMES`) or the path of a camera's own
+        format file (``"mycam.toml"``), as :func:`~qpavoid.human.landmarks.skeleton_format`
+        takes them.
+
     Raises
     ------
+    InputError
+        For a name that is no format, naming the formats.
     SkeletonFormatError
         If the format has no body file, or its body file is wrong (naming the file).
     """
+    fmt = skeleton_format(skeleton)
     # keyed on the file too: two equal formats of two folders have two body files
-    return _body_model(skeleton, skeleton.source)
+    return _body_model(fmt, fmt.source)
 
 
 @functools.cache
