@@ -140,7 +140,7 @@ def test_invariants_over_random_approaches(robot, seed):
     motion = random_approach(rng, robot, path, nominal=nominal)
     if seed % 2:
         motion = Corrupted(motion, seed)
-    ctrl = AnalyticController(robot, path, ControllerConfig(control_period_s=0.01))
+    ctrl = AnalyticController(robot, path=path, config=ControllerConfig(control_period_s=0.01))
     run = simulate(ctrl, motion, SimConfig(control_rate_hz=100, max_time_s=20))
     log = run.log
     assert np.isfinite(log["dq"]).all() and np.isfinite(log["q"]).all()

@@ -110,9 +110,9 @@ def test_nobody_near_qp_equals_analytic_on_each_arm(name, six_sets):
     robot = arm(name, six_sets)
     path = arm_path(robot)
     cfg = paper_config(distance="capsules", control_period_s=0.01)
-    result = free_run(robot, QPController(robot, path, config=cfg), path)
+    result = free_run(robot, QPController(robot, path=path, config=cfg), path)
     log = result.log
-    analytic = AnalyticController(robot, path, config=cfg)
+    analytic = AnalyticController(robot, path=path, config=cfg)
     worst = 0.0
     for k in range(len(log["t"])):
         cmd = analytic.step(log["q"][k], log["joints"][k], log["state"][k], log["tau"][k])
@@ -265,7 +265,7 @@ def test_the_posture_task_pulls_the_null_space_home_keeping_the_end_effector(nam
     runs = {}
     for weight in (0.0, REDUNDANT.posture_weight):
         qp = replace(REDUNDANT, elbow_weight=0.0, posture_weight=weight)
-        result = free_run(robot, QPController(robot, path, config=cfg, qp=qp), path, q0, 5.0)
+        result = free_run(robot, QPController(robot, path=path, config=cfg, qp=qp), path, q0, 5.0)
         assert result.metrics["stop_events"] == []
         log = result.log
         runs[weight] = (

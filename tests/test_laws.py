@@ -233,7 +233,7 @@ def test_a_command_past_a_limit_or_not_finite_is_a_stop(robot):
     from qpavoid.human.posture import Operator
 
     path = ArcPath()
-    ctrl = AnalyticController(robot, path)
+    ctrl = AnalyticController(robot, path=path)
     q = inverse_kinematics(robot, path.reference(1.0)[0])
     tick = ctrl.measure(q, Operator().rest(), None, 1.0)
     assert not tick.reason

@@ -225,7 +225,7 @@ def churn(robot, start: tuple[PlannedPath, np.ndarray], seed: int, ticks: int) -
         safety=str(rng.choice(["paper", "ssm", "pfl"])),
     )
     kind = CONTROLLERS[int(rng.integers(len(CONTROLLERS)))]
-    watched = Watched(kind(robot, start[0], config=config))
+    watched = Watched(kind(robot, path=start[0], config=config))
     q = start[1]
     newest, arrived = -np.inf, 0.0  # the frame in hand's capture time, and when it came
     ids: tuple[int, ...] = ()

@@ -223,7 +223,7 @@ def _start(robot):
 
 def test_iteration_limit_stops_the_robot(robot):
     path, q = _start(robot)
-    ctrl = QPController(robot, path, qp=QPConfig(max_iter=1))
+    ctrl = QPController(robot, path=path, qp=QPConfig(max_iter=1))
     from qpavoid.human.posture import Operator
 
     cmd = ctrl.step(q + 0.05, Operator().rest(), None, 1.0)
@@ -242,7 +242,7 @@ def test_infeasible_problem_stops_the_robot(robot, monkeypatch, backend):
     monkeypatch.setattr(VelocityLimit, "tighten_qp_bounds", crossed)
     ctrl = QPController(
         robot,
-        path,
+        path=path,
         qp=QPConfig(backend=backend, solver="daqp" if backend == "qpsolvers" else "osqp"),
     )
     from qpavoid.human.posture import Operator
@@ -304,7 +304,7 @@ def test_redundancy_moves_the_elbow_away_keeping_the_end_effector(robot7):
         for weight in (0.0, 0.05):
             ctrl = QPController(
                 robot7,
-                path,
+                path=path,
                 config=ControllerConfig(smooth=False),
                 qp=QPConfig(elbow_weight=weight, regularization=1e-4),
             )
@@ -475,7 +475,7 @@ def test_a_nan_in_the_problem_is_never_solved_and_leaves_no_trace(field, value):
 def test_a_solution_the_hard_rows_cannot_judge_is_never_applied(robot, monkeypatch):
     """A 'found' solution whose hard-row check is NaN (Python's max would skip the NaN)."""
     path, q = _start(robot)
-    ctrl = QPController(robot, path)
+    ctrl = QPController(robot, path=path)
     from qpavoid.control.qp.problem import QPSolution
     from qpavoid.human.posture import Operator
 

@@ -259,7 +259,7 @@ def test_the_posture_task_moves_only_the_null_space(robot7):
     cmds = {}
     for w in (0.0, REDUNDANT.posture_weight):
         qp = replace(REDUNDANT, elbow_weight=0.0, posture_weight=w)
-        ctrl = QPController(robot7, path, config=cfg, qp=qp, rest_posture=rest)
+        ctrl = QPController(robot7, path=path, config=cfg, qp=qp, rest_posture=rest)
         cmd = ctrl.step(q, Operator().rest(), None, 4.0)
         assert not cmd.stopped
         cmds[w] = cmd.dq

@@ -96,7 +96,7 @@ def closed_loop(
     )
     kind = AnalyticController if controller == "analytic" else QPController
     return simulate(
-        kind(robot, task.path, config),
+        kind(robot, path=task.path, config=config),
         make_scenario(scenario, robot, task=task),
         SimConfig(
             control_rate_hz=100.0,

@@ -7,7 +7,7 @@ from dataclasses import InitVar, dataclass
 import numpy as np
 
 from qpavoid.arm.model import Robot, joint_columns
-from qpavoid.control.controller import Controller
+from qpavoid.control.controller import Controller, robot_then_keywords
 from qpavoid.control.path import PlannedPath
 from qpavoid.control.tick import Command, ControllerConfig, Tick
 from qpavoid.core.errors import InputError
@@ -107,15 +107,17 @@ class AnalyticController(Controller):
 
     name = "analytic"
 
+    @robot_then_keywords
     def __init__(
         self,
         robot: Robot,
+        *,
         path: PlannedPath | None = None,
         config: ControllerConfig | None = None,
         human: BodyModel | None = None,
         analytic: AnalyticConfig | None = None,
     ):
-        super().__init__(robot, path, config, human)
+        super().__init__(robot, path=path, config=config, human=human)
         self.analytic = analytic or AnalyticConfig()
         self.repelled_cols = joint_columns(robot, self.analytic.repelled_joints, "repelled_joints")
         #: A speed and separation bound above this cannot bind (no point of the arm moves

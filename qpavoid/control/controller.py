@@ -15,9 +15,13 @@ joint angle or path time) raise :class:`~qpavoid.core.errors.InputError` before 
 
 from __future__ import annotations
 
+import functools
+import inspect
 import math
-from collections.abc import Hashable
+import typing
+from collections.abc import Callable, Hashable
 from dataclasses import replace
+from typing import ParamSpec, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -49,7 +53,58 @@ from qpavoid.laws.avoidance import l1_factor, modified_ik, stop_reason
 from qpavoid.laws.ssm import SSMConfig, StopTimeBudget, reaction_time
 from qpavoid.perception.perceiver import Perceiver
 
-__all__ = ["Controller"]
+__all__ = ["Controller", "robot_then_keywords"]
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+
+def robot_then_keywords(init: Callable[_P, _R]) -> Callable[_P, _R]:
+    """A controller's ``__init__`` whose parameters after the robot are keyword-only
+    (``def __init__(self, robot, *, path=None, config=None, ...)``), refusing them by
+    position with a :class:`TypeError` that says which keyword each one is.
+
+    ``QPController(robot, cfg)`` once took ``cfg`` for the path and failed only at the
+    first tick; with keyword-only settings Python refuses it at once, but says only
+    "takes 2 positional arguments but 3 were given". This says how to write it:
+    ``QPController(robot, config=...)``. Type checkers see the keyword-only signature.
+    """
+
+    @functools.wraps(init)
+    def checked(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+        if len(args) > 2:  # self, robot, and more
+            raise TypeError(_by_keyword_message(init, type(args[0]).__name__, args[2:]))
+        return init(*args, **kwargs)
+
+    return checked
+
+
+def _by_keyword_message(init: Callable[..., object], cls: str, extra: tuple) -> str:
+    """The error of :func:`robot_then_keywords`: each extra argument's keyword, guessed
+    from its type against the annotations of ``init``'s keyword-only parameters."""
+    params = inspect.signature(init).parameters
+    keywords = [n for n, p in params.items() if p.kind is inspect.Parameter.KEYWORD_ONLY]
+    try:
+        hints = typing.get_type_hints(init)
+    except (NameError, TypeError):  # an annotation that does not resolve: no guesses
+        hints = {}
+
+    def keyword(value: object) -> str:
+        for name in keywords:
+            for kind in typing.get_args(hints.get(name)) or (hints.get(name),):
+                if isinstance(kind, type) and kind is not type(None):
+                    try:
+                        if isinstance(value, kind):
+                            return name
+                    except TypeError:  # a protocol that cannot be checked at run time
+                        continue
+        return "<keyword>"
+
+    named = ", ".join(f"{keyword(v)}=<your {type(v).__name__}>" for v in extra)
+    return (
+        f"{cls} takes the robot alone by position and its settings by keyword "
+        f"({', '.join(keywords)}): write {cls}(robot, {named})"
+    )
 
 
 def _frame_times(frame_age_s: object, frame_time_s: object) -> tuple[float | None, float | None]:
@@ -86,7 +141,10 @@ class Controller:
     Parameters
     ----------
     robot
-        The arm.
+        The arm, the only argument taken by position: the others, and those of the
+        controllers, are keyword-only (``QPController(robot, config=cfg)``); a setting
+        given by position is refused with a :class:`TypeError` naming its keyword
+        (:func:`robot_then_keywords`).
     path
         The planned end-effector path (default: the arm's own task's,
         :func:`~qpavoid.control.task.default_task`: the paper's arc for the iiwa).
@@ -99,9 +157,11 @@ class Controller:
 
     name = "base"
 
+    @robot_then_keywords
     def __init__(
         self,
         robot: Robot,
+        *,
         path: PlannedPath | None = None,
         config: ControllerConfig | None = None,
         human: BodyModel | None = None,

@@ -17,7 +17,7 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 import pinocchio as pin
@@ -176,6 +176,7 @@ def pose_error(T_desired: np.ndarray, T: np.ndarray) -> np.ndarray:
     return e
 
 
+@runtime_checkable
 class PlannedPath(Protocol):
     """What a controller and a run need of a planned path (:class:`ArcPath`,
     :class:`WaypointPath`): the reference at a path time, its length in time, its start."""

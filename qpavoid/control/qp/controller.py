@@ -6,7 +6,7 @@ import numpy as np
 
 from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import Robot
-from qpavoid.control.controller import Controller
+from qpavoid.control.controller import Controller, robot_then_keywords
 from qpavoid.control.path import PlannedPath
 from qpavoid.control.qp.backends import make_backend
 from qpavoid.control.qp.barriers.repulsion import EERepulsionTask, RepelledRepulsionTask
@@ -91,16 +91,18 @@ class QPController(Controller):
 
     name = "qp"
 
+    @robot_then_keywords
     def __init__(
         self,
         robot: Robot,
+        *,
         path: PlannedPath | None = None,
         config: ControllerConfig | None = None,
         human: BodyModel | None = None,
         qp: QPConfig | None = None,
         rest_posture: np.ndarray | None = None,
     ):
-        super().__init__(robot, path, config, human)
+        super().__init__(robot, path=path, config=config, human=human)
         self.qp = qp or QPConfig()
         w, cfg = self.qp, self.config
         self.variables = x = Variables(robot.nv)
@@ -178,8 +180,8 @@ class QPController(Controller):
         info = {"solver": self.backend.name, "status": sol.status, "iterations": sol.iterations}
         if not sol.found or sol.x is None:
             reason = f"QP not solved ({self.backend.name}: {sol.status})"
-            if (tick.approach_limit < 0.0).any():  # no command keeps the separation
-                reason = f"{tick.separation_reason()} ({reason})"
+            if (tick.approach_limit < 0.0).any():  # a hold: no command keeps the separation
+                reason = tick.separation_reason()  # (the rows' infeasibility is the hold)
             return self.command(tick, None, reason=reason, info=info)
         x, dq = sol.x, self.variables.dq
         # Hard rows, checked against the problem we meant to solve: a solution that breaks
