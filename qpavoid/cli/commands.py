@@ -1,7 +1,7 @@
 """The ``qpavoid`` command line: it parses, calls the library and prints, nothing more.
 
     qpavoid run SCENARIO [--controller analytic|qp] [--distance capsules|spheres]
-                         [--safety paper|ssm] [--bench real|ideal] [--out DIR]
+                         [--safety paper|ssm] [--bench real|ideal] [--task FILE] [--out DIR]
     qpavoid run --human FILE [...]
     qpavoid run --human A.npz B.npz --sensors calib.toml [...]
     qpavoid run --listen HOST:PORT --sensors calib.toml --out DIR [...]
@@ -156,6 +156,12 @@ def build_parser() -> Parser:
         help="QP only: free the joints the robot description locks and keep the elbow away "
         "from the person",
     )
+    run.add_argument(
+        "--task",
+        metavar="FILE",
+        help="a task file (TOML, docs/tasks.md): the waypoints the robot follows and where "
+        "the operator sits, instead of the robot description's task.toml",
+    )
     run.add_argument("--out", type=folder, metavar="DIR", help="output folder (default: runs/NAME)")
     run.add_argument(
         "--view",
@@ -272,6 +278,7 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
         redundant=args.redundant,
         goal_tolerance_m=args.goal_tolerance,
         payload_kg=args.payload,
+        task=args.task,
     )
     out = Path(args.out or Path("runs") / spec.label.replace(":", "-"))
     check_output_dir(out)

@@ -57,7 +57,8 @@ paper's: :class:`Task`'s defaults). Everything is in the robot's base frame, m a
 
 The iiwa's ``robots/iiwa14/task.toml`` is the paper's task, and gives :class:`ArcPath`'s
 references bit for bit; the other arms' files scale it by their reach (their
-``[scaling]`` and comments).
+``[scaling]`` and comments). ``docs/tasks.md`` says more: the frames and units of every
+key, how to write a task, the operator's seat, and ``qpavoid run --task FILE``.
 """
 
 from __future__ import annotations
@@ -217,7 +218,7 @@ def load_task(file: str | PathLike[str], robot: Robot) -> Task:
     try:
         data = read_toml(path, MAX_TASK_BYTES)
     except NotTOMLError as exc:
-        raise RobotDescriptionError(f"{path}: {one_line(exc)}", path=path) from None
+        raise RobotDescriptionError(f"{path}: not TOML: {one_line(exc)}", path=path) from None
     except (OSError, ValueError) as exc:  # missing, too large, not a regular file
         raise RobotDescriptionError(
             f"{path}: cannot read the task file: {one_line(exc)}", path=path
@@ -287,9 +288,10 @@ def _check_reachable(poses: list[np.ndarray], robot: Robot, reader: _TaskReader)
         try:
             q = inverse_kinematics(robot, target, q)
         except IKNotConvergedError as exc:
+            where = "the one before" if k else "the description's [ik_seed]"
             raise reader.error(
                 f"waypoints[{k}]",
-                f"the arm cannot reach this pose from the one before ({one_line(exc)}); "
+                f"the arm cannot reach this pose from {where} ({one_line(exc)}); "
                 "move it within the arm's reach, or give the description an [ik_seed] "
                 "on the branch that reaches it",
                 [round(float(v), 4) for v in pose[:3, 3]],

@@ -12,11 +12,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from qpavoid.arm.dynamics import MAX_PAYLOAD_KG
+from qpavoid.arm.model import Robot, load_robot
 from qpavoid.control.analytic import LIMIT_MODES
 from qpavoid.control.qp.backends import check_solver
+from qpavoid.control.task import Task, load_task
 from qpavoid.control.tick import SAFETY_MODES
 from qpavoid.core.checks import check_choice, check_range
-from qpavoid.core.errors import InputError, SkeletonFormatError
+from qpavoid.core.errors import InputError, RobotDescriptionError, SkeletonFormatError
 from qpavoid.drive.connect import parse_arm
 from qpavoid.human.body import BodyModel, body_model
 from qpavoid.human.landmarks import FORMAT_NAMES, format_file, skeleton_format
@@ -115,6 +117,11 @@ class RunSpec:
         counts it in the arm's effective mass (:class:`~qpavoid.laws.pfl.PFLConfig`), and
         so does the judge of every true contact; above the arm's rated payload the run
         is refused.
+    task
+        A task file (``--task``, docs/tasks.md) for the robot to follow instead of its
+        description's ``task.toml``: its waypoints are the path, its ``[operator]`` the
+        seat of the generated scenarios' person. Read and checked against the robot (its
+        joints, every waypoint reachable) when the spec is made.
     """
 
     scenario: str | None = None
@@ -139,6 +146,7 @@ class RunSpec:
     arm: str | None = None
     camera: str = "kinect_v2"
     payload_kg: float = 0.0
+    task: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sensor_files", tuple(str(f) for f in self.sensor_files))
@@ -205,6 +213,8 @@ class RunSpec:
             check_solver(self.solver)
         if self.listen is None:
             motions.check_human_files(self.sensor_files, self.sensors)
+        if self.task is not None:  # read and checked now: the arm's joints, its reach
+            self.task_for(load_robot(self.robot, locked=() if self.redundant else None))
         if self.arm is not None:
             parse_arm(self.arm)
             if self.bench == "ideal":
@@ -235,6 +245,23 @@ class RunSpec:
         if self.listen is not None:
             return "live"
         return self.scenario if self.scenario is not None else Path(str(self.human_file)).stem
+
+    def task_for(self, robot: Robot) -> Task | None:
+        """The task file's task for ``robot`` (:func:`~qpavoid.control.task.load_task`),
+        or None without ``task`` (the robot's own, its description's ``task.toml``).
+
+        Raises
+        ------
+        InputError
+            ``--task <file>: <key>: <what is wrong>``, in one line: a file that cannot be
+            read or is not a task file, a joint the arm lacks, a waypoint out of its reach.
+        """
+        if self.task is None:
+            return None
+        try:
+            return load_task(self.task, robot)
+        except RobotDescriptionError as exc:
+            raise InputError(f"--task {exc}", name="--task", value=self.task) from None
 
 
 def check_regions(body: BodyModel) -> None:

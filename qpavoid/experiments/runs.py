@@ -81,11 +81,14 @@ ARM_COMPUTE_BUDGET_S = 0.01
 
 
 def build_controller(spec: RunSpec, robot: Robot) -> Controller:
-    """The controller ``spec`` names, on ``robot``, at the spec's control rate, with the
-    body model of the cell's camera on its own joints where it has one format
-    (:func:`cell_body`), else the paper's on the body's landmarks."""
+    """The controller ``spec`` names, on ``robot``, at the spec's control rate, along the
+    path of its ``--task`` (else the robot's own task's), with the body model of the
+    cell's camera on its own joints where it has one format (:func:`cell_body`), else the
+    paper's on the body's landmarks."""
     cameras = cell_formats(spec)
     human = cell_body(spec)
+    task = spec.task_for(robot)  # --task's (None: the robot's own)
+    path = None if task is None else task.path
     uncertainty = () if human is not None else cell_uncertainty_m(cameras)
     config = ControllerConfig(
         distance=spec.distance,
@@ -102,14 +105,18 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
     )
     if spec.controller == "analytic":
         return AnalyticController(
-            robot, config=config, human=human, analytic=AnalyticConfig(limit_mode=spec.limit_mode)
+            robot,
+            path=path,
+            config=config,
+            human=human,
+            analytic=AnalyticConfig(limit_mode=spec.limit_mode),
         )
     qp = QPConfig(
         backend="qpsolvers" if spec.solver else "persistent", solver=spec.solver or "osqp"
     )
     if spec.redundant:  # the redundancy mode's weights (docs/qp.md), same solver
         qp = replace(REDUNDANT, backend=qp.backend, solver=qp.solver)
-    return QPController(robot, config=config, human=human, qp=qp)
+    return QPController(robot, path=path, config=config, human=human, qp=qp)
 
 
 def cell_body(spec: RunSpec) -> BodyModel | None:
@@ -242,7 +249,9 @@ def simulate_one(
     controller = build_controller(spec, robot) if controller is None else controller
     live = spec.listen is not None
     if motion is None and not live:
-        motion = motions.load_motion(robot, spec.scenario, spec.human_files, spec.sensors)
+        motion = motions.load_motion(
+            robot, spec.scenario, spec.human_files, spec.sensors, spec.task_for(robot)
+        )
     if camera is None:  # a close-work case's noise from its seed, as its sweep draws it
         seed = None if spec.scenario is None else closework_seed(spec.scenario)
         camera = (

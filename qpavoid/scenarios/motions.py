@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from qpavoid.arm.model import Robot
+from qpavoid.control.task import Task
 from qpavoid.core.errors import InputError
 from qpavoid.fusion.offline import fuse_recordings, load_people
 from qpavoid.human.frames import HumanMotion
@@ -65,8 +66,11 @@ def load_motion(
     scenario: str | None = None,
     human_files: Sequence[str] = (),
     sensors: str | None = None,
+    task: Task | None = None,
 ) -> HumanMotion:
-    """The true motion a run replays (module docstring).
+    """The true motion a run replays (module docstring); a generated scenario's along
+    ``task``'s path with its operator's seat (default: the robot's own task,
+    :func:`~qpavoid.control.task.default_task`).
 
     Raises
     ------
@@ -76,7 +80,7 @@ def load_motion(
     """
     check_human_files(human_files, sensors)
     if not human_files:
-        return make_scenario(str(scenario), robot)
+        return make_scenario(str(scenario), robot, task=task)
     if sensors is None:
         people = load_people(human_files[0])
         if people is None:
