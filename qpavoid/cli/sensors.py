@@ -1,8 +1,9 @@
-"""The sensor commands of ``qpavoid``: ``fuse`` (offline), ``replay`` (streams over UDP)
-and ``keygen`` (a sensor's key file).
+"""The sensor commands of ``qpavoid``: ``fuse`` (offline), ``replay`` (streams over UDP),
+``send`` (a simulated sensor of any format, over UDP) and ``keygen`` (a sensor's key file).
 
     qpavoid fuse A.npz B.npz --sensors calib.toml --out fused.npz
     qpavoid replay A.npz B.npz --to HOST:PORT --sensors calib.toml [--rate 30]
+    qpavoid send SENSOR --to HOST:PORT --sensors calib.toml [--scenario NAME | --human FILE]
     qpavoid keygen SENSOR --out SENSOR.key [--rotate]
 
 Like :mod:`qpavoid.cli.commands` they parse, call the library and print.
@@ -11,21 +12,47 @@ Like :mod:`qpavoid.cli.commands` they parse, call the library and print.
 from __future__ import annotations
 
 import argparse
+import socket
 from pathlib import Path
 
 import numpy as np
 
-from qpavoid.cli.args import HelpFormatter, positive_float
+from qpavoid.arm.model import load_robot
+from qpavoid.cli.args import HelpFormatter, add_robot_option, count, positive_float
+from qpavoid.control.task import default_task
+from qpavoid.core.checks import check_range, is_loopback
 from qpavoid.core.errors import InputError
 from qpavoid.fusion.offline import fuse_recordings, save_fused_npz
+from qpavoid.human.frames import HumanMotion
+from qpavoid.human.landmarks import FORMAT_NAMES
 from qpavoid.loop.live_input import parse_address
+from qpavoid.loop.sender import AtRest, send, sensor_frames, sensor_latency_s
 from qpavoid.output.run_files import check_output_dir, check_output_file
+from qpavoid.scenarios.generated import check_scenario_name
+from qpavoid.scenarios.motions import load_motion
+from qpavoid.sensing.calibration import Calibration
 from qpavoid.sensing.calibration_file import load_calibration
 from qpavoid.sensing.keys import new_key_file, sensor_name_error
-from qpavoid.sensing.per_sensor import load_sensor_recording
+from qpavoid.sensing.per_sensor import (
+    SensorRecording,
+    is_sensor_recording,
+    load_sensor_recording,
+)
 from qpavoid.sensing.streamer import stream
 
-__all__ = ["add_sensor_commands", "fuse_command", "keygen_command", "replay_command"]
+__all__ = [
+    "add_sensor_commands",
+    "fuse_command",
+    "keygen_command",
+    "replay_command",
+    "send_command",
+]
+
+#: How long ``qpavoid send`` sends a generated motion by default, s: the paper's Test 1
+#: (its hand back at rest after 14 s) and some.
+SEND_SECONDS = 20.0
+#: The longest it sends, s: a day.
+MAX_SEND_SECONDS = 86_400.0
 
 
 def add_sensor_commands(sub: argparse._SubParsersAction) -> None:
@@ -78,6 +105,70 @@ def add_sensor_commands(sub: argparse._SubParsersAction) -> None:
         help="frames per second of each sensor (the recordings' own times set the order)",
     )
     replay.set_defaults(parser=replay, handler=replay_command)
+
+    send_parser = sub.add_parser(
+        "send",
+        formatter_class=fmt,
+        help="be a sensor of any format: stream a simulated camera's frames over UDP",
+        description="Play a calibrated sensor for a 'qpavoid run --listen': the seated "
+        "operator at rest (or --scenario, or --human) filmed by the simulated camera of the "
+        "sensor's format (its joints, noise, rate), in the sensor's own frame (its "
+        "base_from_camera inverted), each frame sent when the camera would deliver it, "
+        "stamped with its capture time (the send time less the camera's latency) and signed "
+        "with the sensor's key (docs/sensors.md §7, §11).",
+    )
+    send_parser.add_argument("sensor", metavar="SENSOR", help="the sensor's name in --sensors")
+    send_parser.add_argument("--to", required=True, metavar="HOST:PORT", help="where to send")
+    send_parser.add_argument(
+        "--sensors",
+        required=True,
+        metavar="TOML",
+        help="the calibration: the sensor's place, format and key file",
+    )
+    send_parser.add_argument(
+        "--camera",
+        metavar="FORMAT",
+        help="the sensor's skeleton format, if you want it checked: it must be the one the "
+        f"calibration names for SENSOR (one of {', '.join(FORMAT_NAMES)}; default: that one)",
+    )
+    what = send_parser.add_mutually_exclusive_group()
+    what.add_argument(
+        "--scenario",
+        metavar="NAME",
+        help="a scenario's motion instead of the operator at rest: test1 (the paper's hand "
+        "motion), test2, free, random:SEED, closework:SEED, ... (qpavoid run --help)",
+    )
+    what.add_argument(
+        "--human",
+        metavar="FILE",
+        help="a recording instead: a base-frame one (docs/formats.md), filmed by the "
+        "simulated camera, or a per-sensor one holding SENSOR's frames, sent as recorded "
+        "(as qpavoid replay does, stamped with the latency)",
+    )
+    add_robot_option(send_parser)
+    send_parser.add_argument(
+        "--latency",
+        type=float,
+        metavar="S",
+        help="the camera's latency, s: each frame is stamped this long before it is sent "
+        "(default: the calibration's latency_s for SENSOR, else its format's)",
+    )
+    send_parser.add_argument(
+        "--seconds",
+        type=positive_float,
+        metavar="S",
+        help=f"how long to send, s (default: a recording's length, else {SEND_SECONDS:g})",
+    )
+    send_parser.add_argument(
+        "--seed", type=count, default=0, metavar="N", help="the camera's noise seed"
+    )
+    send_parser.add_argument(
+        "--unsigned",
+        action="store_true",
+        help="unsigned (version 1) datagrams, for a listener started with "
+        "--allow-unauthenticated on loopback (a calibration without keys)",
+    )
+    send_parser.set_defaults(parser=send_parser, handler=send_command)
 
     keygen = sub.add_parser(
         "keygen",
@@ -151,6 +242,115 @@ def replay_command(args: argparse.Namespace) -> str:
         ) from None
     kind = "unsigned" if args.unsigned else "signed"
     return f"sent {sent} datagrams to {address[0]}:{address[1]} ({kind})"
+
+
+def send_command(args: argparse.Namespace) -> str:
+    """``qpavoid send``: every argument checked, one line on starting, the sensor played
+    (:func:`qpavoid.loop.sender.send`), a summary."""
+    address = parse_address(args.to, "--to")
+    calibration = load_calibration(args.sensors)
+    cal = calibration[args.sensor]  # CalibrationError: no such sensor (naming those there)
+    if args.camera is not None and args.camera != cal.format:
+        raise InputError(
+            f"--camera {str(args.camera)[:80]!r}: sensor {args.sensor!r} is calibrated as "
+            f"{cal.format} (the format key of {args.sensors}); its listener drops any other "
+            "format (dropped_wrong_format)",
+            name="--camera",
+            value=args.camera,
+        )
+    check_signing(calibration, args.sensor, args.to, address[0], args.unsigned)
+    latency = (
+        sensor_latency_s(calibration, args.sensor)
+        if args.latency is None
+        else check_range("the latency (--latency)", args.latency, 0.0, 1.0, "s")
+    )
+    if args.seconds is not None:
+        check_range("the time to send (--seconds)", args.seconds, 0.0, MAX_SEND_SECONDS, "s")
+    try:  # the host resolved now: a name that does not resolve is refused before sending
+        socket.getaddrinfo(address[0], address[1], type=socket.SOCK_DGRAM)
+    except (OSError, UnicodeError) as exc:
+        raise InputError(
+            f"--to {args.to!r}: cannot resolve {address[0]!r} ({exc})", name="--to", value=args.to
+        ) from None
+    motion, what = send_motion(args, calibration)
+    seconds = args.seconds
+    if seconds is None and not isinstance(motion, SensorRecording):
+        seconds = getattr(motion, "duration_s", SEND_SECONDS)  # a recording's, filmed
+    frames = sensor_frames(motion, calibration, args.sensor, seconds, args.seed)
+    kind = "unsigned" if args.unsigned else f"signed with its key (cell {calibration.cell!r})"
+    where = f"{address[0]}:{address[1]}"
+    span = "its length" if seconds is None else f"{seconds:g} s"
+    print(
+        f"sending {args.sensor} ({cal.format}, {cal.skeleton.sensor.frame_rate_hz:g} Hz, "
+        f"latency {latency:.3f} s: each frame stamped that long before it is sent) to {where} "
+        f"for {span}: {what}, {kind}; Ctrl-C stops it",
+        flush=True,
+    )
+    try:
+        sent = send(
+            frames, calibration, args.sensor, address, latency_s=latency, unsigned=args.unsigned
+        )
+    except OSError as exc:
+        raise InputError(
+            f"cannot send to {args.to}: {exc.strerror or exc}", name="--to", value=args.to
+        ) from None
+    bodies = f", {sent.bodies} bodies" if sent.bodies != sent.frames else ""
+    return (
+        f"sent {sent.frames} frames of {args.sensor} ({cal.format}{bodies}) to {where}: "
+        f"{sent.datagrams} {'unsigned' if args.unsigned else 'signed'} datagrams, each "
+        f"stamped {sent.latency_s:.3f} s before it was sent (the listener's summary says how "
+        "many it took)"
+    )
+
+
+def check_signing(
+    calibration: Calibration, sensor: str, to: str, host: str, unsigned: bool
+) -> None:
+    """:class:`InputError` for datagrams the listener of ``calibration`` would drop
+    unread: unsigned ones of sensors that have keys, or sent off loopback; signed ones
+    without keys."""
+    where = calibration.path or "the calibration"
+    if unsigned and calibration.authenticated:
+        raise InputError(
+            f"--unsigned: the sensors of {where} have keys, and a listener with it drops "
+            "every unsigned datagram (dropped_unauthenticated): leave out --unsigned",
+            name="--unsigned",
+            value=True,
+        )
+    if unsigned and not is_loopback(host):
+        raise InputError(
+            f"--unsigned to {to}: a listener takes unsigned datagrams on loopback only "
+            "(--allow-unauthenticated); sign them (qpavoid keygen, key_file)",
+            name="--to",
+            value=to,
+        )
+    if not unsigned and not calibration.authenticated:
+        raise InputError(
+            f"{where} gives {sensor!r} no key to sign with: give each sensor a key_file "
+            f"(qpavoid keygen {sensor} --out {sensor}.key), or --unsigned for a listener "
+            "with --allow-unauthenticated on loopback",
+            name="--sensors",
+            value=where,
+        )
+
+
+def send_motion(
+    args: argparse.Namespace, calibration: Calibration
+) -> tuple[HumanMotion | SensorRecording, str]:
+    """What ``qpavoid send`` films (or sends as recorded) and how to say it: the seated
+    operator at rest where the arm's task seats them, a scenario, or a recording."""
+    if args.human is not None:
+        if is_sensor_recording(args.human):
+            rec = load_sensor_recording(args.human)
+            return rec, f"{args.sensor}'s frames recorded in {args.human}"
+        return load_motion(load_robot(args.robot), None, [args.human]), f"{args.human} filmed"
+    if args.scenario is not None:
+        check_scenario_name(args.scenario)
+        robot = load_robot(args.robot)
+        return load_motion(robot, args.scenario), f"scenario {args.scenario} ({robot.name})"
+    robot = load_robot(args.robot)
+    operator = default_task(robot).operator
+    return AtRest(operator), f"the seated operator at rest ({robot.name}'s seat)"
 
 
 def keygen_command(args: argparse.Namespace) -> str:
