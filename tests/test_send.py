@@ -1,7 +1,7 @@
 """A sender for every format (issue 46, item 2): ``qpavoid send`` and
 :mod:`qpavoid.loop.sender` play a calibrated sensor of any format on the wire; the worked
 calibrations of docs/sensors.md §11 (``docs/calibrations/``) put the operator where their
-hand-worked numbers say.
+hand-worked numbers say; a listener says which format arrived and which it expected.
 
 The worked calibrations' camera is 0.6 m behind the robot's base and 1.5 m above the
 table, tilted down by asin(0.6) (36.87°), so that its optical axis meets (0, 1.0, 0.3)
@@ -258,6 +258,56 @@ def test_a_per_sensor_recording_is_sent_as_recorded_with_its_latency(tmp_path, c
     for frame, recorded in zip(decoded, frames, strict=True):
         np.testing.assert_allclose(frame.joints, recorded.joints, atol=1e-6)  # µm on the wire
         assert before - 0.2 <= frame.t <= after - 0.2
+
+
+# --- what the listener says of a datagram of another format --------------------------------
+
+
+def test_a_datagram_of_another_format_is_reported_once_per_sensor_with_both_names(tmp_path):
+    """A k4abt datagram to a sensor calibrated kinect_v2, a kinect_v2 one to a k4abt
+    sensor, an unknown format to a ZED: each dropped (dropped_wrong_format) and reported
+    by the listener as (arrived, expected), the first one per sensor."""
+    kinect = load_calibration(worked(tmp_path, "kinect_v2"))["kinect"]
+    femto = load_calibration(worked(tmp_path, "k4abt"))["femto"]
+    zed = load_calibration(worked(tmp_path, "zed_body_34"))["zed"]
+    keys = {n: SensorKeys.generate(n) for n in ("kinect", "femto", "zed", "quiet")}
+    calibration = Calibration(
+        {
+            "kinect": kinect,
+            "femto": femto,
+            "zed": zed,
+            "quiet": SensorCalibration("quiet", kinect.base_from_camera),
+        },
+        cell="c",
+        keys=keys,
+    )
+    rest = AtRest(Operator())
+    a_femto = next(sensor_frames(rest, calibration, "femto", 0.1))
+    a_kinect = next(sensor_frames(rest, calibration, "kinect", 0.1))
+    a_zed = next(sensor_frames(rest, calibration, "zed", 0.1))
+    wrong = [
+        a_femto._replace(sensor="kinect"),  # k4abt to kinect_v2
+        a_zed._replace(sensor="kinect"),  # a second wrong one: the first is reported
+        a_kinect._replace(sensor="femto"),  # kinect_v2 to k4abt
+        a_femto._replace(sensor="femto", format="kinect_v3"),  # no such format
+        a_femto._replace(sensor="zed", format="kinect_v3"),
+    ]
+    signers = {n: Signer("c", k) for n, k in keys.items()}
+    with Listener(("127.0.0.1", 0), calibration, max_age_s=5.0) as listener:
+        assert listener.format_mismatches() == {}
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            for frame in wrong:
+                data = signers[frame.sensor].encode(frame._replace(t=time.time()))
+                sock.sendto(data, listener.address)
+        wait_for(listener, len(wrong))
+        counts = dict(listener.counters)
+        mismatches = listener.format_mismatches()
+    assert counts["dropped_wrong_format"] == counts["received"] == 5, counts
+    assert mismatches == {
+        "kinect": ("k4abt", "kinect_v2"),
+        "femto": ("kinect_v2", "k4abt"),
+        "zed": ("kinect_v3", "zed_body_34"),
+    }
 
 
 # --- refusals ------------------------------------------------------------------------------

@@ -190,6 +190,12 @@ class Listener:
         are stale (ask after :meth:`drain`: every loss of a frame drained is then seen)."""
         return self._table.losses()
 
+    def format_mismatches(self) -> dict[str, tuple[str, str]]:
+        """Each sensor whose datagrams came in another skeleton format than its calibrated
+        one (dropped: ``dropped_wrong_format``): (the first format that arrived, the format
+        expected), by name; to say once per sensor what the counter alone does not."""
+        return self._table.format_mismatches()
+
 
 def check_listening(
     address: tuple[str, int], calibration: Calibration, accept_unauthenticated: bool

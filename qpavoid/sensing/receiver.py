@@ -53,7 +53,7 @@ from qpavoid.sensing.calibration import Calibration, known_formats
 from qpavoid.sensing.calibration_file import load_calibration
 from qpavoid.sensing.per_sensor import BodyFrame
 from qpavoid.sensing.signing import FUTURE_TOLERANCE_S, Verifier
-from qpavoid.sensing.wire import REASONS, SKELETON, WireError, Workspace
+from qpavoid.sensing.wire import REASONS, SKELETON, FormatMismatchError, WireError, Workspace
 
 __all__ = ["COUNTERS", "SensorLoss", "SlotTable", "serve"]
 
@@ -83,6 +83,9 @@ KEY_CHECK_S = 1.0
 SLOT_HEAD = 3
 #: Priority the receiver drops to, so that the control loop gets the CPU first.
 NICE = 10
+#: Bytes kept of the first wrong format a sensor sent (:meth:`SlotTable.format_mismatches`):
+#: a format's name as :class:`~qpavoid.sensing.wire.FormatMismatchError` keeps it.
+FORMAT_NAME_BYTES = 40
 
 
 class SensorLoss(NamedTuple):
@@ -120,6 +123,10 @@ class SlotTable:
     formats
         Each sensor's skeleton format (a name, in slot order): a frame of another is
         not kept (``dropped_wrong_format``).
+    wrong_formats
+        The first other format each sensor sent (a multiprocessing Array of
+        :data:`FORMAT_NAME_BYTES` bytes a sensor, in slot order; empty: none yet):
+        :meth:`format_mismatches`.
     """
 
     sensors: tuple[str, ...]
@@ -130,6 +137,7 @@ class SlotTable:
     n_joints: int
     max_bodies: int
     formats: tuple[str, ...] = ()
+    wrong_formats: Any = None
 
     @classmethod
     def create(
@@ -163,7 +171,8 @@ class SlotTable:
         counts = context.Array("q", len(COUNTERS), lock=False)
         lost = context.Array("d", [0.0, -math.inf] * len(names), lock=False)
         lock = context.Lock()
-        return cls(names, values, counts, lost, lock, n_joints, max_bodies, tuple(formats))
+        wrong = context.Array("c", FORMAT_NAME_BYTES * len(names), lock=False)
+        return cls(names, values, counts, lost, lock, n_joints, max_bodies, tuple(formats), wrong)
 
     def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
         width = SLOT_HEAD + 4 * self.n_joints
@@ -187,6 +196,30 @@ class SlotTable:
             name: SensorLoss(int(values[2 * i]), values[2 * i + 1])
             for i, name in enumerate(self.sensors)
         }
+
+    def format_mismatches(self) -> dict[str, tuple[str, str]]:
+        """Each sensor that sent a datagram of another skeleton format than its calibrated
+        one (``dropped_wrong_format``): (the first format that arrived, the format
+        expected), by name."""
+        if self.wrong_formats is None:
+            return {}
+        with self.lock:
+            raw = bytes(self.wrong_formats)
+        out = {}
+        for i, name in enumerate(self.sensors):
+            arrived = raw[i * FORMAT_NAME_BYTES : (i + 1) * FORMAT_NAME_BYTES].rstrip(b"\0")
+            if arrived:
+                out[name] = (arrived.decode("utf-8", "replace"), self._format(i).name)
+        return out
+
+    def _note_wrong_format(self, sensor: int, arrived: str) -> None:
+        """Keep ``arrived`` as the ``sensor``-th sensor's first wrong format (the lock held)."""
+        if self.wrong_formats is None:
+            return
+        at = sensor * FORMAT_NAME_BYTES
+        if self.wrong_formats[at] == b"\0":
+            name = arrived.encode("utf-8", "replace")[:FORMAT_NAME_BYTES] or b"?"
+            self.wrong_formats[at : at + len(name)] = name
 
     def take(self) -> list[BodyFrame]:
         """The frames written since the last call, oldest first (the loop's side)."""
@@ -358,10 +391,11 @@ def _receive(
             return
         step: Step | None = None  # what the datagram did to its sensor's frames, if taken
         reason = "out_of_order_or_duplicate"  # why not, if not
+        mismatch: FormatMismatchError | None = None
         try:
             frame, place = verifier.read(data)
             if frame.format != formats[frame.sensor]:  # a table not made for this calibration
-                raise WireError(f"format {frame.format!r}", reason="wrong_format")
+                raise FormatMismatchError(frame.sensor, frame.format, formats[frame.sensor])
             newer = frame.t > newest[index[frame.sensor] * bodies + int(frame.body)]
             if newer and place is None:  # unsigned: no sequence number, a frame of its own
                 step = Step(SensorFrames(), (frame,))
@@ -371,12 +405,15 @@ def _receive(
                 step = None if step.closed else step
         except WireError as exc:
             reason = exc.reason if exc.reason in TIME_REASONS else f"dropped_{exc.reason}"
+            mismatch = exc if isinstance(exc, FormatMismatchError) else None
         except Exception:  # a datagram must never end the receiver: dropped, counted
             reason = "dropped_unreadable"
         with table.lock:
             counts[0] += 1
             if step is None:
                 counts[code[reason]] += 1
+                if mismatch is not None and mismatch.sensor in index:
+                    table._note_wrong_format(index[mismatch.sensor], mismatch.arrived)
                 continue
             if step.lost:
                 sensor = lost[index[frame.sensor]]

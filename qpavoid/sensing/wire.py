@@ -94,6 +94,7 @@ __all__ = [
     "MAX_DATAGRAM_BYTES",
     "REASONS",
     "VERSION",
+    "FormatMismatchError",
     "Manifest",
     "WireError",
     "Workspace",
@@ -144,6 +145,30 @@ class WireError(InputError):
     def __init__(self, message: str, *, reason: str):
         super().__init__(message, name="datagram", value=reason)
         self.reason = reason
+
+
+class FormatMismatchError(WireError):
+    """A datagram of a calibrated sensor whose skeleton format is not the sensor's
+    (``wrong_format``): which format arrived and which was expected, so that a listener
+    can say so (:meth:`~qpavoid.loop.live_input.Listener.format_mismatches`).
+
+    Attributes
+    ----------
+    sensor
+        The sensor's name.
+    arrived
+        The datagram's ``format`` (``"kinect_v2"`` where it names none; an unknown name as
+        sent, at most 40 characters).
+    expected
+        The sensor's calibrated ``format``.
+    """
+
+    def __init__(self, sensor: str, arrived: str, expected: str):
+        super().__init__(
+            f"format {arrived!r} of sensor {sensor!r}, calibrated as {expected!r}",
+            reason="wrong_format",
+        )
+        self.sensor, self.arrived, self.expected = sensor, arrived, expected
 
 
 @dataclass(frozen=True)
@@ -298,14 +323,11 @@ def skeleton(
     otherwise."""
     name = msg.get("format", DEFAULT_FORMAT)
     fmt = known_formats().get(name) if isinstance(name, str) else None
+    cal = calibration.sensors.get(sensor)
+    if cal is not None and (fmt is None or cal.format != name):
+        raise FormatMismatchError(sensor, str(name)[:40], cal.format)
     if fmt is None:
         raise WireError(f"format {str(name)[:40]!r}", reason="wrong_format")
-    cal = calibration.sensors.get(sensor)
-    if cal is not None and cal.format != name:
-        raise WireError(
-            f"format {name!r} of sensor {sensor!r}, calibrated as {cal.format!r}",
-            reason="wrong_format",
-        )
     body, joint_rows = msg.get("body"), msg.get("joints")
     if t is None:
         t = msg.get("t")
