@@ -83,16 +83,24 @@ def add_robot_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def add_camera_option(parser: argparse.ArgumentParser) -> None:
+def add_camera_option(parser: argparse.ArgumentParser, with_sensors: bool = False) -> None:
     """``--camera FORMAT``, the simulated camera of every command that simulates one: a
-    shipped format's name or a format file of the user's (checked by the run's spec)."""
+    shipped format's name or a format file of the user's (checked by the run's spec).
+    ``with_sensors``: the command also takes ``--sensors``, whose calibration's formats
+    rule (the default is then the cell's, resolved by the run's spec)."""
     parser.add_argument(
         "--camera",
         metavar="FORMAT",
-        default=FORMAT_NAMES[0],
+        default="" if with_sensors else FORMAT_NAMES[0],
         help="the simulated camera's skeleton format, with its latency, noise, joints and "
         f"failure modes: one of {', '.join(FORMAT_NAMES)}, or a format file FILE.toml with "
-        "its body model FILE's <name>_body.toml beside it (docs/sensors.md, docs/formats.md)",
+        "its body model FILE's <name>_body.toml beside it (docs/sensors.md, docs/formats.md)"
+        + (
+            f"; default {FORMAT_NAMES[0]}. With --sensors or --listen the calibration's "
+            "format keys rule: leave it out (one that differs is refused)"
+            if with_sensors
+            else ""
+        ),
     )
 
 

@@ -8,11 +8,10 @@ Like :mod:`qpavoid.cli.commands` it parses, calls the library and prints.
 from __future__ import annotations
 
 import argparse
-import json
 
 from qpavoid.cli.args import HelpFormatter, add_robot_option
 from qpavoid.experiments.bench import format_bench, run_bench
-from qpavoid.output.run_files import check_output_file
+from qpavoid.output.run_files import check_output_file, strict_json
 
 __all__ = ["add_bench_command", "bench_command"]
 
@@ -38,5 +37,5 @@ def bench_command(args: argparse.Namespace) -> str:
     target = None if args.json is None else check_output_file(args.json, "--json")
     result = run_bench(quick=args.quick, robot=args.robot)
     if target is not None:
-        target.write_text(json.dumps(result, indent=1))
+        target.write_text(strict_json(result, indent=1))
     return format_bench(result) + (f"\nwrote {target}" if target else "")

@@ -10,7 +10,6 @@ Like :mod:`qpavoid.cli.commands` it parses, calls the library and prints.
 from __future__ import annotations
 
 import argparse
-import json
 from concurrent.futures import Executor
 
 from qpavoid.cli.args import (
@@ -35,7 +34,7 @@ from qpavoid.experiments.campaign import (
     write_campaign,
 )
 from qpavoid.experiments.run_spec import CONTROLLERS, DISTANCES
-from qpavoid.output.run_files import check_output_dir
+from qpavoid.output.run_files import check_output_dir, strict_json
 
 __all__ = ["add_campaign_command", "sweep_command"]
 
@@ -124,4 +123,4 @@ def sweep_command(args: argparse.Namespace) -> str:
             executor.shutdown()
     summary = write_campaign(out, spec, args.n, args.seed, runs)
     shown = {k: v for k, v in summary.items() if k != "settings"}
-    return f"{json.dumps(shown, indent=1)}\nwrote summary.json, runs.json and worst/ to {out}/"
+    return f"{strict_json(shown, indent=1)}\nwrote summary.json, runs.json and worst/ to {out}/"

@@ -102,9 +102,11 @@ def build_parser() -> Parser:
     run.add_argument(
         "--arm",
         metavar="ARM",
-        help="drive an arm in real time: sim (the simulated arm on the wall clock) or "
-        "franka:HOST (a Franka FR3/Panda, or franky-sim, through franky-control: pip install "
-        '"qpavoid[franka]"; docs/real-robot.md); Ctrl-C ramps it to rest and writes the run',
+        help="drive an arm in real time: sim (the simulated arm on the wall clock), "
+        "franka:HOST (an FR3, or franky-sim, through franky-control: pip install "
+        '"qpavoid[franka]") or panda:HOST (a Panda through panda-python: pip install '
+        '"qpavoid[panda]"); an arm that is not the --robot is refused (docs/real-robot.md); '
+        "Ctrl-C ramps it to rest and writes the run",
     )
     run.add_argument(
         "--sensors",
@@ -136,14 +138,16 @@ def build_parser() -> Parser:
         ("--limit-mode", LIMIT_MODES, "analytic only: enforce eq. (3) by scaling or clipping"),
     ):
         run.add_argument(flag, choices=choices, default=choices[0], help=help_text)
-    add_camera_option(run)
+    add_camera_option(run, with_sensors=True)
     add_payload_option(run)
     run.add_argument(
         "--latency",
         type=float,
         default=None,
         metavar="S",
-        help="sensor latency, s (default: the camera's, from its format file)",
+        help="the camera's latency, s (default: the camera's, from its format file); "
+        "with --sensors, of each sensor whose calibration names no latency_s: a frame "
+        "older than the latency + a frame + 6.7 ms is refused, and stops the robot",
     )
     run.add_argument(
         "--solver",
@@ -299,6 +303,10 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
         def advance(t: float) -> None:
             bar.update(t - bar.n)
 
+        def say(line: str) -> None:  # a live run's lines, above the progress bar
+            bar.write(line, file=sys.stdout)
+            sys.stdout.flush()
+
         m = run_one(
             spec,
             out,
@@ -307,6 +315,7 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
             view=not args.no_view,
             watch=watch,
             clear=clear,
+            say=say,
         )
     lines = [describe(m)]
     for what in ("plots", "view"):

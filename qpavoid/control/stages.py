@@ -34,7 +34,8 @@ from qpavoid.core.errors import InputError
 from qpavoid.distance.methods import distance_method
 from qpavoid.distance.table import DistanceTable
 from qpavoid.human.body import BodyModel, HumanGeometry
-from qpavoid.human.frames import HumanFrame
+from qpavoid.human.frames import HumanFrame, nobody
+from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.landmarks import landmark_map, skeleton_format
 from qpavoid.human.people import NOBODY, People, as_people
 from qpavoid.human.skeleton import SkeletonFormat
@@ -62,13 +63,23 @@ __all__ = [
 ]
 
 
+def nobody_of(human: BodyModel) -> HumanFrame:
+    """Nobody in view, on the body's joints (:data:`~qpavoid.human.people.NOBODY` itself for
+    the Kinect v2's, the paper's body)."""
+    if human.skeleton.name == KINECT_V2.name and human.skeleton.n_joints == len(NOBODY.joints):
+        return NOBODY
+    return nobody(human.skeleton)
+
+
 class Seen(NamedTuple):
     """What the perception stage made of a frame."""
 
     people: People
     """The frame's people, as the body's landmarks."""
     frame_age_s: float
-    """Age of the newest frame the trackers accepted, s (NaN or +inf: unknown, stale)."""
+    """Age of the newest frame the trackers accepted, plus the people's largest lag behind
+    it (:attr:`~qpavoid.human.people.People.lag_s`: a person fused from a later camera's
+    frame is as old as that), s (NaN or +inf: unknown, stale)."""
     perceived: list[Perceived]
     """Each person as the trackers see them (untracked: a stale frame as it is)."""
     geometries: list[HumanGeometry]
@@ -95,6 +106,7 @@ class PerceptionStage:
     def __init__(self, human: BodyModel, config: ControllerConfig):
         self.human, self.max_frame_age_s = human, config.max_frame_age_s
         self.perceiver = Perceiver(human, config.perception)
+        self._nobody = nobody_of(human)
         self.frames = FrameClock()
         # the last camera frame of another format (its format, ids and content) and its
         # body (a frame held over ticks maps once), and that format's landmark uncertainty, m
@@ -138,7 +150,7 @@ class PerceptionStage:
                 name="camera_format",
                 value=fmt.name,
             )
-        people = People(seen.ids, tuple(mapping.map(*f) for f in seen.frames))
+        people = People(seen.ids, tuple(mapping.map(*f) for f in seen.frames), seen.lag_s)
         self._mapped = ((fmt.name, seen.ids, key), people)
         self.camera_extra_m = np.array(mapping.uncertainty_m)
         return people
@@ -161,11 +173,12 @@ class PerceptionStage:
         NaN-aged frame is taken as it is, and the trackers do not learn from it (the robot
         stops on it)."""
         new, age = self.frames.observe(people, clock_s, frame_age_s, frame_time_s, frame_id)
+        age += people.max_lag_s  # a person behind the frame's newest camera: that old
         if age <= self.max_frame_age_s and people.ids:
             captured = clock_s - age if frame_time_s is None else frame_time_s
             seen = self.perceive(people, captured, new)
             return Seen(people, age, seen.perceived, seen.geometry, seen.part_velocity)
-        percs = [Perceived.untracked(f) for f in people.frames or (NOBODY,)]
+        percs = [Perceived.untracked(f) for f in people.frames or (self._nobody,)]
         velocity = np.zeros((len(percs), len(self.human.parts), 3))
         return Seen(people, age, percs, self.perceiver.geometries(people), velocity)
 
@@ -201,6 +214,7 @@ class ClearanceStage:
         self.roles, self.avoidance = robot.roles, config.avoidance
         self.distances = distance_method(config.distance, robot, human)
         self._law_constants = law_constants(config.avoidance)  # eqs. (4)-(7), as floats
+        self._nobody = nobody_of(human)
 
     def __call__(self, kin: Kinematics, seen: Seen) -> tuple[Clearances, np.ndarray]:
         """The clearances, and (S, K) which person each pair's distance is to."""
@@ -220,7 +234,7 @@ class ClearanceStage:
             else 0
         )
         people = seen.people
-        frame = people.frames[nearest] if people.ids else NOBODY
+        frame = people.frames[nearest] if people.ids else self._nobody
         f = float(l1_factor(dmin[roles.scaled], self.avoidance))  # eq. (2)
         clear = Clearances(
             frame=frame,
@@ -274,6 +288,8 @@ class Bounds(NamedTuple):
     human_approach: np.ndarray
     contact_limit: np.ndarray | None
     command_box: tuple[np.ndarray, np.ndarray] | None
+    ssm: SSMConfig | None = None
+    """Speed and separation's constants this tick (its stop time), None without it."""
 
 
 class LimitsStage:
@@ -356,6 +372,7 @@ class LimitsStage:
         approach_limit, human_approach = separation_bounds(table, v_parts, seen.frame_age_s, ssm)
         limits = np.minimum(limits, self.accel * ssm.stop_time_s)  # |q̇_j| ≤ a_j T_s
         if self.contact is None:
-            return Bounds(limits, approach_limit, human_approach, None, box)
+            return Bounds(limits, approach_limit, human_approach, None, box, ssm)
         contact = self.contact(kin, table, seen.geometries, who, ssm, approach_limit)
-        return Bounds(limits, np.maximum(approach_limit, contact), human_approach, contact, box)
+        bound = np.maximum(approach_limit, contact)
+        return Bounds(limits, bound, human_approach, contact, box, ssm)

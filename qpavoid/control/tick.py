@@ -19,7 +19,7 @@ from qpavoid.human.body import HumanGeometry
 from qpavoid.human.frames import HumanFrame
 from qpavoid.laws.avoidance import AvoidanceConfig
 from qpavoid.laws.pfl import PFLConfig
-from qpavoid.laws.ssm import SSMConfig
+from qpavoid.laws.ssm import SSMConfig, hold_distance
 from qpavoid.perception.tracker import Perceived, PerceptionConfig
 
 #: What ``ControllerConfig.safety`` may be: the paper's rules as written, speed and
@@ -246,12 +246,23 @@ class Tick:
     human_approach: np.ndarray
     command_box: tuple[np.ndarray, np.ndarray] | None = None
     contact_limit: np.ndarray | None = None
+    ssm: SSMConfig | None = None
 
     def separation_reason(self) -> str:
-        """Why speed and separation monitoring stops the robot: the tightest pair."""
+        """Why speed and separation monitoring holds the robot, in the operator's words:
+        the tightest pair, its clearance and the clearance a robot at rest needs there
+        (the protective distance at v_r = 0, :func:`~qpavoid.laws.ssm.hold_distance`),
+        e.g. "speed and separation: person's head 0.300 m from robot link 'hand', needs
+        0.340 m: holding"."""
         table = self.table
         i, j = np.unravel_index(int(np.argmin(self.approach_limit)), table.distance.shape)
+        d = float(table.distance[i, j])
+        needs = ""
+        if self.ssm is not None:
+            part = table.part_names[j]
+            need = hold_distance(d, self.frame_age_s, self.ssm, part in self.ssm.body_parts)
+            needs = f", needs {need:.3f} m" if np.isfinite(need) else ", its frame's age unknown"
         return (
-            f"speed and separation: {table.part_names[j]} {table.distance[i, j]:.3f} m "
-            f"from {table.set_names[i]}"
+            f"speed and separation: person's {table.part_names[j]} {d:.3f} m from robot "
+            f"link {table.set_names[i]!r}{needs}: holding"
         )

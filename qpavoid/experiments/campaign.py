@@ -29,7 +29,6 @@ case beside them (its ``replay`` line: a strike's recording, or the close-work s
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import shlex
@@ -52,7 +51,7 @@ from qpavoid.experiments.run_spec import RunSpec
 from qpavoid.experiments.sweep import CloseWorkCheck, StrikeCheck, SweepSpec, summarize, sweep
 from qpavoid.human.frames import HumanFrame, HumanMotion
 from qpavoid.human.landmarks import format_file
-from qpavoid.output.run_files import staged_output
+from qpavoid.output.run_files import staged_output, strict_json
 from qpavoid.scenarios.closework import closework_case, closework_motion
 from qpavoid.scenarios.strikes import strike_case, strike_motion
 from qpavoid.sensing.recording import Recording, save_npz
@@ -322,12 +321,12 @@ def write_campaign(
     of ``spec`` from seed ``seed`` on into ``out``; return the summary."""
     summary = {"settings": campaign_settings(spec, n, seed), **summarize(runs)}
     with staged_output(out) as stage:
-        (stage / "summary.json").write_text(json.dumps(summary, indent=1))
-        (stage / "runs.json").write_text(json.dumps([asdict(r) for r in runs], indent=1))
+        (stage / "summary.json").write_text(strict_json(summary, indent=1))
+        (stage / "runs.json").write_text(strict_json([asdict(r) for r in runs], indent=1))
         worst = stage / "worst"
         worst.mkdir()
         for r in worst_runs(runs):
             save_npz(worst / f"seed{r.seed}.npz", true_recording(r, spec))
             case = {**asdict(r), "replay": rerun_command(r, spec)}
-            (worst / f"seed{r.seed}.json").write_text(json.dumps(case, indent=1))
+            (worst / f"seed{r.seed}.json").write_text(strict_json(case, indent=1))
     return summary

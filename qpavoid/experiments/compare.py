@@ -16,7 +16,6 @@ more cases.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from functools import partial
 from pathlib import Path
@@ -32,7 +31,7 @@ from qpavoid.experiments.run_spec import CONTROLLERS, DISTANCES
 from qpavoid.experiments.runs import RunSpec, simulate_one
 from qpavoid.output import plots as plotting
 from qpavoid.output import replay_html as view_html
-from qpavoid.output.run_files import check_output_dir, staged_output
+from qpavoid.output.run_files import check_output_dir, staged_output, strict_json
 from qpavoid.output.view_data import replay_data
 from qpavoid.sensing.recording import load_recording
 
@@ -219,7 +218,7 @@ def compare(
         ]
     table = "\n".join(lines)
     with staged_output(out) as stage:
-        (stage / "compare.json").write_text(json.dumps(metrics, indent=2) + "\n")
+        (stage / "compare.json").write_text(strict_json(metrics) + "\n")
         (stage / "compare.md").write_text(
             f"# qpavoid compare\n\nOn the arm {description_reference(robot)}: every input "
             "run with both controllers and both distance "

@@ -26,6 +26,8 @@ from qpavoid.laws.pfl import PFLConfig
 from qpavoid.loop.live_input import parse_address
 from qpavoid.scenarios import motions
 from qpavoid.scenarios.generated import SCENARIOS, check_scenario_name
+from qpavoid.sensing.calibration import DEFAULT_FORMAT, Calibration
+from qpavoid.sensing.calibration_file import load_calibration
 
 __all__ = ["BENCHES", "CONTROLLERS", "DISTANCES", "LIMIT_MODES", "RunSpec"]
 
@@ -35,9 +37,6 @@ CONTROLLERS = ("analytic", "qp")
 DISTANCES = ("capsules", "spheres")
 #: Benches: ``real`` (Kinect v2, the iiwa's reaction and braking) or ``ideal`` (the paper's).
 BENCHES = ("real", "ideal")
-#: A frame is stale once older than the latency plus this, s: a frame (33 ms) and 7 ms.
-STALE_AFTER_LATENCY_S = 0.04
-
 #: Accepted ranges: control rate (Hz) from the camera's 30 Hz to 10 kHz; a run's cap (s)
 #: from a few frames to an hour (an hour at 500 Hz logs 1.8 M ticks, about 1.5 GB).
 RATE_RANGE_HZ, MAX_TIME_RANGE_S = (30.0, 10_000.0), (0.1, 3600.0)
@@ -71,14 +70,21 @@ class RunSpec:
         command at once (the frozen-frame check is off: a perfect sensor films a still
         person bit for bit).
     latency_s
-        The real bench's sensor latency, s (None, the default: the camera's, from its
-        format file; the Kinect v2's 0.06 s, docs/safety.md); a frame older than the
-        latency plus 40 ms (one frame and 7 ms) is stale.
+        The cameras' latency, s (None, the default: each camera's, from its format file;
+        the Kinect v2's 0.06 s, docs/safety.md): the simulated camera's, and with
+        ``sensors`` that of each sensor whose calibration names no ``latency_s`` (one that
+        names another is refused). A frame older than its camera's age limit (the latency,
+        a frame period and 6.7 ms: :meth:`~qpavoid.human.skeleton.CameraSpec.age_limit_s`)
+        is stale.
     camera
         The skeleton format of the real bench's simulated camera (``kinect_v2``,
         ``k4abt``, ``zed_body_34``, ``zed_body_38``, ``mediapipe_pose``:
         :data:`~qpavoid.human.landmarks.FORMAT_NAMES`), its latency, noise, joint set and
-        failure modes (:mod:`qpavoid.loop.camera`).
+        failure modes (:mod:`qpavoid.loop.camera`). "" (the default): the cell's, i.e.
+        with ``sensors`` their calibrated format (the Kinect v2's for a cell mixing
+        formats, where the fusion's landmarks are the body), else ``kinect_v2``. With
+        ``sensors`` the calibration's formats rule: a camera that is not every sensor's
+        format is refused.
     max_time_s
         Cap on the run, s (default 40: the 15 s path plus room for stops).
     rate_hz
@@ -110,7 +116,8 @@ class RunSpec:
     arm
         The arm to drive in real time instead of the offline simulation
         (:func:`~qpavoid.drive.connect.open_arm`): ``"sim"`` (the kinematic arm on the wall
-        clock) or ``"franka:HOST"`` (a Franka, or franky-sim, through franky-control);
+        clock), ``"franka:HOST"`` (an FR3, or franky-sim, through franky-control) or
+        ``"panda:HOST"`` (a Panda through panda-python);
         None: the offline simulation (a live run's: the simulated arm in real time).
     payload_kg
         The payload at the end effector, kg (``--payload``): power and force limiting
@@ -144,7 +151,7 @@ class RunSpec:
     listen: str | None = None
     allow_unauthenticated: bool = False
     arm: str | None = None
-    camera: str = "kinect_v2"
+    camera: str = ""
     payload_kg: float = 0.0
     task: str | None = None
 
@@ -187,13 +194,14 @@ class RunSpec:
         check_choice("distance method", self.distance, DISTANCES)
         check_choice("safety mode (--safety)", self.safety, SAFETY_MODES)
         check_choice("bench (--bench)", self.bench, BENCHES)
+        if self.latency_s is not None:
+            check_range("the sensor latency (--latency)", self.latency_s, 0.0, 1.0, "s")
+        object.__setattr__(self, "camera", self._cell_camera())
         if format_file(self.camera) is None:
             check_choice("camera (--camera)", self.camera, FORMAT_NAMES)
         fmt = skeleton_format(self.camera)  # a format file: read and checked (one line)
         if fmt.body:
             check_regions(body_model(fmt))  # its body model on its own joints, checked
-        if self.latency_s is not None:
-            check_range("the sensor latency (--latency)", self.latency_s, 0.0, 1.0, "s")
         check_choice("limit mode", self.limit_mode, LIMIT_MODES)
         check_range("the payload (--payload)", self.payload_kg, 0.0, MAX_PAYLOAD_KG, "kg")
         check_range("the run's cap (--max-time)", self.max_time_s, *MAX_TIME_RANGE_S, "s")
@@ -224,6 +232,53 @@ class RunSpec:
                     name="--arm",
                     value=self.arm,
                 )
+
+    def _cell_camera(self) -> str:
+        """``camera`` resolved (its docstring): the calibration's format with ``sensors``,
+        where a contradicting one is refused; else ``kinect_v2`` for ""."""
+        if self.sensors is None:
+            return self.camera or DEFAULT_FORMAT
+        calibration = self.calibration()
+        formats = sorted(set(calibration.formats))
+        if not self.camera:
+            return formats[0] if len(formats) == 1 else DEFAULT_FORMAT
+        if formats != [self.camera]:
+            raise InputError(
+                f"--camera {self.camera} contradicts the calibration {self.sensors}, whose "
+                f"sensors are {self._sensor_formats(calibration)}: with --sensors the "
+                "calibration's format keys rule; drop --camera",
+                name="--camera",
+                value=self.camera,
+            )
+        return self.camera
+
+    @staticmethod
+    def _sensor_formats(calibration: Calibration) -> str:
+        """ "name (format), ..." of the calibration's sensors."""
+        return ", ".join(f"{name} ({cal.format})" for name, cal in calibration.sensors.items())
+
+    def calibration(self) -> Calibration:
+        """The sensors' calibration (``sensors``) with ``latency_s`` for each sensor that
+        names none (:meth:`~qpavoid.sensing.calibration.Calibration.with_latency`).
+
+        Raises
+        ------
+        InputError
+            Without ``sensors``; for a file that cannot be read, or a sensor whose own
+            latency contradicts ``latency_s``.
+        """
+        if self.sensors is None:
+            raise InputError("the run has no sensors (--sensors)", name="--sensors")
+        return load_calibration(str(self.sensors)).with_latency(self.latency_s)
+
+    @property
+    def frame_age_limit_s(self) -> float:
+        """The oldest a frame may be before the controller stops on it, s: with
+        ``sensors``, the largest of their age limits (each camera's latency, a frame and
+        a margin), else the simulated camera's (a 30 Hz camera's: its latency + 40 ms)."""
+        if self.sensors is not None:
+            return max(self.calibration().age_limits_s.values())
+        return skeleton_format(self.camera).sensor.age_limit_s(self.latency_s)
 
     @property
     def sensor_latency_s(self) -> float:

@@ -33,11 +33,9 @@ from qpavoid.control.smoothing import smooth_rate_limit_hz
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.core.errors import InputError
 from qpavoid.drive.connect import open_arm
-from qpavoid.experiments.run_spec import (
-    STALE_AFTER_LATENCY_S,
-    RunSpec,
-)
+from qpavoid.experiments.run_spec import RunSpec
 from qpavoid.human.body import BodyModel, body_model
+from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.landmarks import landmark_map, skeleton_format
 from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.laws.pfl import PFLConfig
@@ -47,13 +45,13 @@ from qpavoid.loop.live_input import Listener, LiveSource, parse_address
 from qpavoid.loop.simulation import HumanMotion, SimConfig, SimResult, simulate
 from qpavoid.output import plots as plotting
 from qpavoid.output import replay_html as view_html
+from qpavoid.output.live_status import LiveStatus
 from qpavoid.output.live_view import LiveView
 from qpavoid.output.run_files import staged_output, write_run
 from qpavoid.output.view_data import replay_data
 from qpavoid.perception.tracker import PerceptionConfig
 from qpavoid.scenarios import motions
 from qpavoid.scenarios.generated import closework_seed
-from qpavoid.sensing.calibration_file import load_calibration
 from qpavoid.sensing.recording_files import recording_format
 
 
@@ -94,7 +92,7 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
         distance=spec.distance,
         control_period_s=1.0 / spec.rate_hz,
         compute_budget_s=ARM_COMPUTE_BUDGET_S if spec.arm is not None else 0.0,
-        max_frame_age_s=spec.sensor_latency_s + STALE_AFTER_LATENCY_S,
+        max_frame_age_s=spec.frame_age_limit_s,
         safety=spec.safety,
         perception=PerceptionConfig(max_identical_frames=None)
         if spec.bench == "ideal"
@@ -121,13 +119,18 @@ def build_controller(spec: RunSpec, robot: Robot) -> Controller:
 
 def cell_body(spec: RunSpec) -> BodyModel | None:
     """The body model on the run's camera's own joints (:func:`~qpavoid.human.body.body_model`)
-    where the cell sees the person through that one camera of another format than the
-    Kinect v2's (the simulated camera of ``--camera``, not ``--sensors``' fusion; a replayed
-    recording of the body's own landmarks); None: the paper's model on the body's landmarks,
-    which the fusion of several formats and a recording's derived landmarks need."""
+    where the cell sees the person through cameras of one format other than the Kinect
+    v2's (the simulated camera of ``--camera``; a live cell's sensors, fused on their own
+    joints; a replayed recording of the body's own landmarks); None: the paper's model on
+    the body's landmarks, which the fusion of several formats, per-sensor recordings and a
+    recording's derived landmarks need."""
     fmt = skeleton_format(spec.camera)
-    if spec.bench != "real" or spec.sensors is not None or spec.listen is not None or not fmt.body:
+    if spec.bench != "real" or not fmt.body:
         return None
+    if spec.sensors is not None and (
+        spec.listen is None or len(set(spec.calibration().formats)) > 1
+    ):
+        return None  # recordings fused on the landmarks, or a live cell mixing formats
     if spec.human_file is not None and recording_format(spec.human_file).body:
         return None  # a recording's derived landmarks: the landmarks' path, widened
     return body_model(fmt)
@@ -137,10 +140,10 @@ def cell_formats(spec: RunSpec) -> list[SkeletonFormat]:
     """The skeleton formats of a run's cameras: the simulated camera's (``--camera``) and,
     with ``--sensors``, each calibrated sensor's, or a replayed recording's (``--human``:
     the landmarks its camera derived are no truer for being recorded)."""
+    if spec.sensors is not None:  # the calibration's formats rule (the camera is theirs)
+        return [skeleton_format(name) for name in sorted(set(spec.calibration().formats))]
     names = {spec.camera}
-    if spec.sensors is not None:
-        names |= {s.format for s in load_calibration(str(spec.sensors)).sensors.values()}
-    elif spec.human_file is not None:  # a recording's derived landmarks: as seen, not truth
+    if spec.human_file is not None:  # a recording's derived landmarks: as seen, not truth
         names.add(recording_format(spec.human_file).name)
     return [skeleton_format(name) for name in sorted(names)]
 
@@ -154,18 +157,44 @@ def cell_uncertainty_m(cameras: list[SkeletonFormat]) -> tuple[float, ...]:
 
 
 @contextmanager
-def live_source(spec: RunSpec, clear: threading.Event | None = None) -> Iterator[LiveSource | None]:
+def live_source(
+    spec: RunSpec,
+    clear: threading.Event | None = None,
+    say: Callable[[str], None] | None = None,
+) -> Iterator[LiveSource | None]:
     """The live source of a ``--listen`` run (listening while the run lasts), else None;
-    ``clear``: the live view's request to clear flagged people (:class:`LiveSource`)."""
+    ``clear``: the live view's request to clear flagged people; ``say``: told the ready
+    line once listening, and what the source says (:class:`LiveSource`)."""
     if spec.listen is None:
         yield None
         return
-    calibration = load_calibration(str(spec.sensors))
+    calibration = spec.calibration()
     address = parse_address(spec.listen)
+    body = cell_body(spec)  # one camera format: fused on its own joints, for its own body
+    skeleton = KINECT_V2 if body is None else body.skeleton
     with Listener(
         address, calibration, accept_unauthenticated=spec.allow_unauthenticated
     ) as listener:
-        yield LiveSource(listener, clear=clear)
+        source = LiveSource(listener, clear=clear, say=say, skeleton=skeleton)
+        if say is not None:
+            say(source.ready_line())
+        yield source
+
+
+def cameras_used(spec: RunSpec) -> dict[str, Any]:
+    """What the controller saw the person through (``metrics.json``): ``camera`` (the
+    format, or the cell's formats joined by "+"; "ideal" on the ideal bench),
+    ``latency_s`` (the largest camera latency counted, s) and ``frame_age_limit_s``
+    (the age at which the controller stops on a frame, s)."""
+    if spec.bench == "ideal":
+        return {"camera": "ideal", "latency_s": 0.0, "frame_age_limit_s": spec.frame_age_limit_s}
+    if spec.sensors is not None:
+        sensors = spec.calibration().sensors.values()
+        camera = "+".join(sorted({c.format for c in sensors}))
+        latency = max(c.latency_used_s for c in sensors)
+    else:
+        camera, latency = spec.camera, spec.sensor_latency_s
+    return {"camera": camera, "latency_s": latency, "frame_age_limit_s": spec.frame_age_limit_s}
 
 
 def spec_robot(spec: RunSpec) -> Robot:
@@ -210,6 +239,7 @@ def simulate_one(
     robot: Robot | None = None,
     camera: CameraConfig | None = None,
     controller: Controller | None = None,
+    say: Callable[[str], None] | None = None,
 ) -> RunResult:
     """Build the robot, controller and motion of ``spec`` and simulate them.
 
@@ -236,6 +266,9 @@ def simulate_one(
     controller
         The controller, if not the one ``spec`` names (:func:`build_controller`): one built
         with other settings (``benchmarks/smooth_stops.py``: the paper's steps).
+    say
+        A live run's lines for the operator (:func:`live_source`): printed by the
+        command line as they come.
     """
     robot = spec_robot(spec) if robot is None else robot
     if spec.arm is not None and spec.rate_hz > (top := smooth_rate_limit_hz(robot)) + 1e-9:
@@ -260,7 +293,9 @@ def simulate_one(
             else CameraConfig.of(spec.camera, latency_s=spec.sensor_latency_s, seed=seed or 0)
         )
     with contextlib.ExitStack() as stack:
-        source = stack.enter_context(live_source(spec, clear))
+        source = stack.enter_context(live_source(spec, clear, say))
+        if source is not None and say is not None:  # a line every few seconds, too
+            watch = _both(watch, LiveStatus(say, source.report))
         arm = None
         if spec.arm is not None:  # at the path's start, as the offline simulation starts
             q0 = inverse_kinematics(robot, controller.path.reference(0.0)[0])
@@ -285,19 +320,33 @@ def simulate_one(
         metrics = dict(sim.metrics)
         if source is not None:
             metrics["input"] = source.report()
+            metrics["sensors"] = source.sensors_report()
+    metrics.update(cameras_used(spec))
     metrics.update(
         scenario=spec.label,
         safety=spec.safety,
         bench=spec.bench,
-        latency_s=spec.sensor_latency_s if spec.bench == "real" and not live else 0.0,
-        camera=spec.camera if spec.bench == "real" and not live else "ideal",
         payload_kg=spec.payload_kg,
         redundant=bool(spec.redundant),
         robot=description_reference(spec.robot),
-        arm=spec.arm or "offline simulation",
+        arm=spec.arm or ("the simulated arm in real time" if live else "offline simulation"),
         solver=getattr(getattr(controller, "backend", None), "name", None),
     )
     return RunResult(spec, sim, robot, controller, metrics)
+
+
+def _both(
+    first: Callable[[dict[str, Any]], None] | None, second: Callable[[dict[str, Any]], None]
+) -> Callable[[dict[str, Any]], None]:
+    """One watcher calling ``first`` (if any), then ``second``."""
+    if first is None:
+        return second
+
+    def both(row: dict[str, Any]) -> None:
+        first(row)
+        second(row)
+
+    return both
 
 
 def write_outputs(run: RunResult, out: str | Path, plots: bool = True, view: bool = True) -> dict:
@@ -354,8 +403,9 @@ def run_one(
     view: bool = True,
     watch: Callable[[dict[str, Any]], None] | None = None,
     clear: threading.Event | None = None,
+    say: Callable[[str], None] | None = None,
 ) -> dict:
     """Simulate ``spec`` and write its files into ``out``; return its metrics (``watch``,
-    ``clear``: :func:`simulate_one`)."""
-    run = simulate_one(spec, progress=progress, watch=watch, clear=clear)
+    ``clear``, ``say``: :func:`simulate_one`)."""
+    run = simulate_one(spec, progress=progress, watch=watch, clear=clear, say=say)
     return write_outputs(run, out, plots, view)

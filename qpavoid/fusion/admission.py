@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Mapping
 
 from qpavoid.fusion.association import PersonTrack
 from qpavoid.fusion.config import FusionConfig
@@ -45,8 +46,15 @@ class Admission:
         Where refusals and flags are counted (the fuser's).
     """
 
-    def __init__(self, calibration: Calibration, config: FusionConfig, counters: Counter[str]):
+    def __init__(
+        self,
+        calibration: Calibration,
+        config: FusionConfig,
+        counters: Counter[str],
+        max_age_s: Mapping[str, float],
+    ):
         self.calibration, self.cfg, self.counters = calibration, config, counters
+        self.max_age_s = max_age_s  # each sensor's age limit, s (a frame older is not fresh)
         self.first_s: float | None = None  # the first frame's capture time
         self._tokens, self._tokens_s = float(config.new_people_burst), -math.inf
         self._heard: dict[str, float] = {}  # each sensor's newest capture time
@@ -139,7 +147,7 @@ class Admission:
         (only,) = track.seen_by
         centre = track.centre()
         for name in self.calibration.names:
-            fresh = t - self._heard.get(name, -math.inf) <= cfg.max_age_s
+            fresh = t - self._heard.get(name, -math.inf) <= self.max_age_s[name]
             if name != only and fresh and self.calibration[name].sees(centre):
                 self.counters["flagged_people"] += 1
                 return f"seen by {only} only, in the view of {name}"

@@ -15,8 +15,13 @@ class FusionConfig:
     Attributes
     ----------
     max_age_s
-        A sensor's frame older than this at the fusion time is not used, s (0.1: three
-        Kinect frames, the controller's own stale limit on the real bench).
+        A sensor's frame older than this at the fusion time is not used, s; None (the
+        default): each sensor's own age limit, its camera's latency (the calibration's
+        ``latency_s``, else its format's), a frame period and a margin
+        (:attr:`~qpavoid.sensing.calibration.SensorCalibration.age_limit_s`: 0.1 s for a
+        Kinect v2, 0.14 s for an Azure Kinect), which is also the age at which the
+        listener refuses its datagrams. A camera's frames arrive as old as its latency:
+        one limit for all refused every frame of a slower camera.
     max_extrapolation_s
         Farthest a frame is moved along the person's velocity to the fusion time, s.
     weight_tracked, weight_inferred
@@ -94,7 +99,7 @@ class FusionConfig:
         or the sensors' weighted mean (False).
     """
 
-    max_age_s: float = 0.1
+    max_age_s: float | None = None
     max_extrapolation_s: float = 0.0
     weight_tracked: float = 1.0
     weight_inferred: float = 0.2

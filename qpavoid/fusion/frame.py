@@ -42,6 +42,9 @@ class FusedPerson(NamedTuple):
         Why this person is suspect ("" if not): appeared near the robot never seen
         approaching, or seen by one sensor only where another looks (a forged or phantom
         body). The controllers still treat them as a person.
+    captured_s
+        The capture time of the oldest sensor frame behind this person, s (controller
+        clock; ``-inf``: no sensor sees them now): the person is as old as that frame.
     """
 
     id: int
@@ -51,12 +54,16 @@ class FusedPerson(NamedTuple):
     outliers: tuple[OutlierChoice, ...]
     mirrored: tuple[str, ...]
     flag: str = ""
+    captured_s: float = float("-inf")
 
 
 class FusedFrame(NamedTuple):
-    """Every person known at fusion time ``t`` (s, controller clock), and the capture time
-    of the newest frame used (``-inf`` if none: nobody seen by a fresh frame)."""
+    """Every person known at fusion time ``t`` (s, controller clock); the capture time of
+    the newest frame used (``captured_s``: which fusion is new) and of the oldest frame
+    behind anybody seen (``oldest_s``: how old the people are, which speed and separation
+    counts), both ``-inf`` if none: nobody seen by a fresh frame."""
 
     t: float
     people: tuple[FusedPerson, ...]
     captured_s: float = float("-inf")
+    oldest_s: float = float("-inf")

@@ -9,14 +9,20 @@ every person it knows (:class:`FusedFrame`). docs/sensors.md details and measure
    (:func:`~qpavoid.human.landmarks.landmark_map`; a Kinect v2 frame is the landmarks
    already): a cell may mix formats, and everything after this works on the landmarks;
 2. per sensor, its newest frame captured at or before ``t`` (never from the future) and
-   no older than ``max_age_s``;
+   no older than the sensor's age limit (its camera's latency, a frame period and a
+   margin: :attr:`~qpavoid.sensing.calibration.SensorCalibration.age_limit_s`, or
+   ``FusionConfig.max_age_s`` for every sensor where set);
 3. bodies matched to people, left/right swaps undone (:mod:`qpavoid.fusion.association`);
 4. per joint, the sensors that see it averaged by ``state weight × sensor weight ×
    freshness``; where they disagree by more than ``outlier_threshold_m`` one is believed,
    the others dropped (recorded); a joint no sensor sees stays missing, never invented;
 5. the result filtered (α-β) and given a per-joint confidence in [0, 1] (0.5 per fresh
    sensor tracking it, 0.15 per one inferring it, capped at 1); a joint on which sensors
-   disagreed is Inferred, whoever was believed, so the controller widens it.
+   disagreed is Inferred, whoever was believed, so the controller widens it;
+6. each person dated by the oldest sensor frame behind them
+   (:attr:`FusedPerson.captured_s`), the fused frame by the oldest behind anybody
+   (:attr:`FusedFrame.oldest_s`): a joint only a late camera sees is as old as that
+   camera's frame, and speed and separation counts that age (docs/sensors.md §3).
 
 A person no sensor sees any more is reported with every joint missing for
 ``person_timeout_s`` (the controller's tracker bounds them meanwhile), then dropped, unless
@@ -136,8 +142,16 @@ class Fuser:
         # a frame on the way (:meth:`lose`)
         self._stale_before = dict.fromkeys(calibration.names, -math.inf)
         self._assigned: dict[str, dict[int, int]] = {s: {} for s in calibration.names}
+        #: each sensor's age limit, s: its camera's, or the configuration's for all
+        self.max_age_s: dict[str, float] = (
+            calibration.age_limits_s
+            if self.cfg.max_age_s is None
+            else dict.fromkeys(calibration.names, float(self.cfg.max_age_s))
+        )
+        # the freshness weights and the filter's restart count ages against the longest
+        self._longest_age_s = max(self.max_age_s.values(), default=0.0)
         self._next_id = 0
-        self._admission = Admission(calibration, self.cfg, self.counters)
+        self._admission = Admission(calibration, self.cfg, self.counters, self.max_age_s)
         self._sensor_weight = {n: calibration[n].weight for n in calibration.names}
         # a fusion on a body skeleton of the user's own (no shipped format: its
         # sensors stream that skeleton, the calibration file's format key aside)
@@ -207,7 +221,7 @@ class Fuser:
     def lose(self, sensor: str, before_t: float) -> None:
         """``sensor`` lost a frame (a datagram missing on the way): its frames captured
         before ``before_t`` (s, its own clock, as :meth:`add`'s) are stale from now on, as
-        if it had been silent for ``max_age_s`` (a camera dropout: its people's joints are
+        if it had been silent for its age limit (a camera dropout: its people's joints are
         then seen by the others, or missing, never held on its old frames).
 
         Raises
@@ -239,7 +253,7 @@ class Fuser:
                 c = next((c for c in reversed(history) if c.t <= t), None)
                 if c is not None:
                     newest[body] = c
-            oldest = max(t - cfg.max_age_s, self._stale_before[sensor])
+            oldest = max(t - self.max_age_s[sensor], self._stale_before[sensor])
             bodies = {
                 body: c
                 for body, c in newest.items()
@@ -277,7 +291,9 @@ class Fuser:
             if tr.id in per_track
         }
         ages = [c.age for cs in per_track.values() for c in cs]
-        return FusedFrame(float(t), tuple(people), float(t - min(ages)) if ages else -np.inf)
+        if not ages:
+            return FusedFrame(float(t), tuple(people))
+        return FusedFrame(float(t), tuple(people), float(t - min(ages)), float(t - max(ages)))
 
     def _landmark_map(self, sensor: str, fmt: SkeletonFormat) -> LandmarkMap | None:
         """``sensor``'s map onto the body's landmarks (None: its frames are them)."""
@@ -394,7 +410,7 @@ class Fuser:
             float(t),
             self._weight,
             self._confidence,
-            cfg.max_age_s,
+            self._longest_age_s,
             cfg.max_extrapolation_s,
             cfg.outlier_threshold_m,
             cfg.mirror_margin_m,
@@ -421,6 +437,7 @@ class Fuser:
             outliers,
             flipped,
             track.flag,
+            float(t - max(c.age for c in contributions)),
         )
 
     def _far(self, track: PersonTrack) -> bool:

@@ -10,6 +10,7 @@ closest of them, per robot set and body part
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -26,10 +27,19 @@ NOBODY = nobody()
 
 
 class People(NamedTuple):
-    """Everybody in one frame: stable ids and each person's frame (base frame, m)."""
+    """Everybody in one frame: stable ids, each person's frame (base frame, m) and, for
+    people fused from several cameras, how much older than the frame's capture time each
+    person is, s (``lag_s``: their oldest camera frame's; empty: everybody is as old as
+    the frame). The controller counts the frame's age plus the largest lag."""
 
     ids: tuple[int, ...]
     frames: tuple[HumanFrame, ...]
+    lag_s: tuple[float, ...] = ()
+
+    @property
+    def max_lag_s(self) -> float:
+        """The largest of :attr:`lag_s`, s (0 without lags)."""
+        return max(self.lag_s, default=0.0)
 
     @classmethod
     def check(cls, ids: Sequence[int], frames: Sequence[object]) -> People:
@@ -58,6 +68,14 @@ def as_people(joints: object, state: object = None, skeleton: SkeletonFormat = K
         if isinstance(joints, People)
         else People((0,), (HumanFrame.check(joints, state, skeleton),))
     )
+    lags = people.lag_s
+    if lags and (len(lags) != len(people.ids) or not all(0.0 <= x < math.inf for x in lags)):
+        raise InputError(
+            f"people's lag_s must be one age >= 0 s per person ({len(people.ids)}), or none, "
+            f"got {lags!r}",
+            name="lag_s",
+            value=lags,
+        )
     for frame in people.frames:
         if isinstance(joints, People):  # frames built elsewhere: HumanFrame.check's glance
             HumanFrame.check(frame, None, skeleton)

@@ -32,6 +32,7 @@ from qpavoid.core.file_bounds import read_toml as read_toml_file
 from qpavoid.human.conversion import Confidence, LandmarkRule, is_number, only_keys, parse_rule
 
 __all__ = [
+    "AGE_MARGIN_S",
     "BASES",
     "EVIDENCED",
     "FORMATS_DIR",
@@ -164,6 +165,12 @@ class Evidence:
         return evidence
 
 
+#: What a frame's age limit allows beyond the camera's latency and one frame period, s
+#: (:meth:`CameraSpec.age_limit_s`): 6.7 ms for the network and the loop's tick, so that a
+#: 30 Hz camera's limit is its latency + 40 ms, the stale limit of the paper's bench.
+AGE_MARGIN_S = 0.04 - 1.0 / 30.0
+
+
 @dataclass(frozen=True)
 class CameraSpec:
     """The body-tracking camera's numbers, as its format file's ``[sensor]`` table gives
@@ -210,6 +217,14 @@ class CameraSpec:
     left_right_swap_per_s: float = 0.0
     left_right_swap_s: float = 0.5
     evidence: tuple[tuple[str, Evidence], ...] = ()
+
+    def age_limit_s(self, latency_s: float | None = None) -> float:
+        """The oldest a frame of this camera may be when it arrives and when it is used, s:
+        its latency (``latency_s``, e.g. one measured with ``qpavoid latency``, else the
+        format's :attr:`latency_s`), one frame period (a frame held until the next
+        arrives) and :data:`AGE_MARGIN_S`. A 30 Hz camera's limit is its latency + 40 ms."""
+        latency = self.latency_s if latency_s is None else latency_s
+        return latency + (1.0 / self.frame_rate_hz + AGE_MARGIN_S)
 
     def __post_init__(self) -> None:
         for key, low, value in (

@@ -292,6 +292,14 @@ def max_approach_speed(
     return room / (_t_r(cfg) + cfg.stop_time_s / 2.0)
 
 
+def hold_distance(separation_m: float, frame_age_s: float, cfg: SSMConfig, body: bool) -> float:
+    """The separation a robot at rest needs from a part, m: S_p at v_r = 0, S_h + C + Z_d +
+    Z_r (ISO/TS 15066 eq. 1; ``separation_m`` selects the human speed's zone). Closer,
+    :func:`max_approach_speed` is negative and the robot holds (or retreats)."""
+    speed = human_speed(separation_m, cfg, body)
+    return float(human_distance(speed, frame_age_s, cfg)) + fixed_terms(cfg)
+
+
 def with_stop_time(cfg: SSMConfig, stop_time_s: float) -> SSMConfig:
     """``cfg`` with this tick's T_s: a shallow copy, ten times cheaper than
     ``dataclasses.replace`` (which runs the checks again), for a value that changes

@@ -20,18 +20,22 @@ as live sensors would: the whole path runs on one machine over loopback.
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import os
 import threading
 import time
 from collections import Counter
 from collections.abc import Callable
+from typing import Any
 
 from qpavoid.core import signals
 from qpavoid.core.checks import is_loopback
 from qpavoid.core.errors import InputError
 from qpavoid.fusion.fuser import Fuser, FusionConfig
+from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.people import People
+from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.sensing.assembly import LossConfig, LossWatch
 from qpavoid.sensing.calibration import Calibration
 from qpavoid.sensing.per_sensor import BodyFrame
@@ -74,8 +78,10 @@ class Listener:
     workspace
         Where a joint may be in the base frame; a datagram with a joint outside is dropped.
     max_age_s
-        A frame captured more than this before now is dropped on arrival, s (the fusion's
-        own limit, :class:`~qpavoid.fusion.fuser.FusionConfig`).
+        A frame captured more than this before now is dropped on arrival (``late``), s;
+        None (the default): each sensor's own age limit, its camera's latency, a frame
+        and a margin (:attr:`~qpavoid.sensing.calibration.SensorCalibration.age_limit_s`,
+        the fusion's own).
     start_timeout_s
         Longest wait for the receiver process to start and bind, s (it imports numpy and
         scipy: about 0.5 s; 30 leaves room on a loaded machine).
@@ -104,7 +110,7 @@ class Listener:
         address: tuple[str, int],
         calibration: Calibration,
         workspace: Workspace | None = None,
-        max_age_s: float = FusionConfig.max_age_s,
+        max_age_s: float | None = None,
         start_timeout_s: float = 30.0,
         accept_unauthenticated: bool = False,
         future_tolerance_s: float = FUTURE_TOLERANCE_S,
@@ -126,7 +132,7 @@ class Listener:
                 self._table,
                 child_status,
                 self._stop,
-                max_age_s,
+                calibration.age_limits_s if max_age_s is None else max_age_s,
                 os.getpid(),
                 accept_unauthenticated,
                 future_tolerance_s,
@@ -245,6 +251,15 @@ class LiveSource:
     losses
         When a sensor's lost frames raise the alert
         (:class:`~qpavoid.sensing.assembly.LossConfig`).
+    skeleton
+        The skeleton the people are fused on (:class:`~qpavoid.fusion.fuser.Fuser`): the
+        body's landmarks (the Kinect v2's, default), or the cell's one camera format,
+        whose own body model the controller then uses.
+    say
+        Called with a line for the operator when something about the input changes: the
+        first frame of each sensor taken, frames refused as late (with the age limit and
+        how to set it), datagrams of another format than the calibration's
+        (:meth:`ready_line` is the line to say when listening starts).
 
     Attributes
     ----------
@@ -264,9 +279,18 @@ class LiveSource:
         clock: Callable[[], float] = time.time,
         clear: threading.Event | None = None,
         losses: LossConfig | None = None,
+        say: Callable[[str], None] | None = None,
+        skeleton: SkeletonFormat = KINECT_V2,
     ):
         self.listener = listener
-        self.fuser = Fuser(listener.calibration, fusion)
+        self.fuser = Fuser(listener.calibration, fusion, skeleton)
+        self.say = say or (lambda line: None)
+        #: when each sensor's first frame was taken (run clock, s) and its age then, s
+        self.first_taken: dict[str, tuple[float, float]] = {}
+        self._said: set[tuple[str, str]] = (
+            set()
+        )  # what was said once (a sensor's late, wrong format)
+        self._look_s = 0.0  # when the listener's counters are next looked at, run clock
         self.clock = clock
         self.clear = clear
         self.start_s: float | None = None  # the wall time of run time 0, set on first use
@@ -287,16 +311,26 @@ class LiveSource:
         frame used (``-inf`` before the first)."""
         if self.start_s is None:
             self.start_s = self.clock() - t
-        max_age = self.fuser.cfg.max_age_s
+        calibration = self.listener.calibration
         for frame in self.listener.drain():
             frame = frame._replace(t=frame.t - self.start_s)
-            offset = self.listener.calibration[frame.sensor].time_offset_s
-            if frame.t + offset < t - max_age:
+            limit = self.fuser.max_age_s[frame.sensor]
+            captured = frame.t + calibration[frame.sensor].time_offset_s
+            if captured < t - limit:
                 self.counters["late"] += 1
-            elif frame.t + offset > t + max_age:  # a clock ahead of ours: never trusted
+                self._late(frame.sensor, t - captured)
+            elif captured > t + limit:  # a clock ahead of ours: never trusted
                 self.counters["from_the_future"] += 1
-            else:
-                self.fuser.add(frame)
+            elif self.fuser.add(frame) and frame.sensor not in self.first_taken:
+                self.first_taken[frame.sensor] = (t, t - captured)
+                self.say(
+                    f"{frame.sensor}: first frame taken at {t:.2f} s, "
+                    f"{1e3 * (t - captured):.0f} ms old (its age limit "
+                    f"{1e3 * limit:.0f} ms)"
+                )
+        if t >= self._look_s:  # what the receiver refused, looked at twice a second
+            self._look_s = t + 0.5
+            self._refusals()
         losses = self.listener.losses()  # after the frames: every loss they showed is seen
         for sensor, loss in losses.items():
             if loss.stale_before_s > self._stale_before[sensor]:
@@ -321,5 +355,77 @@ class LiveSource:
         self.alert = "; ".join(([lost] if lost else []) + silent + flags + unseen)
         if fused.captured_s > self._captured:
             self._captured = fused.captured_s
-        people = People(tuple(p.id for p in fused.people), tuple(p.frame for p in fused.people))
+        lags = tuple(
+            max(self._captured - p.captured_s, 0.0) if p.captured_s > -math.inf else 0.0
+            for p in fused.people
+        )
+        people = People(
+            tuple(p.id for p in fused.people), tuple(p.frame for p in fused.people), lags
+        )
         return people, self._captured
+
+    def sensors_report(self) -> dict[str, dict[str, Any]]:
+        """Each sensor as the run used it (``metrics.json``: ``sensors``): its format,
+        the latency and age limit counted, s, and when its first frame was taken (run
+        clock, s) and how old it was then, s (None: no frame of it was taken)."""
+        out: dict[str, dict[str, Any]] = {}
+        for name, cal in self.listener.calibration.sensors.items():
+            first = self.first_taken.get(name)
+            out[name] = {
+                "format": cal.format,
+                "latency_s": cal.latency_used_s,
+                "latency_from": "given" if cal.latency_s is not None else "format",
+                "age_limit_s": self.fuser.max_age_s[name],
+                "first_frame_taken_s": None if first is None else round(first[0], 6),
+                "first_frame_age_s": None if first is None else round(first[1], 6),
+            }
+        return out
+
+    def ready_line(self) -> str:
+        """What the listener listens for, in one line: the address, each sensor with its
+        format and age limit, and whether datagrams must be signed."""
+        calibration = self.listener.calibration
+        host, port = self.listener.address
+        sensors = ", ".join(
+            f"{name} ({cal.format}, age limit {1e3 * cal.age_limit_s:.0f} ms)"
+            for name, cal in calibration.sensors.items()
+        )
+        signed = (
+            f"signed datagrams of cell {calibration.cell!r}"
+            if calibration.authenticated
+            else "unsigned datagrams (loopback only)"
+        )
+        return f"listening on {host}:{port} for {sensors}: {signed}"
+
+    def _late(self, sensor: str, age_s: float | None) -> None:
+        """Say once per sensor that its frames come older than its age limit."""
+        if ("late", sensor) in self._said:
+            return
+        self._said.add(("late", sensor))
+        cal = self.listener.calibration[sensor]
+        seen = f" ({1e3 * age_s:.0f} ms old)" if age_s is not None else ""
+        self.say(
+            f"{sensor}: frames refused as late{seen}: {cal.age_limit_reason()}. If its "
+            "latency is longer, measure it (qpavoid latency) and set latency_s for it in the "
+            "calibration, or --latency; else check the clocks (time_offset_s) and the network"
+        )
+
+    def _refusals(self) -> None:
+        """Say once what the receiver refused that the operator can fix: late frames (by
+        the only sensor, or the first sensor not yet taken), datagrams of another format."""
+        counters = self.listener.counters
+        if counters.get("late", 0):
+            waiting = [n for n in self.listener.calibration.names if n not in self.first_taken]
+            for sensor in waiting[:1] or self.listener.calibration.names[:1]:
+                self._late(sensor, None)
+        mismatches = getattr(self.listener, "format_mismatches", None)
+        if mismatches is None:
+            return
+        for sensor, (arrived, expected) in mismatches().items():
+            if ("format", sensor) not in self._said:
+                self._said.add(("format", sensor))
+                self.say(
+                    f"{sensor}: datagrams of {arrived} frames dropped: the calibration "
+                    f"{self.listener.calibration.path or ''} says {expected} (its format "
+                    f"key); send {expected} frames or set format = {arrived!r}"
+                )

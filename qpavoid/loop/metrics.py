@@ -372,7 +372,11 @@ _DROP_HINTS = {
     "--allow-unauthenticated on loopback",
     "dropped_unknown_sensor": "from a sensor the calibration does not name",
     "from_the_future": "stamped ahead of this clock: check the sensors' time_offset_s",
-    "late": "older than the age limit when they arrived: check the clocks and the network",
+    "dropped_wrong_format": "of another skeleton format than the calibration's for their "
+    "sensor: send that format, or correct the sensor's format key",
+    "late": "captured longer ago than their sensor's age limit, its latency + a frame + "
+    "6.7 ms: if the camera's latency is longer, measure it (qpavoid latency) and set "
+    "latency_s in the calibration or --latency; else check the clocks and the network",
 }
 
 

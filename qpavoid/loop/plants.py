@@ -213,6 +213,9 @@ class WallClockArm(_RealTime):
     def execute(
         self, controller: Controller, cmd: Command, t: float, captured_s: float
     ) -> tuple[Command, np.ndarray]:
+        now = self.now()  # the command is applied now: its deadline and latency counted
+        self.timing.late(t, now)
+        self.timing.sent(now, captured_s)
         return cmd, self.wall.command(cmd.dq, t)
 
 

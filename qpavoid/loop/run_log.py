@@ -153,7 +153,9 @@ class RunLogger:
         other_table = self.other.closest(kin, self.controller.geometry(human))[0]
         v_repelled, v_end_effector = self.repulsion
         log["t"][k], log["q"][k], log["dq"][k], log["dq_command"][k] = t, kin.q, dq, cmd.dq
-        log["joints"][k], log["state"][k] = self.controller.closest_frame or human
+        closest = self.controller.closest_frame
+        assert closest is not None  # the closest person's frame: set by the tick just measured
+        log["joints"][k], log["state"][k] = closest
         log["stopped"][k], log["f"][k] = cmd.stopped, cmd.f
         log["distance"][k], log["distance_other"][k] = cmd.distance, other_table.min_per_set()
         log[v_repelled][k], log[v_end_effector][k] = cmd.v_repelled, cmd.v_end_effector

@@ -284,6 +284,8 @@ def simulate(
         raise ArmError(f"the run ended before its first tick: {plant.ended_by}", value=arm)
     log = logger.finished()
     n = logger.n
+    if not reached and tau >= path.duration_s and _at(goal, robot, log["q"][-1], cfg):
+        reached = True  # at the goal and held there (a person near, a stale frame): reached
     if truth is not None and not plant.measured_online:  # where the arm really was, then
         kinematics = robot.kinematics
         for k in range(n):

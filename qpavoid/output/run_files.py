@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import shutil
 import tempfile
@@ -43,6 +44,7 @@ __all__ = [
     "save_csv",
     "save_npz",
     "staged_output",
+    "strict_json",
     "write_run",
 ]
 
@@ -64,13 +66,39 @@ LOG_KEYS = (
 )
 
 
+def strict_json(value: Any, indent: int | None = 2) -> str:
+    """``value`` as strict JSON (RFC 8259): every NaN or infinite number written as
+    ``null`` (Python's ``json`` would write ``NaN`` and ``Infinity``, which strict parsers
+    refuse); numpy scalars and arrays as numbers and lists. Every JSON file a run, a
+    comparison or a campaign writes goes through it (docs/formats.md: null means "not
+    measured", e.g. the distance to nobody, or no frame taken)."""
+    return json.dumps(_finite(value), indent=indent, allow_nan=False)
+
+
+def _finite(value: Any) -> Any:
+    """``value`` with non-finite floats as None, tuples and arrays as lists."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return [_finite(v) for v in value.tolist()]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
 def write_run(out_dir: str | Path, result: SimResult, extra: dict | None = None) -> Path:
     """Write ``metrics.json`` (with ``extra`` merged in) and ``log.npz`` into ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics = dict(result.metrics)
     metrics.update(extra or {})
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    (out / "metrics.json").write_text(strict_json(metrics) + "\n")
     arrays: dict[str, Any] = dict(result.log)
     np.savez_compressed(out / "log.npz", **arrays)
     return out

@@ -17,6 +17,8 @@ from its camera frame to the robot base frame, m (docs/sensors.md)::
                                       # in its view that it does not see is suspect
     format = "kinect_v2"    # optional: its skeleton format (qpavoid.human.landmarks), the
                             # joints of its recordings and datagrams (default kinect_v2)
+    latency_s = 0.104       # optional: its latency as measured (qpavoid latency), s; sets
+                            # how old its frames may be (default: its format's latency)
 
 with, when the sensors have keys, the cell's name at the top (``cell = "cell-1"``): it is
 signed into every datagram, so that one cell's datagrams are refused by another's. Either
@@ -30,7 +32,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cache
 from types import MappingProxyType
 
@@ -39,7 +41,7 @@ import numpy as np
 from qpavoid.core.errors import CalibrationError
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.landmarks import FORMAT_NAMES, skeleton_format
-from qpavoid.human.skeleton import SkeletonFormat
+from qpavoid.human.skeleton import AGE_MARGIN_S, SkeletonFormat
 from qpavoid.sensing.keys import SensorKeys, sensor_name_error, toml_string
 
 __all__ = [
@@ -48,6 +50,7 @@ __all__ = [
     "SensorCalibration",
     "check_format_name",
     "known_formats",
+    "latency_error",
     "pair_within",
     "settings_error",
 ]
@@ -94,6 +97,10 @@ class SensorCalibration:
         :data:`~qpavoid.human.landmarks.FORMAT_NAMES`; default ``"kinect_v2"``): its
         recordings and datagrams carry frames of this format's joints, in metres, with the
         library's tracking states.
+    latency_s
+        The sensor's latency from capture to arrival, s, as measured on the cell
+        (``qpavoid latency``), or None: its format's (:attr:`~qpavoid.human.skeleton.
+        CameraSpec.latency_s`). It sets :attr:`age_limit_s`.
     """
 
     name: str
@@ -103,6 +110,7 @@ class SensorCalibration:
     field_of_view_deg: tuple[float, float] | None = None
     range_m: tuple[float, float] | None = None
     format: str = DEFAULT_FORMAT
+    latency_s: float | None = None
 
     def __post_init__(self) -> None:
         """The same limits as a calibration file's (a weight of 0 made seen joints
@@ -148,6 +156,41 @@ class SensorCalibration:
                 name="format",
                 value=self.format,
             )
+        bad_latency = latency_error(self.latency_s)
+        if bad_latency is not None:
+            raise CalibrationError(
+                f"sensor {self.name!r}: {bad_latency}",
+                sensor=self.name,
+                name="latency_s",
+                value=self.latency_s,
+            )
+
+    @property
+    def age_limit_s(self) -> float:
+        """How old the sensor's frames may be when they arrive and when they are fused, s:
+        its latency (:attr:`latency_s`, else its format's), one frame period and a margin
+        (:meth:`~qpavoid.human.skeleton.CameraSpec.age_limit_s`)."""
+        return self.skeleton.sensor.age_limit_s(self.latency_s)
+
+    @property
+    def latency_used_s(self) -> float:
+        """The latency its age limit counts, s: :attr:`latency_s`, else its format's."""
+        return self.skeleton.sensor.latency_s if self.latency_s is None else self.latency_s
+
+    def age_limit_reason(self) -> str:
+        """How :attr:`age_limit_s` is made, for messages: the latency and where it comes
+        from, the frame period, the margin."""
+        spec = self.skeleton.sensor
+        source = (
+            "its calibration's latency_s"
+            if self.latency_s is not None
+            else (f"{self.format}'s latency")
+        )
+        return (
+            f"{self.name}'s age limit {self.age_limit_s:.3f} s = {source} "
+            f"{self.latency_used_s:.3f} s + a frame {1.0 / spec.frame_rate_hz:.3f} s + "
+            f"{AGE_MARGIN_S:.4f} s"
+        )
 
     @property
     def skeleton(self) -> SkeletonFormat:
@@ -262,6 +305,37 @@ class Calibration:
                 value=format,
             )
 
+    def with_latency(self, latency_s: float | None) -> Calibration:
+        """This calibration with ``latency_s`` (s; ``--latency``) as the latency of every
+        sensor whose calibration names none (itself for None).
+
+        Raises
+        ------
+        CalibrationError
+            If a sensor's calibration names another latency (two latencies for one
+            camera: which one is measured?).
+        """
+        if latency_s is None:
+            return self
+        for cal in self.sensors.values():
+            if cal.latency_s is not None and cal.latency_s != latency_s:
+                raise CalibrationError(
+                    f"{self._where()}sensor {cal.name!r} has latency_s = {cal.latency_s:g} "
+                    f"s, and --latency says {latency_s:g} s: give one (the calibration's is "
+                    "per sensor)",
+                    path=self.path,
+                    sensor=cal.name,
+                    name="latency_s",
+                    value=latency_s,
+                )
+        sensors = {name: replace(cal, latency_s=latency_s) for name, cal in self.sensors.items()}
+        return replace(self, sensors=sensors)
+
+    @property
+    def age_limits_s(self) -> dict[str, float]:
+        """Each sensor's :attr:`SensorCalibration.age_limit_s`, s, by name."""
+        return {name: cal.age_limit_s for name, cal in self.sensors.items()}
+
     @property
     def formats(self) -> tuple[str, ...]:
         """The sensors' skeleton formats, in the file's order (:attr:`names`)."""
@@ -294,6 +368,8 @@ class Calibration:
                     lines.append(f"{key} = [{float(value[0])!r}, {float(value[1])!r}]")
             if cal.format != DEFAULT_FORMAT:
                 lines.append(f"format = {toml_string(cal.format)}")
+            if cal.latency_s is not None:
+                lines.append(f"latency_s = {cal.latency_s!r}")
             lines.append("")
         return "\n".join(lines)
 
@@ -335,6 +411,24 @@ def pair_within(value: object, low: float, high: float, increasing: bool) -> boo
     if increasing:
         return bool(low <= a < b <= high)
     return bool(low < a <= high and low < b <= high)
+
+
+#: A sensor's measured latency may be at most this, s (a camera's is 0.03-0.25 s; more
+#: is a unit error, or no camera to drive a robot by).
+MAX_LATENCY_S = 1.0
+
+
+def latency_error(latency_s: object) -> str | None:
+    """Why ``latency_s`` is not a sensor's latency (None if it is one, or None)."""
+    if latency_s is None:
+        return None
+    if (
+        isinstance(latency_s, (int, float, np.floating, np.integer))
+        and not isinstance(latency_s, bool)
+        and 0.0 <= latency_s <= MAX_LATENCY_S
+    ):
+        return None
+    return f"latency_s must be a number from 0 to {MAX_LATENCY_S:g} s, got {latency_s!r}"
 
 
 def settings_error(offset: object, weight: object) -> tuple[str, str, object] | None:

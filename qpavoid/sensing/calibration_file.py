@@ -29,6 +29,7 @@ from qpavoid.sensing.calibration import (
     Calibration,
     SensorCalibration,
     check_format_name,
+    latency_error,
     pair_within,
     settings_error,
 )
@@ -46,6 +47,7 @@ SENSOR_KEYS = (
     "field_of_view_deg",
     "range_m",
     "format",
+    "latency_s",
 )
 #: A calibration file is a few tables of numbers (about 400 bytes a sensor): 1 MiB holds
 #: thousands, and refuses a device or a huge file before it is read (``--sensors /dev/zero``
@@ -145,8 +147,20 @@ def _sensor(name: str, table: object, where: str, path: str | None) -> SensorCal
     problem = check_format_name(fmt)
     if problem is not None:
         raise fail(problem, "format", fmt)
+    latency = table.get("latency_s")
+    problem = latency_error(latency)
+    if problem is not None:
+        raise fail(problem, "latency_s", latency)
     try:
-        return SensorCalibration(name, T, float(offset), float(weight), **view, format=fmt)
+        return SensorCalibration(
+            name,
+            T,
+            float(offset),
+            float(weight),
+            **view,
+            format=fmt,
+            latency_s=None if latency is None else float(latency),
+        )
     except CalibrationError as exc:
         raise fail(str(exc).split(": ", 1)[-1], exc.name, exc.value) from None
 

@@ -14,8 +14,9 @@ which its frames are stale (:meth:`SlotTable.losses`).
 
 Each datagram is verified first (:class:`~qpavoid.sensing.wire.Verifier`: length, header, key,
 the tag in constant time before any JSON, the sequence number against a replay window,
-then the skeleton); then, its time stamp now authenticated, a frame captured more than the
-fusion's ``max_age_s`` before now is dropped (``late``), one captured more than
+then the skeleton); then, its time stamp now authenticated, a frame captured longer before
+now than its sensor's age limit is dropped (``late``: :attr:`~qpavoid.sensing.calibration.
+SensorCalibration.age_limit_s`, the camera's latency, a frame and a margin), one captured more than
 ``future_tolerance_s`` after now too (``from_the_future``: a sensor stamps its capture
 before it sends, so a clock ahead of ours must not poison the order), and one not newer
 than its body's last, or of a frame already closed (``out_of_order_or_duplicate``); the
@@ -37,7 +38,7 @@ import math
 import os
 import socket
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from multiprocessing.context import SpawnContext
@@ -259,7 +260,7 @@ def serve(
     table: SlotTable,
     status: Connection,
     stop: Any,
-    max_age_s: float,
+    max_age_s: float | Mapping[str, float],
     parent_pid: int,
     accept_v1: bool = False,
     future_tolerance_s: float = FUTURE_TOLERANCE_S,
@@ -271,7 +272,8 @@ def serve(
 
     Ctrl-C is the parent's to handle (it stops this process): ignored here. Datagrams are
     verified (unsigned ones taken only with ``accept_v1``); a frame captured more than
-    ``max_age_s`` before now (``late``) or more than ``future_tolerance_s`` after now
+    ``max_age_s`` (one for all, or each sensor's by name) before now (``late``) or more
+    than ``future_tolerance_s`` after now
     (``from_the_future``, a clock ahead of ours) is dropped before it can count as its
     body's newest. The calibration and key files are looked at every ``key_check_s`` and
     read again when one changed (a rotated key).

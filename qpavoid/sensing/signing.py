@@ -49,7 +49,7 @@ import json
 import math
 import struct
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import NamedTuple
 
 from qpavoid.core.errors import InputError
@@ -250,8 +250,10 @@ class Verifier:
     max_age_s, future_tolerance_s
         The time window, s: a frame captured more than ``max_age_s`` before ``clock()``
         is ``late``, one more than ``future_tolerance_s`` after it ``from_the_future``
-        (each sensor's ``time_offset_s`` applied). ``max_age_s=None``: no time window
-        (recordings, tests).
+        (each sensor's ``time_offset_s`` applied). ``max_age_s`` is one limit for every
+        sensor or each sensor's by name (a live listener's: each camera's
+        :attr:`~qpavoid.sensing.calibration.SensorCalibration.age_limit_s`);
+        ``max_age_s=None``: no time window (recordings, tests).
     clock
         The shared clock, s.
 
@@ -265,12 +267,19 @@ class Verifier:
         workspace: Workspace | None = None,
         *,
         accept_v1: bool = False,
-        max_age_s: float | None = None,
+        max_age_s: float | Mapping[str, float] | None = None,
         future_tolerance_s: float = FUTURE_TOLERANCE_S,
         clock: Callable[[], float] = time.time,
     ):
         self.calibration, self.workspace, self.accept_v1 = calibration, workspace, accept_v1
         self.max_age_s, self.future_tolerance_s, self.clock = max_age_s, future_tolerance_s, clock
+        self._max_age: Mapping[str, float] | None = (
+            None
+            if max_age_s is None
+            else dict.fromkeys(calibration.sensors, float(max_age_s))
+            if isinstance(max_age_s, (int, float))
+            else {name: float(max_age_s[name]) for name in calibration.sensors}
+        )
         self._sensors = {name.encode(): name for name in calibration.sensors}
         # one window per sensor and key: a new key counts afresh, whatever an old key's
         # holder did to its window
@@ -340,12 +349,15 @@ class Verifier:
     def _check_time(self, sensor: str, t: float, now: float) -> None:
         """:class:`WireError` ``late`` or ``from_the_future`` outside the time window
         around ``now``."""
-        if self.max_age_s is None:
+        if self._max_age is None:
             return
         if not math.isfinite(t):
             raise WireError(f"t {t!r}", reason="non_finite")
         age = now - (t + self.calibration[sensor].time_offset_s)
-        if age > self.max_age_s:
-            raise WireError(f"captured {age:.3f} s ago", reason="late")
+        limit = self._max_age[sensor]
+        if age > limit:
+            raise WireError(
+                f"captured {age:.3f} s ago, over {sensor}'s age limit {limit:.3f} s", reason="late"
+            )
         if age < -self.future_tolerance_s:
             raise WireError(f"captured {-age:.3f} s from now", reason="from_the_future")
