@@ -8,7 +8,6 @@ Every limit here is computed by hand from the camera's numbers: latency + one fr
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
