@@ -32,9 +32,11 @@ from qpavoid.human.frames import HumanFrame
 from qpavoid.human.landmarks import LandmarkMap, skeleton_format
 from qpavoid.human.posture import Operator
 from qpavoid.laws.ssm import SSMConfig
+from qpavoid.loop.live_input import Listener, LiveSource
 from qpavoid.loop.simulation import SimConfig, simulate
 from qpavoid.output.run_files import strict_json
 from qpavoid.perception.tracker import PerceptionConfig
+from qpavoid.sensing.calibration import Calibration
 from qpavoid.sensing.calibration_file import load_calibration
 from qpavoid.sensing.keys import new_key_file
 from qpavoid.sensing.per_sensor import BodyFrame
@@ -57,10 +59,18 @@ def k4abt_cell(folder: Path, latency_s: float | None = None) -> Path:
     return folder / "calib.toml"
 
 
-def send_seated(calib: Path, port: int, latency_s: float, seconds: float, robot: str) -> None:
+def send_seated(
+    calib: Path,
+    port: int,
+    latency_s: float,
+    seconds: float,
+    robot: str,
+    cal: Calibration | None = None,
+) -> None:
     """The seated operator of ``robot``'s task, filmed by the k4abt camera: its joints in
-    its own frame, each frame stamped ``latency_s`` before it is sent, 30 a second."""
-    cal = load_calibration(str(calib))
+    its own frame, each frame stamped ``latency_s`` before it is sent, 30 a second (signed
+    with the key of ``cal``, default the calibration file's)."""
+    cal = cal or load_calibration(str(calib))
     fmt = skeleton_format("k4abt")
     seated = default_task(qpavoid.load_robot(robot)).operator.rest()
     cam = LandmarkMap.simulated(fmt).map(seated, np.full(len(seated), 2, np.int8))
@@ -231,3 +241,39 @@ class Still:
     def frame_at(self, t: float) -> tuple[HumanFrame, float]:
         joints = self.then if t >= self.at_s and self.then is not None else self.joints
         return HumanFrame(joints, np.full(len(joints), 2, np.int8)), t
+
+
+def test_the_listener_says_once_what_it_refuses_and_how_to_fix_it(tmp_path):
+    """k4abt frames to a Kinect v2 calibration: said once, naming both formats; k4abt
+    frames 0.2 s old to a k4abt calibration: said once, naming the age limit and how to
+    set it; nothing taken in either case."""
+    for fmt, latency, words in (
+        ("kinect_v2", 0.0, "femto: datagrams of k4abt frames dropped: the calibration"),
+        ("k4abt", 0.2, "femto: frames refused as late: femto's age limit 0.140 s = k4abt's"),
+    ):
+        folder = tmp_path / fmt
+        folder.mkdir()
+        calib = k4abt_cell(folder)
+        if fmt != "k4abt":  # the same camera calibrated as a Kinect v2
+            calib.write_text(calib.read_text().replace('"k4abt"', f'"{fmt}"'))
+        lines: list[str] = []
+        with Listener(("127.0.0.1", 0), load_calibration(str(calib))) as listener:
+            source = LiveSource(listener, say=lines.append)
+            port = listener.address[1]
+            calibrated = load_calibration(str(calib))
+            sender = threading.Thread(
+                target=send_seated, args=(calib, port, latency, 1.0, "iiwa14", calibrated)
+            )
+            sender.start()
+            t0 = time.time()
+            while time.time() - t0 < 1.5:
+                people, _ = source.frame_at(time.time() - t0)
+                time.sleep(0.01)
+            sender.join()
+        said = [x for x in lines if x.startswith(words)]
+        assert len(said) == 1, lines
+        assert source.first_taken == {} and not people.ids
+        if fmt == "k4abt":
+            assert "set latency_s for it in the calibration, or --latency" in said[0]
+        else:
+            assert "says kinect_v2 (its format key)" in said[0]

@@ -418,10 +418,7 @@ class LiveSource:
             waiting = [n for n in self.listener.calibration.names if n not in self.first_taken]
             for sensor in waiting[:1] or self.listener.calibration.names[:1]:
                 self._late(sensor, None)
-        mismatches = getattr(self.listener, "format_mismatches", None)
-        if mismatches is None:
-            return
-        for sensor, (arrived, expected) in mismatches().items():
+        for sensor, (arrived, expected) in self.listener.format_mismatches().items():
             if ("format", sensor) not in self._said:
                 self._said.add(("format", sensor))
                 self.say(
