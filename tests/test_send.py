@@ -39,6 +39,7 @@ from qpavoid.sensing.keys import SensorKeys, new_key_file
 from qpavoid.sensing.per_sensor import BodyFrame, SensorRecording, save_sensor_npz
 from qpavoid.sensing.recording import Recording, save_npz
 from qpavoid.sensing.signing import Signer, Verifier
+from qpavoid.sensing.synthetic_pair import look_at
 
 WORKED = Path(__file__).parents[1] / "docs" / "calibrations"
 #: Each format's worked calibration file and its sensor's name in it.
@@ -101,6 +102,17 @@ def test_each_worked_calibration_is_rigid_and_names_its_format(tmp_path, fmt):
     np.testing.assert_array_equal(T[3], [0, 0, 0, 1])
     np.testing.assert_allclose(T[:3, 3], [0.0, -0.6, 1.5])  # the camera's place
     np.testing.assert_allclose(R[:, 2], [0.0, 0.8, -0.6])  # it looks along +z, 36.87° down
+
+
+@pytest.mark.parametrize("fmt", FORMAT_NAMES)
+def test_the_recipe_for_your_own_place_gives_the_worked_matrices(tmp_path, fmt):
+    """docs/sensors.md §11: ``look_at`` (a Kinect v2 at the camera's place, looking at the
+    chest), its rotation times diag(-1, -1, 1) for a right-down-forward camera."""
+    T = look_at(np.array([0.0, -0.6, 1.5]), np.array([0.0, 1.0, 0.3]))
+    if fmt != "kinect_v2":
+        T[:3, :3] = T[:3, :3] @ np.diag([-1.0, -1.0, 1.0])
+    cal = load_calibration(worked(tmp_path, fmt))[SENSORS[fmt]]
+    np.testing.assert_allclose(cal.base_from_camera, T, atol=1e-12)
 
 
 @pytest.mark.parametrize("fmt", FORMAT_NAMES)
