@@ -32,7 +32,7 @@ from qpavoid.control.task import default_task
 from qpavoid.human.landmarks import FORMAT_NAMES, camera_frame, skeleton_format
 from qpavoid.human.posture import Operator
 from qpavoid.loop.live_input import Listener
-from qpavoid.loop.sender import AtRest, send, sensor_frames
+from qpavoid.loop.sender import AtRest, send, sensor_frames, sensor_latency_s
 from qpavoid.sensing.calibration import Calibration, SensorCalibration
 from qpavoid.sensing.calibration_file import load_calibration
 from qpavoid.sensing.keys import SensorKeys, new_key_file
@@ -188,6 +188,14 @@ def test_frames_are_stamped_send_time_less_the_latency_and_carry_the_cameras_noi
     joints = np.array([f.joints for f in decoded])
     spread = np.diff(joints, axis=0).std() / np.sqrt(2)
     assert spread == pytest.approx(noise_m, rel=0.15)
+
+
+def test_the_default_latency_is_the_calibrations_measured_one_else_the_formats(tmp_path):
+    calibration = load_calibration(worked(tmp_path, "zed_body_38"))
+    assert sensor_latency_s(calibration, "zed") == 0.12  # zed_body_38.toml's [sensor]
+    text = Path(worked(tmp_path, "k4abt")).read_text() + "latency_s = 0.21\n"
+    (tmp_path / "measured.toml").write_text(text)  # a measured one, under [sensors.femto]
+    assert sensor_latency_s(load_calibration(tmp_path / "measured.toml"), "femto") == 0.21
 
 
 def test_each_formats_sender_gets_its_frames_taken_by_a_listener(tmp_path):

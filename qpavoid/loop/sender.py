@@ -76,9 +76,7 @@ def sensor_latency_s(calibration: Calibration, sensor: str) -> float:
     CalibrationError
         For a sensor not in ``calibration``.
     """
-    cal = calibration[sensor]
-    measured = getattr(cal, "latency_s", None)
-    return float(cal.skeleton.sensor.latency_s if measured is None else measured)
+    return calibration[sensor].latency_used_s
 
 
 def sensor_frames(
