@@ -244,6 +244,9 @@ def test_the_live_source_applies_each_loss_and_raises_the_alert_while_frames_are
         def losses(self):
             return dict(self.lost)
 
+        def format_mismatches(self):  # every datagram of its sensor's format
+            return {}
+
     listener, dt = Frames(), 1 / 32  # a frame every 31 ms (exact in binary)
     source = LiveSource(listener, clock=lambda: 100.0)  # run time 0 = 100 s
     for k in range(30):  # 0.9 s: the operator and a bystander, whole frames

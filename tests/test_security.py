@@ -564,6 +564,9 @@ def test_the_live_source_clears_the_flagged_people_when_the_view_asks():
         def losses(self) -> dict:  # none lost on the way
             return {}
 
+        def format_mismatches(self) -> dict:  # every datagram of its sensor's format
+            return {}
+
     listener, clear = Frames(), threading.Event()
     source = LiveSource(listener, clock=lambda: 100.0, clear=clear)  # run time 0 = 100 s
     for k in range(45):  # the operator from the start, then a phantom by the base at 1.2 s
