@@ -67,6 +67,9 @@ class Listener:
     def losses(self) -> dict:  # none lost on the way (the frames are put in whole)
         return {}
 
+    def format_mismatches(self) -> dict:  # every datagram of its sensor's format
+        return {}
+
 
 @pytest.mark.parametrize("distance", ["capsules", "spheres"])
 @pytest.mark.parametrize("kind", CONTROLLERS)
