@@ -14,6 +14,7 @@ import json
 import socket
 import threading
 import time
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -277,3 +278,53 @@ def test_the_listener_says_once_what_it_refuses_and_how_to_fix_it(tmp_path):
             assert "set latency_s for it in the calibration, or --latency" in said[0]
         else:
             assert "says kinect_v2 (its format key)" in said[0]
+
+
+def test_send_seats_the_operator_where_the_runs_task_file_does(tmp_path, capsys):
+    """``qpavoid send --task FILE``: the operator at rest at the file's [operator] seat, as
+    ``qpavoid run --task FILE`` seats them (the Panda's seat moved 0.25 m back); a task
+    file naming what the arm lacks is refused in one line."""
+    from qpavoid.cli.commands import build_parser
+    from qpavoid.cli.sensors import send_motion
+
+    text = (resources.files("qpavoid.robots") / "panda" / "task.toml").read_text()
+    moved = tmp_path / "task.toml"
+    moved.write_text(text.replace("distance_m = 1.0882", "distance_m = 1.3382", 1))
+    calib = k4abt_cell(tmp_path)
+    args = build_parser().parse_args(
+        [
+            "send",
+            "femto",
+            "--to",
+            "127.0.0.1:5999",
+            "--sensors",
+            str(calib),
+            "--robot",
+            "panda",
+            "--task",
+            str(moved),
+        ]
+    )
+    motion, said = send_motion(args, load_calibration(str(calib)))
+    assert motion.operator.distance_m == 1.3382 and said.endswith(f"(the seat of {moved})")
+    spec = RunSpec(scenario="free", robot="panda", task=str(moved))
+    seated = spec.task_for(qpavoid.load_robot("panda")).operator
+    np.testing.assert_array_equal(motion.frame_at(0.0).joints, seated.rest())
+    moved.write_text(text.replace("[operator]", "[operator]\nelbow_m = 1", 1))
+    status = main(
+        [
+            "send",
+            "femto",
+            "--to",
+            "127.0.0.1:5999",
+            "--sensors",
+            str(calib),
+            "--robot",
+            "panda",
+            "--task",
+            str(moved),
+        ]
+    )
+    out, err = capsys.readouterr()
+    assert status == 2 and out == "" and err.startswith("qpavoid: error: --task ")
+    assert len(err.strip().splitlines()) == 1

@@ -22,6 +22,7 @@ from qpavoid.cli.args import HelpFormatter, add_robot_option, count, positive_fl
 from qpavoid.control.task import default_task
 from qpavoid.core.checks import check_range, is_loopback
 from qpavoid.core.errors import InputError
+from qpavoid.experiments.run_spec import task_option
 from qpavoid.fusion.offline import fuse_recordings, save_fused_npz
 from qpavoid.human.frames import HumanMotion
 from qpavoid.human.landmarks import FORMAT_NAMES
@@ -146,6 +147,12 @@ def add_sensor_commands(sub: argparse._SubParsersAction) -> None:
         "(as qpavoid replay does, stamped with the latency)",
     )
     add_robot_option(send_parser)
+    send_parser.add_argument(
+        "--task",
+        metavar="FILE",
+        help="a task file (docs/tasks.md): the operator sits at its [operator] seat and a "
+        "scenario runs along its path, as in 'qpavoid run --task FILE' (give both the same)",
+    )
     send_parser.add_argument(
         "--latency",
         type=float,
@@ -344,13 +351,14 @@ def send_motion(
             rec = load_sensor_recording(args.human)
             return rec, f"{args.sensor}'s frames recorded in {args.human}"
         return load_motion(load_robot(args.robot), None, [args.human]), f"{args.human} filmed"
+    robot = load_robot(args.robot)
+    task = default_task(robot) if args.task is None else task_option(args.task, robot)
+    seat = f"{robot.name}'s seat" if args.task is None else f"the seat of {args.task}"
     if args.scenario is not None:
         check_scenario_name(args.scenario)
-        robot = load_robot(args.robot)
-        return load_motion(robot, args.scenario), f"scenario {args.scenario} ({robot.name})"
-    robot = load_robot(args.robot)
-    operator = default_task(robot).operator
-    return AtRest(operator), f"the seated operator at rest ({robot.name}'s seat)"
+        motion = load_motion(robot, args.scenario, task=task)
+        return motion, f"scenario {args.scenario} ({robot.name}, {seat})"
+    return AtRest(task.operator), f"the seated operator at rest ({seat})"
 
 
 def keygen_command(args: argparse.Namespace) -> str:

@@ -311,12 +311,22 @@ class RunSpec:
             ``--task <file>: <key>: <what is wrong>``, in one line: a file that cannot be
             read or is not a task file, a joint the arm lacks, a waypoint out of its reach.
         """
-        if self.task is None:
-            return None
-        try:
-            return load_task(self.task, robot)
-        except RobotDescriptionError as exc:
-            raise InputError(f"--task {exc}", name="--task", value=self.task) from None
+        return None if self.task is None else task_option(self.task, robot)
+
+
+def task_option(path: str, robot: Robot) -> Task:
+    """``--task``'s task for ``robot`` (:func:`~qpavoid.control.task.load_task`), as
+    ``qpavoid run`` and ``qpavoid send`` read it.
+
+    Raises
+    ------
+    InputError
+        ``--task <file>: <key>: <what is wrong>``, in one line.
+    """
+    try:
+        return load_task(path, robot)
+    except RobotDescriptionError as exc:
+        raise InputError(f"--task {exc}", name="--task", value=path) from None
 
 
 def check_regions(body: BodyModel) -> None:
