@@ -249,7 +249,9 @@ def simulate_one(
         The run.
     motion
         The human motion if already made (else the one ``spec`` names,
-        :func:`qpavoid.scenarios.motions.load_motion`).
+        :func:`qpavoid.scenarios.motions.load_motion`). For a live run (``spec.listen``):
+        the truth the senders film, if known (their run clock's: the run's time 0 is the
+        first tick), against which each tick's clearance is then measured.
     progress
         Called with the simulated time, s, at every human frame.
     watch
@@ -309,7 +311,7 @@ def simulate_one(
                 braking=None if spec.bench == "ideal" else BrakingConfig(),
                 max_time_s=spec.max_time_s,
                 goal_tolerance_m=spec.goal_tolerance_m,
-                measure_truth=spec.measure_truth,
+                measure_truth=spec.measure_truth or (live and motion is not None),
             ),
             progress=progress,
             source=source,

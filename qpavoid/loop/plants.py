@@ -205,6 +205,8 @@ class WallClockArm(_RealTime):
     """The simulated arm in real time: between ticks it executes the last command for the
     real time that passed (:class:`~qpavoid.arm.braking.WallClockArm`)."""
 
+    measured_online = False  # the truth: after the run (each tick's q is exact), off its time
+
     def catch_up(self, t: float, q: np.ndarray) -> tuple[float, np.ndarray, float]:
         t = max(t, self.now())  # getting the frame took time too: the age is judged now
         q, moved = self.wall.advance(q, t)  # the arm kept moving until now
