@@ -1,11 +1,16 @@
-"""The Franka adapter (qpavoid.drive.franka) and the franky-sim helper (franka_sim).
+"""The FR3's adapter (qpavoid.drive.franka), what the Franka adapters share
+(qpavoid.drive.libfranka) and the franky-sim helper (franka_sim).
 
 The default suite checks the adapter's own logic without an arm: the joint map, the
-checks that refuse a command (nothing reaches franky), the stall and fault errors, against
-a stand-in for franky that records what it is given; and franky's own refusal of an
-address nobody serves. The slow tests drive franky-sim (MuJoCo physics behind libfranka's
-protocol), one server per test on a loopback address of its own (parallel workers never
-share one), and check that nothing of it is left running afterwards.
+checks that refuse a command (nothing reaches franky), the stall and fault errors, the
+arm's model checked against the description, against a stand-in for franky that records
+what it is given; franky's own refusal of an address nobody serves; and franky's libfranka
+refused by a controller of another version (a Panda's, an older FR3's: a stand-in that
+answers libfranka's first message as they do, tests/libfranka_handshake.py). The slow
+tests drive franky-sim (MuJoCo physics behind libfranka's protocol), one server per test
+on a loopback address of its own (parallel workers never share one), and check that
+nothing of it is left running afterwards; franky-sim's FR3 answering for ``--robot panda``
+is refused at connect, by the adapter and by the command line.
 
 Every expectation of a slow test is on the simulator's own clock (the state's time), so
 a slow machine makes the run longer, not the errors larger; waits are bounded only.
@@ -15,8 +20,8 @@ from __future__ import annotations
 
 import contextlib
 import enum
-import itertools
 import os
+import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -25,16 +30,20 @@ from typing import Any
 
 import numpy as np
 import pytest
+from conftest import PYTHON
+from libfranka_handshake import RefusingController, free_address, loopback_addresses
 
 import qpavoid
 from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import Robot
 from qpavoid.control.task import default_task
-from qpavoid.core.errors import ArmError, InputError
-from qpavoid.drive import franka, franka_sim
+from qpavoid.core.errors import ArmError, InputError, RobotDescriptionError
+from qpavoid.drive import franka
+from qpavoid.drive.connect import parse_arm
 from qpavoid.drive.franka import LOCK_TOLERANCE_RAD, REST_RADPS, FrankaArm, FrankaJoints
 from qpavoid.drive.franka_sim import FrankySim
 from qpavoid.drive.interface import Arm, ArmState
+from qpavoid.drive.libfranka import FRANKY, MODEL_FILE, FrankaModel, bundled_models
 
 DT = 0.002  # 500 Hz
 #: The FR3's active joints (fr3_joint3 locked at 0) among its seven.
@@ -44,6 +53,11 @@ ACTIVE = (0, 1, 3, 4, 5, 6)
 @pytest.fixture(scope="module")
 def fr3() -> Robot:
     return qpavoid.load_robot("fr3")
+
+
+@pytest.fixture(scope="module")
+def panda() -> Robot:
+    return qpavoid.load_robot("panda")
 
 
 # -- the joint map ------------------------------------------------------------------------
@@ -103,6 +117,9 @@ class FakeLimit:
 class FakeRobot:
     """franky.Robot's surface as the adapter uses it: a state whose clock advances 1 ms a
     read (unless frozen) and a record of the motions given."""
+
+    #: The URDF the controller sends (franky-sim's starts so).
+    model_urdf = '<?xml version="1.0" ?>\n<robot name="fr3">\n  <link name="base"/>'
 
     def __init__(self, host: str, realtime_config: object = None):
         self.q, self.dq = np.zeros(7), np.zeros(7)
@@ -293,6 +310,120 @@ def test_unreachable_address(fr3: Robot) -> None:
         assert "\n" not in str(e.value)
 
 
+# -- which arm answers: the description's model against the arm's version ------------------
+
+
+def test_the_bundled_models(fr3: Robot, panda: Robot) -> None:
+    # Franka's compatibility matrix: robot servers 2-5 are the Panda's (libfranka < 0.10),
+    # 6-10 the FR3's (libfranka >= 0.10)
+    assert FrankaModel.of(fr3) == FrankaModel("FR3", (6, 7, 8, 9, 10), "fr3")
+    assert FrankaModel.of(panda) == FrankaModel("Panda (FER)", (2, 3, 4, 5), "panda")
+    assert {m.robot for m in bundled_models()} == {"fr3", "panda"}
+    assert FrankaModel.of(fr3).versions_text() == "6-10"
+    with pytest.raises(ArmError, match="version 5") as e:
+        FrankaModel.of(fr3).check("franka:x", 5)
+    assert e.value.reason == "model" and e.value.value == 5
+    FrankaModel.of(fr3).check("franka:x", 10)  # an FR3's: no error
+
+
+def _copy_description(src: str, to: Path) -> Path:
+    """A copy of a bundled description's control-point and task files (its URDF comes from
+    its package), without its franka.toml."""
+    folder = Path(qpavoid.load_robot(src).path).parent
+    to.mkdir()
+    for name in ("control_points.toml", "task.toml"):
+        (to / name).write_text((folder / name).read_text())
+    return to
+
+
+def test_a_description_must_say_which_franka_it_is(tmp_path: Path, fake: SimpleNamespace) -> None:
+    mine = _copy_description("fr3", tmp_path / "myfr3")
+    robot = qpavoid.load_robot(str(mine))
+    with pytest.raises(InputError, match=f"does not say which Franka arm it is.*{MODEL_FILE}"):
+        FrankaArm(robot, "fake")
+    assert fake.robots == []  # refused before connecting
+    for text, key in [
+        ('model = "FR3"\nserver_versions = [10]\nwhoami = 1\n', "unknown key"),
+        ('model = "FR3"\nserver_versions = []\n', "server_versions"),
+        ('model = "FR3"\nserver_versions = [10.0]\n', "server_versions"),
+        ("server_versions = [10]\n", "model"),
+        ("model = [\n", "franka.toml"),
+    ]:
+        (mine / MODEL_FILE).write_text(text)
+        with pytest.raises(RobotDescriptionError, match=key):
+            FrankaArm(robot, "fake")
+    (mine / MODEL_FILE).write_text('model = "FR3"\nserver_versions = [10]\n')
+    assert FrankaArm(robot, "fake").model == FrankaModel("FR3", (10,), "myfr3")
+
+
+def test_an_fr3_answering_for_a_panda_is_refused(panda: Robot, fake: SimpleNamespace) -> None:
+    # franky's libfranka connected: the arm speaks its version, 10, an FR3's
+    with pytest.raises(ArmError) as e:
+        FrankaArm(panda, "fake")
+    text = str(e.value)
+    assert e.value.reason == "model" and e.value.value == FRANKY.server_version
+    assert text.startswith("franka:fake: the arm is not the Panda (FER) that --robot panda")
+    assert text == (
+        "franka:fake: the arm is not the Panda (FER) that --robot panda describes: its "
+        "controller speaks version 10 of libfranka's protocol (the FR3's: --robot fr3) and "
+        "names its model 'fr3', where the Panda (FER)'s speaks 2-5"
+    )
+    robot = fake.robots[0]
+    assert robot.moves == [] and robot.joint_velocity_limit.value == robot.joint_velocity_limit.max
+
+
+def test_the_arm_names_its_model(fr3: Robot, fake: SimpleNamespace) -> None:
+    assert FrankaArm(fr3, "fake").reported_model == "fr3"
+
+
+@pytest.fixture
+def free_host(addresses: Iterator[str]) -> str:
+    return free_address(addresses)
+
+
+def test_franky_refused_by_a_controller_of_another_version(
+    fr3: Robot, panda: Robot, free_host: str
+) -> None:
+    """franky's own libfranka against a controller that refuses it, as a Panda's (robot
+    server 5) and an FR3's on robot system 5.7.2-5.8 (9) do: the version the controller
+    says decides which line the run ends with."""
+    pytest.importorskip("franky")
+    host = free_host
+    with RefusingController(host, 5) as panda_controller:
+        with pytest.raises(ArmError) as e:  # --robot fr3, a Panda answers
+            FrankaArm(fr3, host, connect_timeout_s=5.0)
+        assert e.value.reason == "model" and e.value.value == 5
+        assert str(e.value) == (
+            f"franka:{host}: the arm is not the FR3 that --robot fr3 describes: its controller "
+            "speaks version 5 of libfranka's protocol (the Panda (FER)'s: --robot panda), where "
+            "the FR3's speaks 6-10"
+        )
+        with pytest.raises(ArmError) as e:  # --robot panda: the right arm, another binding
+            FrankaArm(panda, host, connect_timeout_s=5.0)
+        assert e.value.reason == "unreachable"
+        assert str(e.value) == (
+            f"franka:{host}: the Panda (FER) there speaks version 5 of libfranka's protocol, "
+            "franky-control's libfranka 0.21 speaks 10: drive it with "
+            f"--arm panda:{host} (panda-python's libfranka 0.9.2 speaks 5: "
+            'pip install "qpavoid[panda]")'
+        )
+    # what franky-control offers is the version the adapter counts on
+    assert panda_controller.offered == [FRANKY.server_version] * 2
+    with RefusingController(host, 9), pytest.raises(ArmError) as e:
+        FrankaArm(fr3, host, connect_timeout_s=5.0)
+    assert e.value.reason == "unreachable"
+    assert "the FR3 there speaks version 9" in str(e.value)
+    assert "no adapter here speaks it (franky-control 10, panda-python 5)" in str(e.value)
+
+
+def test_arm_names() -> None:
+    assert parse_arm("panda:172.16.0.2") == ("panda", "172.16.0.2")
+    assert parse_arm("franka: 127.0.0.1 ") == ("franka", "127.0.0.1")
+    for bad in ("panda:", "panda", "fr3:127.0.0.1", "sim:x"):
+        with pytest.raises(InputError, match="franka:HOST, panda:HOST"):
+            parse_arm(bad)
+
+
 # -- against franky-sim -------------------------------------------------------------------
 
 
@@ -312,21 +443,14 @@ def _children_running_franky() -> list[int]:
 
 @pytest.fixture(scope="module")
 def addresses() -> Iterator[str]:
-    """Loopback addresses of this process's own: 127.<pid>.k (Linux routes all of
-    127/8 to the loopback), so that parallel workers, and parallel runs, never share one."""
-    pid = os.getpid()
-    return (f"127.{(pid >> 8) % 256}.{pid % 256}.{k}" for k in itertools.count(2))
-
-
-def _free(addresses: Iterator[str]) -> str:
-    """The next of ``addresses`` that nothing serves yet (another run may use some)."""
-    return next(h for h in addresses if not franka_sim._accepts(h, franka_sim.FCI_PORT))
+    """Loopback addresses of this process's own (parallel workers never share one)."""
+    return loopback_addresses(2)
 
 
 @pytest.fixture
 def sim(addresses: Iterator[str]) -> Iterator[FrankySim]:
     pytest.importorskip("franky")
-    with FrankySim(_free(addresses)) as server:
+    with FrankySim(free_address(addresses)) as server:
         pid = server.pid
         yield server
     with pytest.raises(ProcessLookupError):  # nothing of its process group is left
@@ -473,11 +597,45 @@ def test_killed_mid_motion(fr3: Robot, sim: FrankySim) -> None:
 
 
 @pytest.mark.slow
+def test_franky_sim_refuses_to_be_a_panda(panda: Robot, fr3: Robot, sim: FrankySim) -> None:
+    """franky-sim's FR3 answering for --robot panda: refused at connect, naming both, before
+    any limit is set or anything moves; the server takes the next client."""
+    with pytest.raises(ArmError) as e:
+        FrankaArm(panda, sim.host)
+    assert e.value.reason == "model" and e.value.arm == f"franka:{sim.host}"
+    assert str(e.value) == (
+        f"franka:{sim.host}: the arm is not the Panda (FER) that --robot panda describes: its "
+        "controller speaks version 10 of libfranka's protocol (the FR3's: --robot fr3) and "
+        "names its model 'fr3', where the Panda (FER)'s speaks 2-5"
+    )
+    with FrankaArm(fr3, sim.host) as arm:  # the refused client was let go
+        assert arm.reported_model == "fr3" and arm.read().q.shape == (6,)
+
+
+@pytest.mark.slow
+def test_the_command_line_refuses_franky_sim_as_a_panda(sim: FrankySim, tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    cmd = [*PYTHON, "-m", "qpavoid", "run", "test1", "--robot", "panda"]
+    cmd += ["--arm", f"franka:{sim.host}", "--out", str(out), "--no-plots", "--no-view", "-q"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip().splitlines() == [
+        f"qpavoid: error: franka:{sim.host}: the arm is not the Panda (FER) that --robot panda "
+        "describes: its controller speaks version 10 of libfranka's protocol (the FR3's: "
+        "--robot fr3) and names its model 'fr3', where the Panda (FER)'s speaks 2-5"
+    ]
+    assert not out.exists()
+
+
+@pytest.mark.slow
 def test_franky_sim_helper(addresses: Iterator[str]) -> None:
     pytest.importorskip("franky_sim")
     with pytest.raises(InputError, match="loopback"):
         FrankySim("10.0.0.1")
-    with FrankySim(_free(addresses)) as a, FrankySim(_free(addresses)) as b:  # side by side
+    with (
+        FrankySim(free_address(addresses)) as a,
+        FrankySim(free_address(addresses)) as b,
+    ):  # side by side
         assert a.running() and b.running() and a.pid != b.pid
         with pytest.raises(RuntimeError, match="already serves"):
             FrankySim(a.host).start()

@@ -232,7 +232,7 @@ class ArmError(QpavoidError):
         Which arm (e.g. ``"franka:127.0.0.1"``), if known.
     reason
         A short machine-readable cause (``"unreachable"``, ``"stalled"``, ``"rejected"``,
-        ``"fault"``, ``"limit"``), if known.
+        ``"fault"``, ``"limit"``; ``"model"``: not the arm the description is), if known.
     value
         The offending value (a command, a state's age), if any.
     """

@@ -1,6 +1,9 @@
 """Driving an arm: what the control loop reads from an arm and sends to it
 (:mod:`~qpavoid.drive.interface`), the kinematic simulation of one, and adapters for real
-arms (:mod:`~qpavoid.drive.franka`, through ``franky-control``).
+arms: a Franka arm through the binding of libfranka its controller speaks
+(:mod:`~qpavoid.drive.libfranka`, what they share): the FR3 through ``franky-control``
+(:mod:`~qpavoid.drive.franka`), the Panda through ``panda-python``
+(:mod:`~qpavoid.drive.panda`).
 
 May import: every stage above it (core to control).
 """

@@ -1,4 +1,12 @@
-"""Which arm a run drives, by name: ``sim`` or ``franka:HOST`` (the ``--arm`` flag)."""
+"""Which arm a run drives, by name: ``sim``, ``franka:HOST`` or ``panda:HOST`` (the
+``--arm`` flag).
+
+A Franka arm is driven through the binding of libfranka its controller speaks
+(:mod:`qpavoid.drive.libfranka`): ``franka:HOST`` through franky-control (libfranka 0.21:
+an FR3 on robot system 5.9.0 or later), ``panda:HOST`` through panda-python (libfranka
+0.9.2: a Panda on robot system 4.2.1 or later). Either checks at connect that the arm is
+the one ``--robot`` describes.
+"""
 
 from __future__ import annotations
 
@@ -11,17 +19,21 @@ from qpavoid.arm.model import Robot
 from qpavoid.core.errors import InputError
 from qpavoid.drive.franka import FrankaArm
 from qpavoid.drive.interface import Arm
+from qpavoid.drive.libfranka import LibfrankaArm
+from qpavoid.drive.panda import PandaArm
 from qpavoid.drive.simulated import SimulatedArm
 
 __all__ = ["ARM_KINDS", "open_arm", "parse_arm"]
 
-#: What ``--arm`` may name: the kinematic simulation on the wall clock, or a Franka (FR3,
-#: Panda; franky-sim too) at an FCI address through franky-control.
-ARM_KINDS = ("sim", "franka:HOST")
+#: What ``--arm`` may name: the kinematic simulation on the wall clock, an FR3 (franky-sim
+#: too) at an FCI address through franky-control, or a Panda through panda-python.
+ARM_KINDS = ("sim", "franka:HOST", "panda:HOST")
+#: The adapter of each Franka kind.
+_FRANKA_ADAPTERS: dict[str, type[LibfrankaArm]] = {"franka": FrankaArm, "panda": PandaArm}
 
 
 def parse_arm(text: str) -> tuple[str, str | None]:
-    """``("sim", None)`` or ``("franka", host)`` from ``--arm``'s text.
+    """``("sim", None)``, ``("franka", host)`` or ``("panda", host)`` from ``--arm``'s text.
 
     Raises
     ------
@@ -31,8 +43,8 @@ def parse_arm(text: str) -> tuple[str, str | None]:
     kind, _, host = str(text).partition(":")
     if kind == "sim" and not host:
         return "sim", None
-    if kind == "franka" and host.strip():
-        return "franka", host.strip()
+    if kind in _FRANKA_ADAPTERS and host.strip():
+        return kind, host.strip()
     raise InputError(
         f"--arm takes one of {', '.join(ARM_KINDS)}, got {text!r}", name="--arm", value=text
     )
@@ -45,14 +57,17 @@ def open_arm(text: str, robot: Robot, q0: np.ndarray, period_s: float) -> Iterat
 
     Raises
     ------
+    InputError
+        The adapter's binding is not installed (one line naming its extra).
     ArmError
-        The arm is unreachable, refuses the connection, or cannot reach ``q0``.
+        The arm is unreachable, refuses the connection, is not the one ``robot``
+        describes ("model"), or cannot reach ``q0``.
     """
     kind, host = parse_arm(text)
     if kind == "sim":
         yield SimulatedArm(robot, q0, period_s)
         return
     assert host is not None
-    with FrankaArm(robot, host, period_s=period_s) as franka:
+    with _FRANKA_ADAPTERS[kind](robot, host, period_s=period_s) as franka:
         franka.move_to(q0)
         yield franka
