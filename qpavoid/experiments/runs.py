@@ -332,6 +332,7 @@ def simulate_one(
         redundant=bool(spec.redundant),
         robot=description_reference(spec.robot),
         arm=spec.arm or ("the simulated arm in real time" if live else "offline simulation"),
+        task=spec.task,
         solver=getattr(getattr(controller, "backend", None), "name", None),
     )
     return RunResult(spec, sim, robot, controller, metrics)

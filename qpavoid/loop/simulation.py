@@ -200,7 +200,8 @@ def simulate(
         ``tau`` (T,) path clock, ``tick_us`` (T,) controller time per tick,
         ``dq_command`` (T, nv) the controller's command (``dq`` is what the arm did),
         ``frame_age_s`` (T,) the age of the frame the controller was given (now minus its
-        capture time), ``true_distance`` (T, S) exact capsule distance per set to where the
+        capture time, plus its people's lag behind it: the age speed and separation
+        counts), ``true_distance`` (T, S) exact capsule distance per set to where the
         person really is (NaN without ``measure_truth``), ``robot_point`` and
         ``human_point`` (T, S, 3) the witness points of each set's closest pair (NaN if no
         part is seen), ``stop_reason`` (T,) str why the robot stops ("" while it moves),
@@ -267,7 +268,8 @@ def simulate(
             if truth is not None and plant.measured_online:
                 logger.log["true_distance"][k] = truth(kin, t)
             dq = logger.guard(q, dq)
-            logger.row(k, t, kin, dq, cmd, human, tau, tick_us, t - captured_s, alert)
+            lag = human.max_lag_s if isinstance(human, People) else 0.0  # fused: the oldest
+            logger.row(k, t, kin, dq, cmd, human, tau, tick_us, t - captured_s + lag, alert)
             if plant.ended_by:
                 break
             if tau >= path.duration_s and not cmd.stopped and _at(goal, robot, q, cfg):
