@@ -14,8 +14,8 @@ import pytest
 pytest.importorskip("rosbags")
 pytest.importorskip("cyclonedds")
 
-from qpavoid.sensing import ros2_types  # noqa: E402
-from qpavoid.sensing.ros2_types import (  # noqa: E402
+from qpavoid.sensing import ros2_types
+from qpavoid.sensing.ros2_types import (
     DISTRIBUTIONS,
     MESSAGE_TYPES,
     dds_name,
@@ -40,10 +40,21 @@ INTS = {
     "int64": (-(2**63), 2**63),
     "uint64": (0, 2**64),
 }
-NUMPY = {"float32": np.float32, "float64": np.float64, "int8": np.int8, "uint8": np.uint8,
-         "byte": np.int8, "char": np.uint8, "int16": np.int16, "uint16": np.uint16,
-         "int32": np.int32, "uint32": np.uint32, "int64": np.int64, "uint64": np.uint64,
-         "bool": np.bool_}  # fmt: skip
+NUMPY = {
+    "float32": np.float32,
+    "float64": np.float64,
+    "int8": np.int8,
+    "uint8": np.uint8,
+    "byte": np.int8,
+    "char": np.uint8,
+    "int16": np.int16,
+    "uint16": np.uint16,
+    "int32": np.int32,
+    "uint32": np.uint32,
+    "int64": np.int64,
+    "uint64": np.uint64,
+    "bool": np.bool_,
+}
 
 
 def _base(rng: np.random.Generator, name: str) -> object:
@@ -106,19 +117,36 @@ def test_a_joint_state_is_the_cdr_worked_by_hand():
     time = dds_type("jazzy", "builtin_interfaces/msg/Time")
     msg = cls(
         header=header(stamp=time(sec=3, nanosec=5), frame_id="a"),
-        name=["j"], position=[1.5], velocity=[], effort=[],
-    )  # fmt: skip
+        name=["j"],
+        position=[1.5],
+        velocity=[],
+        effort=[],
+    )
     expected = (
         b"\x00\x01\x00\x00"  # CDR_LE
-        + (3).to_bytes(4, "little") + (5).to_bytes(4, "little")  # stamp
-        + (2).to_bytes(4, "little") + b"a\x00" + b"\x00\x00"  # "a" + NUL, padding to 4
-        + (1).to_bytes(4, "little") + (2).to_bytes(4, "little") + b"j\x00" + b"\x00\x00"
-        + (1).to_bytes(4, "little") + np.float64(1.5).tobytes()  # at 32: 8-aligned
-        + (0).to_bytes(4, "little") + (0).to_bytes(4, "little")
-    )  # fmt: skip
+        + (3).to_bytes(4, "little")
+        + (5).to_bytes(4, "little")  # stamp
+        + (2).to_bytes(4, "little")
+        + b"a\x00"
+        + b"\x00\x00"  # "a" + NUL, padding to 4
+        + (1).to_bytes(4, "little")
+        + (2).to_bytes(4, "little")
+        + b"j\x00"
+        + b"\x00\x00"
+        + (1).to_bytes(4, "little")
+        + np.float64(1.5).tobytes()  # at 32: 8-aligned
+        + (0).to_bytes(4, "little")
+        + (0).to_bytes(4, "little")
+    )
     assert msg.serialize() == expected
-    assert to_cdr("jazzy", from_cdr("jazzy", expected, "sensor_msgs/msg/JointState"),
-                  "sensor_msgs/msg/JointState") == expected  # fmt: skip
+    assert (
+        to_cdr(
+            "jazzy",
+            from_cdr("jazzy", expected, "sensor_msgs/msg/JointState"),
+            "sensor_msgs/msg/JointState",
+        )
+        == expected
+    )
 
 
 def test_dds_names_follow_ros2():
@@ -145,8 +173,11 @@ def test_stamps_and_their_refusals():
 
 
 def test_malformed_cdr_is_one_input_error():
-    data = to_cdr("humble", random_message(typestore("humble"), "sensor_msgs/msg/JointState",
-                                            np.random.default_rng(1)), "sensor_msgs/msg/JointState")  # fmt: skip
+    data = to_cdr(
+        "humble",
+        random_message(typestore("humble"), "sensor_msgs/msg/JointState", np.random.default_rng(1)),
+        "sensor_msgs/msg/JointState",
+    )
     with pytest.raises(ros2_types.InputError, match="not a sensor_msgs/msg/JointState"):
         from_cdr("humble", data[: len(data) // 2 - 3], "sensor_msgs/msg/JointState")
     with pytest.raises(ros2_types.InputError, match="unknown ROS 2 distribution"):

@@ -101,6 +101,9 @@ class SensorCalibration:
         The sensor's latency from capture to arrival, s, as measured on the cell
         (``qpavoid latency``), or None: its format's (:attr:`~qpavoid.human.skeleton.
         CameraSpec.latency_s`). It sets :attr:`age_limit_s`.
+    topic
+        The ROS 2 topic its driver publishes its bodies on (``"/k4a/body_tracking_data"``),
+        or None: the sensor is not read from ROS 2 (docs/ros2.md).
     """
 
     name: str
@@ -111,6 +114,7 @@ class SensorCalibration:
     range_m: tuple[float, float] | None = None
     format: str = DEFAULT_FORMAT
     latency_s: float | None = None
+    topic: str | None = None
 
     def __post_init__(self) -> None:
         """The same limits as a calibration file's (a weight of 0 made seen joints
@@ -370,6 +374,8 @@ class Calibration:
                 lines.append(f"format = {toml_string(cal.format)}")
             if cal.latency_s is not None:
                 lines.append(f"latency_s = {cal.latency_s!r}")
+            if cal.topic is not None:
+                lines.append(f"topic = {toml_string(cal.topic)}")
             lines.append("")
         return "\n".join(lines)
 

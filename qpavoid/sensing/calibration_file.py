@@ -13,6 +13,7 @@ not turn into a scale error.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
@@ -48,6 +49,7 @@ SENSOR_KEYS = (
     "range_m",
     "format",
     "latency_s",
+    "topic",
 )
 #: A calibration file is a few tables of numbers (about 400 bytes a sensor): 1 MiB holds
 #: thousands, and refuses a device or a huge file before it is read (``--sensors /dev/zero``
@@ -151,6 +153,14 @@ def _sensor(name: str, table: object, where: str, path: str | None) -> SensorCal
     problem = latency_error(latency)
     if problem is not None:
         raise fail(problem, "latency_s", latency)
+    topic = table.get("topic")
+    if topic is not None and not _ros_topic(topic):
+        raise fail(
+            f"topic must be a ROS 2 topic name (/ then letters, digits, _ and /), got "
+            f"{str(topic)[:80]!r}",
+            "topic",
+            topic,
+        )
     try:
         return SensorCalibration(
             name,
@@ -160,9 +170,21 @@ def _sensor(name: str, table: object, where: str, path: str | None) -> SensorCal
             **view,
             format=fmt,
             latency_s=None if latency is None else float(latency),
+            topic=topic,
         )
     except CalibrationError as exc:
         raise fail(str(exc).split(": ", 1)[-1], exc.name, exc.value) from None
+
+
+def _ros_topic(value: object) -> bool:
+    """A fully qualified ROS 2 topic name: ``/`` then tokens of letters, digits and ``_``,
+    not starting with a digit, joined by single ``/`` (ROS 2's topic name rules)."""
+    return (
+        isinstance(value, str)
+        and re.fullmatch(r"(/[A-Za-z_][A-Za-z0-9_]*)+", value) is not None
+        and "__" not in value
+        and len(value) <= 256
+    )
 
 
 def _rigid(value: object, fail: Callable[..., CalibrationError]) -> np.ndarray:

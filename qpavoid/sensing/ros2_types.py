@@ -23,6 +23,7 @@ them :class:`Ros2UnavailableError` says ``pip install "qpavoid[ros2]"``.
 from __future__ import annotations
 
 import importlib
+import math
 from functools import cache
 from numbers import Integral
 from types import ModuleType
@@ -245,10 +246,10 @@ def from_cdr(distribution: str, data: bytes | memoryview, name: str) -> object:
 
 def time_msg(distribution: str, seconds: float) -> object:
     """``builtin_interfaces/msg/Time`` of ``seconds`` (s since the epoch, >= 0)."""
-    ns = round(seconds * 1e9)
-    return typestore(distribution).types["builtin_interfaces/msg/Time"](
-        sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000
-    )
+    sec = math.floor(seconds)
+    nanosec = round((seconds - sec) * 1e9)  # exact to the float's ns, whatever the epoch
+    sec, nanosec = sec + nanosec // 1_000_000_000, nanosec % 1_000_000_000
+    return typestore(distribution).types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
 
 def stamp_s(stamp: Any) -> float | None:
