@@ -50,9 +50,10 @@ from qpavoid.control.tick import SAFETY_MODES
 from qpavoid.experiments.compare import compare
 from qpavoid.experiments.jobs import progress_bar
 from qpavoid.experiments.run_spec import BENCHES, CONTROLLERS, DISTANCES, LIMIT_MODES
-from qpavoid.experiments.runs import RunSpec, live_view, run_one
+from qpavoid.experiments.runs import RunSpec, live_view, run_one, spec_robot
 from qpavoid.loop.live_input import check_listening, parse_address
 from qpavoid.loop.metrics import describe
+from qpavoid.output.bag_writer import check_bag_path, write_run_bag
 from qpavoid.output.run_files import check_output_dir
 from qpavoid.scenarios.generated import SCENARIOS
 from qpavoid.scenarios.motions import check_inputs
@@ -167,6 +168,12 @@ def build_parser() -> Parser:
         "the operator sits, instead of the robot description's task.toml",
     )
     run.add_argument("--out", type=folder, metavar="DIR", help="output folder (default: runs/NAME)")
+    run.add_argument(
+        "--bag",
+        metavar="FILE.mcap",
+        help="also write the run as a ROS 2 bag: joint states, commands, the people's markers "
+        'and diagnostics (docs/ros2.md; pip install "qpavoid[ros2]")',
+    )
     run.add_argument(
         "--view",
         nargs="?",
@@ -286,6 +293,8 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
     )
     out = Path(args.out or Path("runs") / spec.label.replace(":", "-"))
     check_output_dir(out)
+    if args.bag:
+        check_bag_path(args.bag)
     if args.listen:  # a bad file, a missing key, unsigned off loopback: before the run
         check_listening(
             parse_address(args.listen), load_calibration(args.sensors), spec.allow_unauthenticated
@@ -326,6 +335,10 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
     written = ["metrics.json", "log.npz"] + [f"{len(m['plots'])} figures"] * bool(m["plots"])
     written += ["replay.html (open it in a browser)"] * bool(m.get("view"))
     lines.append(f"wrote {', '.join(written[:-1])} and {written[-1]} to {out}/")
+    if args.bag:
+        counts = write_run_bag(args.bag, out, spec_robot(spec))
+        n = sum(counts.values())
+        lines.append(f"wrote the bag {args.bag} ({n} messages on {len(counts)} topics)")
     return "\n".join(lines)
 
 

@@ -18,8 +18,9 @@ from qpavoid.fusion.offline import fuse_recordings, load_people
 from qpavoid.human.frames import HumanMotion
 from qpavoid.loop.crowd import Crowd
 from qpavoid.scenarios.generated import make_scenario
+from qpavoid.sensing.bags import is_bag, sensor_recordings
 from qpavoid.sensing.calibration_file import load_calibration
-from qpavoid.sensing.per_sensor import is_sensor_recording, load_sensor_recording
+from qpavoid.sensing.per_sensor import is_sensor_recording
 from qpavoid.sensing.recording import load_recording
 
 __all__ = ["check_human_files", "check_inputs", "load_motion"]
@@ -36,7 +37,7 @@ def check_human_files(files: Sequence[str], sensors: str | None) -> None:
                 value=sensors,
             )
         return
-    per_sensor = [f for f in files if is_sensor_recording(f)]
+    per_sensor = [f for f in files if is_sensor_recording(f) or is_bag(f)]
     if sensors is None and (len(files) > 1 or per_sensor):
         raise InputError(
             f"{(per_sensor or list(files))[0]}: per-sensor recordings (with a sensor name) "
@@ -58,7 +59,8 @@ def check_inputs(files: Sequence[str], sensors: str | None) -> None:
         return
     calibration = load_calibration(sensors)
     for f in files:
-        calibration.check_names(load_sensor_recording(f).sensors)
+        for recording in sensor_recordings(f, calibration):
+            calibration.check_names(recording.sensors)
 
 
 def load_motion(
@@ -87,6 +89,6 @@ def load_motion(
             return load_recording(human_files[0])
         return Crowd(people) if len(people) > 1 else next(iter(people.values()))
     calibration = load_calibration(sensors)
-    recordings = [load_sensor_recording(f) for f in human_files]
+    recordings = [r for f in human_files for r in sensor_recordings(f, calibration)]
     people = fuse_recordings(recordings, calibration).people()
     return Crowd(people) if len(people) > 1 else next(iter(people.values()))
