@@ -89,7 +89,7 @@ def test_a_frame_held_too_long_is_stale_on_the_controllers_clock(robot):
     reasons = [ctrl.step(q, joints.copy(), None, 0.0).reason for _ in range(150)]
     first = next(k for k, r in enumerate(reasons) if r)
     assert first == 101  # ages 0, 1 ms, ..., 100 ms pass; 101 ms is stale
-    assert reasons[first].startswith("human frame is stale (0.101 s old")
+    assert reasons[first].startswith("human frame is stale (101.0 ms old, max 100.0 ms)")
     # a new frame brings it back
     assert not ctrl.step(q, far_person(1), None, 0.0).reason
 

@@ -28,7 +28,7 @@ from qpavoid.control.qp import QPController
 from qpavoid.control.task import default_task
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.core.errors import InputError
-from qpavoid.experiments.runs import RunSpec, run_one
+from qpavoid.experiments.runs import RunSpec, run_one, simulate_one
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.landmarks import LandmarkMap, skeleton_format
 from qpavoid.human.posture import Operator
@@ -247,21 +247,26 @@ class Still:
 def test_the_listener_says_once_what_it_refuses_and_how_to_fix_it(tmp_path):
     """k4abt frames to a Kinect v2 calibration: said once, naming both formats; k4abt
     frames 0.2 s old to a k4abt calibration: said once, naming the age limit and how to
-    set it; nothing taken in either case."""
-    for fmt, latency, words in (
-        ("kinect_v2", 0.0, "femto: datagrams of k4abt frames dropped: the calibration"),
-        ("k4abt", 0.2, "femto: frames refused as late: femto's age limit 0.140 s = k4abt's"),
+    set it; frames signed with another key: said once, with what to check; nothing taken
+    in any case."""
+    for case, fmt, latency, words in (
+        ("format", "kinect_v2", 0.0, "femto: datagrams of k4abt frames dropped: the calib"),
+        ("late", "k4abt", 0.2, "femto: frames refused as late: femto's age limit 0.140 s ="),
+        ("key", "k4abt", 0.1, "datagrams dropped as bad_tag: not signed by this cell's keys"),
     ):
-        folder = tmp_path / fmt
+        folder = tmp_path / case
         folder.mkdir()
         calib = k4abt_cell(folder)
         if fmt != "k4abt":  # the same camera calibrated as a Kinect v2
             calib.write_text(calib.read_text().replace('"k4abt"', f'"{fmt}"'))
+        calibrated = load_calibration(str(calib))  # the sender's keys
+        if case == "key":  # the listener's key file made anew: the sender's is another
+            (folder / "femto.key").unlink()
+            new_key_file(folder / "femto.key", "femto")
         lines: list[str] = []
         with Listener(("127.0.0.1", 0), load_calibration(str(calib))) as listener:
             source = LiveSource(listener, say=lines.append)
             port = listener.address[1]
-            calibrated = load_calibration(str(calib))
             sender = threading.Thread(
                 target=send_seated, args=(calib, port, latency, 1.0, "iiwa14", calibrated)
             )
@@ -274,9 +279,9 @@ def test_the_listener_says_once_what_it_refuses_and_how_to_fix_it(tmp_path):
         said = [x for x in lines if x.startswith(words)]
         assert len(said) == 1, lines
         assert source.first_taken == {} and not people.ids
-        if fmt == "k4abt":
+        if case == "late":
             assert "set latency_s for it in the calibration, or --latency" in said[0]
-        else:
+        elif case == "format":
             assert "says kinect_v2 (its format key)" in said[0]
 
 
@@ -328,3 +333,59 @@ def test_send_seats_the_operator_where_the_runs_task_file_does(tmp_path, capsys)
     out, err = capsys.readouterr()
     assert status == 2 and out == "" and err.startswith("qpavoid: error: --task ")
     assert len(err.strip().splitlines()) == 1
+
+
+class GoesStale:
+    """The seated operator, each tick a new frame until ``until_s``, then the same frame
+    aging (a sender that stopped)."""
+
+    def __init__(self, until_s: float):
+        self.until_s = until_s
+
+    def frame_at(self, t: float) -> tuple[HumanFrame, float]:
+        joints = Operator().rest()
+        return HumanFrame(joints, np.full(len(joints), 2, np.int8)), min(t, self.until_s)
+
+
+def test_a_run_stopped_in_its_paths_last_moments_within_the_tolerance_reached_its_goal(robot):
+    """The camera stops 0.3 s before the path ends: the arm brakes, its path clock stops
+    at 14.8 s, and it stands 0.0006 mm from the goal (the path's end is slow): it reached
+    its goal (before: 'reached goal False', 0.007 mm from it, an adversary's run). A run
+    whose path still had millimetres to go has not."""
+    config = ControllerConfig(
+        control_period_s=0.01, perception=PerceptionConfig(max_identical_frames=None)
+    )
+    sim_cfg = SimConfig(control_rate_hz=100, max_time_s=17)
+    ctrl = QPController(robot, config=config)
+    sim = simulate(ctrl, None, sim_cfg, source=GoesStale(ctrl.path.duration_s - 0.3))
+    assert sim.log["tau"][-1] < ctrl.path.duration_s and sim.log["stopped"][-1]
+    assert sim.metrics["final_position_error_m"] < 1e-3
+    assert sim.metrics["reached_goal"] and sim.metrics["end_reason"] == "goal reached"
+    early = simulate(QPController(robot, config=config), None, sim_cfg, source=GoesStale(12.0))
+    assert early.metrics["final_position_error_m"] > 1e-3
+    assert not early.metrics["reached_goal"]
+
+
+def test_a_run_held_by_speed_and_separation_says_what_held_it_and_what_to_change():
+    """The Panda beside its seated operator seen by a ZED (0.12 s): held most of the run.
+    The time stopped is split by cause, summing to the time stopped, and the summary says
+    what the protective distance counts and what to change."""
+    from qpavoid.loop.metrics import describe
+
+    spec = RunSpec(
+        scenario="free",
+        robot="panda",
+        camera="zed_body_34",
+        safety="ssm",
+        controller="qp",
+        rate_hz=100.0,
+        max_time_s=6.0,
+    )
+    m = simulate_one(spec).metrics | {"scenario": "free"}
+    causes = m["stopped_s_by_cause"]
+    assert list(causes)[0] == "speed and separation", causes
+    assert sum(causes.values()) == pytest.approx(m["stopped_s"], abs=1e-6)
+    text = describe(m)
+    assert f"(speed and separation {causes['speed and separation']:.1f} s" in text
+    assert "its protective distance counts the camera's latency (0.120 s here)" in text
+    assert "seat the operator further from the path" in text

@@ -158,7 +158,9 @@ def add_sensor_commands(sub: argparse._SubParsersAction) -> None:
         type=float,
         metavar="S",
         help="the camera's latency, s: each frame is stamped this long before it is sent "
-        "(default: the calibration's latency_s for SENSOR, else its format's)",
+        "(default: the calibration's latency_s for SENSOR, else its format's; another plays "
+        "a camera slower or faster than the listener's calibration says, and the start line "
+        "says so)",
     )
     send_parser.add_argument(
         "--seconds",
@@ -287,10 +289,17 @@ def send_command(args: argparse.Namespace) -> str:
     kind = "unsigned" if args.unsigned else f"signed with its key (cell {calibration.cell!r})"
     where = f"{address[0]}:{address[1]}"
     span = "its length" if seconds is None else f"{seconds:g} s"
+    expected = cal.latency_used_s  # what the listener of this calibration expects
+    unlike = (
+        ""
+        if abs(latency - expected) < 1e-9
+        else f" (a camera slower or faster than the calibration's {expected:.3f} s: its "
+        f"listener takes frames up to {cal.age_limit_s:.3f} s old)"
+    )
     print(
         f"sending {args.sensor} ({cal.format}, {cal.skeleton.sensor.frame_rate_hz:g} Hz, "
-        f"latency {latency:.3f} s: each frame stamped that long before it is sent) to {where} "
-        f"for {span}: {what}, {kind}; Ctrl-C stops it",
+        f"latency {latency:.3f} s{unlike}: each frame stamped that long before it is sent) to "
+        f"{where} for {span}: {what}, {kind}; Ctrl-C stops it",
         flush=True,
     )
     try:

@@ -304,7 +304,10 @@ class Controller:
         age, percs, dmin, f = seen.frame_age_s, seen.perceived, clear.distance, clear.f
         frozen = self.config.perception.max_identical_frames
         if not age <= self.config.max_frame_age_s:  # NaN too
-            return f"human frame is stale ({age:.3f} s old, max {self.config.max_frame_age_s} s)"
+            limit = f"max {1e3 * self.config.max_frame_age_s:.1f} ms"
+            if age == math.inf:
+                return f"human frame is stale (none taken yet, {limit})"
+            return f"human frame is stale ({1e3 * age:.1f} ms old, {limit})"
         if frozen is not None and (repeats := max(p.identical for p in percs)) > frozen:
             return f"human frame is frozen ({repeats + 1} identical skeletons in a row)"
         if self.config.require_human and not np.isfinite(dmin).any():

@@ -36,6 +36,7 @@ from qpavoid.fusion.fuser import Fuser, FusionConfig
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.people import People
 from qpavoid.human.skeleton import SkeletonFormat
+from qpavoid.loop.metrics import DROP_HINTS
 from qpavoid.sensing.assembly import LossConfig, LossWatch
 from qpavoid.sensing.calibration import Calibration
 from qpavoid.sensing.per_sensor import BodyFrame
@@ -60,6 +61,11 @@ def parse_address(text: str, name: str = "--listen", any_port: bool = False) -> 
             value=text,
         )
     return host.strip("[]"), int(port)
+
+
+#: Late frames are said once at least this many came (and a tenth of all, or every frame
+#: of a sensor so far): a single datagram a busy machine delayed says nothing of a camera.
+LATE_SAID_AFTER = 3
 
 
 class Listener:
@@ -291,6 +297,7 @@ class LiveSource:
             set()
         )  # what was said once (a sensor's late, wrong format)
         self._look_s = 0.0  # when the listener's counters are next looked at, run clock
+        self._late_here: dict[str, float] = {}  # the age of each sensor's last late frame
         self.clock = clock
         self.clear = clear
         self.start_s: float | None = None  # the wall time of run time 0, set on first use
@@ -318,7 +325,7 @@ class LiveSource:
             captured = frame.t + calibration[frame.sensor].time_offset_s
             if captured < t - limit:
                 self.counters["late"] += 1
-                self._late(frame.sensor, t - captured)
+                self._late_here[frame.sensor] = t - captured  # said if late ones add up
             elif captured > t + limit:  # a clock ahead of ours: never trusted
                 self.counters["from_the_future"] += 1
             elif self.fuser.add(frame) and frame.sensor not in self.first_taken:
@@ -343,7 +350,8 @@ class LiveSource:
         lost = self._losses.alert(t, {sensor: loss.frames for sensor, loss in losses.items()})
         flags = [f"person {p.id}: {p.flag}" for p in fused.people if p.flag]
         unseen = [
-            f"person {pid} unseen for {gone:.1f} s, last seen {where:.2f} m from the robot: "
+            f"person {pid} unseen for {gone:.1f} s, their torso last seen {where:.2f} m from "
+            "the robot's base: "
             "it waits until a sensor sees them again"
             for pid, gone, where in self.fuser.kept_unseen(t)
         ]
@@ -411,13 +419,24 @@ class LiveSource:
         )
 
     def _refusals(self) -> None:
-        """Say once what the receiver refused that the operator can fix: late frames (by
-        the only sensor, or the first sensor not yet taken), datagrams of another format."""
-        counters = self.listener.counters
-        if counters.get("late", 0):
-            waiting = [n for n in self.listener.calibration.names if n not in self.first_taken]
-            for sensor in waiting[:1] or self.listener.calibration.names[:1]:
-                self._late(sensor, None)
+        """Say once what was refused that the operator can fix: late frames once they add
+        up (at least :data:`LATE_SAID_AFTER` and a tenth of what came, or every frame of a
+        sensor so far: one datagram the machine delayed is no camera's latency; by the
+        sensor seen late here, else the first not yet taken), datagrams of another format,
+        and each drop reason with a hint (a wrong key, unsigned datagrams, ...)."""
+        counts = self.report()
+        late, received = counts.get("late", 0), counts.get("received", 0)
+        names = self.listener.calibration.names
+        waiting = [n for n in names if n not in self.first_taken]
+        if late >= LATE_SAID_AFTER and (late >= 0.1 * received or waiting):
+            late_here = [n for n in names if n in self._late_here]
+            for sensor in late_here or waiting[:1] or names[:1]:
+                self._late(sensor, self._late_here.get(sensor))
+        for reason, hint in DROP_HINTS.items():
+            own_line = reason in ("late", "dropped_wrong_format")  # said above, in full
+            if counts.get(reason, 0) and not own_line and ("drop", reason) not in self._said:
+                self._said.add(("drop", reason))
+                self.say(f"datagrams dropped as {reason.removeprefix('dropped_')}: {hint}")
         for sensor, (arrived, expected) in self.listener.format_mismatches().items():
             if ("format", sensor) not in self._said:
                 self._said.add(("format", sensor))

@@ -251,6 +251,7 @@ def run_metrics(
         "max_path_error_m": float(np.max(path_err)),
         "duration_s": float(log["t"][-1]),
         "stopped_s": float(np.count_nonzero(log["stopped"]) * dt),
+        "stopped_s_by_cause": stopped_by_cause(log["stop_reason"], dt),
         "stop_events": stop_events,
         "max_f": float(np.max(log["f"])),
         "min_distance_m": {"spheres": dmin["spheres"], "capsules": dmin["capsules"]},
@@ -272,6 +273,26 @@ def run_metrics(
     }
 
 
+def stop_cause(reason: str) -> str:
+    """What kind of stop a reason is: its words before the first ':' or '(' ("speed and
+    separation", "human frame is stale", "L2 within stop distance", ...)."""
+    return reason.split(":", 1)[0].split(" (", 1)[0].strip()
+
+
+def stopped_by_cause(reasons: np.ndarray, dt: float) -> dict[str, float]:
+    """How long (s) the robot was stopped by each kind of stop (:func:`stop_cause`), the
+    longest first: a run held by a person for most of it and whose camera stopped at the end
+    ends on a stale frame, and this says both."""
+    kinds, counts = np.unique([stop_cause(str(r)) for r in reasons if r], return_counts=True)
+    order = np.argsort(-counts, kind="stable")
+    return {str(kinds[i]): round(float(counts[i]) * dt, 3) for i in order}
+
+
+#: A hold by speed and separation longer than this share of the run gets a hint in the
+#: summary: what the protective distance counts and what to change.
+HOLD_HINT_SHARE = 0.25
+
+
 def _ending(m: dict[str, Any]) -> str:
     """How a run ended, in words: why it ended early (Ctrl-C, an arm's error) before who
     held it."""
@@ -286,6 +307,9 @@ def _ending(m: dict[str, Any]) -> str:
         )
     return reason
 
+
+#: More late ticks than this share of a real-time run's gets a line in the summary.
+OVERRUN_HINT_SHARE = 0.1
 
 #: Stop events :func:`describe` lists (the rest are counted).
 STOPS_SHOWN = 4
@@ -313,7 +337,7 @@ def describe(m: dict[str, Any]) -> str:
             f"max {m['max_path_error_m'] * 1e3:.3f} mm\n"
             f"  min distance spheres {md['spheres']:.4f} m, capsules {md['capsules']:.4f} m, "
             f"max f {m['max_f']:.3f}{sphere_note}\n"
-            f"  stopped {m['stopped_s']:.2f} s, stops: {stops}\n"
+            f"  stopped {m['stopped_s']:.2f} s{_causes(m)}, stops: {stops}\n"
             f"  tick {m['tick_us']['median']:.0f} us median, {m['tick_us']['p99']:.0f} us p99; "
             f"limit violations: velocity {m['joint_velocity_limit_violations']}, "
             f"position {m['joint_position_limit_violations']}"
@@ -321,6 +345,30 @@ def describe(m: dict[str, Any]) -> str:
         + (_input_line(m["input"]) if "input" in m else "")
         + _contact_line(m)
         + _loop_line(m)
+        + _hold_hint(m)
+    )
+
+
+def _causes(m: dict[str, Any]) -> str:
+    """ " (speed and separation 20.0 s, human frame is stale 10.0 s)": what stopped it."""
+    causes = m.get("stopped_s_by_cause") or {}
+    if not causes:
+        return ""
+    return " (" + ", ".join(f"{k} {v:.1f} s" for k, v in list(causes.items())[:3]) + ")"
+
+
+def _hold_hint(m: dict[str, Any]) -> str:
+    """What to change when speed and separation held the robot for much of the run."""
+    held = (m.get("stopped_s_by_cause") or {}).get("speed and separation", 0.0)
+    if held <= HOLD_HINT_SHARE * max(m["duration_s"], 1e-9):
+        return ""
+    latency = m.get("latency_s")
+    counted = f" ({latency:.3f} s here)" if isinstance(latency, float) and latency else ""
+    return (
+        f"\n  speed and separation held the robot {held:.1f} s: its protective distance "
+        f"counts the camera's latency{counted} at ISO 13855's body speeds. Measure the "
+        "latency (qpavoid latency) and give it, or seat the operator further from the "
+        "path (a task file's [operator], docs/tasks.md)"
     )
 
 
@@ -356,6 +404,13 @@ def _loop_line(m: dict[str, Any]) -> str:
             f"{lp['longest_gap_s'] * 1e3:.1f} ms; frame to command {lat['median'] * 1e3:.1f} ms "
             f"median, {lat['p99'] * 1e3:.1f} ms p99"
         )
+        late, ticks = m.get("realtime_overruns", 0), max(m.get("ticks", 0), 1)
+        if late > OVERRUN_HINT_SHARE * ticks:
+            line += (
+                f"\n  the loop fell behind: {late} of {ticks} ticks began more than a period "
+                f"late (at {m['control_rate_hz']:g} Hz; the commands of the late ones counted "
+                "at their true age): give the run a core of its own, or a lower --rate"
+            )
     broken = {k: n for k, n in m.get("command_limit_violations", {}).items() if n}
     if broken:
         line += "\n  commands beyond the arm's limits: " + ", ".join(
@@ -364,8 +419,9 @@ def _loop_line(m: dict[str, Any]) -> str:
     return line
 
 
-#: What a live run's drops most likely mean, for the one that dominates.
-_DROP_HINTS = {
+#: What a live run's drops most likely mean: for the one that dominates the summary, and
+#: said once during a live run (:class:`~qpavoid.loop.live_input.LiveSource`).
+DROP_HINTS = {
     "dropped_bad_tag": "not signed by this cell's keys: check the key files and the cell name",
     "dropped_unknown_key": "signed with a key id this calibration does not hold",
     "dropped_unauthenticated": "unsigned: sign them (replay --sensors) or, without keys, "
@@ -384,12 +440,12 @@ def _input_line(counts: dict[str, int]) -> str:
     """A live run's datagrams: how many came, how many were taken, the drops, and what the
     largest drop most likely means (docs/security.md)."""
     drops = sorted(
-        ((n, k) for k, n in counts.items() if k.startswith("dropped_") or k in _DROP_HINTS),
+        ((n, k) for k, n in counts.items() if k.startswith("dropped_") or k in DROP_HINTS),
         reverse=True,
     )
     line = f"\n  input: {counts.get('received', 0)} datagrams, {counts.get('accepted', 0)} taken"
     if drops:
         line += "; " + ", ".join(f"{k} {n}" for n, k in drops[:4])
-        if drops[0][1] in _DROP_HINTS and drops[0][0] > counts.get("accepted", 0):
-            line += f" ({_DROP_HINTS[drops[0][1]]})"
+        if drops[0][1] in DROP_HINTS and drops[0][0] > counts.get("accepted", 0):
+            line += f" ({DROP_HINTS[drops[0][1]]})"
     return line

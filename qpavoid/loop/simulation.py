@@ -286,7 +286,8 @@ def simulate(
         raise ArmError(f"the run ended before its first tick: {plant.ended_by}", value=arm)
     log = logger.finished()
     n = logger.n
-    if not reached and tau >= path.duration_s and _at(goal, robot, log["q"][-1], cfg):
+    rest_of_path = path.reference(tau)[0]  # a path passing its goal earlier has not ended
+    if not reached and _at(goal, robot, log["q"][-1], cfg) and _near(goal, rest_of_path, cfg):
         reached = True  # at the goal and held there (a person near, a stale frame): reached
     if truth is not None and not plant.measured_online:  # where the arm really was, then
         kinematics = robot.kinematics
@@ -376,7 +377,11 @@ def _plant(
 
 def _at(goal: np.ndarray, robot: Robot, q: np.ndarray, cfg: SimConfig) -> bool:
     """The end effector at ``q`` is at the goal pose, within the run's tolerances."""
-    T = robot.end_effector(q)
+    return _near(goal, robot.end_effector(q), cfg)
+
+
+def _near(goal: np.ndarray, T: np.ndarray, cfg: SimConfig) -> bool:
+    """The pose ``T`` is the goal pose, within the run's tolerances."""
     pos_err = np.linalg.norm(T[:3, 3] - goal[:3, 3])
     return bool(pos_err < cfg.goal_tolerance_m and _rot_err(goal, T) < cfg.goal_tolerance_rad)
 
