@@ -383,7 +383,7 @@ def test_a_run_held_by_speed_and_separation_says_what_held_it_and_what_to_change
     )
     m = simulate_one(spec).metrics | {"scenario": "free"}
     causes = m["stopped_s_by_cause"]
-    assert list(causes)[0] == "speed and separation", causes
+    assert next(iter(causes)) == "speed and separation", causes
     assert sum(causes.values()) == pytest.approx(m["stopped_s"], abs=1e-6)
     text = describe(m)
     assert f"(speed and separation {causes['speed and separation']:.1f} s" in text
