@@ -207,6 +207,7 @@ def test_json_files_hold_no_nan_or_infinity():
     assert strict_load(text) == {"a": None, "b": [None, None, 2.5], "c": [1]}
 
 
+@pytest.mark.slow  # the same rule as the next test's, reached another way
 def test_a_run_at_its_goal_held_there_by_a_person_reached_it(robot):
     """The arm arrives at its goal in the very tick a hand appears beside it (the ideal
     bench: no latency, the paper's rules): it holds there, within the goal's tolerance, to
@@ -244,45 +245,61 @@ class Still:
         return HumanFrame(joints, np.full(len(joints), 2, np.int8)), t
 
 
-def test_the_listener_says_once_what_it_refuses_and_how_to_fix_it(tmp_path):
+@pytest.mark.parametrize(
+    ("case", "fmt", "latency", "words"),
+    [
+        ("late", "k4abt", 0.2, "femto: frames refused as late: femto's age limit 0.140 s ="),
+        pytest.param(
+            "format",
+            "kinect_v2",
+            0.0,
+            "femto: datagrams of k4abt frames dropped: the calib",
+            marks=pytest.mark.slow,  # the receiver's record: tests/test_send.py
+        ),
+        pytest.param(
+            "key",
+            "k4abt",
+            0.1,
+            "datagrams dropped as bad_tag: not signed by this cell's keys",
+            marks=pytest.mark.slow,
+        ),
+    ],
+)
+def test_the_listener_says_once_what_it_refuses_and_how_to_fix_it(
+    tmp_path, case, fmt, latency, words
+):
     """k4abt frames to a Kinect v2 calibration: said once, naming both formats; k4abt
     frames 0.2 s old to a k4abt calibration: said once, naming the age limit and how to
     set it; frames signed with another key: said once, with what to check; nothing taken
     in any case."""
-    for case, fmt, latency, words in (
-        ("format", "kinect_v2", 0.0, "femto: datagrams of k4abt frames dropped: the calib"),
-        ("late", "k4abt", 0.2, "femto: frames refused as late: femto's age limit 0.140 s ="),
-        ("key", "k4abt", 0.1, "datagrams dropped as bad_tag: not signed by this cell's keys"),
-    ):
-        folder = tmp_path / case
-        folder.mkdir()
-        calib = k4abt_cell(folder)
-        if fmt != "k4abt":  # the same camera calibrated as a Kinect v2
-            calib.write_text(calib.read_text().replace('"k4abt"', f'"{fmt}"'))
-        calibrated = load_calibration(str(calib))  # the sender's keys
-        if case == "key":  # the listener's key file made anew: the sender's is another
-            (folder / "femto.key").unlink()
-            new_key_file(folder / "femto.key", "femto")
-        lines: list[str] = []
-        with Listener(("127.0.0.1", 0), load_calibration(str(calib))) as listener:
-            source = LiveSource(listener, say=lines.append)
-            port = listener.address[1]
-            sender = threading.Thread(
-                target=send_seated, args=(calib, port, latency, 1.0, "iiwa14", calibrated)
-            )
-            sender.start()
-            t0 = time.time()
-            while time.time() - t0 < 1.5:
-                people, _ = source.frame_at(time.time() - t0)
-                time.sleep(0.01)
-            sender.join()
-        said = [x for x in lines if x.startswith(words)]
-        assert len(said) == 1, lines
-        assert source.first_taken == {} and not people.ids
-        if case == "late":
-            assert "set latency_s for it in the calibration, or --latency" in said[0]
-        elif case == "format":
-            assert "says kinect_v2 (its format key)" in said[0]
+    folder = tmp_path
+    calib = k4abt_cell(folder)
+    if fmt != "k4abt":  # the same camera calibrated as a Kinect v2
+        calib.write_text(calib.read_text().replace('"k4abt"', f'"{fmt}"'))
+    calibrated = load_calibration(str(calib))  # the sender's keys
+    if case == "key":  # the listener's key file made anew: the sender's is another
+        (folder / "femto.key").unlink()
+        new_key_file(folder / "femto.key", "femto")
+    lines: list[str] = []
+    with Listener(("127.0.0.1", 0), load_calibration(str(calib))) as listener:
+        source = LiveSource(listener, say=lines.append)
+        port = listener.address[1]
+        sender = threading.Thread(
+            target=send_seated, args=(calib, port, latency, 1.0, "iiwa14", calibrated)
+        )
+        sender.start()
+        t0 = time.time()
+        while time.time() - t0 < 1.5:
+            people, _ = source.frame_at(time.time() - t0)
+            time.sleep(0.01)
+        sender.join()
+    said = [x for x in lines if x.startswith(words)]
+    assert len(said) == 1, lines
+    assert source.first_taken == {} and not people.ids
+    if case == "late":
+        assert "set latency_s for it in the calibration, or --latency" in said[0]
+    elif case == "format":
+        assert "says kinect_v2 (its format key)" in said[0]
 
 
 def test_send_seats_the_operator_where_the_runs_task_file_does(tmp_path, capsys):
@@ -353,15 +370,16 @@ def test_a_run_stopped_in_its_paths_last_moments_within_the_tolerance_reached_it
     its goal (before: 'reached goal False', 0.007 mm from it, an adversary's run). A run
     whose path still had millimetres to go has not."""
     config = ControllerConfig(
-        control_period_s=0.01, perception=PerceptionConfig(max_identical_frames=None)
+        control_period_s=0.02, perception=PerceptionConfig(max_identical_frames=None)
     )
-    sim_cfg = SimConfig(control_rate_hz=100, max_time_s=17)
+    sim_cfg = SimConfig(control_rate_hz=50, max_time_s=15.5)
     ctrl = QPController(robot, config=config)
     sim = simulate(ctrl, None, sim_cfg, source=GoesStale(ctrl.path.duration_s - 0.3))
     assert sim.log["tau"][-1] < ctrl.path.duration_s and sim.log["stopped"][-1]
     assert sim.metrics["final_position_error_m"] < 1e-3
     assert sim.metrics["reached_goal"] and sim.metrics["end_reason"] == "goal reached"
-    early = simulate(QPController(robot, config=config), None, sim_cfg, source=GoesStale(12.0))
+    early_cfg = SimConfig(control_rate_hz=50, max_time_s=12.5)
+    early = simulate(QPController(robot, config=config), None, early_cfg, source=GoesStale(12.0))
     assert early.metrics["final_position_error_m"] > 1e-3
     assert not early.metrics["reached_goal"]
 

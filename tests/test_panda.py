@@ -27,6 +27,7 @@ from libfranka_handshake import RefusingController, free_address, loopback_addre
 
 import qpavoid
 from qpavoid.arm.model import Robot
+from qpavoid.cli.commands import main
 from qpavoid.core.errors import ArmError, InputError
 from qpavoid.drive import franka_sim, libfranka, panda
 from qpavoid.drive.interface import Arm
@@ -192,17 +193,29 @@ def test_missing_extra(robot: Robot, monkeypatch: pytest.MonkeyPatch) -> None:
     assert "\n" not in str(e.value)
 
 
-def test_the_command_line_names_the_extra(tmp_path: Path) -> None:
+def test_the_command_line_names_the_extra(tmp_path: Path, monkeypatch, capsys) -> None:
+    """Without panda-python (its import made to fail, in-process as the console script
+    runs): one line naming the extra, exit 2, nothing written."""
     out = tmp_path / "run"
-    code = (
-        "import sys; sys.modules['panda_py'] = None; "
-        "from qpavoid.launch import main; sys.exit(main())"
+    monkeypatch.setitem(sys.modules, "panda_py", None)
+    status = main(
+        [
+            "run",
+            "test1",
+            "--robot",
+            "panda",
+            "--arm",
+            "panda:127.0.0.1",
+            "--out",
+            str(out),
+            "--no-plots",
+            "--no-view",
+            "-q",
+        ]
     )
-    cmd = [*PYTHON, "-c", code, "run", "test1", "--robot", "panda", "--arm", "panda:127.0.0.1"]
-    cmd += ["--out", str(out), "--no-plots", "--no-view", "-q"]
-    done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 2, done.stderr
-    assert done.stderr.strip().splitlines() == [
+    stdout, stderr = capsys.readouterr()
+    assert status == 2 and stdout == "", stderr
+    assert stderr.strip().splitlines() == [
         "qpavoid: error: --arm panda drives a Panda through panda-python: pip install "
         '"qpavoid[panda]" (import panda_py: import of panda_py halted; None in sys.modules)'
     ]
