@@ -354,7 +354,9 @@ def bystander_far_away() -> Working:
 
 def every_real_frame_taken(report: dict, real_sent: int) -> bool:
     """Every real datagram accepted, or dropped as ``late`` (a receiver the machine kept
-    from running for 0.1 s: the safe side), and at most one in ten late. An attacker's
+    from running for 0.1 s: the safe side), and at most one in ten late (a frame accepted
+    and too old by the time the loop took it is one of the accepted: ``late_when_taken``,
+    no longer counted twice, which once made 301 of 300). An attacker's
     datagram never counts as ``late`` (a copy of a real one is ``dropped_replayed``
     first), so nothing an attacker sent took a real frame's place."""
     late = report.get("late", 0)

@@ -324,7 +324,10 @@ class LiveSource:
             limit = self.fuser.max_age_s[frame.sensor]
             captured = frame.t + calibration[frame.sensor].time_offset_s
             if captured < t - limit:
-                self.counters["late"] += 1
+                # accepted by the receiver, too old by the time the loop took it: counted
+                # apart from the receiver's own "late" (refused on arrival), which a frame
+                # accepted then dropped here was counted twice as (301 of 300 sent, once)
+                self.counters["late_when_taken"] += 1
                 self._late_here[frame.sensor] = t - captured  # said if late ones add up
             elif captured > t + limit:  # a clock ahead of ours: never trusted
                 self.counters["from_the_future"] += 1
@@ -425,7 +428,8 @@ class LiveSource:
         sensor seen late here, else the first not yet taken), datagrams of another format,
         and each drop reason with a hint (a wrong key, unsigned datagrams, ...)."""
         counts = self.report()
-        late, received = counts.get("late", 0), counts.get("received", 0)
+        late = counts.get("late", 0) + counts.get("late_when_taken", 0)
+        received = counts.get("received", 0)
         names = self.listener.calibration.names
         waiting = [n for n in names if n not in self.first_taken]
         if late >= LATE_SAID_AFTER and (late >= 0.1 * received or waiting):
@@ -433,7 +437,7 @@ class LiveSource:
             for sensor in late_here or waiting[:1] or names[:1]:
                 self._late(sensor, self._late_here.get(sensor))
         for reason, hint in DROP_HINTS.items():
-            own_line = reason in ("late", "dropped_wrong_format")  # said above, in full
+            own_line = reason in ("late", "late_when_taken", "dropped_wrong_format")
             if counts.get(reason, 0) and not own_line and ("drop", reason) not in self._said:
                 self._said.add(("drop", reason))
                 self.say(f"datagrams dropped as {reason.removeprefix('dropped_')}: {hint}")

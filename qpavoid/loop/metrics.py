@@ -430,6 +430,8 @@ DROP_HINTS = {
     "from_the_future": "stamped ahead of this clock: check the sensors' time_offset_s",
     "dropped_wrong_format": "of another skeleton format than the calibration's for their "
     "sensor: send that format, or correct the sensor's format key",
+    "late_when_taken": "accepted on arrival, older than their sensor's age limit when the "
+    "control loop took them: the loop fell behind, or the camera is at its limit",
     "late": "captured longer ago than their sensor's age limit, its latency + a frame + "
     "6.7 ms: if the camera's latency is longer, measure it (qpavoid latency) and set "
     "latency_s in the calibration or --latency; else check the clocks and the network",

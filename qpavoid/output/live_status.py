@@ -20,8 +20,8 @@ import numpy as np
 __all__ = ["REFUSED", "LiveStatus"]
 
 #: The live input's counts that are frames refused (besides every ``dropped_*``): too old
-#: on arrival or stamped ahead of the clock.
-REFUSED = ("late", "from_the_future")
+#: on arrival or when the loop took them, or stamped ahead of the clock.
+REFUSED = ("late", "late_when_taken", "from_the_future")
 
 
 class LiveStatus:
