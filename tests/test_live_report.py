@@ -313,40 +313,16 @@ def test_send_seats_the_operator_where_the_runs_task_file_does(tmp_path, capsys)
     moved = tmp_path / "task.toml"
     moved.write_text(text.replace("distance_m = 1.0882", "distance_m = 1.3382", 1))
     calib = k4abt_cell(tmp_path)
-    args = build_parser().parse_args(
-        [
-            "send",
-            "femto",
-            "--to",
-            "127.0.0.1:5999",
-            "--sensors",
-            str(calib),
-            "--robot",
-            "panda",
-            "--task",
-            str(moved),
-        ]
-    )
+    send = ["send", "femto", "--to", "127.0.0.1:5999", "--sensors", str(calib)]
+    send += ["--robot", "panda", "--task", str(moved)]
+    args = build_parser().parse_args(send)
     motion, said = send_motion(args, load_calibration(str(calib)))
     assert motion.operator.distance_m == 1.3382 and said.endswith(f"(the seat of {moved})")
     spec = RunSpec(scenario="free", robot="panda", task=str(moved))
     seated = spec.task_for(qpavoid.load_robot("panda")).operator
     np.testing.assert_array_equal(motion.frame_at(0.0).joints, seated.rest())
     moved.write_text(text.replace("[operator]", "[operator]\nelbow_m = 1", 1))
-    status = main(
-        [
-            "send",
-            "femto",
-            "--to",
-            "127.0.0.1:5999",
-            "--sensors",
-            str(calib),
-            "--robot",
-            "panda",
-            "--task",
-            str(moved),
-        ]
-    )
+    status = main(send)
     out, err = capsys.readouterr()
     assert status == 2 and out == "" and err.startswith("qpavoid: error: --task ")
     assert len(err.strip().splitlines()) == 1
