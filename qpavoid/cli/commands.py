@@ -98,7 +98,14 @@ def build_parser() -> Parser:
         "--listen",
         metavar="HOST:PORT",
         help="drive the simulated robot in real time from live skeletons on UDP "
-        "(docs/sensors.md), with --sensors; Ctrl-C ends the run and writes it",
+        "(docs/sensors.md), or ros2:CELL.toml from the cameras' ROS 2 topics (docs/ros2.md, "
+        "with --trust-ros-graph), with --sensors; Ctrl-C ends the run and writes it",
+    )
+    run.add_argument(
+        "--trust-ros-graph",
+        action="store_true",
+        help="take input from a ROS 2 graph (--listen ros2:, --arm ros2:), where anyone on "
+        "the DDS domain can publish: fence the domain first (docs/security.md)",
     )
     run.add_argument(
         "--arm",
@@ -106,7 +113,9 @@ def build_parser() -> Parser:
         help="drive an arm in real time: sim (the simulated arm on the wall clock), "
         "franka:HOST (an FR3, or franky-sim, through franky-control: pip install "
         '"qpavoid[franka]") or panda:HOST (a Panda through panda-python: pip install '
-        '"qpavoid[panda]"); an arm that is not the --robot is refused (docs/real-robot.md); '
+        '"qpavoid[panda]"), or ros2:CELL.toml (an arm under ros2_control, docs/ros2.md, '
+        "with --trust-ros-graph); an arm that is not the --robot is refused "
+        "(docs/real-robot.md); "
         "Ctrl-C ramps it to rest and writes the run",
     )
     run.add_argument(
@@ -274,6 +283,7 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
         sensors=args.sensors,
         listen=args.listen,
         allow_unauthenticated=args.allow_unauthenticated,
+        trust_ros_graph=args.trust_ros_graph,
         arm=args.arm,
         controller=args.controller,
         distance=args.distance,
@@ -295,7 +305,9 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
     check_output_dir(out)
     if args.bag:
         check_bag_path(args.bag)
-    if args.listen:  # a bad file, a missing key, unsigned off loopback: before the run
+    if args.listen and args.listen.startswith("ros2:"):  # checked by RunSpec (cell, trust)
+        load_calibration(args.sensors)
+    elif args.listen:  # a bad file, a missing key, unsigned off loopback: before the run
         check_listening(
             parse_address(args.listen), load_calibration(args.sensors), spec.allow_unauthenticated
         )

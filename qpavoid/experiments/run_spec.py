@@ -28,6 +28,8 @@ from qpavoid.scenarios import motions
 from qpavoid.scenarios.generated import SCENARIOS, check_scenario_name
 from qpavoid.sensing.calibration import DEFAULT_FORMAT, Calibration
 from qpavoid.sensing.calibration_file import load_calibration
+from qpavoid.sensing.dds_input import check_trust
+from qpavoid.sensing.ros2_cell import load_cell
 
 __all__ = ["BENCHES", "CONTROLLERS", "DISTANCES", "LIMIT_MODES", "RunSpec"]
 
@@ -110,14 +112,17 @@ class RunSpec:
     listen
         ``HOST:PORT``: drive the controller in real time from live frames on UDP
         (:mod:`qpavoid.loop.live_input`, with ``sensors``), the robot simulated; no truth.
+        ``ros2:CELL.toml``: from the sensors' ROS 2 topics instead (docs/ros2.md).
     allow_unauthenticated
         With ``listen`` on a loopback address: also accept unsigned (version 1)
         datagrams (docs/security.md).
+    trust_ros_graph
+        Take input from a ROS 2 graph (``listen`` or ``arm`` ``ros2:``): the explicit opt-in.
     arm
         The arm to drive in real time instead of the offline simulation
         (:func:`~qpavoid.drive.connect.open_arm`): ``"sim"`` (the kinematic arm on the wall
         clock), ``"franka:HOST"`` (an FR3, or franky-sim, through franky-control) or
-        ``"panda:HOST"`` (a Panda through panda-python);
+        ``"panda:HOST"`` (a Panda through panda-python), ``"ros2:CELL.toml"`` (ros2_control);
         None: the offline simulation (a live run's: the simulated arm in real time).
     payload_kg
         The payload at the end effector, kg (``--payload``): power and force limiting
@@ -150,6 +155,7 @@ class RunSpec:
     sensors: str | None = None
     listen: str | None = None
     allow_unauthenticated: bool = False
+    trust_ros_graph: bool = False
     arm: str | None = None
     camera: str = ""
     payload_kg: float = 0.0
@@ -160,7 +166,10 @@ class RunSpec:
         if self.sensor_files and self.human_file is None:
             object.__setattr__(self, "human_file", self.sensor_files[0])
         if self.listen is not None:
-            parse_address(self.listen)
+            if self.listen.startswith("ros2:"):  # a ROS 2 cell: read, checked, trusted?
+                check_trust(self.trust_ros_graph, load_cell(self.listen[5:]).domain_id)
+            else:
+                parse_address(self.listen)
             if self.scenario is not None or self.human_file is not None or not self.sensors:
                 raise InputError(
                     "--listen takes live frames: give --sensors CALIBRATION.toml and no "
@@ -224,7 +233,9 @@ class RunSpec:
         if self.task is not None:  # read and checked now: the arm's joints, its reach
             self.task_for(load_robot(self.robot, locked=() if self.redundant else None))
         if self.arm is not None:
-            parse_arm(self.arm)
+            kind, where = parse_arm(self.arm)
+            if kind == "ros2" and where is not None:
+                check_trust(self.trust_ros_graph, load_cell(where).domain_id)
             if self.bench == "ideal":
                 raise InputError(
                     "--arm drives a real arm (or the simulated one in real time): the "

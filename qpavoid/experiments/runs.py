@@ -47,12 +47,15 @@ from qpavoid.output import plots as plotting
 from qpavoid.output import replay_html as view_html
 from qpavoid.output.live_status import LiveStatus
 from qpavoid.output.live_view import LiveView
+from qpavoid.output.ros2_out import Ros2Outputs, ros2_cell
 from qpavoid.output.run_files import staged_output, write_run
 from qpavoid.output.view_data import replay_data
 from qpavoid.perception.tracker import PerceptionConfig
 from qpavoid.scenarios import motions
 from qpavoid.scenarios.generated import closework_seed
+from qpavoid.sensing.dds_input import DdsListener
 from qpavoid.sensing.recording_files import recording_format
+from qpavoid.sensing.ros2_cell import load_cell
 
 
 @dataclass
@@ -169,11 +172,16 @@ def live_source(
         yield None
         return
     calibration = spec.calibration()
-    address = parse_address(spec.listen)
     body = cell_body(spec)  # one camera format: fused on its own joints, for its own body
     skeleton = KINECT_V2 if body is None else body.skeleton
-    with Listener(
-        address, calibration, accept_unauthenticated=spec.allow_unauthenticated
+    with (
+        DdsListener(load_cell(spec.listen[5:]), calibration, spec.trust_ros_graph, say)
+        if spec.listen.startswith("ros2:")  # the cameras' ROS 2 topics (docs/ros2.md)
+        else Listener(
+            parse_address(spec.listen),
+            calibration,
+            accept_unauthenticated=spec.allow_unauthenticated,
+        )
     ) as listener:
         source = LiveSource(listener, clear=clear, say=say, skeleton=skeleton)
         if say is not None:
@@ -301,7 +309,12 @@ def simulate_one(
         arm = None
         if spec.arm is not None:  # at the path's start, as the offline simulation starts
             q0 = inverse_kinematics(robot, controller.path.reference(0.0)[0])
-            arm = stack.enter_context(open_arm(spec.arm, robot, q0, 1.0 / spec.rate_hz))
+            arm = stack.enter_context(
+                open_arm(spec.arm, robot, q0, 1.0 / spec.rate_hz, spec.trust_ros_graph)
+            )
+        if ros2_cell(spec) is not None:  # diagnostics and capsules for RViz, off the loop
+            outputs = stack.enter_context(Ros2Outputs(ros2_cell(spec), robot, controller))  # type: ignore[arg-type]
+            watch = _both(watch, outputs.update)
         sim = simulate(
             controller,
             motion,
@@ -333,6 +346,7 @@ def simulate_one(
         robot=description_reference(spec.robot),
         arm=spec.arm or ("the simulated arm in real time" if live else "offline simulation"),
         task=spec.task,
+        trust_ros_graph=bool(spec.trust_ros_graph),
         solver=getattr(getattr(controller, "backend", None), "name", None),
     )
     return RunResult(spec, sim, robot, controller, metrics)

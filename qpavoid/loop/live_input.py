@@ -39,6 +39,7 @@ from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.loop.metrics import DROP_HINTS
 from qpavoid.sensing.assembly import LossConfig, LossWatch
 from qpavoid.sensing.calibration import Calibration
+from qpavoid.sensing.dds_input import DdsListener
 from qpavoid.sensing.per_sensor import BodyFrame
 from qpavoid.sensing.receiver import KEY_CHECK_S, SensorLoss, SlotTable, serve
 from qpavoid.sensing.signing import FUTURE_TOLERANCE_S
@@ -280,7 +281,7 @@ class LiveSource:
 
     def __init__(
         self,
-        listener: Listener,
+        listener: Listener | DdsListener,
         fusion: FusionConfig | None = None,
         clock: Callable[[], float] = time.time,
         clear: threading.Event | None = None,
@@ -298,6 +299,11 @@ class LiveSource:
         )  # what was said once (a sensor's late, wrong format)
         self._look_s = 0.0  # when the listener's counters are next looked at, run clock
         self._late_here: dict[str, float] = {}  # the age of each sensor's last late frame
+        #: which fusion the people handed out are: it changes whenever their content does
+        #: (a camera's new frame, a frame aged out, someone dropped), so the controller
+        #: takes a later camera's frame as new though the newest capture time stands
+        self.frame_id = 0
+        self._content: tuple = ()
         self.clock = clock
         self.clear = clear
         self.start_s: float | None = None  # the wall time of run time 0, set on first use
@@ -366,6 +372,10 @@ class LiveSource:
         self.alert = "; ".join(([lost] if lost else []) + silent + flags + unseen)
         if fused.captured_s > self._captured:
             self._captured = fused.captured_s
+        content = tuple((p.id, p.captured_s, p.sensors) for p in fused.people)
+        if content != self._content:  # a later camera's frame, someone dropped: new
+            self._content = content
+            self.frame_id += 1
         lags = tuple(
             max(self._captured - p.captured_s, 0.0) if p.captured_s > -math.inf else 0.0
             for p in fused.people
@@ -395,6 +405,8 @@ class LiveSource:
     def ready_line(self) -> str:
         """What the listener listens for, in one line: the address, each sensor with its
         format and age limit, and whether datagrams must be signed."""
+        if hasattr(self.listener, "ready_line"):  # a ROS 2 input says its own
+            return str(self.listener.ready_line())
         calibration = self.listener.calibration
         host, port = self.listener.address
         sensors = ", ".join(
