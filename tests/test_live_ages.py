@@ -173,3 +173,24 @@ def test_a_frame_accepted_then_too_old_when_taken_is_counted_once():
     assert report == {"received": 1, "accepted": 1, "late_when_taken": 1}
     assert report["accepted"] + report.get("late", 0) == report["received"]
     assert not people.ids
+
+
+def test_a_held_frame_keeps_the_lag_of_the_people_the_trackers_took(robot):
+    """A reviewer's case: a later camera's new frame changes the people's lag but not the
+    frame's newest capture time. Held (the same newest time, or the same fusion id), the
+    controller still counts the lag of the people its trackers hold (0.09 s), never the
+    new, smaller one (0.06 s) of people it did not take; taken (a new fusion id), the new."""
+    config = ControllerConfig(control_period_s=0.002, safety="ssm", max_frame_age_s=0.2)
+    frame = as_people(Operator().rest()).frames[0]
+    first, later = People((0,), (frame,), (0.09,)), People((0,), (frame,), (0.06,))
+    for by_id in (False, True):
+        ctrl = QPController(robot, config=config)
+        q = inverse_kinematics(robot, ctrl.path.reference(0.0)[0])
+        time_of = (lambda t: None) if by_id else (lambda t: t)
+        a = ctrl.measure(q, first, None, 0.0, 0.01, time_of(5.0), 1 if by_id else None)
+        assert a.frame_age_s == pytest.approx(0.10)
+        b = ctrl.measure(q, later, None, 0.002, 0.012, time_of(5.0), 1 if by_id else None)
+        assert b.frame_age_s == pytest.approx(0.012 + 0.09)  # held: the lag in hand
+        if by_id:  # the live source's next fusion: a new frame, its own lag
+            c = ctrl.measure(q, later, None, 0.004, 0.014, None, 2)
+            assert c.frame_age_s == pytest.approx(0.014 + 0.06)

@@ -10,6 +10,7 @@ which the fixed 0.1 s age limit refused whole.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import socket
 import threading
@@ -383,3 +384,47 @@ def test_a_run_held_by_speed_and_separation_says_what_held_it_and_what_to_change
     assert f"(speed and separation {causes['speed and separation']:.1f} s" in text
     assert "its protective distance counts the camera's latency (0.120 s here)" in text
     assert "seat the operator further from the path" in text
+
+
+def test_a_loop_held_at_its_start_has_not_reached_its_goal():
+    """A reviewer's case: a task out and back to its start (its goal), the run capped at
+    0.2 s, the arm still at the start: not 'goal reached' (the rest of the path is judged,
+    not only its pose now)."""
+    task = Path(__file__).parent / "data" / "panda_out_and_back_task.toml"
+    spec = RunSpec(scenario="test1", robot="panda", task=str(task), max_time_s=0.2, bench="ideal")
+    m = simulate_one(spec).metrics
+    assert m["final_position_error_m"] < 1e-3  # at the goal's pose ...
+    assert not m["reached_goal"] and m["end_reason"] != "goal reached"  # ... not its goal
+
+
+def test_a_spec_of_a_mixed_cell_is_copied_and_its_camera_is_the_landmarks(tmp_path):
+    """A reviewer's case: dataclasses.replace on a spec of a cell mixing formats raised
+    (its camera resolved to kinect_v2, then refused as contradicting the calibration)."""
+    calib = k4abt_cell(tmp_path)
+    text = calib.read_text()
+    kinect = text.split("[sensors.femto]")[1].replace('format = "k4abt"', 'format = "kinect_v2"')
+    calib.write_text(text + "\n[sensors.kinect]" + kinect.replace("femto.key", "kinect.key"))
+    new_key_file(tmp_path / "kinect.key", "kinect")
+    spec = RunSpec(listen="127.0.0.1:5999", sensors=str(calib))
+    assert spec.camera == "kinect_v2"  # a mixed cell runs on the body's landmarks
+    assert dataclasses.replace(spec, max_time_s=5.0).max_time_s == 5.0
+    with pytest.raises(InputError, match="--camera k4abt contradicts the calibration"):
+        dataclasses.replace(spec, camera="k4abt")
+
+
+def test_the_time_stopped_is_split_by_kind_not_by_each_reasons_numbers():
+    """A reviewer's case: the paper's rules' reasons carry numbers; each made a key."""
+    from qpavoid.loop.metrics import stopped_by_cause
+
+    reasons = np.array(
+        [
+            "d_L2 = 0.121 m <= 0.15 m",
+            "d_L2 = 0.123 m <= 0.15 m",
+            "",
+            "f = 0.987 > 0.95",
+            "human frame is stale (101.0 ms old, max 100.0 ms)",
+            "f = 0.99 > 0.95",
+            "d_L2 = 0.1 m",
+        ]
+    )
+    assert stopped_by_cause(reasons, 0.5) == {"d_L2": 1.5, "f": 1.0, "human frame is stale": 0.5}

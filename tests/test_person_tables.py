@@ -231,6 +231,7 @@ def churn(robot, start: tuple[PlannedPath, np.ndarray], seed: int, ticks: int) -
     watched = Watched(kind(robot, path=start[0], config=config))
     q = start[1]
     newest, arrived = -np.inf, 0.0  # the frame in hand's capture time, and when it came
+    lag = 0.0  # its people's lag behind that time (each as old as their oldest camera's)
     ids: tuple[int, ...] = ()
     changed = 0
     for k in range(1, ticks + 1):
@@ -245,7 +246,9 @@ def churn(robot, start: tuple[PlannedPath, np.ndarray], seed: int, ticks: int) -
             order = rng.permutation(len(people.ids)).tolist()
             people = People(*(tuple(x[i] for i in order) for x in people))
         new = captured > newest
-        age = t - captured if new else max(t - captured, t - arrived)
+        if new:  # the people's lag behind the frame counts, the held frame's while held
+            lag = people.max_lag_s
+        age = (t - captured if new else max(t - captured, t - arrived)) + lag
         if new:
             newest, arrived = captured, t
         changed += not new and people.ids != ids and age <= config.max_frame_age_s

@@ -108,6 +108,7 @@ class PerceptionStage:
         self.perceiver = Perceiver(human, config.perception)
         self._nobody = nobody_of(human)
         self.frames = FrameClock()
+        self._lag_s = 0.0  # the lag behind its capture time of the frame in hand, s
         # the last camera frame of another format (its format, ids and content) and its
         # body (a frame held over ticks maps once), and that format's landmark uncertainty, m
         self._mapped: tuple[tuple[str, tuple[int, ...], tuple[bytes, ...]], People] | None = None
@@ -173,7 +174,9 @@ class PerceptionStage:
         NaN-aged frame is taken as it is, and the trackers do not learn from it (the robot
         stops on it)."""
         new, age = self.frames.observe(people, clock_s, frame_age_s, frame_time_s, frame_id)
-        age += people.max_lag_s  # a person behind the frame's newest camera: that old
+        if new:  # a person behind the frame's newest camera is that old; a frame held
+            self._lag_s = people.max_lag_s  # keeps the lag of the people the trackers took
+        age += self._lag_s
         if age <= self.max_frame_age_s and people.ids:
             captured = clock_s - age if frame_time_s is None else frame_time_s
             seen = self.perceive(people, captured, new)

@@ -54,6 +54,7 @@ from qpavoid.human.landmarks import format_file
 from qpavoid.output.run_files import staged_output, strict_json
 from qpavoid.scenarios.closework import closework_case, closework_motion
 from qpavoid.scenarios.strikes import strike_case, strike_motion
+from qpavoid.sensing.calibration import DEFAULT_FORMAT
 from qpavoid.sensing.recording import Recording, save_npz
 
 __all__ = [
@@ -298,7 +299,7 @@ def rerun_command(run: CampaignRun, spec: SweepSpec) -> str:
         if cap is None:
             cap = closework_case(run.seed, load_robot(spec.robot)).duration_s
         named = str(format_file(spec.camera) or spec.camera)  # a file: absolute, from worst/
-        camera = "" if spec.camera == RunSpec.camera else f" --camera {shlex.quote(named)}"
+        camera = "" if spec.camera == DEFAULT_FORMAT else f" --camera {shlex.quote(named)}"
         latency = "" if spec.latency_s is None else f" --latency {spec.latency_s:g}"
         latency += f" --payload {spec.payload_kg:g}" if spec.payload_kg else ""
         return (

@@ -251,8 +251,9 @@ class RunSpec:
             return self.camera or DEFAULT_FORMAT
         calibration = self.calibration()
         formats = sorted(set(calibration.formats))
-        if not self.camera:
-            return formats[0] if len(formats) == 1 else DEFAULT_FORMAT
+        cell = formats[0] if len(formats) == 1 else DEFAULT_FORMAT  # a mixed cell: landmarks
+        if not self.camera or self.camera == cell:  # (resolved: a spec's copy passes again)
+            return cell
         if formats != [self.camera]:
             raise InputError(
                 f"--camera {self.camera} contradicts the calibration {self.sensors}, whose "

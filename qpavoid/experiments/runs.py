@@ -186,6 +186,13 @@ def live_source(
         source = LiveSource(listener, clear=clear, say=say, skeleton=skeleton)
         if say is not None:
             say(source.ready_line())
+            oldest = max(source.fuser.max_age_s.values())
+            if not ControllerConfig(safety=spec.safety).monitors_separation and oldest > 0.1:
+                say(  # the paper's bench: 0.1 s
+                    f"the {spec.safety} rules do not count a frame's age: frames up to "
+                    f"{1e3 * oldest:.0f} ms old drive the robot at their fixed distances; "
+                    "speed and separation (--safety ssm) counts each frame's age"
+                )
         yield source
 
 

@@ -295,7 +295,9 @@ def max_approach_speed(
 def hold_distance(separation_m: float, frame_age_s: float, cfg: SSMConfig, body: bool) -> float:
     """The separation a robot at rest needs from a part, m: S_p at v_r = 0, S_h + C + Z_d +
     Z_r (ISO/TS 15066 eq. 1; ``separation_m`` selects the human speed's zone). Closer,
-    :func:`max_approach_speed` is negative and the robot holds (or retreats)."""
+    :func:`max_approach_speed` is negative and the robot holds (or retreats). ISO 13855's
+    speeds: with ``cfg.body_acceleration_mps2`` set (off by default), the bound used for a
+    body part may be smaller than this."""
     speed = human_speed(separation_m, cfg, body)
     return float(human_distance(speed, frame_age_s, cfg)) + fixed_terms(cfg)
 

@@ -335,8 +335,8 @@ class LiveSource:
                 # accepted then dropped here was counted twice as (301 of 300 sent, once)
                 self.counters["late_when_taken"] += 1
                 self._late_here[frame.sensor] = t - captured  # said if late ones add up
-            elif captured > t + limit:  # a clock ahead of ours: never trusted
-                self.counters["from_the_future"] += 1
+            elif captured > t + limit:  # a clock ahead of ours: never trusted (counted
+                self.counters["from_the_future_when_taken"] += 1  # apart: one of accepted)
             elif self.fuser.add(frame) and frame.sensor not in self.first_taken:
                 self.first_taken[frame.sensor] = (t, t - captured)
                 self.say(
@@ -372,7 +372,7 @@ class LiveSource:
         self.alert = "; ".join(([lost] if lost else []) + silent + flags + unseen)
         if fused.captured_s > self._captured:
             self._captured = fused.captured_s
-        content = tuple((p.id, p.captured_s, p.sensors) for p in fused.people)
+        content = (fused.captured_s, tuple((p.id, p.captured_s, p.sensors) for p in fused.people))
         if content != self._content:  # a later camera's frame, someone dropped: new
             self._content = content
             self.frame_id += 1
@@ -410,7 +410,7 @@ class LiveSource:
         calibration = self.listener.calibration
         host, port = self.listener.address
         sensors = ", ".join(
-            f"{name} ({cal.format}, age limit {1e3 * cal.age_limit_s:.0f} ms)"
+            f"{name} ({cal.format}, age limit {1e3 * self.fuser.max_age_s[name]:.0f} ms)"
             for name, cal in calibration.sensors.items()
         )
         signed = (

@@ -9,6 +9,7 @@ time cap came first.
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import numpy as np
@@ -274,9 +275,10 @@ def run_metrics(
 
 
 def stop_cause(reason: str) -> str:
-    """What kind of stop a reason is: its words before the first ':' or '(' ("speed and
-    separation", "human frame is stale", "L2 within stop distance", ...)."""
-    return reason.split(":", 1)[0].split(" (", 1)[0].strip()
+    """What kind of stop a reason is: its words before the first ':', '(', ' = ', '<', '>'
+    or number ("speed and separation", "human frame is stale", "d_L2" of "d_L2 = 0.121 m
+    <= 0.15 m", "f" of "f = 0.987 > 0.95", "QP solution breaks a hard constraint by")."""
+    return _CAUSE_END.split(reason, 1)[0].strip() or reason
 
 
 def stopped_by_cause(reasons: np.ndarray, dt: float) -> dict[str, float]:
@@ -287,6 +289,9 @@ def stopped_by_cause(reasons: np.ndarray, dt: float) -> dict[str, float]:
     order = np.argsort(-counts, kind="stable")
     return {str(kinds[i]): round(float(counts[i]) * dt, 3) for i in order}
 
+
+#: Where a stop reason's kind ends: its details begin (:func:`stop_cause`).
+_CAUSE_END = re.compile(r":|\(| = |<|>|\s[-+]?\d")
 
 #: A hold by speed and separation longer than this share of the run gets a hint in the
 #: summary: what the protective distance counts and what to change.

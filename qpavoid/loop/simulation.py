@@ -45,6 +45,7 @@ from qpavoid.arm.braking import ArmResponse, BrakingConfig
 from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import Robot
 from qpavoid.control.controller import Controller
+from qpavoid.control.path import PlannedPath
 from qpavoid.control.tick import Command
 from qpavoid.core.errors import ArmError, InputError
 from qpavoid.core.signals import Interruption
@@ -128,7 +129,9 @@ class SimResult:
 class FrameSource(Protocol):
     """What the controller is shown: ``frame_at(t)`` → (frame or people, capture time), s.
     A source may also say, in an ``alert`` attribute, why its input is suspect (logged
-    every tick as ``input_alert``: :class:`~qpavoid.loop.live_input.LiveSource`)."""
+    every tick as ``input_alert``), and, in a ``frame_id`` attribute, which fusion the
+    frame is (a new id: a new frame, whatever its capture time; the age is then the one
+    given: :class:`~qpavoid.loop.live_input.LiveSource`)."""
 
     def frame_at(self, t: float) -> tuple[HumanFrame | People, float]: ...
 
@@ -246,6 +249,9 @@ def simulate(
             if t_tick is None or read is None:
                 break
             human, captured_s = feed.frame_at(t_tick)
+            # a fused source's frames are new when the fusion's content changes (its own
+            # id), not only when its newest capture time grows (a later camera's frame)
+            frame_id = getattr(feed, "frame_id", None)
             alert = getattr(feed, "alert", "")  # a live source's suspect input, if any
             t, q, moved_tau = plant.catch_up(t_tick, read)
             tau = min(tau + moved_tau, path.duration_s)
@@ -254,7 +260,8 @@ def simulate(
                 last_progress = t
             t0 = time.perf_counter_ns()
             try:
-                cmd = controller.step(q, human, None, tau, t - captured_s, captured_s)
+                frame_time = captured_s if frame_id is None else None
+                cmd = controller.step(q, human, None, tau, t - captured_s, frame_time, frame_id)
             except InputError as exc:
                 if plant.input_error(exc):
                     break
@@ -286,8 +293,7 @@ def simulate(
         raise ArmError(f"the run ended before its first tick: {plant.ended_by}", value=arm)
     log = logger.finished()
     n = logger.n
-    rest_of_path = path.reference(tau)[0]  # a path passing its goal earlier has not ended
-    if not reached and _at(goal, robot, log["q"][-1], cfg) and _near(goal, rest_of_path, cfg):
+    if not reached and _at(goal, robot, log["q"][-1], cfg) and _rest_near(goal, path, tau, cfg):
         reached = True  # at the goal and held there (a person near, a stale frame): reached
     if truth is not None and not plant.measured_online:  # where the arm really was, then
         kinematics = robot.kinematics
@@ -378,6 +384,18 @@ def _plant(
 def _at(goal: np.ndarray, robot: Robot, q: np.ndarray, cfg: SimConfig) -> bool:
     """The end effector at ``q`` is at the goal pose, within the run's tolerances."""
     return _near(goal, robot.end_effector(q), cfg)
+
+
+#: The rest of a path is judged at this many times between the path clock and its end.
+REST_SAMPLES = 32
+
+
+def _rest_near(goal: np.ndarray, path: PlannedPath, tau: float, cfg: SimConfig) -> bool:
+    """What is left of ``path`` after its clock ``tau`` (s) lies within the run's tolerances
+    of the goal (sampled, the end included): a path that passes its goal's pose earlier (a
+    loop out and back) has not reached it there."""
+    times = np.linspace(tau, path.duration_s, REST_SAMPLES)
+    return all(_near(goal, path.reference(float(t))[0], cfg) for t in times)
 
 
 def _near(goal: np.ndarray, T: np.ndarray, cfg: SimConfig) -> bool:

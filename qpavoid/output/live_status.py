@@ -17,11 +17,13 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["REFUSED", "LiveStatus"]
+__all__ = ["REFUSED", "TAKEN_THEN_REFUSED", "LiveStatus"]
 
 #: The live input's counts that are frames refused (besides every ``dropped_*``): too old
 #: on arrival or when the loop took them, or stamped ahead of the clock.
-REFUSED = ("late", "late_when_taken", "from_the_future")
+REFUSED = ("late", "late_when_taken", "from_the_future", "from_the_future_when_taken")
+#: Of those, the ones the receiver had accepted (counted in ``accepted`` too).
+TAKEN_THEN_REFUSED = ("late_when_taken", "from_the_future_when_taken")
 
 
 class LiveStatus:
@@ -70,7 +72,7 @@ class LiveStatus:
             doing = "moving, nobody seen"
         counts = self.counts()
         refused = sum(n for k, n in counts.items() if k.startswith("dropped_") or k in REFUSED)
+        # accepted by the receiver, dropped when the loop took them: refused, not taken
+        taken = counts.get("accepted", 0) - sum(counts.get(k, 0) for k in TAKEN_THEN_REFUSED)
         alert = str(row.get("input_alert", ""))
-        return f"{doing}; frames taken {counts.get('accepted', 0)}, refused {refused}" + (
-            f"; {alert}" if alert else ""
-        )
+        return f"{doing}; frames taken {taken}, refused {refused}" + (f"; {alert}" if alert else "")

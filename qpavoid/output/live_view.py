@@ -23,7 +23,6 @@ The view has no login, so it answers only what the operator's own browser would 
 from __future__ import annotations
 
 import copy
-import json
 import secrets
 import threading
 from functools import partial
@@ -39,6 +38,7 @@ from qpavoid.human.frames import nobody
 from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.output.arm_shapes import arm_parts
 from qpavoid.output.replay_html import encode, page_data, replay_html
+from qpavoid.output.run_files import strict_json
 from qpavoid.output.view_data import replay_data
 from qpavoid.output.view_server import (
     MAX_CONNECTIONS,
@@ -164,7 +164,7 @@ class LiveView:
                 data = replay_data(
                     log, self.metrics, self.robot, human=self.human, parts=self.parts
                 )
-                state = json.dumps(encode(page_data(data)), separators=(",", ":"))
+                state = strict_json(encode(page_data(data)), indent=None)  # no NaN
                 self._state = (handed, state.encode())
             return self._state[1]
 

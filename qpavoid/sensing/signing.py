@@ -273,13 +273,11 @@ class Verifier:
     ):
         self.calibration, self.workspace, self.accept_v1 = calibration, workspace, accept_v1
         self.max_age_s, self.future_tolerance_s, self.clock = max_age_s, future_tolerance_s, clock
-        self._max_age: Mapping[str, float] | None = (
-            None
-            if max_age_s is None
-            else dict.fromkeys(calibration.sensors, float(max_age_s))
-            if isinstance(max_age_s, (int, float))
-            else {name: float(max_age_s[name]) for name in calibration.sensors}
-        )
+        self._max_age: Mapping[str, float] | None = None  # each sensor's, s
+        if isinstance(max_age_s, Mapping):
+            self._max_age = {name: float(max_age_s[name]) for name in calibration.sensors}
+        elif max_age_s is not None:  # one for all (any real number, numpy's too)
+            self._max_age = dict.fromkeys(calibration.sensors, float(max_age_s))
         self._sensors = {name.encode(): name for name in calibration.sensors}
         # one window per sensor and key: a new key counts afresh, whatever an old key's
         # holder did to its window

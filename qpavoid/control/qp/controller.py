@@ -180,8 +180,11 @@ class QPController(Controller):
         info = {"solver": self.backend.name, "status": sol.status, "iterations": sol.iterations}
         if not sol.found or sol.x is None:
             reason = f"QP not solved ({self.backend.name}: {sol.status})"
-            if (tick.approach_limit < 0.0).any():  # a hold: no command keeps the separation
-                reason = tick.separation_reason()  # (the rows' infeasibility is the hold)
+            if (tick.approach_limit < 0.0).any():  # a part inside its protective distance
+                # infeasible: no command keeps the separation, the hold itself; any other
+                # failure (iterations, an inaccurate solve) is said as the solver's too
+                hold = "infeasible" in str(sol.status)
+                reason = tick.separation_reason() + ("" if hold else f" ({reason})")
             return self.command(tick, None, reason=reason, info=info)
         x, dq = sol.x, self.variables.dq
         # Hard rows, checked against the problem we meant to solve: a solution that breaks
