@@ -1,0 +1,245 @@
+"""Stand-ins for a ROS 2 cell's other processes, for the live tests and the hop benchmark
+(issue 47): run as ``python tests/ros2_cell_standin.py camera|arm ...``.
+
+``camera``: the Azure Kinect ROS driver. A scenario's person (``test1``'s) filmed by the
+calibrated sensor's simulated camera (:func:`~qpavoid.loop.sender.sensor_frames`: the
+format's joints, noise, frame rate), in the camera's frame, published as the driver's
+``bodyPublisherThread`` does (docs/ros2.md §2): one ``visualization_msgs/MarkerArray`` per
+body frame on the sensor's topic, ids body × 100 + joint (the k4abt body id starts at 1),
+``depth_camera_link``, metres, reliable keep last 1, an empty array when nobody is seen.
+The motion's time 0 is the wall time ``--start + --lead`` (before it the person stands in
+its first pose); each frame is stamped with its capture time on the wall clock (the clock
+the run's live source shares) and written its latency later.
+
+``arm``: a kinematic ros2_control with a ``JointGroupVelocityController``: subscribes
+(reliable, as the controller does) to ``<controller>/commands``, integrates
+``q += dq · dt`` at ``--rate`` Hz from the start configuration and publishes the arm's
+``sensor_msgs/JointState`` (the controller's joint order, stamped with the wall clock).
+Like the real controller it has no timeout: it holds the last command. Every command it
+received is recorded with its receive time (``--record``, an NPZ written on SIGTERM,
+SIGINT or the end of ``--seconds``), with the states' times it published.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from ros2_standin import marker_array
+
+from qpavoid.arm.model import load_robot
+from qpavoid.sensing.calibration_file import load_calibration
+from qpavoid.sensing.ros2_cell import (
+    dds_message,
+    load_cell,
+    participant,
+    take_raw,
+    write_raw,
+)
+from qpavoid.sensing.ros2_types import dds_topic, dds_type, need, to_cdr
+
+MA = "visualization_msgs/msg/MarkerArray"
+JS = "sensor_msgs/msg/JointState"
+CMD = "std_msgs/msg/Float64MultiArray"
+#: The Azure Kinect driver's first body id (k4abt numbers bodies from 1).
+K4ABT_FIRST_ID = 1
+
+
+class HeldStart:
+    """``motion`` from ``lead_s`` on, its first pose before: the person waits for the run."""
+
+    def __init__(self, motion, lead_s: float):
+        self.motion, self.lead_s = motion, lead_s
+
+    def frame_at(self, t: float):
+        return self.motion.frame_at(max(t - self.lead_s, 0.0))
+
+
+class OnRunClock:
+    """The truth of a live run: the motion the camera stand-in films (started at wall time
+    ``start_s``, the person moving from ``start_s + lead_s``), at run time ``t`` (whose
+    wall time is the live source's ``start_s + t``, known from its first tick on)."""
+
+    def __init__(self, motion, start_s: float, lead_s: float, run_start):
+        self.motion, self.start_s, self.lead_s, self.run_start = motion, start_s, lead_s, run_start
+
+    def frame_at(self, t: float):
+        wall = self.run_start() + t
+        return self.motion.frame_at(max(wall - self.start_s - self.lead_s, 0.0))
+
+
+def _qos(reliable: bool, depth: int):
+    core = need("cyclonedds.core")
+    p = core.Policy
+    return core.Qos(
+        p.Reliability.Reliable(0) if reliable else p.Reliability.BestEffort,
+        p.History.KeepLast(depth),
+        p.Durability.Volatile,
+    )
+
+
+def _endpoint(dp, distribution: str, topic: str, name: str, kind: str, reliable: bool, depth=1):
+    topic_ = need("cyclonedds.topic").Topic(dp, dds_topic(topic), dds_type(distribution, name))
+    if kind == "writer":
+        return need("cyclonedds.pub").DataWriter(dp, topic_, qos=_qos(reliable, depth))
+    return need("cyclonedds.sub").DataReader(dp, topic_, qos=_qos(reliable, depth))
+
+
+def camera_messages(args, distribution: str) -> list[tuple[float, bytes]]:
+    """(send wall time, CDR) of every message, made before the first is due."""
+    from qpavoid.loop.sender import sensor_frames, sensor_latency_s
+    from qpavoid.scenarios.motions import load_motion
+
+    calibration = load_calibration(args.sensors)
+    robot = load_robot(args.robot)
+    motion = HeldStart(load_motion(robot, args.scenario), args.lead)
+    latency = sensor_latency_s(calibration, args.sensor)
+    rate = calibration[args.sensor].skeleton.sensor.frame_rate_hz
+    frames: dict[float, dict[int, np.ndarray]] = {}
+    for f in sensor_frames(motion, calibration, args.sensor, args.seconds):
+        joints = np.where(f.state[:, None] > 0, f.joints, np.nan)  # not seen: no marker
+        frames.setdefault(f.t, {})[K4ABT_FIRST_ID + f.body] = joints
+    out = []
+    for k in range(int(args.seconds * rate)):
+        t = k / rate
+        bodies = frames.get(t, {})
+        message = marker_array(args.start + t, bodies)
+        out.append((args.start + t + latency, to_cdr(distribution, message, MA)))
+    return out
+
+
+def run_camera(args) -> int:
+    cell = load_cell(args.cell)
+    calibration = load_calibration(args.sensors)
+    topic = calibration[args.sensor].topic
+    messages = camera_messages(args, cell.distribution)
+    dp = participant(cell.domain_id)
+    w = _endpoint(dp, cell.distribution, topic, MA, "writer", True)  # the driver's QoS
+    stop = _stop_flag()
+    print(f"camera: {len(messages)} messages on {topic}", flush=True)
+    sent = 0
+    for due, cdr in messages:
+        if stop:
+            break
+        wait = due - time.time()
+        if wait > 0:
+            time.sleep(wait)
+        if wait < -1.0:  # more than a second behind (a slow start): not sent
+            continue
+        write_raw(w, cdr)
+        sent += 1
+    print(f"camera: sent {sent}", flush=True)
+    return 0
+
+
+def _stop_flag() -> list[int]:
+    stop: list[int] = []
+
+    def handler(signum, frame):
+        stop.append(signum)
+
+    signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGINT, handler)
+    return stop
+
+
+def run_arm(args) -> int:
+    cell = load_cell(args.cell)
+    robot = load_robot(args.robot)
+    order = cell.arm.joints or tuple(robot.joint_names)
+    q0 = np.array([float(v) for v in args.q0.split(",")])  # the description's order
+    q = q0[[robot.joint_names.index(j) for j in order]].copy()
+    dp = participant(cell.domain_id)
+    commands = _endpoint(dp, cell.distribution, cell.arm.commands, CMD, "reader", True, 64)
+    states = _endpoint(dp, cell.distribution, cell.arm.joint_states, JS, "writer", True, 10)
+    kind = dds_type(cell.distribution, CMD)
+    header = dds_message(cell.distribution, "std_msgs/msg/Header")
+    stamp_type = type(header.stamp)
+    js = dds_type(cell.distribution, JS)
+    names = list(order)
+    dq = np.zeros(len(q))
+    received_t: list[float] = []
+    received: list[list[float]] = []
+    wrong = 0
+    state_t: list[float] = []
+    stop = _stop_flag()
+    period = 1.0 / args.rate
+    start = last = time.time()
+    next_due = time.perf_counter()
+    end = start + args.seconds
+    print(f"arm: {args.rate:g} Hz on {cell.arm.joint_states}", flush=True)
+    while not stop and time.time() < end:
+        for data in take_raw(commands, 64):
+            now = time.time()
+            values = list(kind.deserialize(data).data)
+            received_t.append(now)
+            received.append(values)
+            if len(values) == len(q) and all(math.isfinite(v) for v in values):
+                dq = np.array(values)
+            else:
+                wrong += 1  # the controller refuses a command of the wrong size
+        now = time.time()
+        q += dq * (now - last)
+        last = now
+        header.stamp = stamp_type(sec=int(now), nanosec=int((now % 1.0) * 1e9))
+        states.write(
+            js(header=header, name=names, position=q.tolist(), velocity=dq.tolist(), effort=[])
+        )
+        state_t.append(now)
+        next_due += period
+        wait = next_due - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+        elif wait < -0.05:  # far behind: do not try to catch up in a burst
+            next_due = time.perf_counter()
+    if args.record:
+        np.savez(
+            args.record,
+            t=np.array(received_t),
+            commands=np.array(received, dtype=float).reshape(len(received), -1),
+            state_t=np.array(state_t),
+            joints=np.array(names),
+            wrong_size=wrong,
+        )
+    ts = np.diff(state_t)
+    print(
+        f"arm: {len(state_t)} states at {1 / np.mean(ts):.0f} Hz (p99 period "
+        f"{1e3 * np.percentile(ts, 99):.2f} ms), {len(received_t)} commands",
+        flush=True,
+    )
+    return 0
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="what", required=True)
+    cam = sub.add_parser("camera")
+    cam.add_argument("--cell", required=True)
+    cam.add_argument("--sensors", required=True)
+    cam.add_argument("--sensor", default="femto")
+    cam.add_argument("--robot", default="iiwa14")
+    cam.add_argument("--scenario", default="test1")
+    cam.add_argument("--start", type=float, required=True, help="wall time of frame 0, s")
+    cam.add_argument("--lead", type=float, default=0.0, help="s before the person moves")
+    cam.add_argument("--seconds", type=float, default=30.0)
+    arm = sub.add_parser("arm")
+    arm.add_argument("--cell", required=True)
+    arm.add_argument("--robot", default="iiwa14")
+    arm.add_argument("--q0", required=True, help="start angles, rad, the description's order")
+    arm.add_argument("--rate", type=float, default=1000.0)
+    arm.add_argument("--seconds", type=float, default=60.0)
+    arm.add_argument("--record", default="")
+    args = p.parse_args(argv)
+    return run_camera(args) if args.what == "camera" else run_arm(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
