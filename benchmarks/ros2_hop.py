@@ -1,0 +1,179 @@
+"""The ROS 2 hops of a live run on a loopback DDS domain (issue 47).
+
+    python benchmarks/ros2_hop.py [--messages 600] [--out benchmarks/results/ros2_hop.json]
+
+* **camera hop**: another process writes the Azure Kinect driver's MarkerArray (one body,
+  32 markers, stamped with the wall time just before the write) at 30 Hz;
+  :class:`~qpavoid.sensing.dds_input.DdsListener` takes it (the wall time its reading
+  thread takes the sample, before decoding). The hop is read − write.
+* **command hop**: :meth:`Ros2Arm.send <qpavoid.drive.ros2_arm.Ros2Arm.send>` at 500 Hz
+  to the kinematic ros2_control stand-in (tests/ros2_cell_standin.py, a 1 kHz loop that
+  takes what came each millisecond, as a controller's update does): its receive time
+  − the send's wall time; it includes up to one stand-in period of waiting.
+
+Both on this machine's wall clock (one clock for both processes). The machine's load is
+written with the numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).parent
+STANDIN = HERE.parent / "tests" / "ros2_cell_standin.py"
+LOOPBACK = '<General><Interfaces><NetworkInterface name="lo"/></Interfaces></General>'
+TOPIC = "/k4a/body_tracking_data"
+MA = "visualization_msgs/msg/MarkerArray"
+
+
+def publish(domain: int, n: int) -> None:
+    """The driver's side: ``n`` MarkerArrays at 30 Hz, each stamped just before its write."""
+    sys.path.insert(0, str(STANDIN.parent))
+    from ros2_standin import marker_array
+
+    from qpavoid.sensing.ros2_cell import participant, write_raw, writer
+    from qpavoid.sensing.ros2_types import to_cdr
+
+    dp = participant(domain)
+    w = writer(dp, "humble", TOPIC, MA)
+    while not w.get_matched_subscriptions():
+        time.sleep(0.01)
+    time.sleep(0.5)
+    joints = np.column_stack([np.linspace(-0.3, 0.3, 32), np.zeros(32), np.full(32, 2.0)])
+    template = marker_array(0.0, {1: joints})
+    for _ in range(n):
+        t = time.time()
+        for m in template.markers:
+            m.header.stamp.sec, m.header.stamp.nanosec = int(t), int((t % 1.0) * 1e9)
+        write_raw(w, to_cdr("humble", template, MA))
+        time.sleep(1 / 30)
+
+
+def camera_hop(domain: int, n: int) -> np.ndarray:
+    from qpavoid.sensing.calibration import Calibration, SensorCalibration
+    from qpavoid.sensing.dds_input import DdsListener
+    from qpavoid.sensing.ros2_cell import Cell
+    from qpavoid.sensing.ros2_types import from_cdr, stamp_s
+
+    calibration = Calibration(
+        {"femto": SensorCalibration("femto", np.eye(4), format="k4abt", topic=TOPIC)}
+    )
+    got: list[tuple[float, bytes]] = []
+    with DdsListener(Cell(domain_id=domain), calibration, True) as listener:
+        sample = listener._sample
+
+        def timed(name: str, data: bytes, received_s: float) -> None:
+            got.append((received_s, data))
+            sample(name, data, received_s)
+
+        listener._sample = timed  # type: ignore[method-assign]
+        subprocess.run(
+            [sys.executable, __file__, "--publish", str(domain), str(n)],
+            check=True,
+            env={**os.environ, "CYCLONEDDS_URI": LOOPBACK},
+        )
+        time.sleep(0.2)
+    return np.array(
+        [r - stamp_s(from_cdr("humble", d, MA).markers[0].header.stamp) for r, d in got]
+    )
+
+
+def command_hop(domain: int, n: int) -> tuple[np.ndarray, float]:
+    from qpavoid.arm.model import load_robot
+    from qpavoid.drive.ros2_arm import Ros2Arm
+    from qpavoid.sensing.ros2_cell import ArmTopics, Cell
+
+    robot = load_robot("iiwa14")
+    with tempfile.TemporaryDirectory() as tmp:
+        cell_file = Path(tmp) / "cell.toml"
+        cell_file.write_text(f'distribution = "humble"\ndomain_id = {domain}\n')
+        record = Path(tmp) / "arm.npz"
+        q0 = ",".join(["0.0"] * robot.nv)
+        command = [sys.executable, str(STANDIN), "arm", "--cell", str(cell_file), "--q0", q0]
+        command += ["--seconds", "60", "--record", str(record)]
+        arm_proc = subprocess.Popen(
+            command,
+            env={**os.environ, "CYCLONEDDS_URI": LOOPBACK},
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        cell = Cell(domain_id=domain, arm=ArmTopics(subscriber_timeout_s=20.0))
+        arm = Ros2Arm(robot, cell, 0.002, True)
+        arm.connect()
+        sent = []
+        next_due = time.perf_counter()
+        for k in range(n):
+            dq = np.full(robot.nv, 1e-6 * (k + 1))
+            sent.append(time.time())
+            arm.send(dq)
+            next_due += 0.002
+            time.sleep(max(next_due - time.perf_counter(), 0.0))
+        arm.stop()
+        arm.close()
+        time.sleep(0.3)
+        arm_proc.terminate()
+        out = arm_proc.communicate(timeout=20)[0]
+        data = np.load(record)
+    rate = float(out.split(" states at ")[1].split(" Hz")[0])
+    index = np.rint(data["commands"][:, 0] / 1e-6).astype(int) - 1
+    mine = index >= 0
+    return data["t"][mine] - np.array(sent)[index[mine]], rate
+
+
+def summary(hops: np.ndarray) -> dict[str, float]:
+    ms = 1e3 * hops
+    return {
+        "n": len(hops),
+        "median_ms": round(float(np.median(ms)), 3),
+        "p99_ms": round(float(np.percentile(ms, 99)), 3),
+        "max_ms": round(float(ms.max()), 3),
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--messages", type=int, default=600)
+    ap.add_argument("--out", default=str(HERE / "results" / "ros2_hop.json"))
+    ap.add_argument("--publish", nargs=2, type=int, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.publish:
+        publish(*args.publish)
+        return
+    os.environ.setdefault("CYCLONEDDS_URI", LOOPBACK)
+    domain = 200 + os.getpid() % 30
+    camera = summary(camera_hop(domain, args.messages))
+    hops, rate = command_hop(domain + 1, 5 * args.messages)
+    command = summary(hops)
+    load = os.getloadavg()[0]
+    result = {
+        "load": load,
+        "cpus": os.cpu_count(),
+        "camera_hop": camera,
+        "command_hop": command,
+        "standin_rate_hz": rate,
+    }
+    print(
+        f"camera hop (driver's write to DdsListener's read, 30 Hz): median "
+        f"{camera['median_ms']} ms, p99 {camera['p99_ms']} ms, max {camera['max_ms']} ms "
+        f"({camera['n']} messages)"
+    )
+    print(
+        f"command hop (Ros2Arm.send to the {rate:g} Hz ros2_control stand-in's take, 500 Hz): "
+        f"median {command['median_ms']} ms, p99 {command['p99_ms']} ms, "
+        f"max {command['max_ms']} ms ({command['n']} commands)"
+    )
+    Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
+    print(f"load {load:.1f} on {os.cpu_count()} cores; wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
