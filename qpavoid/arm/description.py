@@ -20,7 +20,7 @@ particular arm.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from importlib import metadata, resources
 from pathlib import Path
@@ -695,7 +695,23 @@ def _file_locked(
             name=key,
             value=value,
         )
-    for joint, angle in value.items():
+    for joint, angle, fault in _angle_faults(value, path, model, key):
+        raise RobotDescriptionError(
+            f"{path}: {key}: {joint} = {angle!r} is {fault}; lock it at an angle (rad) "
+            "within its limits",
+            path=path,
+            name=f"{key}.{joint}",
+            value=angle,
+        )
+    return {joint: float(angle) for joint, angle in value.items()}
+
+
+def _angle_faults(
+    table: Mapping[str, object], path: Path, model: pin.Model, key: str
+) -> Iterator[tuple[str, object, str]]:
+    """``(joint, angle, fault)`` of each angle of ``table`` (the file's ``key``) that is not
+    a number within its joint's limits; a name that is not a joint of the URDF raised."""
+    for joint, angle in table.items():
         if not model.existJointName(joint):
             raise RobotDescriptionError(
                 f"{path}: {key}: {joint!r} is not a joint of the URDF; its joints are "
@@ -705,18 +721,9 @@ def _file_locked(
                 value=joint,
             )
         if not isinstance(angle, (int, float)) or isinstance(angle, bool):
-            fault = "not an angle (rad)"
-        else:
-            fault = angle_fault(model, joint, float(angle))
-        if fault:
-            raise RobotDescriptionError(
-                f"{path}: {key}: {joint} = {angle!r} is {fault}; lock it at an angle (rad) "
-                "within its limits",
-                path=path,
-                name=f"{key}.{joint}",
-                value=angle,
-            )
-    return {joint: float(angle) for joint, angle in value.items()}
+            yield joint, angle, "not an angle (rad)"
+        elif fault := angle_fault(model, joint, float(angle)):
+            yield joint, angle, fault
 
 
 def _locked_angles(
@@ -961,24 +968,13 @@ def _home(value: object, path: Path, model: pin.Model) -> dict[str, float]:
             name="home",
             value=value,
         )
-    for joint, angle in value.items():
-        if not model.existJointName(joint):
-            raise RobotDescriptionError(
-                f"{path}: home: {joint!r} is not a joint of the URDF; its joints are "
-                f"{list(model.names)[1:]}",
-                path=path,
-                name="home",
-                value=joint,
-            )
-        ok = isinstance(angle, (int, float)) and not isinstance(angle, bool)
-        fault = angle_fault(model, joint, float(angle)) if ok else "not an angle (rad)"
-        if fault:
-            raise RobotDescriptionError(
-                f"{path}: home: {joint} = {angle!r}: {fault}",
-                path=path,
-                name="home",
-                value={joint: angle},
-            )
+    for joint, angle, fault in _angle_faults(value, path, model, "home"):
+        raise RobotDescriptionError(
+            f"{path}: home: {joint} = {angle!r}: {fault}",
+            path=path,
+            name="home",
+            value={joint: angle},
+        )
     return {str(joint): float(angle) for joint, angle in value.items()}
 
 
