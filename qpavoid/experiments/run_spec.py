@@ -8,6 +8,7 @@ a run.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -281,6 +282,11 @@ class RunSpec:
         """
         if self.sensors is None:
             raise InputError("the run has no sensors (--sensors)", name="--sensors")
+        return self._calibration
+
+    @functools.cached_property
+    def _calibration(self) -> Calibration:
+        """The file read once per spec (the spec checks it, the run builds from it)."""
         return load_calibration(str(self.sensors)).with_latency(self.latency_s)
 
     @property
