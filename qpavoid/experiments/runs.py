@@ -184,8 +184,7 @@ def live_source(
         )
     ) as listener:
         source = LiveSource(listener, clear=clear, say=say, skeleton=skeleton)
-        if say is not None:
-            say(source.ready_line())
+        if say is not None:  # (the ready line: at the loop's first tick, by the source)
             oldest = max(source.fuser.max_age_s.values())
             if not ControllerConfig(safety=spec.safety).monitors_separation and oldest > 0.1:
                 say(  # the paper's bench: 0.1 s

@@ -266,7 +266,7 @@ class LiveSource:
         Called with a line for the operator when something about the input changes: the
         first frame of each sensor taken, frames refused as late (with the age limit and
         how to set it), datagrams of another format than the calibration's
-        (:meth:`ready_line` is the line to say when listening starts).
+        (:meth:`ready_line`, said at the first :meth:`frame_at`: the loop ticks).
 
     Attributes
     ----------
@@ -322,8 +322,9 @@ class LiveSource:
     def frame_at(self, t: float) -> tuple[People, float]:
         """Everybody fused at run time ``t`` and the capture time (run clock) of the newest
         frame used (``-inf`` before the first)."""
-        if self.start_s is None:
-            self.start_s = self.clock() - t
+        if self.start_s is None:  # the loop's first tick: ready now (not when bound: a
+            self.start_s = self.clock() - t  # fresh install compiles for seconds between)
+            self.say(self.ready_line())
         calibration = self.listener.calibration
         for frame in self.listener.drain():
             frame = frame._replace(t=frame.t - self.start_s)

@@ -72,7 +72,9 @@ class LiveStatus:
             doing = "moving, nobody seen"
         counts = self.counts()
         refused = sum(n for k, n in counts.items() if k.startswith("dropped_") or k in REFUSED)
-        # accepted by the receiver, dropped when the loop took them: refused, not taken
-        taken = counts.get("accepted", 0) - sum(counts.get(k, 0) for k in TAKEN_THEN_REFUSED)
+        # accepted by the receiver, then replaced by a newer frame before the loop took
+        # them, or dropped when it did: not taken
+        replaced = counts.get("superseded", 0) + sum(counts.get(k, 0) for k in TAKEN_THEN_REFUSED)
+        taken = counts.get("accepted", 0) - replaced
         alert = str(row.get("input_alert", ""))
         return f"{doing}; frames taken {taken}, refused {refused}" + (f"; {alert}" if alert else "")
