@@ -8,6 +8,7 @@ import numpy as np
 from qpavoid.human.body import BodyModel, HumanGeometry
 from qpavoid.human.frames import HumanFrame, nobody
 from qpavoid.human.people import People, as_people, same_frames
+from qpavoid.perception import _kernels
 from qpavoid.perception.tracker import PeopleTracker, Perceived, PerceptionConfig
 
 __all__ = ["Perceiver"]
@@ -34,6 +35,7 @@ class Perceiver:
     def __init__(self, human: BodyModel, cfg: PerceptionConfig | None = None):
         self.human = human
         self.trackers = PeopleTracker(cfg, human.skeleton)
+        _kernels.warm_up(human.skeleton)  # before any loop: not at the first person seen
         self._nobody = nobody(human.skeleton)
         self.perceived: list[Perceived] = []
         self.geometry: list[HumanGeometry] = []
