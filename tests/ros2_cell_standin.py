@@ -35,7 +35,9 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 from ros2_standin import marker_array
 
+from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import load_robot
+from qpavoid.control.task import default_task
 from qpavoid.sensing.calibration_file import load_calibration
 from qpavoid.sensing.ros2_cell import (
     dds_message,
@@ -155,7 +157,10 @@ def run_arm(args) -> int:
     cell = load_cell(args.cell)
     robot = load_robot(args.robot)
     order = cell.arm.joints or tuple(robot.joint_names)
-    q0 = np.array([float(v) for v in args.q0.split(",")])  # the description's order
+    if args.q0:  # the description's order
+        q0 = np.array([float(v) for v in args.q0.split(",")])
+    else:  # where a run starts: the IK of its path's start, as the run computes it
+        q0 = inverse_kinematics(robot, default_task(robot).path.reference(0.0)[0])
     q = q0[[robot.joint_names.index(j) for j in order]].copy()
     dp = participant(cell.domain_id)
     commands = _endpoint(dp, cell.distribution, cell.arm.commands, CMD, "reader", True, 64)
@@ -233,7 +238,12 @@ def main(argv=None) -> int:
     arm = sub.add_parser("arm")
     arm.add_argument("--cell", required=True)
     arm.add_argument("--robot", default="iiwa14")
-    arm.add_argument("--q0", required=True, help="start angles, rad, the description's order")
+    arm.add_argument(
+        "--q0",
+        default="",
+        help="start angles, rad, the description's order (default: the "
+        "run's start, the IK of the robot's task's first waypoint)",
+    )
     arm.add_argument("--rate", type=float, default=1000.0)
     arm.add_argument("--seconds", type=float, default=60.0)
     arm.add_argument("--record", default="")
