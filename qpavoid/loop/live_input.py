@@ -292,6 +292,7 @@ class LiveSource:
         self.listener = listener
         self.fuser = Fuser(listener.calibration, fusion, skeleton)
         self.say = say or (lambda line: None)
+        self._talks = say is not None  # the ready line made only for someone to read it
         #: when each sensor's first frame was taken (run clock, s) and its age then, s
         self.first_taken: dict[str, tuple[float, float]] = {}
         self._said: set[tuple[str, str]] = (
@@ -324,7 +325,8 @@ class LiveSource:
         frame used (``-inf`` before the first)."""
         if self.start_s is None:  # the loop's first tick: ready now (not when bound: a
             self.start_s = self.clock() - t  # fresh install compiles for seconds between)
-            self.say(self.ready_line())
+            if self._talks:
+                self.say(self.ready_line())
         calibration = self.listener.calibration
         for frame in self.listener.drain():
             frame = frame._replace(t=frame.t - self.start_s)
