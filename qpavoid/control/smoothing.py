@@ -32,6 +32,8 @@ and separation monitoring counts on (its T_s and S_s; the arm's reaction time is
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from qpavoid.arm.braking import ArmResponse, BrakingConfig, per_joint, reaction_ticks
@@ -229,11 +231,37 @@ class CommandRamp:
         j = int(np.argmax(np.abs(self.u1)))
         s = float(u[j] / self.u1[j])
         if s_lo <= s_hi:
-            s = min(max(s, s_lo), s_hi)
+            taper = self._taper_floor(np.abs(self.u1[moving]), self.j_dt2[moving])
+            s = min(max(s, s_lo, taper), s_hi)
         # where no point of the line is within reach (joints accelerating unevenly, jerk
         # tighter than a tick's acceleration: 1 kHz on a Franka), the nearest reachable
         # command, off the line for a tick: the limits come first
         return np.clip(max(s, 0.0) * self.u1, lo, hi)
+
+    @staticmethod
+    def _taper_floor(speed: np.ndarray, j_dt2: np.ndarray) -> float:
+        """The smallest fraction s of the last command from which a stop on its line can
+        still reach rest with every step within the jerk limit (0 without one).
+
+        In units of each joint's speed |u₁,j|, the line drops by d = 1 − s this tick, and
+        each later drop may shrink by at most r = min_j j_j dt² / |u₁,j| per tick until the
+        last step to rest (a step to zero from speed s is itself a drop s ≤ r). Shrinking as
+        fast as that loses at least T(d) = max_n (n d − r n(n + 1) / 2) more speed, so s must
+        be at least T(1 − s):
+
+            s ≥ max_n ( n / (n + 1) − r n / 2 ),   n = 0, 1, …
+
+        whose largest term is at the integers around n = √(2/r) − 1. A stop that begins while
+        its joints already decelerate hard (1 kHz on a Franka, where j dt² < a dt) would
+        otherwise reach zero with its deceleration still on: a step of jerk up to 1.4 times
+        the limit, measured.
+        """
+        r = float(np.min(j_dt2 / speed))
+        if not math.isfinite(r):
+            return 0.0
+        n0 = math.sqrt(2.0 / r) - 1.0
+        candidates = (max(math.floor(n0), 0), max(math.ceil(n0), 0))
+        return max(0.0, *(n / (n + 1) - 0.5 * r * n for n in candidates))
 
     def commit(self, u: np.ndarray, stopping: bool) -> float:
         """``u`` is the command sent; the fraction of the stop's start speed it keeps
