@@ -341,6 +341,7 @@ def simulate_one(
         metrics = dict(sim.metrics)
         if source is not None:
             metrics["input"] = source.report()
+            metrics["input_unit"] = source.unit
             metrics["sensors"] = source.sensors_report()
     metrics.update(cameras_used(spec))
     metrics.update(

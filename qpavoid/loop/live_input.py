@@ -112,6 +112,9 @@ class Listener:
         use, not local) or the receiver does not start.
     """
 
+    #: What its input arrives as (the summary's "input: N datagrams").
+    unit = "datagrams"
+
     def __init__(
         self,
         address: tuple[str, int],
@@ -313,6 +316,11 @@ class LiveSource:
         self._captured = float("-inf")
         self._losses = LossWatch(losses)
         self._stale_before = {name: float("-inf") for name in listener.calibration.names}
+
+    @property
+    def unit(self) -> str:
+        """What the input arrives as: "datagrams" (UDP) or "messages" (ROS 2)."""
+        return self.listener.unit
 
     def report(self) -> dict[str, int]:
         """What came in and what was dropped, by reason (``metrics.json``: ``input``)."""

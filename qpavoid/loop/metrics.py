@@ -347,7 +347,7 @@ def describe(m: dict[str, Any]) -> str:
             f"limit violations: velocity {m['joint_velocity_limit_violations']}, "
             f"position {m['joint_position_limit_violations']}"
         )
-        + (_input_line(m["input"]) if "input" in m else "")
+        + (_input_line(m["input"], m.get("input_unit", "datagrams")) if "input" in m else "")
         + _contact_line(m)
         + _loop_line(m)
         + _hold_hint(m)
@@ -443,14 +443,14 @@ DROP_HINTS = {
 }
 
 
-def _input_line(counts: dict[str, int]) -> str:
-    """A live run's datagrams: how many came, how many were taken, the drops, and what the
+def _input_line(counts: dict[str, int], unit: str) -> str:
+    """A live run's ``unit`` (datagrams, DDS messages): how many came, how many were taken, the drops, and what the
     largest drop most likely means (docs/security.md)."""
     drops = sorted(
         ((n, k) for k, n in counts.items() if k.startswith("dropped_") or k in DROP_HINTS),
         reverse=True,
     )
-    line = f"\n  input: {counts.get('received', 0)} datagrams, {counts.get('accepted', 0)} taken"
+    line = f"\n  input: {counts.get('received', 0)} {unit}, {counts.get('accepted', 0)} taken"
     if drops:
         line += "; " + ", ".join(f"{k} {n}" for n, k in drops[:4])
         if drops[0][1] in DROP_HINTS and drops[0][0] > counts.get("accepted", 0):

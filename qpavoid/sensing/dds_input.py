@@ -94,6 +94,9 @@ class DdsListener:
         :class:`~qpavoid.sensing.ros2_types.Ros2UnavailableError` without cyclonedds.
     """
 
+    #: What its input arrives as (the summary's "input: N messages").
+    unit = "messages"
+
     def __init__(
         self,
         cell: Cell,
