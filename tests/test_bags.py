@@ -252,7 +252,7 @@ def test_a_written_bag_is_read_back_in_full_by_rosbags_and_by_mcap(tmp_path):
                 store = get_typestore(Stores.EMPTY)
                 store.register(get_types_from_msg(schema.data.decode(), schema.name))
                 store.deserialize_cdr(message.data, schema.name)
-    assert seen == counts and set(seen) == set(TOPICS)
+    assert seen == counts and set(seen) <= set(TOPICS)
 
 
 def test_the_bag_option_needs_the_ros2_extra(monkeypatch, tmp_path):

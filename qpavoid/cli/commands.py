@@ -49,6 +49,7 @@ from qpavoid.cli.view import add_view_command
 from qpavoid.control.tick import SAFETY_MODES
 from qpavoid.experiments.compare import compare
 from qpavoid.experiments.jobs import progress_bar
+from qpavoid.experiments.reproduce import reproduce_bag
 from qpavoid.experiments.run_spec import BENCHES, CONTROLLERS, DISTANCES, LIMIT_MODES
 from qpavoid.experiments.runs import RunSpec, live_view, run_one, spec_robot
 from qpavoid.loop.live_input import check_listening, parse_address
@@ -57,6 +58,7 @@ from qpavoid.output.bag_writer import check_bag_path, write_run_bag
 from qpavoid.output.run_files import check_output_dir
 from qpavoid.scenarios.generated import SCENARIOS
 from qpavoid.scenarios.motions import check_inputs
+from qpavoid.sensing.bags import has_run, is_bag
 from qpavoid.sensing.calibration_file import load_calibration
 
 DESCRIPTION = (
@@ -276,6 +278,8 @@ def _run(args: argparse.Namespace, parser: Parser) -> str:
     if args.scenario and args.human:
         parser.error("give either SCENARIO or --human FILE, not both")
     files = tuple(args.human or ())
+    if len(files) == 1 and not args.sensors and is_bag(files[0]) and has_run(files[0]):
+        return reproduce_bag(files[0]).line(files[0])  # a run qpavoid wrote: given again
     spec = RunSpec(
         scenario=args.scenario,
         human_file=files[0] if files and not args.sensors else None,

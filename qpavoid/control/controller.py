@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from qpavoid.arm.model import Robot
+from qpavoid.control.journal import Journal
 from qpavoid.control.path import PlannedPath
 from qpavoid.control.smoothing import CommandRamp
 from qpavoid.control.stages import (
@@ -206,6 +207,14 @@ class Controller:
         self._clock_s = 0.0  # = _ticks × control_period_s, s
         self.closest_frame: HumanFrame | None = None  # the closest person's, last tick
         self._last: Command | None = None  # the last command returned
+        #: What it is handed, call by call, if kept (:mod:`~qpavoid.control.journal`: a
+        #: run's commands reproduced from its log or bag).
+        self.journal: Journal | None = None
+
+    @property
+    def last_command(self) -> Command | None:
+        """The last command returned (by :meth:`step` or :meth:`brake`), if any."""
+        return self._last
 
     @property
     def perceiver(self) -> Perceiver:
@@ -239,6 +248,8 @@ class Controller:
         command (:meth:`~qpavoid.control.smoothing.CommandRamp.tighten`), and the braking
         deceleration speed and separation counts on, ``b_j ≤ a_j``. Call it before the
         first tick."""
+        if self.journal is not None:
+            self.journal.limits(velocity_radps, acceleration_radps2, jerk_radps3)
         self.limits.accept(velocity_radps, acceleration_radps2)
         if self.ramp is not None:
             braking = self.limits.braking()
@@ -410,6 +421,8 @@ class Controller:
     def at_rest(self) -> None:
         """The arm stopped on its own (its loop stalled past the arm's hold of a command):
         the next command starts again from rest."""
+        if self.journal is not None:
+            self.journal.rest()
         if self.ramp is not None:
             self.ramp.reset()
 
@@ -430,6 +443,8 @@ class Controller:
             raise InputError(
                 "brake before any tick: nothing to brake from", name="reason", value=reason
             )
+        if self.journal is not None:
+            self.journal.brake(instead)
         if self.ramp is None:
             applied = np.zeros(self.robot.nv)
             time_scale = 0.0
@@ -501,6 +516,10 @@ class Controller:
             the command is not raised: the robot stops with it as the reason.
         """
         tick = self.measure(q, joints, state, t, frame_age_s, frame_time_s, frame_id, camera_format)
+        if self.journal is not None:  # (measured: a tick the controller refused is not kept)
+            if state is not None or camera_format is not None:
+                self.journal.unsupported = "a tick with its own tracking states or format"
+            self.journal.step(tick.q, joints, t, frame_age_s, frame_time_s, frame_id)
         if tick.reason:
             return self.command(tick, None)
         try:

@@ -15,7 +15,7 @@ import contextlib
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -355,6 +355,7 @@ def simulate_one(
         task=spec.task,
         trust_ros_graph=bool(spec.trust_ros_graph),
         solver=getattr(getattr(controller, "backend", None), "name", None),
+        run_spec=asdict(spec),
     )
     return RunResult(spec, sim, robot, controller, metrics)
 

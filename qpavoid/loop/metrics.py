@@ -444,8 +444,8 @@ DROP_HINTS = {
 
 
 def _input_line(counts: dict[str, int], unit: str) -> str:
-    """A live run's ``unit`` (datagrams, DDS messages): how many came, how many were taken, the drops, and what the
-    largest drop most likely means (docs/security.md)."""
+    """A live run's ``unit`` (datagrams, DDS messages): how many came, how many were
+    taken, the drops, and what the largest drop most likely means (docs/security.md)."""
     drops = sorted(
         ((n, k) for k, n in counts.items() if k.startswith("dropped_") or k in DROP_HINTS),
         reverse=True,

@@ -45,6 +45,7 @@ from qpavoid.arm.braking import ArmResponse, BrakingConfig
 from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import Robot
 from qpavoid.control.controller import Controller
+from qpavoid.control.journal import Journal
 from qpavoid.control.path import PlannedPath
 from qpavoid.control.tick import Command
 from qpavoid.core.errors import ArmError, InputError
@@ -120,10 +121,13 @@ class SimConfig:
 
 @dataclass
 class SimResult:
-    """A run: per-tick ``log`` arrays (see :func:`simulate`) and summary ``metrics``."""
+    """A run: per-tick ``log`` arrays (see :func:`simulate`), summary ``metrics`` and what
+    the controller was handed (:meth:`Journal.arrays <qpavoid.control.journal.Journal.
+    arrays>`: empty where it cannot be reproduced, ``metrics["reproducible"]`` says why)."""
 
     log: dict[str, np.ndarray]
     metrics: dict = field(default_factory=dict)
+    journal: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 class FrameSource(Protocol):
@@ -233,6 +237,7 @@ def simulate(
     cmd: Command | None = None
     plant: Plant | None = None
     interrupt = Interruption(realtime or arm is not None)
+    controller.journal = journal = Journal()  # what it is handed: the run reproducible
     try:  # (from here on the signal handlers, and the arm, are always released)
         plant = _plant(controller, cfg, dt, realtime, arm, interrupt, record=truth is not None)
         q = (
@@ -277,6 +282,7 @@ def simulate(
             dq = logger.guard(q, dq)
             lag = human.max_lag_s if isinstance(human, People) else 0.0  # fused: the oldest
             logger.row(k, t, kin, dq, cmd, human, tau, tick_us, t - captured_s + lag, alert)
+            journal.logged()
             if plant.ended_by:
                 break
             if tau >= path.duration_s and not cmd.stopped and _at(goal, robot, q, cfg):
@@ -287,6 +293,7 @@ def simulate(
         plant.finish(controller)
     finally:
         interrupt.restore()
+        controller.journal = None
         if plant is not None:
             plant.close()
     if cmd is None or logger.n == 0:  # an arm that ended the run before its first command
@@ -338,7 +345,9 @@ def simulate(
             controller.config.distance,
             cfg.control_rate_hz,
         )
-        | ending,
+        | ending
+        | {"reproducible": journal.unsupported or True},
+        journal.arrays() if not journal.unsupported else {},
     )
 
 

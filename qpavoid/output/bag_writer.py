@@ -17,7 +17,18 @@ topic                                      type                              whe
 ``/diagnostics``                           ``diagnostic_msgs/msg/            the first tick,
                                            DiagnosticArray``                 each change of
                                                                              stop, and 1 Hz
+``/qpavoid/journal``                       ``std_msgs/msg/Float64MultiArray`` each entry of
+                                                                             what the
+                                                                             controller was
+                                                                             handed (:mod:`~
+                                                                             qpavoid.control.
+                                                                             journal`)
+``/qpavoid/run``                           ``std_msgs/msg/String``           once: the run's
+                                                                             settings (JSON)
 ========================================== ================================= ================
+
+The last two make the bag a run that ``qpavoid run --human FILE.mcap`` reproduces,
+command by command (a live run's too): written where the run's log holds its journal.
 
 Messages are CDR from ``rosbags``' serializer (:mod:`qpavoid.sensing.ros2_types`), each
 channel with its ``ros2msg`` schema (the definition text rosbag2 itself stores), profile
@@ -29,6 +40,7 @@ arm's base frame (``frame_id``), so RViz and Foxglove show them as they show a d
 
 from __future__ import annotations
 
+import json
 import time
 from collections import Counter
 from collections.abc import Sequence
@@ -38,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from qpavoid.arm.model import Robot
+from qpavoid.control.journal import KINDS, Journal
 from qpavoid.core.errors import InputError
 from qpavoid.output.run_files import check_output_file, load_log
 from qpavoid.sensing.ros2_types import need, time_msg, to_cdr, typestore
@@ -50,7 +63,10 @@ TOPICS = {
     "/forward_velocity_controller/commands": "std_msgs/msg/Float64MultiArray",
     "/qpavoid/people": "visualization_msgs/msg/MarkerArray",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+    "/qpavoid/journal": "std_msgs/msg/Float64MultiArray",
+    "/qpavoid/run": "std_msgs/msg/String",
 }
+MULTI = "std_msgs/msg/Float64MultiArray"
 #: Diagnostics at least this often, s (ROS's diagnostic aggregator expects about 1 Hz).
 DIAGNOSTICS_PERIOD_S = 1.0
 #: A joint marker's sphere diameter, m, and how long RViz keeps it without a new one, s.
@@ -183,6 +199,7 @@ def write_bag(
     frame_id: str = "world",
     hardware: str = "arm",
     distribution: str = "humble",
+    run_spec: str | None = None,
 ) -> dict[str, int]:
     """Write the run ``log`` (the arrays of ``log.npz``) as an MCAP bag at ``path``.
 
@@ -199,6 +216,10 @@ def write_bag(
     distribution
         Whose type definitions the schemas carry (the wire is the same for Humble and
         Jazzy).
+    run_spec
+        The run's settings as JSON (``metrics.json``'s ``run_spec``), written on
+        ``/qpavoid/run`` if given; the log's journal (``journal_data``,
+        ``journal_offsets``), if it has one, on ``/qpavoid/journal``.
 
     Returns
     -------
@@ -264,8 +285,24 @@ def write_bag(
                 message = _diagnostics(bag, now, status[0], status[1], nearest, hardware)
                 bag.add("/diagnostics", message, now)
                 last_status, last_diag = status, float(t[k])
+        if run_spec is not None:
+            bag.add("/qpavoid/run", bag.make("std_msgs/msg/String", data=run_spec), start)
+        if "journal_data" in log and "journal_offsets" in log:
+            _journal(bag, log["journal_data"], log["journal_offsets"], start + t)
         bag.writer.finish()
     return dict(bag.counts)
+
+
+def _journal(bag: _Bag, data: np.ndarray, offsets: np.ndarray, times: np.ndarray) -> None:
+    """Each journal entry a ``Float64MultiArray`` at its tick's time (an entry before the
+    tick's row is logged belongs to it; those after the last row, to the last)."""
+    logged = KINDS["logged"]
+    layout = bag.make("std_msgs/msg/MultiArrayLayout", dim=[], data_offset=0)
+    tick = 0
+    for entry in Journal.split(np.asarray(data, dtype=np.float64), offsets):
+        now = float(times[min(tick, len(times) - 1)]) if len(times) else 0.0
+        bag.add("/qpavoid/journal", bag.make(MULTI, layout=layout, data=entry), now)
+        tick += bool(entry[0] == logged)
 
 
 def check_bag_path(path: str) -> Path:
@@ -282,6 +319,15 @@ def check_bag_path(path: str) -> Path:
 
 
 def write_run_bag(path: str | Path, run_dir: str | Path, robot: Robot) -> dict[str, int]:
-    """The run written into ``run_dir`` (its ``log.npz``) as a bag at ``path``
-    (:func:`write_bag`: the arm's joint names and name from ``robot``)."""
-    return write_bag(path, load_log(run_dir), robot.joint_names, hardware=robot.name)
+    """The run written into ``run_dir`` (its ``log.npz`` and ``metrics.json``'s
+    ``run_spec``) as a bag at ``path`` (:func:`write_bag`: the arm's joint names and name
+    from ``robot``)."""
+    metrics = json.loads((Path(run_dir) / "metrics.json").read_text())
+    spec = metrics.get("run_spec")
+    return write_bag(
+        path,
+        load_log(run_dir),
+        robot.joint_names,
+        hardware=robot.name,
+        run_spec=None if spec is None else json.dumps(spec),
+    )

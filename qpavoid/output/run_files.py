@@ -99,7 +99,7 @@ def write_run(out_dir: str | Path, result: SimResult, extra: dict | None = None)
     metrics = dict(result.metrics)
     metrics.update(extra or {})
     (out / "metrics.json").write_text(strict_json(metrics) + "\n")
-    arrays: dict[str, Any] = dict(result.log)
+    arrays: dict[str, Any] = dict(result.log) | result.journal
     np.savez_compressed(out / "log.npz", **arrays)
     return out
 

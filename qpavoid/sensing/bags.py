@@ -37,8 +37,11 @@ __all__ = [
     "JOINT_STATE",
     "BagContents",
     "JointStates",
+    "RunRecord",
+    "has_run",
     "is_bag",
     "read_bag",
+    "read_run",
     "sensor_recordings",
 ]
 
@@ -231,3 +234,64 @@ def sensor_recordings(path: str | Path, calibration: Calibration) -> list[Sensor
     if is_bag(path):
         return read_bag(path, calibration).recordings
     return [load_sensor_recording(path)]
+
+
+#: The topics of a run qpavoid wrote (:mod:`qpavoid.output.bag_writer`) that reproduce it.
+JOURNAL_TOPIC, RUN_TOPIC = "/qpavoid/journal", "/qpavoid/run"
+COMMAND_TOPIC = "/forward_velocity_controller/commands"
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """A run as qpavoid wrote it in a bag: its settings (``/qpavoid/run``, JSON), what its
+    controller was handed (``/qpavoid/journal``, one entry per message) and its commands
+    (T, nv), rad/s."""
+
+    spec_json: str
+    entries: list[np.ndarray]
+    commands: np.ndarray
+
+
+def has_run(path: str | Path) -> bool:
+    """True if the bag at ``path`` is a run qpavoid wrote with its journal (it has the
+    topics :data:`JOURNAL_TOPIC` and :data:`RUN_TOPIC`)."""
+    highlevel = need("rosbags.highlevel")
+    try:
+        with highlevel.AnyReader([Path(path)], default_typestore=typestore("humble")) as reader:
+            return {JOURNAL_TOPIC, RUN_TOPIC} <= {c.topic for c in reader.connections}
+    except Exception:  # not a bag rosbags opens: the recording's reader says why
+        return False
+
+
+def read_run(path: str | Path) -> RunRecord:
+    """The run qpavoid wrote in the bag at ``path`` (:func:`has_run`).
+
+    Raises
+    ------
+    RecordingError
+        For a bag without the run's topics or settings, or that cannot be read (one line).
+    """
+    p = Path(path)
+    highlevel = need("rosbags.highlevel")
+    spec: list[str] = []
+    entries: list[np.ndarray] = []
+    commands: list[np.ndarray] = []
+    try:
+        with highlevel.AnyReader([p], default_typestore=typestore("humble")) as reader:
+            mine = (JOURNAL_TOPIC, RUN_TOPIC, COMMAND_TOPIC)
+            wanted = [c for c in reader.connections if c.topic in mine]
+            for connection, _, raw in reader.messages(connections=wanted):
+                message = reader.deserialize(raw, connection.msgtype)
+                if connection.topic == RUN_TOPIC:
+                    spec.append(str(message.data))
+                elif connection.topic == JOURNAL_TOPIC:
+                    entries.append(np.asarray(message.data, dtype=np.float64))
+                else:
+                    commands.append(np.asarray(message.data, dtype=np.float64))
+    except Exception as exc:  # rosbags' reader errors, an unreadable file
+        raise _fail(
+            p, f"not a readable ROS 2 bag: {type(exc).__name__}: {str(exc)[:160]}"
+        ) from None
+    if len(spec) != 1 or not entries:
+        raise _fail(p, f"not a run qpavoid wrote: no {RUN_TOPIC} or {JOURNAL_TOPIC} in it")
+    return RunRecord(spec[0], entries, np.array(commands))
