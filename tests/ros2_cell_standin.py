@@ -1,12 +1,21 @@
 """Stand-ins for a ROS 2 cell's other processes, for the live tests and the hop benchmark
 (issue 47): run as ``python tests/ros2_cell_standin.py camera|arm ...``.
 
-``camera``: the Azure Kinect ROS driver. A scenario's person (``test1``'s) filmed by the
-calibrated sensor's simulated camera (:func:`~qpavoid.loop.sender.sensor_frames`: the
-format's joints, noise, frame rate), in the camera's frame, published as the driver's
-``bodyPublisherThread`` does (docs/ros2.md §2): one ``visualization_msgs/MarkerArray`` per
-body frame on the sensor's topic, ids body × 100 + joint (the k4abt body id starts at 1),
-``depth_camera_link``, metres, reliable keep last 1, an empty array when nobody is seen.
+``camera``: the body-tracking driver of the calibrated sensor's format. A scenario's
+person (``--scenario``: ``test1``, ``random:SEED``, ... as ``qpavoid run`` names them)
+filmed by the sensor's simulated camera (:func:`~qpavoid.loop.sender.sensor_frames`: the
+format's joints, noise, frame rate), in the camera's frame, published on the sensor's
+topic, reliable keep last 1, as its driver does (docs/ros2.md §2):
+
+* ``k4abt``: the Azure Kinect ROS driver's ``bodyPublisherThread``, one
+  ``visualization_msgs/MarkerArray`` per body frame, ids body × 100 + joint (the k4abt
+  body id starts at 1), ``depth_camera_link``, metres, an empty array when nobody is seen;
+* ``zed_body_34`` / ``zed_body_38``: the ZED ROS 2 wrapper's ``processBodies``, one
+  ``zed_msgs/ObjectsStamped`` per body frame, an ``Object`` per body (its keypoints in the
+  first slots of ``skeleton_3d``, metres, ROS axes: x forward, y left, z up; a joint not
+  seen NaN; ``tracking_state`` OK while any joint is tracked, else SEARCHING; the
+  format's ``body_format``), no object when nobody is seen.
+
 The motion's time 0 is the wall time ``--start + --lead`` (before it the person stands in
 its first pose); each frame is stamped with its capture time on the wall clock (the clock
 the run's live source shares) and written its latency later.
@@ -33,12 +42,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from ros2_standin import marker_array
+from ros2_standin import marker_array, objects_stamped, to_ros_axes, zed_object
 
 from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import load_robot
 from qpavoid.control.task import default_task
 from qpavoid.sensing.calibration_file import load_calibration
+from qpavoid.sensing.ros2_bodies import driver_of
 from qpavoid.sensing.ros2_cell import (
     dds_message,
     load_cell,
@@ -48,11 +58,12 @@ from qpavoid.sensing.ros2_cell import (
 )
 from qpavoid.sensing.ros2_types import dds_topic, dds_type, need, to_cdr
 
-MA = "visualization_msgs/msg/MarkerArray"
 JS = "sensor_msgs/msg/JointState"
 CMD = "std_msgs/msg/Float64MultiArray"
 #: The Azure Kinect driver's first body id (k4abt numbers bodies from 1).
 K4ABT_FIRST_ID = 1
+#: zed_msgs/Object.tracking_state: the body tracked, or its trajectory estimated.
+ZED_OK, ZED_SEARCHING = 1, 2
 
 
 class HeldStart:
@@ -95,36 +106,69 @@ def _endpoint(dp, distribution: str, topic: str, name: str, kind: str, reliable:
     return need("cyclonedds.sub").DataReader(dp, topic_, qos=_qos(reliable, depth))
 
 
+def _sensor(args, calibration) -> str:
+    """The sensor filmed: ``--sensor``, else the calibration's only one."""
+    if args.sensor:
+        return args.sensor
+    if len(calibration.names) != 1:
+        raise SystemExit(f"camera: give --sensor, one of {', '.join(calibration.names)}")
+    return calibration.names[0]
+
+
+def _message(fmt: str, t: float, bodies: dict[int, tuple[np.ndarray, np.ndarray]]):
+    """The driver's message of one body frame captured at wall time ``t``: bodies are
+    body number -> (joints (J, 3) in the format's camera frame, m, NaN where not seen;
+    their states)."""
+    driver = driver_of(fmt)
+    if driver.marker_id_stride:  # the Azure Kinect ROS driver
+        return marker_array(t, {K4ABT_FIRST_ID + b: j for b, (j, _) in bodies.items()})
+    assert driver.body_format is not None
+    objects = [
+        zed_object(
+            b,
+            to_ros_axes(fmt, joints),
+            driver.body_format[fmt],
+            ZED_OK if (state == 2).any() else ZED_SEARCHING,
+        )
+        for b, (joints, state) in bodies.items()
+    ]
+    return objects_stamped(t, objects)
+
+
 def camera_messages(args, distribution: str) -> list[tuple[float, bytes]]:
     """(send wall time, CDR) of every message, made before the first is due."""
     from qpavoid.loop.sender import sensor_frames, sensor_latency_s
     from qpavoid.scenarios.motions import load_motion
 
     calibration = load_calibration(args.sensors)
+    sensor = _sensor(args, calibration)
+    fmt = calibration[sensor].format
+    kind = driver_of(fmt).message
     robot = load_robot(args.robot)
     motion = HeldStart(load_motion(robot, args.scenario), args.lead)
-    latency = sensor_latency_s(calibration, args.sensor)
-    rate = calibration[args.sensor].skeleton.sensor.frame_rate_hz
-    frames: dict[float, dict[int, np.ndarray]] = {}
-    for f in sensor_frames(motion, calibration, args.sensor, args.seconds):
-        joints = np.where(f.state[:, None] > 0, f.joints, np.nan)  # not seen: no marker
-        frames.setdefault(f.t, {})[K4ABT_FIRST_ID + f.body] = joints
+    latency = sensor_latency_s(calibration, sensor)
+    rate = calibration[sensor].skeleton.sensor.frame_rate_hz
+    frames: dict[float, dict[int, tuple[np.ndarray, np.ndarray]]] = {}
+    for f in sensor_frames(motion, calibration, sensor, args.seconds):
+        joints = np.where(f.state[:, None] > 0, f.joints, np.nan)  # not seen: no joint
+        frames.setdefault(f.t, {})[f.body] = (joints, f.state)
     out = []
     for k in range(int(args.seconds * rate)):
         t = k / rate
-        bodies = frames.get(t, {})
-        message = marker_array(args.start + t, bodies)
-        out.append((args.start + t + latency, to_cdr(distribution, message, MA)))
+        message = _message(fmt, args.start + t, frames.get(t, {}))
+        out.append((args.start + t + latency, to_cdr(distribution, message, kind)))
     return out
 
 
 def run_camera(args) -> int:
     cell = load_cell(args.cell)
     calibration = load_calibration(args.sensors)
-    topic = calibration[args.sensor].topic
+    sensor = _sensor(args, calibration)
+    topic = calibration[sensor].topic
+    kind = driver_of(calibration[sensor].format).message
     messages = camera_messages(args, cell.distribution)
     dp = participant(cell.domain_id)
-    w = _endpoint(dp, cell.distribution, topic, MA, "writer", True)  # the driver's QoS
+    w = _endpoint(dp, cell.distribution, topic, kind, "writer", True)  # the driver's QoS
     stop = _stop_flag()
     print(f"camera: {len(messages)} messages on {topic}", flush=True)
     sent = 0
@@ -229,9 +273,9 @@ def main(argv=None) -> int:
     cam = sub.add_parser("camera")
     cam.add_argument("--cell", required=True)
     cam.add_argument("--sensors", required=True)
-    cam.add_argument("--sensor", default="femto")
+    cam.add_argument("--sensor", default="", help="default: the calibration's only one")
     cam.add_argument("--robot", default="iiwa14")
-    cam.add_argument("--scenario", default="test1")
+    cam.add_argument("--scenario", default="test1", help="test1, random:SEED, ...")
     cam.add_argument("--start", type=float, required=True, help="wall time of frame 0, s")
     cam.add_argument("--lead", type=float, default=0.0, help="s before the person moves")
     cam.add_argument("--seconds", type=float, default=30.0)
