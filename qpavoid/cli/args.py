@@ -136,12 +136,25 @@ def package_version() -> str:
         return __version__
 
 
+class Verdict(str):
+    """A command's text with the exit status it ends with (``qpavoid check``: 1 when the
+    arm will stop), for scripts."""
+
+    status: int = 0
+
+    def __new__(cls, text: str, status: int) -> Verdict:
+        out = super().__new__(cls, text)
+        out.status = status
+        return out
+
+
 def run_command(command: Callable[[], str]) -> int:
-    """Run a command and print its text: status 0. Anything else is one line on standard
-    error: bad input or a file error 2, a bug 2 (``QPAVOID_DEBUG=1`` raises it), Ctrl-C
-    130, SIGTERM 143 (the first of them ends the command, and the process: later ones
-    are ignored, :func:`~qpavoid.core.signals.stops_raise`), standard output closed
-    (``| head`` done) 1."""
+    """Run a command and print its text: status 0 (a :class:`Verdict`'s own). Anything
+    else is one line on standard error: bad input or a file error 2, a bug 2
+    (``QPAVOID_DEBUG=1`` raises it), Ctrl-C 130, SIGTERM 143 (the first of them ends the
+    command, and the process: later ones are ignored,
+    :func:`~qpavoid.core.signals.stops_raise`), standard output closed (``| head`` done)
+    1."""
     received: list[int] = []
     try:
         with stops_raise() as received:
@@ -172,7 +185,7 @@ def run_command(command: Callable[[], str]) -> int:
     except BrokenPipeError:  # the reader is gone: nothing more to say, nor at exit
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 1
-    return 0
+    return text.status if isinstance(text, Verdict) else 0
 
 
 def _fail(line: str, status: int) -> int:

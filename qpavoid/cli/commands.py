@@ -42,6 +42,7 @@ from qpavoid.cli.args import (
 )
 from qpavoid.cli.bench import add_bench_command
 from qpavoid.cli.campaign import add_campaign_command
+from qpavoid.cli.check import add_check_command
 from qpavoid.cli.latency import add_latency_command
 from qpavoid.cli.robot import add_robot_command
 from qpavoid.cli.sensors import add_sensor_commands
@@ -237,6 +238,7 @@ def build_parser() -> Parser:
     cmp.set_defaults(parser=cmp)
     add_sensor_commands(sub)
     add_latency_command(sub)
+    add_check_command(sub)
     add_campaign_command(sub)
     add_bench_command(sub)
     add_view_command(sub)
