@@ -12,12 +12,14 @@ import numpy as np
 import pytest
 
 from qpavoid.arm.ik import inverse_kinematics
+from qpavoid.arm.model import load_robot
 from qpavoid.control.analytic import AnalyticController
 from qpavoid.control.qp import QPController
 from qpavoid.core.errors import ArmError
 from qpavoid.drive.interface import Arm, ArmState
 from qpavoid.drive.limits import CommandCheck, CommandLimits
 from qpavoid.drive.simulated import SimulatedArm
+from qpavoid.drive.stop_ramp import ramp_to_rest
 from qpavoid.drive.watchdog import Watchdog
 from qpavoid.loop.simulation import SimConfig, simulate
 from qpavoid.loop.timing import LoopTiming, StallCheck
@@ -216,6 +218,48 @@ def test_a_loop_that_stalls_restarts_the_arm_from_rest(robot):
     a_dt = np.array([dict(robot.arm.max_acceleration_radps2)[n] for n in robot.joint_names])
     assert np.all(np.abs(arm.sent[k]) <= a_dt * 0.002 * (1 + 1e-9))  # from rest
     assert within_limits(robot, arm.sent).total() == 0
+
+
+@pytest.mark.slow  # real time: 4 s of wall clock
+def test_an_arm_that_holds_its_last_command_is_ramped_to_rest_by_the_watchdog():
+    """A ros2_control velocity controller holds the last command until the next: when the
+    loop stands still for 0.5 s, the watchdog's stop is the braking ramp (from the last two
+    commands, within the limits), and the loop starts again from rest after it. Every
+    command the arm got, the loop's and the watchdog's, keeps the limits (a helper's run
+    through the ROS 2 stand-ins saw a step to zero of 2.4 times an acceleration limit)."""
+    robot = load_robot("panda")  # jerk-limited: a step to rest breaks its jerk limit
+    ctrl, q0 = start(robot)
+    step, calls = ctrl.step, []
+
+    def stalling_step(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1600:  # moving fast
+            time.sleep(0.5)
+        return step(*args, **kwargs)
+
+    class HoldingArm(RecordingArm):
+        holds_command_s = None  # until the next command: only a stop ends it
+
+        def __init__(self, robot, q0):
+            super().__init__(robot, q0)
+            self.hold_s = 1e9
+
+        def stop(self) -> None:
+            self.stopped += 1
+            last = self.sent[-1] if self.sent else np.zeros(robot.nv)
+            before = self.sent[-2] if len(self.sent) > 1 else np.zeros(robot.nv)
+            ramp_to_rest(robot, CommandLimits.of(robot, 0.002), (last, before), self.send)
+
+    ctrl.step = stalling_step
+    arm = HoldingArm(robot, q0)
+    res = simulate(ctrl, make_scenario("free", robot), SimConfig(max_time_s=4.2), arm=arm)
+    m = res.metrics
+    assert m["watchdog_fired"] and m["loop"]["loop_stalls"] == 1
+    assert arm.stopped >= 2  # the watchdog's, and the end of the run's
+    moving = np.abs(np.array(arm.sent)).max(axis=1)
+    j_dt2 = min(dict(robot.arm.max_jerk_radps3).values()) * 0.002**2
+    assert moving[1550:1600].max() > j_dt2  # fast enough that a step to rest breaks it
+    assert within_limits(robot, arm.sent).total() == 0, within_limits(robot, arm.sent).worst
 
 
 @pytest.mark.slow  # real time: seconds of wall clock

@@ -6,7 +6,8 @@ published reliable, as the controller subscribes).
 ros2_controllers' velocity controller has **no timeout**: it holds the last command until
 the next. The loop's :class:`~qpavoid.loop.plants.DrivenArm` ramps to rest on every exit
 path the process reaches (the goal, Ctrl-C, SIGTERM, an error, a lost camera) and then
-calls :meth:`Ros2Arm.stop` (zeros, sent twice); a *killed* process sends nothing, and the
+calls :meth:`Ros2Arm.stop` (a braking ramp within the arm's limits, then zeros, sent
+twice; the loop's watchdog calls it too); a *killed* process sends nothing, and the
 arm keeps its last velocity unless the arm side has a watchdog (docs/ros2.md §8).
 
 At connect (:meth:`Ros2Arm.connect`): the command topic must have a subscriber within the
@@ -30,6 +31,7 @@ from qpavoid.arm.model import Robot
 from qpavoid.core.errors import ArmError, InputError
 from qpavoid.drive.interface import ArmState
 from qpavoid.drive.limits import CommandLimits
+from qpavoid.drive.stop_ramp import ramp_to_rest
 from qpavoid.sensing.dds_input import check_trust
 from qpavoid.sensing.ros2_cell import Cell, participant, reader, take_raw, writer
 from qpavoid.sensing.ros2_types import dds_type, need, stamp_s
@@ -58,6 +60,11 @@ class Ros2Arm:
         The explicit opt-in to take the arm's state from the ROS graph.
     """
 
+    #: How long the arm holds a command on its own before it brakes, s: None, the
+    #: controller holds the last command until the next (the loop's watchdog stops it,
+    #: :meth:`stop`).
+    holds_command_s: float | None = None
+
     def __init__(self, robot: Robot, cell: Cell, period_s: float, trust_ros_graph: bool = False):
         check_trust(trust_ros_graph, cell.domain_id)
         arm = cell.arm
@@ -77,6 +84,10 @@ class Ros2Arm:
         self._to_controller = np.array([self.joint_names.index(j) for j in order])
         self.limits = CommandLimits.of(robot, period_s)
         self.period_s, self.cell = period_s, cell
+        self._robot = robot
+        n = len(self.joint_names)
+        self._sent = (np.zeros(n), np.zeros(n))  # the last two commands published
+        self._sending = threading.RLock()  # a stop's ramp and a send never interleave
         self.counters: Counter[str] = Counter()
         self._dp = participant(cell.domain_id)
         self._states = reader(
@@ -212,19 +223,29 @@ class Ros2Arm:
         """Publish ``dq`` (rad/s, the description's joints) in the controller's order."""
         if self.closed:
             raise ArmError("the ROS 2 arm is closed", reason="closed")
-        values = np.asarray(dq, dtype=float)[self._to_controller]
+        u = np.asarray(dq, dtype=float)
+        values = u[self._to_controller]
         if not np.isfinite(values).all():
             raise ArmError(f"a command that is not finite: {values}", reason="command")
-        try:
-            self._commands.write(self._cmd(layout=self._layout, data=values.tolist()))
-        except Exception as exc:
-            raise ArmError(
-                f"cannot publish on {self.cell.arm.commands}: {exc}", reason="dds"
-            ) from None
+        with self._sending:
+            try:
+                self._commands.write(self._cmd(layout=self._layout, data=values.tolist()))
+            except Exception as exc:
+                raise ArmError(
+                    f"cannot publish on {self.cell.arm.commands}: {exc}", reason="dds"
+                ) from None
+            self._sent = (u.copy(), self._sent[0])
 
     def stop(self) -> None:
-        """Command rest: zeros, twice (the controller holds what it last got)."""
-        if not self.closed:
+        """Bring the arm to rest: a braking ramp from the last two commands, one a period,
+        within the arm's acceleration and jerk limits (:meth:`CommandRamp.brake
+        <qpavoid.control.smoothing.CommandRamp.brake>`), then zeros, twice. The controller
+        holds what it last got, and a step to zero would break the limits the loop keeps
+        (a ramp of at most a few tenths of a second: the watchdog calls it too)."""
+        if self.closed:
+            return
+        with self._sending:
+            ramp_to_rest(self._robot, self.limits, self._sent, self.send)
             zero = np.zeros(len(self.joint_names))
             self.send(zero)
             self.send(zero)

@@ -47,6 +47,10 @@ class Watchdog:
         """A command was sent now."""
         self._last = time.monotonic()
 
+    def silent_s(self) -> float:
+        """How long since the last :meth:`kick`, s."""
+        return time.monotonic() - self._last
+
     def _watch(self) -> None:
         fired_after: float | None = None  # the kick the last silence followed
         while not self._done.wait(self.timeout_s / 4.0):

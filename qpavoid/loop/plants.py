@@ -30,6 +30,7 @@ May import: the stages above the loop (core to control), the drive interface.
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -254,8 +255,17 @@ class DrivenArm(_RealTime):
         super().__init__(robot, dt, checked, wall, interrupt, timing)
         self.arm, self.max_time_s, self.watchdog_s = arm, max_time_s, watchdog_s
         self.stall = StallCheck(stall_timeout_s)
-        self.dog = Watchdog(watchdog_s, arm.stop)
-        self.held = _Held(watchdog_s, controller, checked)  # the arm's hold of the last command
+        # the watchdog stops the arm between two sends, never during one (the loop checks
+        # whether it did, then sends, under the same lock: a send never continues a stream
+        # the watchdog has ended)
+        self.sending = threading.Lock()
+        self.dog = Watchdog(watchdog_s, self._silence)
+        self.stops = 0  # the watchdog's stops of the arm
+        # the arm's own hold of a command (franky's, a SimulatedArm's), else none: a
+        # ros2_control velocity controller holds the last command until the next, and only
+        # the watchdog's stop ends it
+        hold = getattr(arm, "holds_command_s", watchdog_s)
+        self.held = _Held(hold, controller, checked, lambda: self.stops)
         self.watching = False  # the watchdog starts with the first command (not the warm-up)
         self.measured = np.zeros(robot.nv)  # the arm's reported velocity
         self.arm_failed = False  # the arm failed, or refused a command: no ramp to rest
@@ -308,14 +318,16 @@ class DrivenArm(_RealTime):
         # the deadline is judged at that send, the wait included, and everything is decided
         # before waiting, so that the send follows the wait at once
         send_at = max(time.perf_counter(), self._sending + self.dt)
-        if late := self.timing.late(self.began, send_at):
-            why = f"missed deadline ({late * 1e3:.1f} ms late)"
-            if (gap := self.held.ran_out(send_at)) is not None:  # so late that the arm
-                self.timing.stalled(gap)  # stopped on its own meanwhile: at rest
-                cmd = controller.brake(why)
-            else:  # the arm still follows the last command: this is a step from it
+        late = self.timing.late(self.began, send_at)
+        why = f"missed deadline ({late * 1e3:.1f} ms late)" if late else ""
+        with self.sending:
+            if (gap := self.held.ran_out(send_at)) is not None:  # the arm stopped on its
+                self.timing.stalled(gap)  # own, or the watchdog stopped it: from rest
+                cmd = controller.brake(why or "the arm came to rest meanwhile")
+            elif late:  # the arm still follows the last command: this is a step from it
                 cmd = controller.brake(why, instead=True)
-        if failed := self._send(cmd.dq, send_at, moves_schedule=True):
+            failed = self._send(cmd.dq, send_at, moves_schedule=True)
+        if failed:
             self.ended_by, self.arm_failed = failed, True
             refused = failed.startswith("command")  # never sent (the arm would fault): logged
             return (cmd, self.measured) if refused else None
@@ -359,15 +371,25 @@ class DrivenArm(_RealTime):
         meanwhile, it stopped on its own: the ramp starts from rest."""
         for _ in range(int(10.0 / self.dt)):
             send_at = max(time.perf_counter(), self._sending + self.dt)
-            self.held.ran_out(send_at)
-            cmd = controller.brake("end of run")
-            if failed := self._send(cmd.dq, send_at):
+            with self.sending:
+                self.held.ran_out(send_at)
+                cmd = controller.brake("end of run")
+                failed = self._send(cmd.dq, send_at)
+            if failed:
                 return failed
             if self.watching:
                 self.dog.kick()
             if not np.any(cmd.dq):
                 return "at rest"
         return "at rest"
+
+    def _silence(self) -> None:
+        """The watchdog's call: the loop has sent nothing for ``watchdog_s``; stop the arm
+        unless a send came meanwhile (checked under the sending lock)."""
+        with self.sending:
+            if self.dog.silent_s() > self.watchdog_s:
+                self.arm.stop()
+                self.stops += 1
 
     def close(self) -> None:
         if self.watching:
@@ -405,26 +427,41 @@ class _Held:
     """When the last command went to the arm, and whether the arm still follows it.
 
     An arm holds a command for ``hold_s`` (franky's hold, the watchdog's timeout,
-    :class:`~qpavoid.drive.simulated.SimulatedArm`'s ``hold_s``), then brakes to rest on its
-    own. A command sent after that is the first of a new stream, from rest: the
+    :class:`~qpavoid.drive.simulated.SimulatedArm`'s ``hold_s``; None: until the next, as a
+    ros2_control velocity controller does), then brakes to rest on its own; or the
+    watchdog stops it (``stops`` counts it). A command sent after that is the first of a
+    new stream, from rest: the
     controller's ramp and the command check start again from rest, together. Judged from
     the time of the last *send*, as the arm judges it, not from when a tick began: a late
     tick sends long after it began, and the arm still follows that command after it.
     """
 
-    def __init__(self, hold_s: float, controller: Controller, checked: CommandCheck):
+    def __init__(
+        self,
+        hold_s: float | None,
+        controller: Controller,
+        checked: CommandCheck,
+        stops: Callable[[], int],
+    ):
         self.hold_s, self.controller, self.checked = hold_s, controller, checked
+        self.stops = stops  # how many times the watchdog has stopped the arm
         self.at: float | None = None  # when the command the arm holds was sent, if one
         self.last = -math.inf  # when the last command was sent (the next: a period later)
+        self._stops_at_send = 0
 
     def sent(self, now: float) -> None:
         """A command went to the arm at ``now`` (wall clock, s)."""
         self.at = self.last = now
+        self._stops_at_send = self.stops()
 
     def ran_out(self, now: float) -> float | None:
-        """If the arm's hold of the last command ran out by ``now``: the controller and
-        the check then start from rest; the time since that command, s (else None)."""
-        if self.at is None or now - self.at <= self.hold_s:
+        """If the arm's hold of the last command ran out by ``now`` (its own hold, or the
+        watchdog stopped it): the controller and the check then start from rest; the time
+        since that command, s (else None)."""
+        if self.at is None:
+            return None
+        stopped = self.stops() != self._stops_at_send
+        if not stopped and (self.hold_s is None or now - self.at <= self.hold_s):
             return None
         gap, self.at = now - self.at, None
         self.controller.at_rest()
