@@ -22,7 +22,6 @@ The view has no login, so it answers only what the operator's own browser would 
 
 from __future__ import annotations
 
-import copy
 import secrets
 import threading
 from functools import partial
@@ -108,8 +107,7 @@ class LiveView:
     ):
         _check_loopback(address)
         self.human = human or KinectHuman()
-        self.robot = copy.copy(robot)
-        self.robot.data = robot.model.createData()  # the server's threads compute on their own
+        self.robot = robot.for_thread()  # the server's threads compute on their own
         self.metrics = {"distance_method": method}
         self._latest: dict[str, Any] | None = None
         self._handed = 0

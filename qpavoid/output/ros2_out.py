@@ -74,7 +74,9 @@ class Ros2Outputs:
     """
 
     def __init__(self, cell: Cell, robot: Robot, controller: Controller, frame_id: str = "world"):
-        self.cell, self.robot, self.frame_id = cell, robot, frame_id
+        # its thread computes the capsules in Pinocchio data of its own (the loop's robot
+        # computes the ticks: one data shared changed the run's commands)
+        self.cell, self.robot, self.frame_id = cell, robot.for_thread(), frame_id
         self.human = controller.human
         self.published = self.errors = 0
         self._dp = participant(cell.domain_id)
