@@ -7,6 +7,10 @@
   :class:`~qpavoid.sensing.dds_input.DdsListener` takes it (the wall time its reading
   thread takes the sample, before decoding). Reported from the stamp (the serialization
   of a Python driver included) and from the write (the DDS hop).
+* **state to command**: the closed loop on the stand-in: the newest JointState read, a
+  real controller tick, its command sent; from the state's stamp to the stand-in's take
+  of that command, against the bar "no command later than the arm's period plus the
+  tick" (counted, never asserted).
 * **command hop**: :meth:`Ros2Arm.send <qpavoid.drive.ros2_arm.Ros2Arm.send>` at 500 Hz
   to the kinematic ros2_control stand-in (tests/ros2_cell_standin.py, a 1 kHz loop that
   takes what came each millisecond, as a controller's update does): its receive time
@@ -145,6 +149,68 @@ def command_hop(domain: int, n: int) -> tuple[np.ndarray, float]:
     return data["t"][mine] - np.array(sent)[index[mine]], rate
 
 
+def state_to_command(domain: int, n: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """The closed loop on the stand-in arm: each tick reads the newest JointState
+    (:meth:`Ros2Arm.read`), runs a real controller tick (the analytic controller, the
+    iiwa, test1's person near the path) and sends its command. Per command: from the
+    state's stamp (the arm's publication) to the arm's take of the command, and the tick's
+    own time, s; the stand-in's rate, Hz."""
+    from qpavoid.arm.ik import inverse_kinematics
+    from qpavoid.arm.model import load_robot
+    from qpavoid.control.analytic import AnalyticController
+    from qpavoid.drive.ros2_arm import Ros2Arm
+    from qpavoid.human.frames import HumanFrame
+    from qpavoid.scenarios.generated import make_scenario
+    from qpavoid.sensing.ros2_cell import ArmTopics, Cell
+
+    robot = load_robot("iiwa14")
+    controller = AnalyticController(robot)
+    person = make_scenario("test1", robot)
+    q0 = inverse_kinematics(robot, controller.path.reference(0.0)[0])
+    with tempfile.TemporaryDirectory() as tmp:
+        cell_file = Path(tmp) / "cell.toml"
+        cell_file.write_text(f'distribution = "humble"\ndomain_id = {domain}\n')
+        record = Path(tmp) / "arm.npz"
+        command = [sys.executable, str(STANDIN), "arm", "--cell", str(cell_file)]
+        command += ["--q0", ",".join(repr(float(v)) for v in q0)]
+        command += ["--seconds", "60", "--record", str(record)]
+        arm_proc = subprocess.Popen(
+            command,
+            env={**os.environ, "CYCLONEDDS_URI": LOOPBACK},
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        cell = Cell(domain_id=domain, arm=ArmTopics(subscriber_timeout_s=20.0))
+        arm = Ros2Arm(robot, cell, 0.002, True)
+        arm.connect()
+        stamps, ticks, sent = [], [], []
+        next_due = time.perf_counter()
+        for k in range(n):
+            state = arm.read()
+            t0 = time.perf_counter()
+            frame = HumanFrame(*person.frame_at(0.002 * k))
+            cmd = controller.step(state.q, frame, None, 0.002 * k, 0.07)
+            dq = cmd.dq + 1e-9 * (k + 1)  # each command told apart by its last digits
+            ticks.append(time.perf_counter() - t0)
+            stamps.append(state.time_s)
+            sent.append(dq[0])
+            arm.send(dq)
+            next_due += 0.002
+            time.sleep(max(next_due - time.perf_counter(), 0.0))
+        arm.stop()
+        arm.close()
+        time.sleep(0.3)
+        arm_proc.terminate()
+        out = arm_proc.communicate(timeout=20)[0]
+        data = np.load(record)
+    rate = float(out.split(" states at ")[1].split(" Hz")[0])
+    index = {float(v): i for i, v in enumerate(sent)}
+    taken = [(t, index.get(float(c[0]))) for t, c in zip(data["t"], data["commands"], strict=True)]
+    mine = [(t, i) for t, i in taken if i is not None]
+    delay = np.array([t - stamps[i] for t, i in mine])
+    return delay, np.array([ticks[i] for _, i in mine]), rate
+
+
 def summary(hops: np.ndarray) -> dict[str, float]:
     ms = 1e3 * hops
     return {
@@ -170,6 +236,14 @@ def main() -> None:
     camera, dds = summary(stamped), summary(written)
     hops, rate = command_hop(domain + 1, 5 * args.messages)
     command = summary(hops)
+    delay, ticks, _ = state_to_command(domain + 2, 5 * args.messages)
+    period = 1.0 / rate
+    over = delay - (period + ticks)  # beyond one arm period and the tick's own time
+    closed = summary(delay) | {
+        "tick_p99_ms": round(float(np.percentile(ticks, 99)) * 1e3, 3),
+        "later_than_period_plus_tick": int(np.sum(over > 0)),
+        "worst_excess_ms": round(float(over.max()) * 1e3, 3),
+    }
     load = os.getloadavg()[0]
     result = {
         "load": load,
@@ -177,6 +251,7 @@ def main() -> None:
         "camera_hop": camera,  # from the stamp: the driver's serialization included
         "camera_dds_hop": dds,  # from the write: DDS and the reading thread's wake
         "command_hop": command,
+        "state_to_command": closed,  # the closed loop: the state's stamp to the take
         "standin_rate_hz": rate,
     }
     print(
@@ -189,6 +264,13 @@ def main() -> None:
         f"command hop (Ros2Arm.send to the {rate:g} Hz ros2_control stand-in's take, 500 Hz): "
         f"median {command['median_ms']} ms, p99 {command['p99_ms']} ms, "
         f"max {command['max_ms']} ms ({command['n']} commands)"
+    )
+    print(
+        f"state to command (the arm's JointState stamp to its take of the command computed "
+        f"from it, a controller tick between): median {closed['median_ms']} ms, p99 "
+        f"{closed['p99_ms']} ms, max {closed['max_ms']} ms; later than the arm's period "
+        f"({1e3 * period:.2f} ms) + the tick: {closed['later_than_period_plus_tick']} of "
+        f"{closed['n']} (worst by {closed['worst_excess_ms']} ms)"
     )
     Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
     print(f"load {load:.1f} on {os.cpu_count()} cores; wrote {args.out}")
