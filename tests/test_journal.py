@@ -48,6 +48,23 @@ def test_a_frame_entry_gives_the_frame_back():
     assert isinstance(nobody, People) and nobody.ids == () and nobody.frames == ()
 
 
+def test_the_same_frame_handed_anew_is_kept_once():
+    """A live source hands a new People each tick; kept again only when its content (ids,
+    lags, joints, states) changes."""
+    rng = np.random.default_rng(2)
+    joints = rng.normal(size=(25, 3))
+
+    def people(dx: float, lag: float = 0.01) -> People:
+        return People((4,), (HumanFrame(joints + dx, np.full(25, 2, np.int8)),), (lag,))
+
+    journal = Journal()
+    for frame in (people(0.0), people(0.0), people(0.0), people(0.001), people(0.001, 0.02)):
+        journal.step(np.zeros(7), frame, 0.0, 0.05, None, 1)
+    kinds = [e[0] for e in journal.entries]
+    assert kinds.count(KINDS["frame"]) == 3 and kinds.count(KINDS["step"]) == 5
+    assert [int(e[1]) for e in journal.entries if e[0] == KINDS["step"]] == [0, 0, 0, 1, 2]
+
+
 def test_a_run_is_reproduced_to_the_bit_and_its_journal_keeps_each_frame_once():
     spec = RunSpec(scenario="test1", controller="qp", safety="ssm", max_time_s=3.0, rate_hz=100)
     run = simulate_one(spec)
