@@ -55,7 +55,11 @@ def add_check_command(sub: argparse._SubParsersAction) -> None:
         help="the camera's latency, s, as qpavoid latency measured it (default: its format's)",
     )
     check.add_argument(
-        "--safety", choices=SAFETY_MODES, default="ssm", help="the safety mode (default: ssm)"
+        "--safety",
+        choices=[m for m in SAFETY_MODES if m != "pfl"],
+        default="ssm",
+        help="the safety mode (default: ssm; pfl slows near hands instead of holding, which "
+        "the check does not model)",
     )
     check.add_argument("--controller", choices=CONTROLLERS, default="analytic")
     check.add_argument(

@@ -148,6 +148,15 @@ def check_cell(spec: RunSpec) -> CellCheck:
         errors of ``spec`` itself (a task file naming a joint the arm lacks, a latency out
         of range), each one line.
     """
+    if spec.safety == "pfl":
+        raise InputError(
+            "the cell check judges where speed and separation (--safety ssm) or the paper's "
+            "stop rules (paper) hold the arm; under pfl it slows to a hand's contact speed "
+            "instead of holding, which it does not model: check with --safety ssm (the "
+            "head's and trunk's distances are the same)",
+            name="--safety",
+            value=spec.safety,
+        )
     spec = replace(spec, scenario="free", human_file=None, measure_truth=False)
     robot = spec_robot(spec)
     controller = build_controller(spec, robot)
