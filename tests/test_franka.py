@@ -41,9 +41,9 @@ from qpavoid.core.errors import ArmError, InputError, RobotDescriptionError
 from qpavoid.drive import franka
 from qpavoid.drive.connect import parse_arm
 from qpavoid.drive.franka import LOCK_TOLERANCE_RAD, REST_RADPS, FrankaArm, FrankaJoints
+from qpavoid.drive.franka_model import FRANKY, MODEL_FILE, FrankaModel, bundled_models
 from qpavoid.drive.franka_sim import FrankySim
 from qpavoid.drive.interface import Arm, ArmState
-from qpavoid.drive.libfranka import FRANKY, MODEL_FILE, FrankaModel, bundled_models
 
 DT = 0.002  # 500 Hz
 #: The FR3's active joints (fr3_joint3 locked at 0) among its seven.

@@ -29,9 +29,10 @@ import qpavoid
 from qpavoid.arm.model import Robot
 from qpavoid.cli.commands import main
 from qpavoid.core.errors import ArmError, InputError
-from qpavoid.drive import franka_sim, libfranka, panda
+from qpavoid.drive import franka_sim, panda
+from qpavoid.drive.franka_model import PANDA_PY
 from qpavoid.drive.interface import Arm
-from qpavoid.drive.libfranka import PANDA_PY
+from qpavoid.drive.libfranka_connection import refused_versions
 from qpavoid.drive.panda import MAX_STEP_PERIODS, PandaArm
 
 DT = 0.002  # 500 Hz
@@ -466,5 +467,5 @@ def test_panda_python_cannot_speak_to_franky_sim(robot: Robot, addresses: Iterat
 
 def test_the_shared_refusal_text() -> None:
     text = "libfranka: Incompatible library version (server version: 5, library version: 10)."
-    assert libfranka.refused_versions(RuntimeError(text)) == (5, 10)
-    assert libfranka.refused_versions(RuntimeError("libfranka: UDP receive: Timeout")) is None
+    assert refused_versions(RuntimeError(text)) == (5, 10)
+    assert refused_versions(RuntimeError("libfranka: UDP receive: Timeout")) is None

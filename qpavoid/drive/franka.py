@@ -7,7 +7,7 @@ libfranka 0.21, which talks to the arm's controller (or to franky-sim, its simul
 0.21 speaks version 10 of libfranka's protocol, an FR3's on robot system 5.9.0 or later; a
 Panda's controller (versions 2-5, libfranka < 0.10) refuses it, and is driven through
 panda-python instead (:mod:`qpavoid.drive.panda`, ``--arm panda:HOST``). At connect the arm
-is checked against the description (:class:`~qpavoid.drive.libfranka.FrankaModel`): an arm
+is checked against the description (:class:`~qpavoid.drive.franka_model.FrankaModel`): an arm
 that accepts franky-control's libfranka speaks its version, and is refused unless the
 description's ``franka.toml`` lists it (``--robot panda`` answered by an FR3: one line
 naming both); the model the controller names in the URDF it sends (libfranka >= 0.15's
@@ -45,14 +45,10 @@ import numpy as np
 
 from qpavoid.arm.model import Robot
 from qpavoid.core.errors import ArmError, InputError
-from qpavoid.drive.libfranka import (
-    FRANKY,
-    LOCK_TOLERANCE_RAD,
-    REST_RADPS,
-    FrankaJoints,
-    LibfrankaArm,
-    RawState,
-)
+from qpavoid.drive.franka_joints import LOCK_TOLERANCE_RAD, FrankaJoints
+from qpavoid.drive.franka_model import FRANKY
+from qpavoid.drive.libfranka import LibfrankaArm
+from qpavoid.drive.libfranka_state import REST_RADPS, RawState
 from qpavoid.drive.limits import CommandLimits
 
 try:

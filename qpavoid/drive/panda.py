@@ -8,7 +8,7 @@ later), which only libfranka < 0.10 speaks (Franka's compatibility matrix): fran
 "qpavoid[panda]"``; import name ``panda_py``) 1.x's PyPI wheels bundle libfranka 0.9.2,
 version 5. It is imported when a :class:`PandaArm` is made, not before: without it, one
 line names the extra. At connect the arm is checked against the description
-(:class:`~qpavoid.drive.libfranka.FrankaModel`): an arm whose controller speaks another
+(:class:`~qpavoid.drive.franka_model.FrankaModel`): an arm whose controller speaks another
 version (an FR3's 6-10, told by its refusal of libfranka 0.9.2 or by
 ``Robot.server_version()``) is refused in one line naming both.
 
@@ -45,7 +45,9 @@ import numpy as np
 from qpavoid.arm.model import Robot
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import InputError
-from qpavoid.drive.libfranka import PANDA_PY, LibfrankaArm, RawState
+from qpavoid.drive.franka_model import PANDA_PY
+from qpavoid.drive.libfranka import LibfrankaArm
+from qpavoid.drive.libfranka_state import RawState
 from qpavoid.drive.limits import CommandLimits
 
 __all__ = ["MAX_STEP_PERIODS", "PandaArm"]
