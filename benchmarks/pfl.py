@@ -26,7 +26,8 @@ import numpy as np
 
 from qpavoid.experiments.jobs import map_jobs
 from qpavoid.experiments.runs import RunSpec, simulate_one
-from qpavoid.experiments.sweep import SweepSpec, summarize, sweep
+from qpavoid.experiments.sweep import SweepSpec, sweep
+from qpavoid.experiments.sweep_summary import summarize
 
 CONTROLLERS = ("qp", "analytic")
 MODES = ("paper", "ssm", "pfl")

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from qpavoid.experiments.runs import RunSpec, simulate_one
-from qpavoid.experiments.sweep import as_dicts, strike_sweep, summarize
+from qpavoid.experiments.sweep import strike_sweep
+from qpavoid.experiments.sweep_summary import as_dicts, summarize
 
 CONTROLLERS = ("qp", "analytic")
 

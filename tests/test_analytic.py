@@ -13,7 +13,7 @@ from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.control.analytic import AnalyticController, enforce_limits
 from qpavoid.control.path import ArcPath
 from qpavoid.control.tick import ControllerConfig
-from qpavoid.experiments.sweep import check_log
+from qpavoid.experiments.sweep_checks import check_log
 from qpavoid.human.kinect_v2 import JointType
 from qpavoid.human.posture import Operator
 from qpavoid.loop.simulation import SimConfig, simulate

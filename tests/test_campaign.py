@@ -22,7 +22,8 @@ from qpavoid.experiments.campaign import (
     write_campaign,
 )
 from qpavoid.experiments.runs import RunSpec, simulate_one
-from qpavoid.experiments.sweep import StrikeCheck, summarize
+from qpavoid.experiments.sweep_checks import StrikeCheck
+from qpavoid.experiments.sweep_summary import summarize
 from qpavoid.sensing.recording import load_recording
 
 

@@ -18,7 +18,9 @@ from qpavoid.core.errors import InputError
 from qpavoid.distance.methods import distance_method
 from qpavoid.experiments import campaign, sweep
 from qpavoid.experiments.run_spec import RunSpec
-from qpavoid.experiments.sweep import CloseWorkCheck, SweepSpec
+from qpavoid.experiments.sweep import SweepSpec
+from qpavoid.experiments.sweep_checks import CloseWorkCheck
+from qpavoid.experiments.sweep_summary import summarize
 from qpavoid.human.body import KinectHuman
 from qpavoid.scenarios import closework as cw
 from qpavoid.scenarios.generated import (
@@ -184,7 +186,7 @@ def test_a_close_work_sweep_sums_up_safety_and_productivity():
     assert [type(c) for c in checks] == [CloseWorkCheck] * 2
     assert [(c.seed, c.variant) for c in checks] == [(0, "handover"), (1, "rest_near")]
     assert all(not c.reached_goal and c.time_to_goal_s is None for c in checks)  # 2 s only
-    summary = sweep.summarize(checks)
+    summary = summarize(checks)
     assert set(summary) == {
         "runs",
         "runs_moving_in_true_contact",
@@ -249,7 +251,7 @@ def test_the_close_work_summary_counts_what_it_says():
         close_check(2, "rest_near", 20.0, 5.0),
         close_check(3, "handover", 18.0, 3.0, min_true_clearance_moving_m=float("inf")),
     ]
-    s = sweep.summarize(runs)
+    s = summarize(runs)
     assert s["fraction_reaching_goal"] == 0.75 and s["runs_moving_in_true_contact"] == 1
     assert s["time_to_goal_s"] == {"median": 18.0, "mean": 18.0}
     assert s["mean_time_stopped_s"] == 6.0 and s["mean_duration_s"] == 21.0

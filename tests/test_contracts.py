@@ -1,5 +1,5 @@
 """Names earlier issues wrote down still work exactly: the console script's target,
-``import qpavoid.qp``, ``qpavoid.sweep.safety_sweep``, ``qpavoid.cli.main``,
+``import qpavoid.control.qp``, ``qpavoid.cli.main``,
 ``AnalyticConfig(limit_mode, l2_joints)``, ``L2RepulsionTask``, ``load_robot(toml)``."""
 
 from __future__ import annotations
@@ -33,25 +33,22 @@ def test_the_console_script_is_qpavoid_launch_main():
     assert callable(qpavoid.launch.main)
 
 
-def test_the_old_top_level_names_are_the_stages_objects():
+def test_the_top_level_names_are_the_stages_objects():
     import qpavoid.cli
-    import qpavoid.qp
-    import qpavoid.sweep
     from qpavoid.cli.commands import main
     from qpavoid.control.qp import QPController
-    from qpavoid.experiments.sweep import safety_sweep
 
-    assert qpavoid.qp.QPController is QPController is qpavoid.QPController
-    assert qpavoid.sweep.safety_sweep is safety_sweep
+    assert QPController is qpavoid.QPController
     assert qpavoid.cli.main is main
     with pytest.raises(AttributeError):
         qpavoid.cli.nothing  # noqa: B018
 
 
-def test_import_qpavoid_qp_and_robots_in_a_fresh_interpreter():
-    """What the quick start's check runs (``python -P -c "import qpavoid.qp, qpavoid.robots"``)."""
+def test_import_qpavoid_control_qp_and_robots_in_a_fresh_interpreter():
+    """What the quick start's check runs
+    (``python -P -c "import qpavoid.control.qp, qpavoid.robots"``)."""
     done = subprocess.run(
-        [*PYTHON, "-c", "import qpavoid.qp, qpavoid.robots; print('ok')"],
+        [*PYTHON, "-c", "import qpavoid.control.qp, qpavoid.robots; print('ok')"],
         capture_output=True,
         text=True,
         cwd="/",

@@ -6,7 +6,7 @@ import numpy as np
 
 from qpavoid.control.analytic import AnalyticController
 from qpavoid.control.qp import QPController
-from qpavoid.experiments.sweep import braking_ticks
+from qpavoid.experiments.sweep_checks import braking_ticks
 from qpavoid.loop.camera import CameraConfig
 from qpavoid.loop.simulation import SimConfig, simulate
 from qpavoid.scenarios.generated import make_scenario

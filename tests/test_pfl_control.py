@@ -330,7 +330,8 @@ def test_a_body_region_missing_from_the_table_is_refused(robot):
 @pytest.mark.slow
 @pytest.mark.parametrize("controller", ["qp", "analytic"])
 def test_pfl_strikes_touch_no_head_nor_trunk_and_nothing_above_its_limit(controller):
-    from qpavoid.experiments.sweep import strike_sweep, summarize
+    from qpavoid.experiments.sweep import strike_sweep
+    from qpavoid.experiments.sweep_summary import summarize
 
     checks = strike_sweep(range(40), controller, "pfl", workers=2)
     summary = summarize(checks)
@@ -369,7 +370,8 @@ def test_a_push_without_a_fault_is_the_camera_s_latency():
 
 @pytest.mark.slow
 def test_pfl_works_within_reach_where_ssm_waits():
-    from qpavoid.experiments.sweep import SweepSpec, summarize, sweep
+    from qpavoid.experiments.sweep import SweepSpec, sweep
+    from qpavoid.experiments.sweep_summary import summarize
 
     out = {}
     for safety in ("ssm", "pfl"):

@@ -29,7 +29,9 @@ from qpavoid.control.tick import ControllerConfig
 from qpavoid.distance.methods import PointDistance
 from qpavoid.experiments.run_spec import CONTROLLERS, DISTANCES
 from qpavoid.experiments.runs import RunSpec, simulate_one
-from qpavoid.experiments.sweep import check_log, safety_sweep, summarize
+from qpavoid.experiments.sweep import safety_sweep
+from qpavoid.experiments.sweep_checks import check_log
+from qpavoid.experiments.sweep_summary import summarize
 from qpavoid.human.kinect_v2 import JointType
 from qpavoid.loop.simulation import SimConfig, simulate
 from qpavoid.scenarios.generated import make_scenario

@@ -20,7 +20,7 @@ from qpavoid.control.qp import QPController
 from qpavoid.control.smoothing import CommandRamp
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.drive.limits import CommandCheck, CommandLimits
-from qpavoid.experiments.sweep import braking_ticks
+from qpavoid.experiments.sweep_checks import braking_ticks
 from qpavoid.loop.simulation import SimConfig, SimResult, simulate
 from qpavoid.scenarios.generated import make_scenario
 

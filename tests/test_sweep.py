@@ -11,7 +11,9 @@ import pytest
 from qpavoid.cli.commands import build_parser
 from qpavoid.core.errors import InputError, RobotDescriptionError
 from qpavoid.experiments import campaign, sweep
-from qpavoid.experiments.sweep import ApproachCheck, StrikeCheck, SweepSpec
+from qpavoid.experiments.sweep import SweepSpec
+from qpavoid.experiments.sweep_checks import ApproachCheck, StrikeCheck
+from qpavoid.experiments.sweep_summary import summarize
 
 
 def untimed(check: StrikeCheck) -> StrikeCheck:
@@ -36,7 +38,7 @@ def test_bad_settings_are_refused_before_any_run(settings, word):
 
 def test_nothing_to_sum_up_is_an_input_error():
     with pytest.raises(InputError, match="at least one run"):
-        sweep.summarize([])
+        summarize([])
 
 
 def test_the_kind_chooses_the_motion_and_the_check():
@@ -49,8 +51,8 @@ def test_the_kind_chooses_the_motion_and_the_check():
     checks = sweep.sweep(approach, [3], workers=1) + sweep.sweep(strike, [3], workers=1)
     assert [type(c) for c in checks] == [ApproachCheck, StrikeCheck]
     assert [c.seed for c in checks] == [3, 3]
-    assert sweep.summarize(checks[:1])["approaches"] == 1
-    assert sweep.summarize(checks[1:])["runs"] == 1
+    assert summarize(checks[:1])["approaches"] == 1
+    assert summarize(checks[1:])["runs"] == 1
     # the documented callers are the engine's runs
     assert sweep.safety_sweep([3], "analytic", "spheres", 50.0, 1.0, workers=1) == checks[:1]
     (again,) = sweep.strike_sweep(

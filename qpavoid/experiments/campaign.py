@@ -3,7 +3,7 @@ against the truth, on any executor.
 
 A campaign runs ``n`` cases of the sweep engine (:mod:`qpavoid.experiments.sweep`) from seed
 ``seed`` on, each along the whole path (until the goal, or a cap), and sums them up
-(:func:`~qpavoid.experiments.sweep.summarize`). Its *motion* (:data:`MOTIONS`) is
+(:func:`~qpavoid.experiments.sweep_summary.summarize`). Its *motion* (:data:`MOTIONS`) is
 
 ``strikes`` (kind ``"strike"``)
     a hand, or both, driven from rest into every robot set, the shoulder or the base at up
@@ -48,7 +48,9 @@ from qpavoid.core.checks import check_choice
 from qpavoid.core.errors import InputError, RobotDescriptionError, Terminated
 from qpavoid.core.signals import handled_by
 from qpavoid.experiments.run_spec import RunSpec
-from qpavoid.experiments.sweep import CloseWorkCheck, StrikeCheck, SweepSpec, summarize, sweep
+from qpavoid.experiments.sweep import SweepSpec, sweep
+from qpavoid.experiments.sweep_checks import CloseWorkCheck, StrikeCheck
+from qpavoid.experiments.sweep_summary import summarize
 from qpavoid.human.frames import HumanFrame, HumanMotion
 from qpavoid.human.landmarks import format_file
 from qpavoid.output.run_files import staged_output, strict_json
