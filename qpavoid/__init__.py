@@ -23,7 +23,7 @@ import importlib
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the names as type checkers and editors see them
-    from .arm.description import ControlSet
+    from .arm.control_points import ControlSet
     from .arm.ik import inverse_kinematics
     from .arm.model import Kinematics, Robot, load_robot
     from .control.analytic import AnalyticConfig, AnalyticController
@@ -64,7 +64,7 @@ _LAZY = {
     "BodyPart": "human.body",
     "CapsuleDistance": "distance.capsules",
     "Command": "control.tick",
-    "ControlSet": "arm.description",
+    "ControlSet": "arm.control_points",
     "ControllerConfig": "control.tick",
     "DistanceTable": "distance.table",
     "HumanFrame": "human.frames",

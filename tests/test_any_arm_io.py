@@ -13,9 +13,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from qpavoid.arm.description import description_reference, package_entry
+from qpavoid.arm.description import description_reference
 from qpavoid.arm.meshes import collision_geometry, object_vertices
 from qpavoid.arm.model import load_robot
+from qpavoid.arm.urdf import package_entry
 from qpavoid.cli.commands import build_parser, main
 from qpavoid.core.errors import RobotDescriptionError
 from qpavoid.human.body import HumanGeometry, KinectHuman

@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from qpavoid.arm.description import mesh_dirs
 from qpavoid.arm.fit import fit_description
 from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import load_robot
 from qpavoid.arm.reach import arm_reach, shoulder_centre
+from qpavoid.arm.urdf import mesh_dirs
 from qpavoid.control.task import default_task
 from qpavoid.experiments.campaign import campaign_spec
 from qpavoid.experiments.run_spec import RunSpec

@@ -18,7 +18,6 @@ from conftest import seeds
 
 import qpavoid
 from qpavoid.arm.coverage import coverage
-from qpavoid.arm.description import mesh_dirs
 from qpavoid.arm.fit import (
     capsule_volume,
     fit_capsule,
@@ -26,6 +25,7 @@ from qpavoid.arm.fit import (
     segment_distances,
     sphere_centres,
 )
+from qpavoid.arm.urdf import mesh_dirs
 from qpavoid.cli.commands import main
 
 IIWA_URDF = Path(str(resources.files("qpavoid.robots") / "iiwa14" / "iiwa14.urdf"))

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from qpavoid.arm.description import Roles
+from qpavoid.arm.roles import Roles
 from qpavoid.core.errors import InputError
 from qpavoid.laws._kernels import NOT_FINITE, limit_crossed
 from qpavoid.laws.avoidance import (

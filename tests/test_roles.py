@@ -20,7 +20,8 @@ import pytest
 from conftest import ideal_sim, paper_config, random_q
 
 import qpavoid
-from qpavoid.arm.description import CHECK_TOLERANCE, LWA
+from qpavoid.arm.frames import LWA
+from qpavoid.arm.model_checks import CHECK_TOLERANCE
 from qpavoid.control.analytic import AnalyticController
 from qpavoid.control.qp import QPController
 from qpavoid.control.tick import ControllerConfig

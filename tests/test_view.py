@@ -22,8 +22,8 @@ from conftest import PYTHON
 from PIL import Image
 
 import qpavoid
-from qpavoid.arm.description import Roles
 from qpavoid.arm.meshes import collision_geometry
+from qpavoid.arm.roles import Roles
 from qpavoid.cli.commands import main
 from qpavoid.control.path import ArcPath
 from qpavoid.experiments.runs import RunSpec, run_one

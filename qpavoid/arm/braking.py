@@ -51,7 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from qpavoid.arm.description import ArmDynamics
+from qpavoid.arm.dynamics import ArmDynamics
 from qpavoid.arm.model import Kinematics, Robot
 from qpavoid.core.errors import InputError
 

@@ -2,7 +2,8 @@
 
 A number within its bounds, a table that must be there, no unknown key: each refusal a
 :class:`~qpavoid.core.errors.RobotDescriptionError` naming the file, the key as the file
-says it and the offending value (:mod:`qpavoid.arm.description`, :mod:`qpavoid.arm.dynamics`).
+says it and the offending value (:mod:`qpavoid.arm.control_points`, :mod:`qpavoid.arm.urdf`,
+:mod:`qpavoid.arm.joints`, :mod:`qpavoid.arm.roles`, :mod:`qpavoid.arm.dynamics`).
 """
 
 from __future__ import annotations

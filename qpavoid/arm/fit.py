@@ -19,8 +19,9 @@ import pinocchio as pin
 from scipy.optimize import minimize, minimize_scalar
 from scipy.spatial import ConvexHull, QhullError
 
-from qpavoid.arm.description import build_urdf_model, check_lock_angle, check_urdf_joints
+from qpavoid.arm.joints import check_lock_angle
 from qpavoid.arm.meshes import object_vertices, urdf_geometry
+from qpavoid.arm.urdf import build_urdf_model, check_urdf_joints
 from qpavoid.core.errors import InputError
 
 __all__ = [

@@ -23,16 +23,13 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike
 
+from qpavoid.arm.control_points import ControlSet
 from qpavoid.arm.coverage import check_coverage
-from qpavoid.arm.description import (
-    LWA,
-    ROLE_NAMES,
-    ArmDynamics,
-    ControlSet,
-    IKSeed,
-    Roles,
-    read_description,
-)
+from qpavoid.arm.description import read_description
+from qpavoid.arm.dynamics import ArmDynamics
+from qpavoid.arm.frames import LWA
+from qpavoid.arm.joints import IKSeed
+from qpavoid.arm.roles import ROLE_NAMES, Roles
 from qpavoid.core.checks import as_array
 from qpavoid.core.errors import InputError
 

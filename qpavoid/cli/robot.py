@@ -13,10 +13,11 @@ import argparse
 import math
 from pathlib import Path
 
+from qpavoid.arm.control_points import CONFIG_NAME
 from qpavoid.arm.coverage import check_coverage, coverage, coverage_table
-from qpavoid.arm.description import CONFIG_NAME, mesh_dirs, package_entry
 from qpavoid.arm.fit import fit_description
 from qpavoid.arm.model import load_robot
+from qpavoid.arm.urdf import mesh_dirs, package_entry
 from qpavoid.cli.args import HelpFormatter, Parser
 from qpavoid.core.errors import InputError
 

@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from qpavoid.arm.description import Roles
 from qpavoid.arm.model import Kinematics
+from qpavoid.arm.roles import Roles
 from qpavoid.core.errors import InputError
 from qpavoid.distance.methods import DistanceTable
 from qpavoid.human.body import HumanGeometry

@@ -6,7 +6,7 @@ Equations (2) and (4) are read as in the reading notes (§5), after Flacco et al
     v_L2 = V_max / (1 + exp((‖d_L2,H‖ · 2/ρ − 1) · α))      (4)
 
 The paper names its sets after the iiwa's links; here each law takes the sets by the part
-they play (:class:`~qpavoid.arm.description.Roles`): the *scaled* set (L1: eqs. 2-3), the
+they play (:class:`~qpavoid.arm.roles.Roles`): the *scaled* set (L1: eqs. 2-3), the
 *repelled* set (L2: eqs. 4-6, 9) and the *end-effector* set (EE: eqs. 7-8). The constants
 keep the paper's names (``rho_L1_m``, ``d_stop_L2_m``, ...), one per part.
 
@@ -27,7 +27,7 @@ from numba import njit
 from numpy.typing import ArrayLike
 from scipy.linalg import lapack
 
-from qpavoid.arm.description import Roles
+from qpavoid.arm.roles import Roles
 from qpavoid.core.checks import finite_number
 from qpavoid.core.errors import InputError, SolverError
 
@@ -37,7 +37,7 @@ class AvoidanceConfig:
     """Constants of the avoidance laws. Distances in m, speeds in m/s.
 
     The names are the paper's: L1 is the scaled set, L2 the repelled set, EE the
-    end-effector set of the robot description (:class:`~qpavoid.arm.description.Roles`).
+    end-effector set of the robot description (:class:`~qpavoid.arm.roles.Roles`).
 
     Attributes
     ----------

@@ -52,7 +52,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from qpavoid.arm.braking import jerk_lag_s, per_joint, stop_time
-from qpavoid.arm.description import ArmDynamics
+from qpavoid.arm.dynamics import ArmDynamics
 from qpavoid.core.checks import check_range
 from qpavoid.core.errors import InputError
 from qpavoid.distance.table import DistanceTable

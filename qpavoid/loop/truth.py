@@ -29,10 +29,10 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from qpavoid.arm.description import RobotDescriptionError
 from qpavoid.arm.inertia import EffectiveMass
 from qpavoid.arm.meshes import collision_geometry, object_vertices
 from qpavoid.arm.model import Kinematics, Robot
+from qpavoid.core.errors import RobotDescriptionError
 from qpavoid.core.geometry import unit
 from qpavoid.distance.capsules import CapsuleDistance, axis_rotation
 from qpavoid.human.body import BodyModel, HumanGeometry, KinectHuman

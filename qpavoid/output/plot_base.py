@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from qpavoid.arm.description import ROLE_NAMES
 from qpavoid.arm.model import Robot
+from qpavoid.arm.roles import ROLE_NAMES
 from qpavoid.human.body import BodyModel, KinectHuman
 from qpavoid.laws.avoidance import AvoidanceConfig, set_stop_distances, stop_distances
 

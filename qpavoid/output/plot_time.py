@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from qpavoid.arm.description import ROLE_NAMES
+from qpavoid.arm.roles import ROLE_NAMES
 from qpavoid.laws.avoidance import l1_factor, stop_distances
 from qpavoid.loop.run_log import repulsion_keys
 from qpavoid.output.plot_base import (

@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from qpavoid.arm.description import Roles
 from qpavoid.arm.model import Robot
+from qpavoid.arm.roles import Roles
 from qpavoid.core.errors import InputError
 from qpavoid.core.geometry import unit
 from qpavoid.human.body import BodyModel, KinectHuman
