@@ -149,12 +149,12 @@ def command_hop(domain: int, n: int) -> tuple[np.ndarray, float]:
     return data["t"][mine] - np.array(sent)[index[mine]], rate
 
 
-def state_to_command(domain: int, n: int) -> tuple[np.ndarray, np.ndarray, float]:
+def state_to_command(domain: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """The closed loop on the stand-in arm: each tick reads the newest JointState
     (:meth:`Ros2Arm.read`), runs a real controller tick (the analytic controller, the
     iiwa, test1's person near the path) and sends its command. Per command: from the
     state's stamp (the arm's publication) to the arm's take of the command, and the tick's
-    own time, s; the stand-in's rate, Hz."""
+    own time, s; the times the stand-in took them (wall clock, s); its rate, Hz."""
     from qpavoid.arm.ik import inverse_kinematics
     from qpavoid.arm.model import load_robot
     from qpavoid.control.analytic import AnalyticController
@@ -208,7 +208,7 @@ def state_to_command(domain: int, n: int) -> tuple[np.ndarray, np.ndarray, float
     taken = [(t, index.get(float(c[0]))) for t, c in zip(data["t"], data["commands"], strict=True)]
     mine = [(t, i) for t, i in taken if i is not None]
     delay = np.array([t - stamps[i] for t, i in mine])
-    return delay, np.array([ticks[i] for _, i in mine]), rate
+    return delay, np.array([ticks[i] for _, i in mine]), np.array([t for t, _ in mine]), rate
 
 
 def summary(hops: np.ndarray) -> dict[str, float]:
@@ -236,13 +236,18 @@ def main() -> None:
     camera, dds = summary(stamped), summary(written)
     hops, rate = command_hop(domain + 1, 5 * args.messages)
     command = summary(hops)
-    delay, ticks, _ = state_to_command(domain + 2, 5 * args.messages)
+    delay, ticks, taken, _ = state_to_command(domain + 2, 5 * args.messages)
     period = 1.0 / rate
     over = delay - (period + ticks)  # beyond one arm period and the tick's own time
+    # between two commands the arm takes: the loop's period (2 ms) plus the later tick's
+    gaps = np.diff(taken) - (0.002 + ticks[1:])
     closed = summary(delay) | {
         "tick_p99_ms": round(float(np.percentile(ticks, 99)) * 1e3, 3),
         "later_than_period_plus_tick": int(np.sum(over > 0)),
         "worst_excess_ms": round(float(over.max()) * 1e3, 3),
+        "gap_median_ms": round(float(np.median(np.diff(taken))) * 1e3, 3),
+        "gap_p99_ms": round(float(np.percentile(np.diff(taken), 99)) * 1e3, 3),
+        "gaps_beyond_loop_period_plus_tick": int(np.sum(gaps > 0)),
     }
     load = os.getloadavg()[0]
     result = {
@@ -270,7 +275,9 @@ def main() -> None:
         f"from it, a controller tick between): median {closed['median_ms']} ms, p99 "
         f"{closed['p99_ms']} ms, max {closed['max_ms']} ms; later than the arm's period "
         f"({1e3 * period:.2f} ms) + the tick: {closed['later_than_period_plus_tick']} of "
-        f"{closed['n']} (worst by {closed['worst_excess_ms']} ms)"
+        f"{closed['n']} (worst by {closed['worst_excess_ms']} ms); between two commands "
+        f"taken: median {closed['gap_median_ms']} ms, p99 {closed['gap_p99_ms']} ms, "
+        f"{closed['gaps_beyond_loop_period_plus_tick']} beyond the loop's 2 ms + the tick"
     )
     Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
     print(f"load {load:.1f} on {os.cpu_count()} cores; wrote {args.out}")
