@@ -46,7 +46,8 @@ if TYPE_CHECKING:  # the names as type checkers and editors see them
         sphere_distances,
     )
     from .distance.table import DistanceTable
-    from .human.body import BodyModel, BodyPart, HumanGeometry, KinectHuman
+    from .human.body import BodyModel, HumanGeometry, KinectHuman
+    from .human.body_parts import BodyPart
     from .human.frames import HumanFrame
     from .human.kinect_v2 import JointType, TrackingState
     from .human.skeleton import SkeletonFormat
@@ -61,7 +62,7 @@ _LAZY = {
     "ArcPath": "control.path",
     "AvoidanceConfig": "laws.avoidance",
     "BodyModel": "human.body",
-    "BodyPart": "human.body",
+    "BodyPart": "human.body_parts",
     "CapsuleDistance": "distance.capsules",
     "Command": "control.tick",
     "ControlSet": "arm.control_points",

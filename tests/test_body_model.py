@@ -19,9 +19,9 @@ from qpavoid.human.body import (
     KINECT_V2_BODY_PARTS,
     UPPER_BODY,
     BodyModel,
-    BodyPart,
     KinectHuman,
 )
+from qpavoid.human.body_parts import BodyPart
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.kinect_v2 import KINECT_V2, KINECT_V2_FILE, JointType
 from qpavoid.human.posture import Operator

@@ -26,7 +26,8 @@ from qpavoid.human.body import BodyModel, KinectHuman, body_model
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.landmarks import FORMAT_NAMES, LandmarkMap, skeleton_format
 from qpavoid.human.people import People
-from qpavoid.human.skeleton import FORMATS_DIR, INFERRED, NOT_TRACKED, TRACKED, SkeletonFormat
+from qpavoid.human.skeleton import INFERRED, NOT_TRACKED, TRACKED, SkeletonFormat
+from qpavoid.human.skeleton_file import FORMATS_DIR
 from qpavoid.loop.camera import Camera, CameraConfig
 from qpavoid.scenarios.generated import make_scenario
 from qpavoid.scenarios.strikes import strike_case, strike_motion

@@ -382,7 +382,7 @@ def test_a_bad_rule_is_refused_with_its_key(rule, message):
 def test_a_bad_camera_format_file_is_refused(tmp_path, change, message):
     import tomllib
 
-    from qpavoid.human.skeleton import FORMATS_DIR
+    from qpavoid.human.skeleton_file import FORMATS_DIR
 
     data = tomllib.loads((FORMATS_DIR / "k4abt.toml").read_text())
     data.update(change)
@@ -393,7 +393,7 @@ def test_a_bad_camera_format_file_is_refused(tmp_path, change, message):
 def test_a_rule_that_misses_a_landmark_is_refused():
     import tomllib
 
-    from qpavoid.human.skeleton import FORMATS_DIR
+    from qpavoid.human.skeleton_file import FORMATS_DIR
 
     data = tomllib.loads((FORMATS_DIR / "k4abt.toml").read_text())
     del data["landmarks"]["Head"]

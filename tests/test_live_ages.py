@@ -17,10 +17,10 @@ from qpavoid.control.qp import QPController
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.core.errors import CalibrationError, InputError
 from qpavoid.fusion.fuser import Fuser
+from qpavoid.human.camera_spec import AGE_MARGIN_S
 from qpavoid.human.landmarks import skeleton_format
 from qpavoid.human.people import People, as_people
 from qpavoid.human.posture import Operator
-from qpavoid.human.skeleton import AGE_MARGIN_S
 from qpavoid.loop.live_input import LiveSource
 from qpavoid.sensing.calibration import Calibration, SensorCalibration
 from qpavoid.sensing.calibration_file import calibration_from_dict

@@ -13,17 +13,11 @@ import pytest
 
 from qpavoid.core.errors import InputError
 from qpavoid.human import kinect_v2
+from qpavoid.human.camera_spec import BASES, EVIDENCED, Evidence
 from qpavoid.human.kinect_v2 import KINECT_V2, KINECT_V2_FILE, JointType, TrackingState
 from qpavoid.human.landmarks import FORMAT_NAMES
-from qpavoid.human.skeleton import (
-    BASES,
-    EVIDENCED,
-    FORMATS_DIR,
-    MAX_FORMAT_FILE_BYTES,
-    Evidence,
-    SkeletonFormat,
-    SkeletonFormatError,
-)
+from qpavoid.human.skeleton import SkeletonFormat, SkeletonFormatError
+from qpavoid.human.skeleton_file import FORMATS_DIR, MAX_FORMAT_FILE_BYTES
 from qpavoid.sensing.calibration import known_formats
 
 if sys.version_info >= (3, 11):

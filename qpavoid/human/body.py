@@ -1,9 +1,11 @@
 """The human: the paper's upper-body model (Sect. 4) on a skeleton, as data.
 
-A body model is parts of a skeleton format's joints (:class:`BodyPart`): each part is
-covered by spheres of one radius centred on its points (eq. 1) and, for the exact
-method, by one capsule along its chain of joints. :class:`BodyModel` is any such model
-(:meth:`BodyModel.load` reads one from a TOML file); :class:`KinectHuman` is the paper's
+A body model is parts of a skeleton format's joints
+(:class:`~qpavoid.human.body_parts.BodyPart`, checked by :mod:`qpavoid.human.body_parts`):
+each part is covered by spheres of one radius centred on its points (eq. 1) and, for the
+exact method, by one capsule along its chain of joints. :class:`BodyModel` is any such
+model (:meth:`BodyModel.load` reads one from a TOML file, its shape checked by
+:mod:`qpavoid.human.body_file`); :class:`KinectHuman` is the paper's
 on the Kinect v2 (``formats/kinect_v2_body.toml``): 8 parts, 21 points (13 joints plus
 one mid-point per part).
 
@@ -31,7 +33,6 @@ another format, so nothing is widened for a mapping.
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -41,81 +42,33 @@ import numpy as np
 from qpavoid.core.compiling import kernel_input
 from qpavoid.core.errors import SkeletonFormatError
 from qpavoid.human._kernels import append_centres, tracked_body, warm_up
+from qpavoid.human.body_file import read_body_file
+from qpavoid.human.body_parts import (
+    BodyPart,
+    Joint,
+    centre_joints,
+    check_one_tree,
+    check_parts,
+    joint_id,
+)
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.landmarks import skeleton_format
-from qpavoid.human.skeleton import FORMATS_DIR, SkeletonFormat, read_toml
+from qpavoid.human.skeleton import SkeletonFormat
+from qpavoid.human.skeleton_file import FORMATS_DIR
 
 __all__ = [
     "KINECT_V2_BODY_FILE",
     "KINECT_V2_BODY_PARTS",
     "UPPER_BODY",
     "BodyModel",
-    "BodyPart",
     "HumanGeometry",
     "KinectHuman",
     "body_model",
 ]
 
-#: A joint of a part: its name in the skeleton format, or its id (row).
-Joint = str | int
-
 #: The paper's model on the Kinect v2.
 KINECT_V2_BODY_FILE = FORMATS_DIR / "kinect_v2_body.toml"
-#: A part's radius, m: a finger is 1 cm thick; a capsule over 1 m wide covers no body part.
-MIN_RADIUS_M, MAX_RADIUS_M = 0.01, 1.0
-
-_BODY_KEYS = ("format", "points", "centres", "parts")
-_PART_KEYS = (
-    "name",
-    "chain",
-    "mid",
-    "sphere_radius_m",
-    "capsule_radius_m",
-    "reach",
-    "moves_with_body",
-    "region",
-)
-
-
-@dataclass(frozen=True)
-class BodyPart:
-    """One part of an upper-body model.
-
-    Attributes
-    ----------
-    name
-        Part name.
-    chain
-        Joints along the part, proximal first (names in the skeleton format, or ids). The
-        capsule runs between the first and the last usable joint of the chain.
-    mid
-        The two joints whose mid-point is the part's extra point (paper Fig. 3).
-    sphere_radius_m
-        Radius r_j of the part's spheres (eq. 1), m.
-    capsule_radius_m
-        Radius of the part's capsule (exact method), m.
-    reach
-        Joints beyond the chain that the capsule must cover (a hand's HandTip and Thumb):
-        the capsule is widened, each frame, by how far they stick out of it.
-    moves_with_body
-        The part moves with the body, not the arm (the head and trunk of a seated
-        person): speed and separation monitoring gives it the body's approach speed.
-        Default False: an arm's part, the faster case.
-    region
-        The ISO/TS 15066 Annex A body region the part is (a name of
-        ``qpavoid/laws/body_regions.toml``, e.g. ``"hand_finger"``): power and force limiting
-        takes its limits from it (:mod:`qpavoid.laws.pfl`). None (the default): no region.
-    """
-
-    name: str
-    chain: tuple[Joint, ...]
-    mid: tuple[Joint, Joint]
-    sphere_radius_m: float
-    capsule_radius_m: float
-    reach: tuple[Joint, ...] = ()
-    moves_with_body: bool = False
-    region: str | None = None
 
 
 @dataclass(frozen=True)
@@ -218,23 +171,24 @@ class BodyModel:
 
     def __post_init__(self) -> None:
         parts, skeleton = self.parts, self.skeleton
-        self._check_parts()
-        object.__setattr__(self, "_centre_of", self._read_centres())
+        check_parts(parts)
+        object.__setattr__(self, "_centre_of", centre_joints(skeleton, self.centres))
         width = max([int(row.sum()) for row in self._centre_of], default=1)
         ids = np.full((len(self._centre_of), width), -1, dtype=np.int64)
         for c, row in enumerate(self._centre_of):  # the kernel's form: ids, padded with -1
             ids[c, : row.sum()] = np.flatnonzero(row)
         object.__setattr__(self, "_centre_ids", ids)
-        chains = [[self._joint(j, f"{p.name}.chain") for j in p.chain] for p in parts]
-        mids = [[self._joint(j, f"{p.name}.mid") for j in p.mid] for p in parts]
-        reaches = [[self._joint(j, f"{p.name}.reach") for j in p.reach] for p in parts]
-        order = [self._joint(j, "point_order") for j in self.point_order]
+        joint = functools.partial(joint_id, skeleton, self.centres)
+        chains = [[joint(j, f"{p.name}.chain") for j in p.chain] for p in parts]
+        mids = [[joint(j, f"{p.name}.mid") for j in p.mid] for p in parts]
+        reaches = [[joint(j, f"{p.name}.reach") for j in p.reach] for p in parts]
+        order = [joint(j, "point_order") for j in self.point_order]
         members = np.zeros((len(parts), self.n_nodes), dtype=bool)
         for k in range(len(parts)):
             members[k, [*chains[k], *mids[k], *reaches[k]]] = True
         n = skeleton.n_joints  # a centre's joints are its parts' too (the fastest of them)
         members[:, :n] |= (members[:, n:].astype(int) @ self._centre_of) > 0
-        self._check_one_tree(np.asarray(members[:, :n].any(axis=0)))
+        check_one_tree(skeleton, np.asarray(members[:, :n].any(axis=0)))
         used = {j for k in range(len(parts)) for j in (*chains[k], *mids[k])}
         joints = [j for j in order if j in used] + sorted(used - set(order))
         member = np.zeros((len(joints) + len(parts), len(parts)), dtype=bool)
@@ -257,140 +211,10 @@ class BodyModel:
             object.__setattr__(self, name, value)
         warm_up(skeleton)
 
-    def _check_parts(self) -> None:
-        if not self.parts:
-            raise SkeletonFormatError("a body model needs parts", name="parts", value=self.parts)
-        names = [p.name for p in self.parts]
-        for p in self.parts:
-            if not isinstance(p.name, str) or not p.name.strip():
-                raise SkeletonFormatError(
-                    f"a part's name must be a non-empty string, got {p.name!r}",
-                    name="parts",
-                    value=p.name,
-                )
-            if names.count(p.name) > 1:
-                raise SkeletonFormatError(
-                    f"two parts are called {p.name!r}", name="parts", value=names
-                )
-            for key in ("sphere_radius_m", "capsule_radius_m"):
-                r = getattr(p, key)
-                if not isinstance(r, (int, float)) or isinstance(r, bool) or not r > 0:
-                    raise SkeletonFormatError(
-                        f"part {p.name!r}: {key} must be a number > 0, m, got {r!r}",
-                        name=f"{p.name}.{key}",
-                        value=r,
-                    )
-                if not math.isfinite(r):
-                    raise SkeletonFormatError(
-                        f"part {p.name!r}: {key} is {r!r}", name=f"{p.name}.{key}", value=r
-                    )
-                if not MIN_RADIUS_M <= r <= MAX_RADIUS_M:
-                    raise SkeletonFormatError(
-                        f"part {p.name!r}: {key} must be between {MIN_RADIUS_M} and "
-                        f"{MAX_RADIUS_M} m (a body part's), got {r!r}",
-                        name=f"{p.name}.{key}",
-                        value=r,
-                    )
-            if p.region is not None and (not isinstance(p.region, str) or not p.region.strip()):
-                raise SkeletonFormatError(
-                    f"part {p.name!r}: region must name a body region (text) or be absent, "
-                    f"got {p.region!r}",
-                    name=f"{p.name}.region",
-                    value=p.region,
-                )
-            if not p.chain or len(p.mid) != 2:
-                raise SkeletonFormatError(
-                    f"part {p.name!r} needs a chain of joints and two mid joints, got chain "
-                    f"{p.chain!r} and mid {p.mid!r}",
-                    name=f"{p.name}.chain",
-                    value=(p.chain, p.mid),
-                )
-
-    def _check_one_tree(self, used: np.ndarray) -> None:
-        """The joints the parts use are all in one tree of the format's parents: the
-        tracker bounds a joint never seen by the nearest seen joint along the tree, and a
-        joint in a tree of its own would be bounded by nothing (a part would shrink)."""
-        skeleton = self.skeleton
-        roots: dict[str, str] = {}  # root: the first joint found in its tree
-        for j in np.flatnonzero(used):
-            r = int(j)
-            while skeleton.parent[r] >= 0:
-                if not skeleton.bone_bounds_m[r] > 0.0:  # a bone of unknown length
-                    raise SkeletonFormatError(
-                        f"joint {skeleton.joints[r]!r} of the {skeleton.name} format has a "
-                        "parent but no max_bone_m: a joint never seen through it would be "
-                        "bounded by nothing (the body's parts use it)",
-                        name="max_bone_m",
-                        value=skeleton.joints[r],
-                    )
-                r = int(skeleton.parent[r])
-            roots.setdefault(skeleton.joints[r], skeleton.joints[int(j)])
-        if len(roots) > 1:
-            raise SkeletonFormatError(
-                f"the body's joints are in {len(roots)} trees of the {skeleton.name} format "
-                f"(rooted at {', '.join(roots)}): a joint never seen is bounded only by the "
-                "seen joints of its tree; give the roots parents in the format file",
-                name="parts",
-                value=sorted(roots),
-            )
-
-    def _read_centres(self) -> np.ndarray:
-        """(C, J) bool: the joints each centre is the mean of, checked."""
-        skeleton, names = self.skeleton, [name for name, _ in self.centres]
-        out = np.zeros((len(self.centres), skeleton.n_joints), dtype=bool)
-        for c, (name, joints) in enumerate(self.centres):
-            key = f"centres.{name}"
-            if not isinstance(name, str) or not name.strip() or name in skeleton.joints:
-                raise SkeletonFormatError(
-                    f"{key}: a centre needs a name that is no joint of the {skeleton.name} "
-                    f"format, got {name!r}",
-                    name=key,
-                    value=name,
-                )
-            if names.count(name) > 1:
-                raise SkeletonFormatError(f"two centres are called {name!r}", name=key, value=names)
-            ids = [self._joint(j, key, centres=False) for j in joints]
-            if len(set(ids)) != len(ids):
-                raise SkeletonFormatError(
-                    f"{key}: a joint is named twice in {list(joints)!r} (the mean weighs each "
-                    "joint once)",
-                    name=key,
-                    value=list(joints),
-                )
-            if len(set(ids)) < 2:
-                raise SkeletonFormatError(
-                    f"{key}: a centre is the mean of two or more different joints, got "
-                    f"{list(joints)!r}",
-                    name=key,
-                    value=list(joints),
-                )
-            out[c, ids] = True
-        return out
-
     @property
     def n_nodes(self) -> int:
         """The format's joints and then the model's centres: the rows the kernels see."""
         return self.skeleton.n_joints + len(self.centres)
-
-    def _joint(self, joint: Joint, key: str, centres: bool = True) -> int:
-        """The id of ``joint`` (a name or an id) in the format, a centre's (after the
-        format's joints), or SkeletonFormatError."""
-        skeleton = self.skeleton
-        if isinstance(joint, str) and joint in skeleton.joints:
-            return skeleton.index(joint)
-        names = [name for name, _ in self.centres]
-        if centres and isinstance(joint, str) and joint in names:
-            return skeleton.n_joints + names.index(joint)
-        is_id = isinstance(joint, (int, np.integer)) and not isinstance(joint, bool)
-        if is_id and 0 <= int(joint) < skeleton.n_joints:
-            return int(joint)
-        raise SkeletonFormatError(
-            f"{key}: {joint!r} is not a joint of the {skeleton.name} format"
-            + (f" nor a centre of the model ({names})" if centres and names else "")
-            + f"; its joints are {list(skeleton.joints)}",
-            name=key,
-            value=joint,
-        )
 
     @classmethod
     def load(cls, path: str | Path, skeleton: SkeletonFormat | None = None) -> BodyModel:
@@ -525,108 +349,6 @@ class BodyModel:
         n = self.skeleton.n_joints
         radius = np.zeros(n) if joint_radius is None else joint_radius
         return self.tracked_geometry(frame, radius, np.zeros((n, 3)))[0]
-
-
-def read_body_file(
-    path: str | Path,
-) -> tuple[tuple[str, ...], tuple[BodyPart, ...], str, tuple[tuple[str, tuple[Joint, ...]], ...]]:
-    """The point order, the parts, the format's name and the centres of the body file at
-    ``path``.
-
-    Raises
-    ------
-    SkeletonFormatError
-        For a file that cannot be read, is not TOML, or lacks a key or has an unknown one
-        (joint names are checked against the format by :class:`BodyModel`).
-    """
-    data = read_toml(path)
-
-    def fail(message: str, key: str, value: object) -> SkeletonFormatError:
-        return SkeletonFormatError(f"{path}: {message}", path=path, name=key, value=value)
-
-    unknown = [k for k in data if k not in _BODY_KEYS]
-    if unknown:
-        raise fail(
-            f"unknown key {unknown[0]}; the keys are {', '.join(_BODY_KEYS)}",
-            unknown[0],
-            data[unknown[0]],
-        )
-    format_name, points, rows = data.get("format"), data.get("points", []), data.get("parts")
-    if not isinstance(format_name, str):
-        raise fail(
-            f"format must name a skeleton format, got {format_name!r}", "format", format_name
-        )
-    if not isinstance(points, list) or not all(isinstance(p, str) for p in points):
-        raise fail(f"points must be an array of joint names, got {points!r}", "points", points)
-    if len(set(points)) != len(points):
-        raise fail(f"points names a joint twice: {points!r}", "points", points)
-    if not format_name.replace("_", "").replace("-", "").isalnum():
-        raise fail(
-            f"format must be a format's name (letters, digits, _ and -), got {format_name!r}",
-            "format",
-            format_name,
-        )
-    if not isinstance(rows, list) or not rows:
-        raise fail(f"parts must be an array of tables ([[parts]]), got {rows!r}", "parts", rows)
-    table = data.get("centres", {})
-    if not isinstance(table, dict) or not all(
-        isinstance(v, list) and all(isinstance(j, str) for j in v) for v in table.values()
-    ):
-        raise fail(
-            f"centres must be a table of names to arrays of joint names, got {table!r}",
-            "centres",
-            table,
-        )
-    centres = tuple((name, tuple(joints)) for name, joints in table.items())
-    parts = []
-    for k, row in enumerate(rows):
-        if not isinstance(row, dict):
-            raise fail(f"parts[{k}] must be a table, got {row!r}", f"parts[{k}]", row)
-        unknown = [key for key in row if key not in _PART_KEYS]
-        missing = [key for key in _PART_KEYS[:5] if key not in row]
-        if unknown or missing:
-            key = (unknown or missing)[0]
-            what = "unknown key" if unknown else "missing key"
-            raise fail(
-                f"parts[{k}]: {what} {key}; the keys are {', '.join(_PART_KEYS)}",
-                f"parts[{k}].{key}",
-                row.get(key),
-            )
-        for key in ("chain", "mid", "reach"):
-            joints = row.get(key, [])
-            if not isinstance(joints, list) or not all(isinstance(j, str) for j in joints):
-                raise fail(
-                    f"parts[{k}].{key} must be an array of joint names, got {joints!r}",
-                    f"parts[{k}].{key}",
-                    joints,
-                )
-        moves = row.get("moves_with_body", False)
-        if not isinstance(moves, bool):
-            raise fail(
-                f"parts[{k}].moves_with_body must be true or false, got {moves!r}",
-                f"parts[{k}].moves_with_body",
-                moves,
-            )
-        region = row.get("region")
-        if region is not None and (not isinstance(region, str) or not region.strip()):
-            raise fail(
-                f"parts[{k}].region must name a body region (text), got {region!r}",
-                f"parts[{k}].region",
-                region,
-            )
-        parts.append(
-            BodyPart(
-                row["name"],
-                tuple(row["chain"]),
-                tuple(row["mid"]),
-                row["sphere_radius_m"],
-                row["capsule_radius_m"],
-                tuple(row.get("reach", ())),
-                moves,
-                region,
-            )
-        )
-    return tuple(points), tuple(parts), format_name, centres
 
 
 _POINTS, _PARTS, _FORMAT, _ = read_body_file(KINECT_V2_BODY_FILE)

@@ -13,7 +13,8 @@ from __future__ import annotations
 from enum import IntEnum
 
 from qpavoid.core.errors import SkeletonFormatError
-from qpavoid.human.skeleton import FORMATS_DIR, SkeletonFormat
+from qpavoid.human.skeleton import SkeletonFormat
+from qpavoid.human.skeleton_file import FORMATS_DIR
 
 __all__ = ["KINECT_V2", "KINECT_V2_FILE", "N_KINECT_JOINTS", "JointType", "TrackingState"]
 

@@ -37,7 +37,8 @@ from qpavoid.core.errors import InputError, SkeletonFormatError
 from qpavoid.human.conversion import LandmarkRule
 from qpavoid.human.frames import HumanFrame, check_joints
 from qpavoid.human.kinect_v2 import KINECT_V2
-from qpavoid.human.skeleton import FORMATS_DIR, SkeletonFormat
+from qpavoid.human.skeleton import SkeletonFormat
+from qpavoid.human.skeleton_file import FORMATS_DIR
 
 __all__ = [
     "FORMAT_NAMES",

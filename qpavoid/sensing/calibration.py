@@ -39,9 +39,10 @@ from types import MappingProxyType
 import numpy as np
 
 from qpavoid.core.errors import CalibrationError
+from qpavoid.human.camera_spec import AGE_MARGIN_S
 from qpavoid.human.kinect_v2 import KINECT_V2
 from qpavoid.human.landmarks import FORMAT_NAMES, skeleton_format
-from qpavoid.human.skeleton import AGE_MARGIN_S, SkeletonFormat
+from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.sensing.keys import SensorKeys, sensor_name_error, toml_string
 
 __all__ = [
