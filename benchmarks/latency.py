@@ -26,7 +26,9 @@ from qpavoid.arm.model import load_robot
 from qpavoid.human.landmarks import FORMAT_NAMES, skeleton_format
 from qpavoid.loop.camera import CameraConfig
 from qpavoid.loop.excitation import film_excitation
-from qpavoid.sensing.latency import camera_track, estimate_latency, flange_positions
+from qpavoid.sensing.arm_log import flange_positions
+from qpavoid.sensing.hand_track import camera_track
+from qpavoid.sensing.latency_fit import estimate_latency
 
 #: The true latencies measured, s: from a fast pipeline to beyond the formats' assumed ones.
 LATENCIES_S = (0.03, 0.06, 0.10, 0.15)

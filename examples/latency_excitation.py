@@ -24,7 +24,7 @@ from qpavoid.arm.model import load_robot
 from qpavoid.control.task import default_task
 from qpavoid.drive.connect import open_arm
 from qpavoid.loop.excitation import Excitation, drive_excitation
-from qpavoid.sensing.latency import save_arm_log
+from qpavoid.sensing.arm_log import save_arm_log
 
 parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
 parser.add_argument("arm", help="sim or franka:HOST")

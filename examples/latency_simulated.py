@@ -22,7 +22,7 @@ from qpavoid.arm.model import load_robot
 from qpavoid.human.landmarks import FORMAT_NAMES
 from qpavoid.loop.camera import CameraConfig
 from qpavoid.loop.excitation import film_excitation
-from qpavoid.sensing.latency import save_arm_log
+from qpavoid.sensing.arm_log import save_arm_log
 from qpavoid.sensing.recording import save_npz
 
 parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

@@ -23,7 +23,7 @@ from conftest import PYTHON
 
 from qpavoid.cli.commands import main
 from qpavoid.human.posture import Operator
-from qpavoid.sensing.latency import ArmLog, save_arm_log
+from qpavoid.sensing.arm_log import ArmLog, save_arm_log
 from qpavoid.sensing.per_sensor import SensorRecording, save_sensor_npz
 from qpavoid.sensing.recording import Recording, save_npz
 

@@ -40,18 +40,11 @@ from qpavoid.drive.simulated import SimulatedArm
 from qpavoid.human.landmarks import landmark_map, skeleton_format
 from qpavoid.loop.camera import CameraConfig
 from qpavoid.loop.excitation import Excitation, drive_excitation, film_excitation
+from qpavoid.sensing.arm_log import ArmLog, flange_positions, read_arm_log, save_arm_log
 from qpavoid.sensing.calibration import Calibration, SensorCalibration
-from qpavoid.sensing.latency import (
-    ArmLog,
-    LatencyConfig,
-    camera_track,
-    estimate_latency,
-    flange_positions,
-    landmark_index,
-    measure_latency,
-    read_arm_log,
-    save_arm_log,
-)
+from qpavoid.sensing.hand_track import camera_track, landmark_index
+from qpavoid.sensing.latency import measure_latency
+from qpavoid.sensing.latency_fit import LatencyConfig, estimate_latency
 from qpavoid.sensing.per_sensor import SensorRecording, save_sensor_npz
 from qpavoid.sensing.recording import save_csv, save_npz
 

@@ -14,7 +14,9 @@ import argparse
 from qpavoid.arm.model import load_robot
 from qpavoid.cli.args import HelpFormatter, add_robot_option
 from qpavoid.sensing.calibration_file import load_calibration
-from qpavoid.sensing.latency import LANDMARKS, LatencyConfig, LatencyEstimate, measure_latency
+from qpavoid.sensing.hand_track import LANDMARKS
+from qpavoid.sensing.latency import measure_latency
+from qpavoid.sensing.latency_fit import LatencyConfig, LatencyEstimate
 
 __all__ = ["add_latency_command", "format_estimate", "latency_command"]
 

@@ -41,7 +41,7 @@ from qpavoid.human.frames import HumanFrame
 from qpavoid.human.posture import Operator
 from qpavoid.human.skeleton import TRACKED
 from qpavoid.loop.camera import Camera, CameraConfig
-from qpavoid.sensing.latency import ArmLog
+from qpavoid.sensing.arm_log import ArmLog
 from qpavoid.sensing.recording import Recording
 
 __all__ = ["Excitation", "HandOnFlange", "drive_excitation", "film_excitation"]
