@@ -5,7 +5,7 @@
 For each skeleton format's simulated camera, at its own noise and at three times it, and
 at true latencies of 0.03, 0.06, 0.10 and 0.15 s: the arm moves the default excitation
 (30 s) while the operator holds its flange (:func:`qpavoid.loop.excitation.film_excitation`,
-every frame stamped on arrival), and :func:`qpavoid.sensing.latency.estimate_latency` fits
+every frame stamped on arrival), and :func:`qpavoid.sensing.latency_fit.estimate_latency` fits
 the lag. Printed as a Markdown table (docs/sensors.md §10), over ``--seeds`` seeds (the
 camera's noise, swaps and anatomy; each case its own): for each true latency the mean
 estimate and the error's RMS, then the mean reported uncertainty (one standard error), the

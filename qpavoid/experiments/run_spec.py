@@ -77,7 +77,7 @@ class RunSpec:
         the Kinect v2's 0.06 s, docs/safety.md): the simulated camera's, and with
         ``sensors`` that of each sensor whose calibration names no ``latency_s`` (one that
         names another is refused). A frame older than its camera's age limit (the latency,
-        a frame period and 6.7 ms: :meth:`~qpavoid.human.skeleton.CameraSpec.age_limit_s`)
+        a frame period and 6.7 ms: :meth:`~qpavoid.human.camera_spec.CameraSpec.age_limit_s`)
         is stale.
     camera
         The skeleton format of the real bench's simulated camera (``kinect_v2``,

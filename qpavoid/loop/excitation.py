@@ -2,7 +2,7 @@
 
 The person holds the robot's flange while the arm moves a few slow sinusoids on two
 joints (:class:`Excitation`); the camera films their hand and the arm logs its joint
-angles, both on one clock, and :func:`qpavoid.sensing.latency.estimate_latency` finds the
+angles, both on one clock, and :func:`qpavoid.sensing.latency_fit.estimate_latency` finds the
 lag between them (docs/sensors.md §10, "Measuring your camera's latency").
 
 * :func:`drive_excitation` moves any :class:`~qpavoid.drive.interface.Arm` through it in

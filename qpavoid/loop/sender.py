@@ -69,7 +69,7 @@ class SentSummary:
 def sensor_latency_s(calibration: Calibration, sensor: str) -> float:
     """The latency ``sensor``'s frames are stamped with by default, s: its calibration's
     (``latency_s``, a measured one) where it names one, else its format's
-    (:attr:`~qpavoid.human.skeleton.CameraSpec.latency_s`).
+    (:attr:`~qpavoid.human.camera_spec.CameraSpec.latency_s`).
 
     Raises
     ------

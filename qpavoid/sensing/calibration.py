@@ -174,7 +174,7 @@ class SensorCalibration:
     def age_limit_s(self) -> float:
         """How old the sensor's frames may be when they arrive and when they are fused, s:
         its latency (:attr:`latency_s`, else its format's), one frame period and a margin
-        (:meth:`~qpavoid.human.skeleton.CameraSpec.age_limit_s`)."""
+        (:meth:`~qpavoid.human.camera_spec.CameraSpec.age_limit_s`)."""
         return self.skeleton.sensor.age_limit_s(self.latency_s)
 
     @property
