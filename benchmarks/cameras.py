@@ -1,7 +1,8 @@
 """What each camera costs: the time to the goal through each format's simulated camera.
 
     python benchmarks/cameras.py [--random 10] [--controllers qp analytic] [--safety ssm|pfl]
-                                 [--at-kinect-latency] [--rate 100] [--out FILE.json]
+                                 [--at-kinect-latency] [--rate 100] [--robot iiwa14]
+                                 [--out FILE.json]
     python benchmarks/cameras.py --budget     # the longest latency free passes, per camera
     python benchmarks/cameras.py --terms      # what each term costs, in free at 60 ms
 
@@ -16,6 +17,14 @@ ISO 13855's speeds or the human motion model's options (``--body-speed``,
 landmarks (issue 28's path) with one term switched to the Kinect v2's at a time (noise, no
 landmark uncertainty, Z_d) and the landmark uncertainty scaled by 0.5 and 0.25. The numbers
 of docs/safety.md §7b.
+
+``--rate`` is the control rate (100 Hz by default, the rate of docs/safety.md §7b's first
+tables; a real iiwa is driven at 500 Hz, a Franka at libfranka's 1 kHz), ``--robot`` the arm
+(a bundled description: iiwa14, the default, panda, fr3, ur5), each with its own task and
+seated operator. The rate matters: the arm's reaction time T_r is one control period plus
+the arm's reaction in whole periods. The JSON's ``settings`` entry says the rate, the arm
+and the options a file was made with; each run also counts its commands beyond the arm's
+limits (``command_limit_violations``).
 """
 
 from __future__ import annotations
@@ -23,12 +32,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from qpavoid.arm.description import bundled_robots
 from qpavoid.arm.model import Robot
 from qpavoid.control.analytic import AnalyticController
 from qpavoid.control.controller import Controller
@@ -74,16 +85,23 @@ def run(spec: RunSpec, ssm: dict | None = None) -> dict:
         "duration_s": m["duration_s"],
         "stopped_s": m["stopped_s"],
         "ticks_moving_in_true_contact": m.get("ticks_moving_in_true_contact", 0),
+        "command_limit_violations": sum(m.get("command_limit_violations", {}).values()),
     }
 
 
-def terms(camera: str, rate_hz: float) -> dict:
+def terms(camera: str, rate_hz: float, robot_name: str = "iiwa14") -> dict:
     """``free`` at the Kinect v2's latency with one term at a time as the Kinect v2's, on
     the body's landmarks (issue 28's question: what the mapping's widening costs; a cell on
     the camera's own body has none)."""
     latency = KINECT_V2.sensor.latency_s
     spec = RunSpec(
-        "free", controller="qp", safety="ssm", camera=camera, latency_s=latency, rate_hz=rate_hz
+        "free",
+        controller="qp",
+        safety="ssm",
+        camera=camera,
+        latency_s=latency,
+        rate_hz=rate_hz,
+        robot=robot_name,
     )
     robot = spec_robot(spec)
     native = build_controller(spec, robot)
@@ -141,6 +159,7 @@ def _row(runs: dict[str, dict]) -> dict:
         "reached_goal": sum(r["reached_goal"] for r in randoms),
         "runs": len(randoms),
         "ticks_moving_in_true_contact": sum(r["ticks_moving_in_true_contact"] for r in randoms),
+        "command_limit_violations": sum(r["command_limit_violations"] for r in randoms),
     }
     return row
 
@@ -155,13 +174,20 @@ def _print(label: str, row: dict) -> None:
     print(
         f"{label:38s} " + " | ".join(cells) + f" | random {r['mean_duration_s']:.2f} s / "
         f"{r['mean_stopped_s']:.2f} s, {r['reached_goal']}/{r['runs']}, "
-        f"contact ticks {r['ticks_moving_in_true_contact']}",
+        f"contact ticks {r['ticks_moving_in_true_contact']}, commands beyond limits "
+        f"{sum(row[s]['command_limit_violations'] for s in ('free', 'test1', 'test2'))}"
+        f"+{r['command_limit_violations']}",
         flush=True,
     )
 
 
 def budget(
-    camera: str, controller: str, safety: str, rate_hz: float, ssm: dict | None = None
+    camera: str,
+    controller: str,
+    safety: str,
+    rate_hz: float,
+    ssm: dict | None = None,
+    robot_name: str = "iiwa14",
 ) -> float | None:
     """The longest latency (in 10 ms steps from 0) at which ``free`` reaches its goal within
     16 s through ``camera``, s; None if not even at 0."""
@@ -175,6 +201,7 @@ def budget(
             latency_s=ms / 1000.0,
             rate_hz=rate_hz,
             max_time_s=16.0,
+            robot=robot_name,
         )
         if not run(spec, ssm)["reached_goal"]:
             break
@@ -185,7 +212,8 @@ def budget(
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--random", type=int, default=10, help="random approaches per camera")
-    ap.add_argument("--rate", type=float, default=100.0, help="control rate, Hz")
+    ap.add_argument("--rate", type=float, default=100.0, help="control rate, Hz (100)")
+    ap.add_argument("--robot", default="iiwa14", choices=bundled_robots(), help="the arm (iiwa14)")
     ap.add_argument("--out", type=Path, help="write the results as JSON")
     ap.add_argument("--terms", action="store_true", help="what each term costs (free, 60 ms)")
     ap.add_argument("--controllers", nargs="+", default=["qp"], choices=["qp", "analytic"])
@@ -215,16 +243,27 @@ def main() -> None:
         )
         if value is not None
     }
+    settings = {
+        "rate_hz": args.rate,
+        "robot": args.robot,
+        "safety": args.safety,
+        "controllers": args.controllers,
+        "random": args.random,
+        "max_time_s": 16.0 if args.budget else 40.0,
+        "ssm": ssm,
+        "command": " ".join(["python benchmarks/cameras.py", *sys.argv[1:]]),
+    }
     if args.terms:
-        found = {c: terms(c, args.rate) for c in args.cameras if c != KINECT_V2.name}
+        found: dict = {"settings": settings}
+        found |= {c: terms(c, args.rate, args.robot) for c in args.cameras if c != KINECT_V2.name}
         if args.out:
             args.out.write_text(json.dumps(found, indent=1))
         return
-    out: dict = {}
+    out: dict = {"settings": settings}
     if args.budget:
         with ProcessPoolExecutor(args.jobs) as pool:
             budgets = {
-                (c, k): pool.submit(budget, c, k, args.safety, args.rate, ssm)
+                (c, k): pool.submit(budget, c, k, args.safety, args.rate, ssm, args.robot)
                 for c in args.cameras
                 for k in args.controllers
             }
@@ -243,6 +282,7 @@ def main() -> None:
         for which, latency in latencies.items():
             for controller in args.controllers:
                 cases.append((camera, which, latency, controller))
+    print(f"{args.robot} at {args.rate:g} Hz, --safety {args.safety}", flush=True)
     with ProcessPoolExecutor(args.jobs) as pool:
         jobs = {
             (case, s): pool.submit(
@@ -255,6 +295,7 @@ def main() -> None:
                     latency_s=case[2],
                     rate_hz=args.rate,
                     max_time_s=40.0,
+                    robot=args.robot,
                 ),
                 ssm,
             )
