@@ -107,28 +107,33 @@ def camera_hop(domain: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     return from_stamp, from_write
 
 
-def command_hop(domain: int, n: int) -> tuple[np.ndarray, float]:
-    from qpavoid.arm.model import load_robot
+def _standin_arm(robot, domain: int, q0: np.ndarray, tmp: str):
+    """The kinematic ros2_control stand-in started at ``q0`` on ``domain`` (recording into
+    ``tmp``) and a connected :class:`Ros2Arm` on it: (the process, the arm, the record)."""
     from qpavoid.drive.ros2_arm import Ros2Arm
     from qpavoid.sensing.ros2_cell import ArmTopics, Cell
 
+    cell_file = Path(tmp) / "cell.toml"
+    cell_file.write_text(f'distribution = "humble"\ndomain_id = {domain}\n')
+    record = Path(tmp) / "arm.npz"
+    command = [sys.executable, str(STANDIN), "arm", "--cell", str(cell_file)]
+    command += ["--q0", ",".join(repr(float(v)) for v in q0)]
+    command += ["--seconds", "60", "--record", str(record)]
+    env = {**os.environ, "CYCLONEDDS_URI": LOOPBACK}
+    proc = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, text=True)
+    arm = Ros2Arm(
+        robot, Cell(domain_id=domain, arm=ArmTopics(subscriber_timeout_s=20.0)), 0.002, True
+    )
+    arm.connect()
+    return proc, arm, record
+
+
+def command_hop(domain: int, n: int) -> tuple[np.ndarray, float]:
+    from qpavoid.arm.model import load_robot
+
     robot = load_robot("iiwa14")
     with tempfile.TemporaryDirectory() as tmp:
-        cell_file = Path(tmp) / "cell.toml"
-        cell_file.write_text(f'distribution = "humble"\ndomain_id = {domain}\n')
-        record = Path(tmp) / "arm.npz"
-        q0 = ",".join(["0.0"] * robot.nv)
-        command = [sys.executable, str(STANDIN), "arm", "--cell", str(cell_file), "--q0", q0]
-        command += ["--seconds", "60", "--record", str(record)]
-        arm_proc = subprocess.Popen(
-            command,
-            env={**os.environ, "CYCLONEDDS_URI": LOOPBACK},
-            stdout=subprocess.PIPE,
-            text=True,
-        )
-        cell = Cell(domain_id=domain, arm=ArmTopics(subscriber_timeout_s=20.0))
-        arm = Ros2Arm(robot, cell, 0.002, True)
-        arm.connect()
+        arm_proc, arm, record = _standin_arm(robot, domain, np.zeros(robot.nv), tmp)
         sent = []
         next_due = time.perf_counter()
         for k in range(n):
@@ -158,31 +163,15 @@ def state_to_command(domain: int, n: int) -> tuple[np.ndarray, np.ndarray, np.nd
     from qpavoid.arm.ik import inverse_kinematics
     from qpavoid.arm.model import load_robot
     from qpavoid.control.analytic import AnalyticController
-    from qpavoid.drive.ros2_arm import Ros2Arm
     from qpavoid.human.frames import HumanFrame
     from qpavoid.scenarios.generated import make_scenario
-    from qpavoid.sensing.ros2_cell import ArmTopics, Cell
 
     robot = load_robot("iiwa14")
     controller = AnalyticController(robot)
     person = make_scenario("test1", robot)
     q0 = inverse_kinematics(robot, controller.path.reference(0.0)[0])
     with tempfile.TemporaryDirectory() as tmp:
-        cell_file = Path(tmp) / "cell.toml"
-        cell_file.write_text(f'distribution = "humble"\ndomain_id = {domain}\n')
-        record = Path(tmp) / "arm.npz"
-        command = [sys.executable, str(STANDIN), "arm", "--cell", str(cell_file)]
-        command += ["--q0", ",".join(repr(float(v)) for v in q0)]
-        command += ["--seconds", "60", "--record", str(record)]
-        arm_proc = subprocess.Popen(
-            command,
-            env={**os.environ, "CYCLONEDDS_URI": LOOPBACK},
-            stdout=subprocess.PIPE,
-            text=True,
-        )
-        cell = Cell(domain_id=domain, arm=ArmTopics(subscriber_timeout_s=20.0))
-        arm = Ros2Arm(robot, cell, 0.002, True)
-        arm.connect()
+        arm_proc, arm, record = _standin_arm(robot, domain, q0, tmp)
         stamps, ticks, sent = [], [], []
         next_due = time.perf_counter()
         for k in range(n):
