@@ -144,6 +144,7 @@ def test_the_command_line_exits_1_where_the_arm_stops_and_writes_the_figure(tmp_
         text=True,
     )
     assert done.returncode == 1, done.stderr
+    assert "checking panda's task beside its seated operator, 8 phases" in done.stderr
     assert "the arm will stop for the still operator on 1 stretch(es)" in done.stdout
     assert "passes at a latency of 0.0" in done.stdout
     result = json.loads((tmp_path / "check.json").read_text())

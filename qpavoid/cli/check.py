@@ -4,6 +4,7 @@ operator (:mod:`qpavoid.experiments.cell_check`; exit 0 if nowhere, 1 if somewhe
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,8 @@ from qpavoid.cli.args import (
     positive_float,
 )
 from qpavoid.control.tick import SAFETY_MODES
-from qpavoid.experiments.cell_check import CellCheck, Stretch, check_cell
+from qpavoid.experiments.cell_check import PHASES, CellCheck, Stretch, check_cell
+from qpavoid.experiments.jobs import progress_bar
 from qpavoid.experiments.run_spec import CONTROLLERS, RunSpec
 from qpavoid.experiments.runs import spec_robot
 from qpavoid.output.check_figure import check_figure
@@ -66,6 +68,7 @@ def add_check_command(sub: argparse._SubParsersAction) -> None:
         "--rate", type=positive_float, default=500.0, metavar="HZ", help="control rate, Hz"
     )
     check.add_argument("--out", metavar="DIR", help="where to write (default: runs/check-ROBOT)")
+    check.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     check.set_defaults(handler=check_command)
 
 
@@ -82,7 +85,14 @@ def check_command(args: argparse.Namespace) -> Verdict:
     )
     out = Path(args.out or Path("runs") / f"check-{Path(args.robot).name}")
     check_output_dir(out)
-    result = check_cell(spec)
+    if not args.quiet:  # the check takes seconds: say what it does before the bar
+        print(
+            f"checking {Path(args.robot).name}'s task beside its seated operator, "
+            f"{PHASES} phases of the operator's work ...",
+            file=sys.stderr,
+        )
+    with progress_bar(PHASES, "cell check", "phase", not args.quiet) as bar:
+        result = check_cell(spec, lambda done, _total: bar.update(done - bar.n))
     out.mkdir(parents=True, exist_ok=True)
     (out / "check.json").write_text(strict_json(as_json(result)) + "\n")
     lines = [describe_check(result)]

@@ -37,6 +37,7 @@ before a stretch (never stopped there by this check's criterion).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -137,9 +138,11 @@ class CellCheck:
         return bool(self.stretches)
 
 
-def check_cell(spec: RunSpec) -> CellCheck:
+def check_cell(spec: RunSpec, progress: Callable[[int, int], None] | None = None) -> CellCheck:
     """Where the arm of ``spec`` stops along its task beside the still operator (module
     docstring). ``spec``'s scenario is ignored (the operator is the task's, at work).
+    ``progress(done, total)`` is called after each of the operator's phases has been
+    followed along the whole path (total: the phases), for a command line's progress bar.
 
     Raises
     ------
@@ -170,7 +173,7 @@ def check_cell(spec: RunSpec) -> CellCheck:
     motion = make_scenario("free", robot, task=spec.task_for(robot))
     camera = Camera(motion, camera_cfg, controller.human.skeleton)
     frames = [camera.frame_at(4.0 * k / PHASES)[0] for k in range(PHASES)]
-    rows = _measure(controller, qs, times, frames, age)
+    rows = _measure(controller, qs, times, frames, age, progress)
     waypoints = _waypoint_times(path)
     stretches = _stretches(rows, times, waypoints, age, period, controller)
     return CellCheck(spec, age, times, rows.clearance, rows.needed, waypoints, stretches)
@@ -194,7 +197,12 @@ def _need(distance: np.ndarray, age: float, ssm: SSMConfig, body: np.ndarray) ->
 
 
 def _measure(
-    controller: Controller, qs: np.ndarray, times: np.ndarray, frames: list, age: float
+    controller: Controller,
+    qs: np.ndarray,
+    times: np.ndarray,
+    frames: list,
+    age: float,
+    progress: Callable[[int, int], None] | None,
 ) -> _Rows:
     n = len(times)
     rows = _Rows(
@@ -225,6 +233,8 @@ def _measure(
                 rows.clearance[k], rows.needed[k] = table.distance[i, j], need[i, j]
                 rows.pair[k] = (table.part_names[j], table.set_names[i])
                 rows.vector[k] = table.vector[i, j]
+        if progress is not None:
+            progress(phase + 1, len(frames))
     return rows
 
 
