@@ -39,6 +39,7 @@ if TYPE_CHECKING:  # the names as type checkers and editors see them
         SolverError,
     )
     from .distance.capsules import CapsuleDistance
+    from .distance.coal_capsules import CoalCapsuleDistance
     from .distance.methods import (
         SphereDistance,
         capsule_distances,
@@ -64,6 +65,7 @@ _LAZY = {
     "BodyModel": "human.body",
     "BodyPart": "human.body_parts",
     "CapsuleDistance": "distance.capsules",
+    "CoalCapsuleDistance": "distance.coal_capsules",
     "Command": "control.tick",
     "ControlSet": "arm.control_points",
     "ControllerConfig": "control.tick",
@@ -118,6 +120,7 @@ __all__ = [
     "BodyModel",
     "BodyPart",
     "CapsuleDistance",
+    "CoalCapsuleDistance",
     "Command",
     "ControlSet",
     "ControllerConfig",

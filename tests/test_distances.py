@@ -1,8 +1,9 @@
 """Distance tables against independent references.
 
 * spheres: a plain double loop over every robot point and human point;
-* capsules: an analytic segment-segment distance written here (critical point of the
-  squared distance plus the four endpoint-to-segment distances), to 1e-6 m.
+* capsules (the compiled pass and coal's alike): an analytic segment-segment distance
+  written here (critical point of the squared distance plus the four endpoint-to-segment
+  distances), to 1e-6 m.
 """
 
 from __future__ import annotations
@@ -13,7 +14,12 @@ from conftest import random_q
 
 import qpavoid
 from qpavoid.arm.model import Kinematics
-from qpavoid.distance.methods import CapsuleDistance, SphereDistance, axis_rotations
+from qpavoid.distance.methods import (
+    CapsuleDistance,
+    CoalCapsuleDistance,
+    SphereDistance,
+    axis_rotations,
+)
 from qpavoid.human.body import HumanGeometry
 from qpavoid.human.kinect_v2 import JointType, TrackingState
 from qpavoid.human.posture import random_posture
@@ -160,9 +166,10 @@ def _check_capsules(robot, human, table, rseg, hseg, widen=None):
             assert np.linalg.norm(table.vector[i, j]) == pytest.approx(1.0)
 
 
-def test_capsules_random_against_analytic(robot, human):
+@pytest.mark.parametrize("method", [CapsuleDistance, CoalCapsuleDistance])
+def test_capsules_random_against_analytic(robot, human, method):
     rng = np.random.default_rng(3)
-    caps = CapsuleDistance(robot, human)
+    caps = method(robot, human)
     for _ in range(200):
         q = random_q(rng, robot)
         kin = robot.kinematics(q, jacobians=False)
@@ -188,8 +195,9 @@ def test_capsules_random_against_analytic(robot, human):
         ("along_minus_z", [[0.3, 0.0, 1.0], [0.3, 0.0, 0.2]]),
     ],
 )
-def test_capsules_special_cases(robot, human, name, hseg):
-    caps = CapsuleDistance(robot, human)
+@pytest.mark.parametrize("method", [CapsuleDistance, CoalCapsuleDistance])
+def test_capsules_special_cases(robot, human, name, hseg, method):
+    caps = method(robot, human)
     rseg = np.array(
         [
             [[0, 0, 0.0], [0, 0, 1.0]],  # vertical
@@ -305,10 +313,11 @@ def test_axis_rotations_take_z_onto_each_axis():
     np.testing.assert_array_equal(axis_rotations(np.zeros((1, 3)))[0], np.eye(3))
 
 
-@pytest.mark.parametrize("method", [CapsuleDistance, SphereDistance])
+@pytest.mark.parametrize("method", [CapsuleDistance, CoalCapsuleDistance, SphereDistance])
 def test_closest_of_several_people_is_each_pair_s_closest_person(robot, human, method):
-    """``closest`` (capsules: people tried in order of a bounding-sphere bound, coal skipped
-    for the rest) equals the minimum over every person's own table, entry by entry."""
+    """``closest`` (coal's capsules: people tried in order of a bounding-sphere bound, coal
+    skipped for the rest; the compiled ones: every person in one pass) equals the minimum
+    over every person's own table, entry by entry."""
     rng = np.random.default_rng(7)
     table_of, many = method(robot, human), method(robot, human)
     for _ in range(40):

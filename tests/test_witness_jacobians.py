@@ -30,7 +30,7 @@ import pytest
 import qpavoid
 from qpavoid.control.qp.kernels import damper_rows, pair_inputs
 from qpavoid.core.errors import RobotDescriptionError
-from qpavoid.distance.capsules import axis_rotation
+from qpavoid.distance.coal_capsules import axis_rotation
 from qpavoid.distance.methods import CapsuleDistance, SphereDistance
 
 #: Finite-difference step, rad (central differences: error ~ h² · q̈-terms + ε/h ≈ 2e-9).

@@ -33,7 +33,7 @@ from qpavoid.experiments.campaign import (
     run_campaign,
     write_campaign,
 )
-from qpavoid.experiments.run_spec import CONTROLLERS, DISTANCES
+from qpavoid.experiments.run_spec import CONTROLLERS, DISTANCE_METHODS
 from qpavoid.output.run_files import check_output_dir, strict_json
 
 __all__ = ["add_campaign_command", "sweep_command"]
@@ -54,7 +54,7 @@ def add_campaign_command(sub: argparse._SubParsersAction) -> None:
     )
     sweep.add_argument("--n", type=whole_number(1, MAX_RUNS), required=True, help="number of runs")
     sweep.add_argument("--controller", choices=CONTROLLERS, required=True)
-    sweep.add_argument("--distance", choices=DISTANCES, default=DISTANCES[0])
+    sweep.add_argument("--distance", choices=DISTANCE_METHODS, default=DISTANCE_METHODS[0])
     sweep.add_argument(
         "--safety",
         choices=SAFETY_MODES,

@@ -1,6 +1,6 @@
 """The ``qpavoid`` command line: it parses, calls the library and prints, nothing more.
 
-    qpavoid run SCENARIO [--controller analytic|qp] [--distance capsules|spheres]
+    qpavoid run SCENARIO [--controller analytic|qp] [--distance capsules|capsules-coal|spheres]
                          [--safety paper|ssm] [--bench real|ideal] [--task FILE] [--out DIR]
     qpavoid run --human FILE [...]
     qpavoid run --human A.npz B.npz --sensors calib.toml [...]
@@ -51,7 +51,7 @@ from qpavoid.control.tick import SAFETY_MODES
 from qpavoid.experiments.compare import compare
 from qpavoid.experiments.jobs import progress_bar
 from qpavoid.experiments.reproduce import reproduce_bag
-from qpavoid.experiments.run_spec import BENCHES, CONTROLLERS, DISTANCES, LIMIT_MODES
+from qpavoid.experiments.run_spec import BENCHES, CONTROLLERS, DISTANCE_METHODS, LIMIT_MODES
 from qpavoid.experiments.runs import RunSpec, live_view, run_one, spec_robot
 from qpavoid.loop.live_input import check_listening, parse_address
 from qpavoid.loop.metrics import describe
@@ -135,7 +135,12 @@ def build_parser() -> Parser:
     )
     for flag, choices, help_text in (
         ("--controller", CONTROLLERS, "the paper's controller or its QP variant"),
-        ("--distance", DISTANCES, "exact capsules (cover the shoulder) or the paper's spheres"),
+        (
+            "--distance",
+            DISTANCE_METHODS,
+            "exact capsules (cover the shoulder; capsules-coal: the same by coal) or the "
+            "paper's spheres",
+        ),
         (
             "--safety",
             SAFETY_MODES,

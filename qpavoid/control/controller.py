@@ -43,8 +43,7 @@ from qpavoid.control.tick import Command, ControllerConfig, Tick
 from qpavoid.core.checks import finite_number
 from qpavoid.core.compiling import kernel_input
 from qpavoid.core.errors import InputError, SolverError
-from qpavoid.distance.capsules import CapsuleDistance
-from qpavoid.distance.methods import SphereDistance
+from qpavoid.distance.methods import DistanceMethod
 from qpavoid.human.body import BodyModel, HumanGeometry, KinectHuman
 from qpavoid.human.frames import HumanFrame
 from qpavoid.human.people import People
@@ -222,7 +221,7 @@ class Controller:
         return self.perception.perceiver
 
     @property
-    def distances(self) -> SphereDistance | CapsuleDistance:
+    def distances(self) -> DistanceMethod:
         """The distance method (the clearance stage's)."""
         return self.clearance.distances
 

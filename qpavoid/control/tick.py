@@ -34,8 +34,9 @@ class ControllerConfig:
     Attributes
     ----------
     distance
-        Distance method: ``"capsules"`` (exact, coal; the default, because it covers every
-        robot surface a person can reach, the shoulder included) or ``"spheres"`` (the
+        Distance method: ``"capsules"`` (exact, one compiled pass; the default, because it
+        covers every robot surface a person can reach, the shoulder included),
+        ``"capsules-coal"`` (the same table by coal, its judge) or ``"spheres"`` (the
         paper's eq. 1 as published: blind at the shoulder, docs/distances.md).
     avoidance
         Constants of the avoidance laws (eqs. 2-7) and the stop rules.

@@ -18,7 +18,19 @@ from qpavoid.core import geometry
 from qpavoid.core.compiling import ctrl_c_deferred, recompile_if_stale
 from qpavoid.core.geometry import TINY
 
-__all__ = ["capsule_axes", "capsule_directions", "sphere_table", "warm_up"]
+__all__ = [
+    "capsule_axes",
+    "capsule_directions",
+    "capsule_table",
+    "segment_closest",
+    "sphere_table",
+    "warm_up",
+]
+
+#: Below this ``sin²`` of the angle between two segments (times their squared lengths)
+#: they are taken as parallel: any point of the overlap is a closest pair, and the
+#: error in the squared distance of taking ``s = 0`` is at most this times ``|a|²``.
+PARALLEL = 1e-12
 
 
 @njit(cache=True)
@@ -144,6 +156,193 @@ def capsule_directions(
     return vector, s
 
 
+@njit(cache=True, inline="always")
+def _clamp01(x: float) -> float:
+    return min(max(x, 0.0), 1.0)
+
+
+@njit(cache=True)
+def segment_closest(
+    p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray
+) -> tuple[float, float]:
+    r"""The parameters ``(s, t)`` of the closest points ``p1 + s (q1 − p1)`` and
+    ``p2 + t (q2 − p2)`` of two segments, each in [0, 1].
+
+    Ericson, *Real-Time Collision Detection* (2005), §5.1.9. With
+    ``d₁ = q1 − p1``, ``d₂ = q2 − p2``, ``r = p1 − p2``, ``a = d₁·d₁``, ``e = d₂·d₂``,
+    ``b = d₁·d₂``, ``c = d₁·r``, ``f = d₂·r``, the lines' closest points solve
+
+    .. math:: s = \frac{b f − c e}{a e − b^2}, \qquad t = \frac{b s + f}{e},
+
+    and where ``t`` leaves [0, 1] it is clamped and ``s`` taken anew as the closest to that
+    end, ``s = \mathrm{clamp}((b t − c) / a)``. Degenerate cases: a segment of zero length
+    is its point (``a`` or ``e`` below :data:`~qpavoid.core.geometry.TINY`² m²); for
+    (nearly) parallel segments (``a e − b² ≤`` :data:`PARALLEL` ``a e``) the lines' closest
+    points are ill-conditioned or far outside both segments, so the minimum lies on the
+    boundary of the square of (s, t): one end of a segment against the other segment, the
+    closest of the four (:func:`_closest_of_the_ends`).
+    """
+    a = e = b = c = f = 0.0
+    for k in range(3):
+        d1, d2, r = q1[k] - p1[k], q2[k] - p2[k], p1[k] - p2[k]
+        a += d1 * d1
+        e += d2 * d2
+        b += d1 * d2
+        c += d1 * r
+        f += d2 * r
+    small = TINY * TINY
+    if a <= small and e <= small:  # two points
+        return 0.0, 0.0
+    if a <= small:  # the first a point: its projection on the second
+        return 0.0, _clamp01(f / e)
+    if e <= small:  # the second a point
+        return _clamp01(-c / a), 0.0
+    denom = a * e - b * b
+    if denom <= PARALLEL * a * e:  # parallel: the closest of each end to the other segment
+        return _closest_of_the_ends(a, b, c, e, f)
+    s = _clamp01((b * f - c * e) / denom)
+    t = (b * s + f) / e
+    if t < 0.0:
+        return _clamp01(-c / a), 0.0
+    if t > 1.0:
+        return _clamp01((b - c) / a), 1.0
+    return s, t
+
+
+@njit(cache=True)
+def _closest_of_the_ends(a: float, b: float, c: float, e: float, f: float) -> tuple[float, float]:
+    """The closest of the four pairs (each end of a segment, its projection on the other
+    segment, clamped), in :func:`segment_closest`'s terms; the squared distance of
+    ``(s, t)`` is ``|r|² + a s² + e t² + 2 c s − 2 f t − 2 b s t``, whose ``|r|²`` all
+    four share."""
+    best_s = best_t = 0.0
+    best = np.inf
+    for k in range(4):
+        if k == 0:  # p1 against the second segment
+            s, t = 0.0, _clamp01(f / e)
+        elif k == 1:  # q1
+            s, t = 1.0, _clamp01((b + f) / e)
+        elif k == 2:  # p2 against the first
+            s, t = _clamp01(-c / a), 0.0
+        else:  # q2
+            s, t = _clamp01((b - c) / a), 1.0
+        value = a * s * s + e * t * t + 2.0 * c * s - 2.0 * f * t - 2.0 * b * s * t
+        if value < best:
+            best, best_s, best_t = value, s, t
+    return best_s, best_t
+
+
+@njit(cache=True)
+def capsule_table(
+    robot_segments: np.ndarray,
+    robot_radii: np.ndarray,
+    human_segments: np.ndarray,
+    human_radii: np.ndarray,
+    human_valid: np.ndarray,
+    n_parts: int,
+    fallback: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    r"""Signed capsule–capsule distances of every robot set with every body part, the
+    closest of the people: one pass.
+
+    Robot set ``i`` is the capsule of axis ``robot_segments[i]`` (a → b) and radius
+    ``robot_radii[i]``; part ``j`` of person ``p`` the capsule at row ``p P + j`` of
+    ``human_segments``, ``human_radii`` (margins included) and ``human_valid``
+    (``P = n_parts``). With the axes' closest points ``c_r``, ``c_h``
+    (:func:`segment_closest`), the signed distance is
+
+    .. math:: d = \lVert c_r − c_h \rVert − ρ_r − ρ_h,
+
+    exact apart and in penetration (the distance between the axes is 1-Lipschitz in a
+    translation, so no shorter one separates them), its direction
+    ``n = (c_r − c_h) / ‖c_r − c_h‖`` (human → robot), the witness points on the surfaces
+    ``c_r − ρ_r n`` and ``c_h + ρ_h n``, and ``s`` the robot's axis parameter of ``c_r``
+    (the point whose Jacobian the table's rows use). Where the axes meet (``‖c_r − c_h‖
+    < TINY``) ``n`` is the unit normal of both axes (``d₁ × d₂``), else one of the robot
+    axis alone, else ``fallback``. Row ``r = i P + j`` keeps the closest person, the first
+    of equals.
+
+    Returns
+    -------
+    distance
+        (S P,) m; +inf where no person's part is valid.
+    vector
+        (S P, 3) unit, 0 where the distance is infinite.
+    s
+        (S P,) in [0, 1] (0 where the distance is infinite).
+    robot_point, human_point
+        (S P, 3) m (NaN where the distance is infinite).
+    who
+        (S P,) the person of each row (0 where the distance is infinite).
+    """
+    n_sets = robot_segments.shape[0]
+    n_people = human_segments.shape[0] // n_parts
+    n_rows = n_sets * n_parts
+    distance = np.full(n_rows, np.inf)
+    vector = np.zeros((n_rows, 3))
+    s_out = np.zeros(n_rows)
+    robot_point = np.full((n_rows, 3), np.nan)
+    human_point = np.full((n_rows, 3), np.nan)
+    who = np.zeros(n_rows, dtype=np.int64)
+    c_r, c_h, n = np.empty(3), np.empty(3), np.empty(3)
+    for i in range(n_sets):
+        a_r, b_r = robot_segments[i, 0], robot_segments[i, 1]
+        for j in range(n_parts):
+            row = i * n_parts + j
+            for p in range(n_people):
+                h = p * n_parts + j
+                if not human_valid[h]:
+                    continue
+                a_h, b_h = human_segments[h, 0], human_segments[h, 1]
+                s, t = segment_closest(a_r, b_r, a_h, b_h)
+                gap2 = 0.0
+                for k in range(3):
+                    c_r[k] = a_r[k] + s * (b_r[k] - a_r[k])
+                    c_h[k] = a_h[k] + t * (b_h[k] - a_h[k])
+                    gap2 += (c_r[k] - c_h[k]) ** 2
+                gap = np.sqrt(gap2)
+                d = gap - robot_radii[i] - human_radii[h]
+                if not d < distance[row]:  # the first of equals is kept
+                    continue
+                if gap >= TINY:
+                    for k in range(3):
+                        n[k] = (c_r[k] - c_h[k]) / gap
+                else:
+                    _normal_of_axes(a_r, b_r, a_h, b_h, fallback, n)
+                distance[row], s_out[row], who[row] = d, s, p
+                for k in range(3):
+                    vector[row, k] = n[k]
+                    robot_point[row, k] = c_r[k] - robot_radii[i] * n[k]
+                    human_point[row, k] = c_h[k] + human_radii[h] * n[k]
+    return distance, vector, s_out, robot_point, human_point, who
+
+
+@njit(cache=True)
+def _normal_of_axes(
+    a_r: np.ndarray,
+    b_r: np.ndarray,
+    a_h: np.ndarray,
+    b_h: np.ndarray,
+    fallback: np.ndarray,
+    n: np.ndarray,
+) -> None:
+    """Into ``n``: a unit vector normal to both axes where they meet (their cross
+    product), else normal to the robot's axis (its cross product with the coordinate axis
+    it leans on least), else ``fallback`` (a point on a point)."""
+    u, v = b_r - a_r, b_h - a_h
+    w = np.cross(u, v)
+    norm = np.sqrt(w @ w)
+    if norm < TINY:
+        e = np.zeros(3)
+        e[np.argmin(np.abs(u))] = 1.0
+        w = np.cross(u, e)
+        norm = np.sqrt(w @ w)
+    if norm < TINY:
+        w, norm = fallback, 1.0
+    for k in range(3):
+        n[k] = w[k] / norm
+
+
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) the kernels, once per process; the sphere
@@ -162,4 +361,14 @@ def warm_up() -> None:
         )
         capsule_directions(np.zeros((1, 2, 3)), np.ones(2), np.zeros((2, 3)), np.ones((2, 3)))
         capsule_axes(np.zeros((1, 2, 3)))
-        recompile_if_stale(sphere_table, geometry)  # it compiles geometry.TINY in
+        capsule_table(
+            np.zeros((1, 2, 3)),
+            np.ones(1),
+            np.ones((2, 2, 3)),
+            np.ones(2),
+            np.ones(2, dtype=np.bool_),
+            1,
+            np.zeros(3),
+        )
+        for kernel in (sphere_table, capsule_table):  # they compile geometry.TINY in
+            recompile_if_stale(kernel, geometry)

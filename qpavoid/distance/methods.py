@@ -7,12 +7,14 @@
 Both methods widen a part by its uncertainty (``HumanGeometry.part_margin``: lost or
 inferred joints); the capsule method also by how far its fingers stick out of it
 (``reach_margin``).
-* **capsules** (exact): coal's capsule-capsule distance between the capsule of set i and
-  the capsule of part j.
+* **capsules** (exact, the default): the signed distance between the capsule of set i and
+  the capsule of part j, the whole table in one compiled pass
+  (:mod:`qpavoid.distance.capsules`); **capsules-coal** is the same table from coal's
+  capsule distance (:mod:`qpavoid.distance.coal_capsules`), its judge in the tests.
 
 Both fill a :class:`~qpavoid.distance.table.DistanceTable` (its witness points, the
 convention for parts not seen). This module is the one to import from: it holds the
-sphere method and re-exports the table and the capsule method (:mod:`qpavoid.distance.capsules`).
+sphere method and re-exports the table and the capsule methods.
 
 For use in a control loop, build :class:`SphereDistance` or :class:`CapsuleDistance`
 once and call it every tick with the robot's :class:`~qpavoid.arm.model.Kinematics` and the
@@ -28,7 +30,8 @@ from numpy.typing import ArrayLike
 from qpavoid.arm.model import Kinematics, Robot
 from qpavoid.core.errors import InputError
 from qpavoid.distance._kernels import sphere_table, warm_up
-from qpavoid.distance.capsules import CapsuleDistance, axis_rotations
+from qpavoid.distance.capsules import CapsuleDistance
+from qpavoid.distance.coal_capsules import CoalCapsuleDistance, axis_rotations
 from qpavoid.distance.table import FALLBACK_DIRECTION, DistanceTable, closest_of
 from qpavoid.human.body import BodyModel, HumanGeometry
 
@@ -36,12 +39,15 @@ __all__ = [
     "FALLBACK_DIRECTION",
     "METHODS",
     "CapsuleDistance",
+    "CoalCapsuleDistance",
+    "DistanceMethod",
     "DistanceTable",
     "PointDistance",
     "SphereDistance",
     "axis_rotations",
     "capsule_distances",
     "distance_method",
+    "geometry",
     "sphere_distances",
 ]
 
@@ -57,7 +63,8 @@ class SphereDistance:
         Gives the points' part membership and sphere radii.
     """
 
-    method = "spheres"
+    method = "spheres"  #: the table's geometry
+    name = "spheres"  #: the distance method's name (``--distance``)
 
     def __init__(self, robot: Robot, human: BodyModel):
         n_sets, n_parts = len(robot.sets), len(human.parts)
@@ -167,14 +174,24 @@ class PointDistance:
         return d, vector
 
 
-METHODS: dict[str, type[SphereDistance] | type[CapsuleDistance]] = {
+#: A distance method of the tables (rows: robot sets, columns: body parts).
+DistanceMethod = SphereDistance | CapsuleDistance | CoalCapsuleDistance
+
+METHODS: dict[str, type[SphereDistance] | type[CapsuleDistance] | type[CoalCapsuleDistance]] = {
     "spheres": SphereDistance,
     "capsules": CapsuleDistance,
+    "capsules-coal": CoalCapsuleDistance,
 }
 
 
-def distance_method(name: str, robot: Robot, human: BodyModel) -> SphereDistance | CapsuleDistance:
-    """Build the distance method called ``name`` (``"spheres"`` or ``"capsules"``)."""
+def geometry(name: str) -> str:
+    """The shapes the distance method ``name`` measures between: ``"spheres"`` or
+    ``"capsules"`` (both capsule methods), as a table's ``method`` says."""
+    return "spheres" if name == "spheres" else "capsules"
+
+
+def distance_method(name: str, robot: Robot, human: BodyModel) -> DistanceMethod:
+    """Build the distance method called ``name`` (a key of :data:`METHODS`)."""
     if name not in METHODS:
         raise InputError(
             f"unknown distance method {name!r}; choose from {sorted(METHODS)}",
@@ -205,7 +222,7 @@ def sphere_distances(
 def capsule_distances(
     robot: Robot, q: ArrayLike, human: BodyModel, joints: object, state: object = None
 ) -> DistanceTable:
-    """The exact capsule distance table (coal) at robot angles ``q`` (rad).
+    """The exact capsule distance table at robot angles ``q`` (rad).
 
     Same arguments as :func:`sphere_distances`.
     """

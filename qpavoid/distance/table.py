@@ -84,6 +84,30 @@ class DistanceTable:
         hp[p_idx < 0] = np.nan
         return rp.reshape(*shape, 3), hp.reshape(*shape, 3)
 
+    @classmethod
+    def of_capsules(
+        cls,
+        names: tuple[tuple[str, ...], tuple[str, ...]],
+        distance: np.ndarray,
+        vector: np.ndarray,
+        robot_s: np.ndarray,
+        robot_point: np.ndarray,
+        human_point: np.ndarray,
+    ) -> DistanceTable:
+        """A capsule table from its rows ``r = i K + j`` (``names``: the sets', the parts')."""
+        shape = (len(names[0]), len(names[1]))
+        none = np.full(shape, -1)
+        return cls(
+            "capsules",
+            distance.reshape(shape),
+            vector.reshape(*shape, 3),
+            none,
+            robot_s.reshape(shape),
+            none,
+            *names,
+            (robot_point.reshape(*shape, 3), human_point.reshape(*shape, 3)),
+        )
+
     def min_per_set(self) -> np.ndarray:
         """(S,) minimum distance of each robot set over all parts, m."""
         return self.distance.min(axis=1)
@@ -117,6 +141,13 @@ class DistanceTable:
             assert kin.point_jacobians is not None
             return kin.point_jacobians[self.robot_index[sets, parts]]
         return kin.segment_point_jacobian(sets, self.robot_s[sets, parts])
+
+
+def require_people(geos: Sequence[object]) -> None:
+    """Refuse an empty list of people: nobody is :data:`~qpavoid.human.people.NOBODY`'s
+    one geometry with no part seen, never no geometry (an ``InputError``)."""
+    if not geos:
+        raise InputError("closest: no person's geometry (nobody: NOBODY's)", name="geos")
 
 
 def closest_of(tables: Sequence[DistanceTable]) -> tuple[DistanceTable, np.ndarray]:

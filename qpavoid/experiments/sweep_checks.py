@@ -260,7 +260,7 @@ def check_log(
     that plays no part in the laws, as the controller holds it).
     """
     avo, roles = config.avoidance, robot.roles
-    capsule = log["distance"] if distance == "capsules" else log["distance_other"]
+    capsule = log["distance_other"] if distance == "spheres" else log["distance"]
     threshold = set_stop_distances(avo, roles, len(robot.sets))
     moving = np.any(log["dq_command"] != 0.0, axis=1)  # the controller's decisions
     braking = braking_ticks(log["dq_command"])

@@ -241,8 +241,9 @@ def run_metrics(
     """
     dt = 1.0 / control_rate_hz
     path_err = np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)
-    other = "capsules" if method == "spheres" else "spheres"
-    dmin = {method: float(np.min(log["distance"])), other: float(np.min(log["distance_other"]))}
+    other = "capsules" if method == "spheres" else "spheres"  # the geometries' names
+    used = "spheres" if method == "spheres" else "capsules"
+    dmin = {used: float(np.min(log["distance"])), other: float(np.min(log["distance_other"]))}
     tick = log["tick_us"]
     final_err = float(np.linalg.norm(log["ee_pos"][-1] - goal[:3, 3]))
     return {

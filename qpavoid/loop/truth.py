@@ -34,7 +34,7 @@ from qpavoid.arm.meshes import collision_geometry, object_vertices
 from qpavoid.arm.model import Kinematics, Robot
 from qpavoid.core.errors import RobotDescriptionError
 from qpavoid.core.geometry import unit
-from qpavoid.distance.capsules import CapsuleDistance, axis_rotation
+from qpavoid.distance.coal_capsules import CoalCapsuleDistance, axis_rotation
 from qpavoid.human.body import BodyModel, HumanGeometry, KinectHuman
 from qpavoid.human.frames import HumanFrame, HumanMotion
 from qpavoid.laws.pfl import (
@@ -342,7 +342,7 @@ class TrueClearance:
         self, robot: Robot, human: BodyModel, motion: HumanMotion, pfl: PFLConfig | None = None
     ):
         self.robot, self.human, self.motion = robot, human, motion
-        self.capsules = CapsuleDistance(robot, human)
+        self.capsules = CoalCapsuleDistance(robot, human)  # coal's: the judge
         self.meshes = MeshClearance(robot, human)
         self.n_sets = len(robot.sets)
         self.t0 = float(np.asarray(getattr(motion, "t", [0.0]))[0])

@@ -93,7 +93,7 @@ def _cylinder_grid(radius: float, height: float) -> np.ndarray:
 def _robot_volumes(run: Run, q: np.ndarray) -> list[np.ndarray]:
     """Surface grids of the robot's spheres (eq. 1) or capsules at ``q``."""
     robot = run.robot
-    if run.method != "capsules":
+    if run.method == "spheres":
         return [
             capsule_grid(p, p, r)
             for p, r in zip(robot.control_points(q), robot.sphere_radii, strict=True)
@@ -111,7 +111,7 @@ def _person(run: Run, k: int) -> tuple[list[np.ndarray], np.ndarray]:
     human = run.human
     joints, state = run.log["joints"][k], run.log["state"][k]
     geo = human.geometry(joints, state)
-    if run.method == "capsules":
+    if run.method != "spheres":
         grids = [
             capsule_grid(a, b, r)
             for (a, b), r, ok in zip(
@@ -191,7 +191,7 @@ def _scene_legend(run: Run, base: tuple[float, float]) -> list[Any]:
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    volumes = "capsules" if run.method == "capsules" else "spheres (eq. 1)"
+    volumes = "spheres (eq. 1)" if run.method == "spheres" else "capsules"
     return [
         Line2D([], [], color="C0", lw=2, marker="o", ms=2.5, label="robot links"),
         Patch(**ROBOT, label=f"robot {volumes}"),
