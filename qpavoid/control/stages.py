@@ -43,8 +43,10 @@ from qpavoid.laws.avoidance import avoidance_terms, l1_factor, law_constants, sc
 from qpavoid.laws.ssm import (
     SSMConfig,
     StopTimeBudget,
+    body_mask,
     joint_speed_limits,
-    separation_bounds,
+    separation_constants,
+    separation_rows,
     with_stop_time,
 )
 from qpavoid.perception.freshness import FrameClock
@@ -328,6 +330,7 @@ class LimitsStage:
         self.robot, self.config, self.ramp = robot, config, ramp
         self.scaled_cols = joint_columns(robot, config.scaled_joints, "scaled_joints")
         self.ssm = ssm
+        self._body = body_mask(human.part_names, ssm)  # the parts at the body's speed
         self.stop_budget = StopTimeBudget(ssm, robot.joint_names, config.control_period_s)
         self.accel = joint_speed_limits(replace(ssm, stop_time_s=1.0), robot.joint_names)  # a_j
         #: (nv,) the joints' velocity limits, rad/s: the description's (tighter with
@@ -371,8 +374,16 @@ class LimitsStage:
             return Bounds(limits, self._no_bound, self._no_approach, None, box)
         ssm = with_stop_time(self.ssm, self.stop_budget.budget())
         table = clear.table
-        v_parts = seen.part_velocity[who, np.arange(who.shape[1])[None, :]]  # each pair's
-        approach_limit, human_approach = separation_bounds(table, v_parts, seen.frame_age_s, ssm)
+        # every pair's bound and its part's speed towards the set (laws.ssm), one call
+        approach_limit, human_approach = separation_rows(
+            kernel_input(table.distance, np.float64),
+            kernel_input(table.vector, np.float64),
+            kernel_input(who, np.int64),
+            kernel_input(seen.part_velocity, np.float64),
+            self._body,
+            float(seen.frame_age_s),
+            *separation_constants(ssm),
+        )
         limits = np.minimum(limits, self.accel * ssm.stop_time_s)  # |q̇_j| ≤ a_j T_s
         if self.contact is None:
             return Bounds(limits, approach_limit, human_approach, None, box, ssm)

@@ -49,6 +49,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike
 
 from qpavoid.arm.braking import jerk_lag_s, per_joint, stop_time
@@ -348,6 +349,104 @@ def separation_bounds(
     limit = max_approach_speed(table.distance, frame_age_s, cfg, body, speed)
     towards = np.einsum("skx,skx->sk", table.vector, v)  # vector: human -> robot
     return limit, np.maximum(towards, 0.0)
+
+
+def separation_constants(cfg: SSMConfig) -> tuple[float, ...]:
+    """The scalars :func:`separation_rows` takes, in its order: T_r, T_s, the human
+    speeds' zone (m) and speeds (near, far, body; m/s), C + Z_d + Z_r (m), the body's
+    acceleration (m/s², NaN: off) and the speed error (m/s)."""
+    accel = cfg.body_acceleration_mps2
+    return (
+        _t_r(cfg),
+        cfg.stop_time_s,
+        cfg.human_speed_zone_m,
+        cfg.human_speed_near_mps,
+        cfg.human_speed_far_mps,
+        cfg.body_speed_mps,
+        fixed_terms(cfg),
+        math.nan if accel is None else float(accel),
+        cfg.speed_error_mps,
+    )
+
+
+def body_mask(part_names: Sequence[str], cfg: SSMConfig) -> np.ndarray:
+    """(K,) True for the parts moving at the body's speed (a writeable copy, as the
+    compiled :func:`separation_rows` was warmed up for)."""
+    return np.array(_body_mask(tuple(part_names), tuple(cfg.body_parts))[0])
+
+
+@njit(cache=True)
+def separation_rows(
+    distance: np.ndarray,
+    vector: np.ndarray,
+    who: np.ndarray,
+    part_velocity: np.ndarray,
+    body: np.ndarray,
+    frame_age_s: float,
+    t_r: float,
+    t_s: float,
+    zone_m: float,
+    near_mps: float,
+    far_mps: float,
+    body_mps: float,
+    fixed_m: float,
+    body_acceleration_mps2: float,
+    speed_error_mps: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    r""":func:`separation_bounds` in one compiled pass (the stage's; the numpy functions
+    above are its reference in the tests), each pair's part taken from its closest person.
+
+    For pair (i, j) with distance d, unit direction n (human → robot) and the velocity v
+    of part j of person ``who[i, j]`` (``part_velocity`` (P, K, 3), m/s):
+
+    .. math::
+
+        \bar v_r = \frac{d − v_h (T_f + T_r + T_s) − (C + Z_d + Z_r)}{T_r + T_s / 2},
+        \qquad v_{h,n} = \max(n · v, 0),
+
+    with v_h ISO 13855's (:func:`human_speed`; ``body`` (K,) the parts at the body's
+    speed), and for a body part with ``body_acceleration_mps2`` finite the smaller S_h of
+    :func:`accelerated_reach` from ``‖v‖ + speed_error_mps`` (:func:`max_approach_speed`).
+    An infinite or NaN ``frame_age_s`` allows no approach (−inf); NaN propagates as in
+    numpy. The scalars are :func:`separation_constants`'.
+
+    Returns
+    -------
+    limit, towards
+        (S, K) m/s.
+    """
+    n_sets, n_parts = distance.shape
+    limit = np.empty((n_sets, n_parts))
+    towards = np.empty((n_sets, n_parts))
+    known = np.isfinite(frame_age_s)
+    horizon = frame_age_s + t_r + t_s
+    per_speed = t_r + t_s / 2.0
+    accelerating = body_acceleration_mps2 == body_acceleration_mps2  # not NaN
+    for i in range(n_sets):
+        for j in range(n_parts):
+            p = who[i, j]
+            vx, vy, vz = part_velocity[p, j, 0], part_velocity[p, j, 1], part_velocity[p, j, 2]
+            along = vector[i, j, 0] * vx + vector[i, j, 1] * vy + vector[i, j, 2] * vz
+            towards[i, j] = along if along > 0.0 else 0.0
+            if not known:
+                limit[i, j] = -np.inf
+                continue
+            d = distance[i, j]
+            speed = body_mps if body[j] else (near_mps if d <= zone_m else far_mps)
+            s_h = speed * horizon
+            if accelerating and body[j]:
+                v0 = np.sqrt(vx * vx + vy * vy + vz * vz) + speed_error_mps
+                v0 = v0 if not v0 > body_mps else body_mps  # NaN stays NaN (np.minimum)
+                t1 = (body_mps - v0) / body_acceleration_mps2
+                if horizon <= t1:
+                    reach = v0 * horizon + 0.5 * body_acceleration_mps2 * horizon * horizon
+                else:
+                    reach = (
+                        v0 * t1 + 0.5 * body_acceleration_mps2 * t1 * t1 + body_mps * (horizon - t1)
+                    )
+                s_h = s_h if s_h < reach else reach  # NaN reach gives NaN (np.minimum)
+            limit[i, j] = (d - s_h - fixed_m) / per_speed
+    return limit, towards
 
 
 @functools.lru_cache(maxsize=8)
