@@ -23,11 +23,12 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike
 
+from qpavoid.arm._kernels import frame_jacobians
+from qpavoid.arm._kernels import warm_up as warm_up_kernels
 from qpavoid.arm.control_points import ControlSet
 from qpavoid.arm.coverage import check_coverage
 from qpavoid.arm.description import read_description
 from qpavoid.arm.dynamics import ArmDynamics
-from qpavoid.arm.frames import LWA
 from qpavoid.arm.joints import IKSeed
 from qpavoid.arm.roles import ROLE_NAMES, Roles
 from qpavoid.core.checks import as_array
@@ -197,7 +198,21 @@ class Robot:
         self._frames = tuple(frames)
         self._segment_index = np.array(seg_idx)
         self._n_points = len(self.point_frames)
+        # the velocity columns of the joints that carry each frame (its Jacobian's nonzero
+        # columns), for arm._kernels.frame_jacobians
+        self._support = np.array([self._carried_by(f) for f in frames], dtype=np.bool_)
+        self._ee_support = self._carried_by(self.ee_frame)
+        warm_up_kernels()
         self.data = model.createData()
+
+    def _carried_by(self, frame: int) -> np.ndarray:
+        """(nv,) True for the velocity columns of the joints that move ``frame``."""
+        out = np.zeros(self.model.nv, dtype=np.bool_)
+        for j in self.model.supports[self.model.frames[frame].parentJoint]:
+            joint = self.model.joints[j]
+            if j > 0 and joint.nv > 0:
+                out[joint.idx_v : joint.idx_v + joint.nv] = True
+        return out
 
     @property
     def data(self) -> pin.Data:
@@ -323,12 +338,10 @@ class Robot:
         points, segments = pos[: self._n_points], pos[self._segment_index]
         ee = ee_placement.homogeneous  # a copy
         pj = sj = ej = None
-        if jacobians:
-            jac = np.ascontiguousarray(
-                np.array([pin.getFrameJacobian(model, data, f, LWA) for f in self._frames])[:, :3]
-            )
+        if jacobians:  # every frame's from the joints' in one compiled call
+            at = ee[:3, 3].copy()
+            jac, ej = frame_jacobians(data.J.T, pos, self._support, at, self._ee_support)
             pj, sj = jac[: self._n_points], jac[self._segment_index]
-            ej = pin.getFrameJacobian(model, data, self.ee_frame, LWA)
         return Kinematics(q, points, pj, segments, sj, ee, ej)
 
     def control_points(self, q: ArrayLike) -> np.ndarray:
