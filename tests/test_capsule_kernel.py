@@ -213,17 +213,19 @@ def test_the_methods_by_name_and_their_geometry(robot):
         assert type(method) is kind and method.name == name and method.method == "capsules"
 
 
-def test_a_run_on_the_compiled_capsules_commands_what_coal_s_commands():
-    """Test 1 with speed and separation, QP, 4 s on the Panda: the commands on the compiled
-    capsules are those on coal's to 1e-7 rad/s (the recorded runs' tolerance: distances
-    equal to ~1e-12 m move OSQP's stopping point by up to 4e-8 here), and the metrics name
-    the method used and keep the geometries' minimum distances under their usual keys."""
+@pytest.mark.parametrize("controller, tol", [("analytic", 1e-9), ("qp", 1e-6)])
+def test_a_run_on_the_compiled_capsules_commands_what_coal_s_commands(controller, tol):
+    """Test 1 with speed and separation, 4 s on the Panda: the commands on the compiled
+    capsules are those on coal's, to 1e-9 rad/s for the paper's controller (a closed
+    form) and 1e-6 for the QP (OSQP stops within eps = 1e-7 of its optimum: distances equal
+    to ~1e-12 m move its stopping point by up to 2e-7 here); the metrics name the method
+    used and keep the geometries' minimum distances under their usual keys."""
     runs = {
         d: simulate_one(
             RunSpec(
                 scenario="test1",
                 robot="panda",
-                controller="qp",
+                controller=controller,
                 safety="ssm",
                 distance=d,
                 max_time_s=4.0,
@@ -234,7 +236,7 @@ def test_a_run_on_the_compiled_capsules_commands_what_coal_s_commands():
     }
     compiled, coal = (runs[d].sim.log["dq_command"] for d in ("capsules", "capsules-coal"))
     assert np.abs(coal).max() > 0.01  # it moved
-    np.testing.assert_allclose(compiled, coal, atol=1e-7, rtol=0)
+    np.testing.assert_allclose(compiled, coal, atol=tol, rtol=0)
     metrics = runs["capsules-coal"].metrics
     assert metrics["distance_method"] == "capsules-coal"
     assert metrics["min_distance_m"]["capsules"] == pytest.approx(

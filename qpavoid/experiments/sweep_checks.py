@@ -17,6 +17,7 @@ import numpy as np
 
 from qpavoid.arm.model import Robot, joint_columns
 from qpavoid.control.tick import ControllerConfig
+from qpavoid.distance.methods import geometry
 from qpavoid.experiments.runs import RunResult
 from qpavoid.laws.avoidance import (
     scaled_velocity_limits,
@@ -260,7 +261,7 @@ def check_log(
     that plays no part in the laws, as the controller holds it).
     """
     avo, roles = config.avoidance, robot.roles
-    capsule = log["distance_other"] if distance == "spheres" else log["distance"]
+    capsule = log["distance"] if geometry(distance) == "capsules" else log["distance_other"]
     threshold = set_stop_distances(avo, roles, len(robot.sets))
     moving = np.any(log["dq_command"] != 0.0, axis=1)  # the controller's decisions
     braking = braking_ticks(log["dq_command"])

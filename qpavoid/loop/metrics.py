@@ -16,6 +16,7 @@ import numpy as np
 
 from qpavoid.arm.model import Robot
 from qpavoid.control.tick import Command
+from qpavoid.distance.methods import geometry
 from qpavoid.laws.avoidance import AvoidanceConfig, set_stop_distances, stop_rule_prefixes
 from qpavoid.loop.truth import TrueContact
 
@@ -241,8 +242,8 @@ def run_metrics(
     """
     dt = 1.0 / control_rate_hz
     path_err = np.linalg.norm(log["ee_pos"] - log["ee_ref"], axis=1)
-    other = "capsules" if method == "spheres" else "spheres"  # the geometries' names
-    used = "spheres" if method == "spheres" else "capsules"
+    used = geometry(method)  # "capsules-coal" measures capsules too
+    other = "capsules" if used == "spheres" else "spheres"
     dmin = {used: float(np.min(log["distance"])), other: float(np.min(log["distance_other"]))}
     tick = log["tick_us"]
     final_err = float(np.linalg.norm(log["ee_pos"][-1] - goal[:3, 3]))
