@@ -123,22 +123,34 @@ def test_compiled_end_effector_cost_equals_numpy(ticks):
 
 def test_in_place_assembly_equals_the_pieces_own_blocks(ticks):
     """What the loop solves (Assembler.fill, in place) is the sum, stack and intersection
-    of each piece's compute_qp_* (allocated fresh), and problem() outlives the next tick."""
+    of each piece's compute_qp_* (allocated fresh), the rows of a piece that tightens
+    another's merged into them (the same left side where both bound a pair: the smaller
+    bound), and problem() outlives the next tick."""
     ctrl, recorded = ticks
     asm: Assembler = ctrl.assembler
     n, first = asm.n, ctrl.problem(recorded[0])
     kept = {k: getattr(first, k).copy() for k in ("H", "c", "G", "h", "lb", "ub")}
+    merged = 0
     for tick in recorded:
         H, c = np.zeros((n, n)), np.zeros(n)
-        G, h = [], []
+        G, h, own = [], [], {}
         lb, ub = np.full(n, -np.inf), np.full(n, np.inf)
         for p in asm.pieces:
             if (obj := p.compute_qp_objective(tick, 0.01)) is not None:
                 H, c = H + obj.H, c + obj.c
             if p.rows:
                 con = p.compute_qp_inequalities(tick, 0.01)
-                G.append(con.G)
-                h.append(con.h)
+                if p.tightens is None:
+                    G.append(con.G)
+                    h.append(con.h)
+                    own[p.name] = len(G) - 1
+                else:  # into the rows it tightens
+                    k = own[p.tightens]
+                    both = np.isfinite(con.h) & np.isfinite(h[k])
+                    np.testing.assert_allclose(con.G[both], G[k][both], rtol=0, atol=0)
+                    merged += int(both.sum())
+                    G[k] = np.where(np.isfinite(con.h)[:, None], con.G, G[k])
+                    h[k] = np.minimum(h[k], con.h)
             if (b := p.compute_qp_bounds(tick, 0.01)) is not None:
                 lb, ub = np.maximum(lb, b.lb), np.minimum(ub, b.ub)
         prob = asm.fill(tick, 0.01)
@@ -148,6 +160,7 @@ def test_in_place_assembly_equals_the_pieces_own_blocks(ticks):
             np.testing.assert_allclose(getattr(prob, name), ref, rtol=1e-13, atol=1e-13)
     for k, v in kept.items():  # the first problem() is untouched by every fill since
         np.testing.assert_array_equal(getattr(first, k), v)
+    assert merged > 20  # pairs bounded by both the damper and speed and separation
 
 
 def test_problem_defect_finds_every_nan_and_infinity():
@@ -271,3 +284,19 @@ def test_the_posture_task_moves_only_the_null_space(robot7):
     pull = REDUNDANT.posture_gain_per_s * (rest - q)
     assert abs(v @ pull) > 0.1  # rad/s: a real pull
     assert v @ (on - off) == pytest.approx(w / (w + eps) * (v @ pull), rel=1e-4, abs=1e-6)
+
+
+def test_a_piece_tightens_only_rows_before_it_of_its_own_size():
+    """The separation's bounds tighten the dampers' rows: with the dampers first, the
+    problem has the dampers' rows alone (both pieces' slices are theirs); without them, or
+    with the separation first, or with another count of rows, the assembler refuses."""
+    from qpavoid.control.qp.variables import Variables
+
+    x = Variables(3)
+    damper = VelocityDamper(x, np.zeros(2), 0.2, 0.5, 3)  # 2 sets × 3 parts
+    separation = SeparationLimit(x, 6, 3.0)
+    asm = Assembler(x.n, [damper, separation])
+    assert asm.m == 6 and asm.rows[SeparationLimit.name] == asm.rows[VelocityDamper.name]
+    for pieces in ([separation], [separation, damper], [damper, SeparationLimit(x, 4, 3.0)]):
+        with pytest.raises(ValueError, match="tightens the rows of 'velocity_damper'"):
+            Assembler(x.n, pieces)

@@ -1,6 +1,6 @@
 """Speed and separation's compiled rows against the numpy functions they compile.
 
-:func:`~qpavoid.laws.ssm.separation_rows` (the limits stage's one call) must give what
+:func:`~qpavoid.laws.ssm.approach_bounds` (the limits stage's one call) must give what
 :func:`~qpavoid.laws.ssm.separation_bounds` (numpy, term by term: ``human_speed``,
 ``human_distance``, ``accelerated_reach``, ``max_approach_speed``) gives for the same
 pairs, over random tables of several people with parts unseen, at every age (stale,
@@ -18,7 +18,7 @@ from qpavoid.laws.ssm import (
     body_mask,
     separation_bounds,
     separation_constants,
-    separation_rows,
+    approach_bounds,
 )
 
 PARTS = ("head", "trunk", "left_hand", "right_hand", "left_forearm")
@@ -34,7 +34,7 @@ def _table(distance, vector):
 
 
 def _rows(table, who, velocity, age, cfg):
-    return separation_rows(
+    return approach_bounds(
         table.distance,
         table.vector,
         who,

@@ -43,10 +43,10 @@ from qpavoid.laws.avoidance import avoidance_terms, l1_factor, law_constants, sc
 from qpavoid.laws.ssm import (
     SSMConfig,
     StopTimeBudget,
+    approach_bounds,
     body_mask,
     joint_speed_limits,
     separation_constants,
-    separation_rows,
     with_stop_time,
 )
 from qpavoid.perception.freshness import FrameClock
@@ -375,7 +375,7 @@ class LimitsStage:
         ssm = with_stop_time(self.ssm, self.stop_budget.budget())
         table = clear.table
         # every pair's bound and its part's speed towards the set (laws.ssm), one call
-        approach_limit, human_approach = separation_rows(
+        approach_limit, human_approach = approach_bounds(
             kernel_input(table.distance, np.float64),
             kernel_input(table.vector, np.float64),
             kernel_input(who, np.int64),

@@ -16,7 +16,7 @@ from numba import njit
 
 from qpavoid.core.compiling import ctrl_c_deferred
 from qpavoid.laws.avoidance import avoidance_terms
-from qpavoid.laws.ssm import separation_rows
+from qpavoid.laws.ssm import approach_bounds
 
 __all__ = ["NOT_FINITE", "limit_crossed", "warm_up"]
 
@@ -49,7 +49,7 @@ def warm_up() -> None:
     with ctrl_c_deferred():
         avoidance_terms(np.ones((3, 2)), np.zeros((3, 2, 3)), 1, 2, 0.2, 9.0, 0.25)
         limit_crossed(np.zeros(2), np.zeros(2), 0.01, -np.ones(2), np.ones(2))
-        separation_rows(
+        approach_bounds(
             np.ones((2, 2)),
             np.zeros((2, 2, 3)),
             np.zeros((2, 2), dtype=np.int64),

@@ -352,7 +352,7 @@ def separation_bounds(
 
 
 def separation_constants(cfg: SSMConfig) -> tuple[float, ...]:
-    """The scalars :func:`separation_rows` takes, in its order: T_r, T_s, the human
+    """The scalars :func:`approach_bounds` takes, in its order: T_r, T_s, the human
     speeds' zone (m) and speeds (near, far, body; m/s), C + Z_d + Z_r (m), the body's
     acceleration (m/s², NaN: off) and the speed error (m/s)."""
     accel = cfg.body_acceleration_mps2
@@ -371,12 +371,12 @@ def separation_constants(cfg: SSMConfig) -> tuple[float, ...]:
 
 def body_mask(part_names: Sequence[str], cfg: SSMConfig) -> np.ndarray:
     """(K,) True for the parts moving at the body's speed (a writeable copy, as the
-    compiled :func:`separation_rows` was warmed up for)."""
+    compiled :func:`approach_bounds` was warmed up for)."""
     return np.array(_body_mask(tuple(part_names), tuple(cfg.body_parts))[0])
 
 
 @njit(cache=True)
-def separation_rows(
+def approach_bounds(
     distance: np.ndarray,
     vector: np.ndarray,
     who: np.ndarray,

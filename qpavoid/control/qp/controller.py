@@ -50,7 +50,10 @@ class QPController(Controller):
                     u_EEᵀ J_EE q̇ + s_EE ≥ u_EEᵀ (v_PL + K e) + |v_EE|  EERepulsionTask
                     s_L2, s_EE ≥ 0
                     −nᵀ J_p q̇ ≤ ξ (d − d_s) / (d_i − d_s) [− v_h,n] VelocityDamper, every pair
-                   [−nᵀ J_p q̇ ≤ v_max(d)                         SeparationLimit, ssm only]
+                   [−nᵀ J_p q̇ ≤ v_max(d)                         SeparationLimit, ssm only:
+                                                                   one row per pair with
+                                                                   the damper's, the smaller
+                                                                   bound]
                     |q̇| ≤ q̇_max, scaled joints × (1 − f)          VelocityLimit, eq. (3)
                     γ (q_min − q)/dt ≤ q̇ ≤ γ (q_max − q)/dt      PositionLimit
                     lo ≤ q̇ ≤ hi, within reach of the last command AccelerationLimit
@@ -163,12 +166,8 @@ class QPController(Controller):
         warm_up()  # the QP's compiled pieces, before the first tick (the backend warms its own)
         self.assembler = Assembler(x.n, pieces)
         self.backend = make_backend(w, x.n, self.assembler.m)
-        # the rows of the hard pieces: the dampers', then the separation's (a slice: a view)
-        rows = self.assembler.rows
-        damper = rows[VelocityDamper.name]
-        separation = rows.get(SeparationLimit.name, slice(damper.stop, damper.stop))
-        assert damper.stop == separation.start  # adjacent in the pieces' order
-        self._hard = slice(damper.start, separation.stop)
+        # the hard rows: the pairs' (the dampers', which the separation's bounds tighten)
+        self._hard = self.assembler.rows[VelocityDamper.name]
 
     def problem(self, tick: Tick) -> QPProblem:
         """The QP of a tick (for inspection and cross-checks)."""

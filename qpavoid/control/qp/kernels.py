@@ -135,20 +135,20 @@ def separation_rows(
     G: np.ndarray,
     h: np.ndarray,
 ) -> None:
-    """Speed and separation rows, in place: ``−nᵀ J_p q̇ ≤ v_max`` for each pair whose
-    bound ``v_max`` is below ``inactive_above_mps``, other rows ``0 ≤ +inf``
-    (:class:`~qpavoid.control.qp.barriers.separation.SeparationLimit`). Shapes as
+    """Speed and separation's bounds on the pairs' rows, in place: for each pair whose
+    bound ``v_max`` is below ``inactive_above_mps``, the row ``−nᵀ J_p q̇`` and
+    ``h = min(h, v_max)``; other rows untouched
+    (:class:`~qpavoid.control.qp.barriers.separation.SeparationLimit`, which tightens the
+    dampers' rows: rows of ``0 ≤ +inf`` given, its own rows). Shapes as
     :func:`damper_rows`."""
     n_parts = bound.shape[0] // segment_jacobians.shape[0]
-    G[:] = 0.0
     for r in range(bound.shape[0]):
         if not bound[r] < inactive_above_mps:
-            h[r] = np.inf
             continue
         _approach_row(
             r, n_parts, vector, robot_index, robot_s, point_jacobians, segment_jacobians, G
         )
-        h[r] = bound[r]
+        h[r] = min(h[r], bound[r])
 
 
 @functools.cache

@@ -72,10 +72,18 @@ class QPPiece(Generic[StateT]):
     constant_objective, constant_bounds
         True if the objective (bounds) never change: the assembler computes them once,
         with ``tick=None``.
+    tightens
+        The name of another piece whose rows bound the same left side ``G x`` as this
+        one's, row for row, or None. Then this piece writes into that piece's rows instead
+        of adding its own, and :meth:`write_qp_inequalities` only lowers ``h`` (writing a
+        row's G where it bounds it): ``G x ≤ min(h₁, h₂)`` is both rows, in one row of
+        the solver's (speed and separation's rows tighten the dampers': half the rows
+        OSQP factors).
     """
 
     name = "piece"
     rows = 0
+    tightens: str | None = None
     constant_objective = False
     constant_bounds = False
     variables: Variables

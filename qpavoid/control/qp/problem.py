@@ -107,10 +107,26 @@ class Assembler(Generic[StateT]):
         ]
         self._bounds = [p for p in self.pieces if p.gives("bounds") and not p.constant_bounds]
         self._rows = [p for p in self.pieces if p.rows]
-        offsets = np.cumsum([0] + [p.rows for p in self._rows]).tolist()
+        own = [p for p in self._rows if p.tightens is None]
+        offsets = np.cumsum([0] + [p.rows for p in own]).tolist()
         self.rows = {
-            p.name: slice(a, b) for p, a, b in zip(self._rows, offsets, offsets[1:], strict=False)
+            p.name: slice(a, b) for p, a, b in zip(own, offsets, offsets[1:], strict=False)
         }
+        for k, p in enumerate(self._rows):  # one that tightens another's rows writes after it
+            if p.tightens is not None:
+                target = self.rows.get(p.tightens)
+                before = {q.name for q in self._rows[:k]}
+                if (
+                    target is None
+                    or p.tightens not in before
+                    or target.stop - target.start != p.rows
+                ):
+                    raise ValueError(
+                        f"QP piece {p.name!r} tightens the rows of {p.tightens!r}, which "
+                        f"comes before it with {p.rows} rows: "
+                        f"{ {q.name: q.rows for q in own} }"
+                    )
+                self.rows[p.name] = target
         self.m = offsets[-1]
         self._slices = [self.rows[p.name] for p in self._rows]
         self._filled = self._arrays()
