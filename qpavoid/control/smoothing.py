@@ -32,12 +32,15 @@ and separation monitoring counts on (its T_s and S_s; the arm's reaction time is
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
+from numba import njit
 
 from qpavoid.arm.braking import ArmResponse, BrakingConfig, per_joint, reaction_ticks
 from qpavoid.arm.model import Robot
+from qpavoid.core.compiling import ctrl_c_deferred, kernel_input
 
 __all__ = ["TESTED_JERK_RATE_HZ", "CommandRamp", "smooth_rate_limit_hz"]
 
@@ -96,12 +99,14 @@ class CommandRamp:
         self.brake_radps2 = per_joint(braking_radps2, names)
         jerk = dict(robot.arm.max_jerk_radps3)
         self.j_dt2 = np.array([jerk.get(n, np.inf) for n in names]) * dt * dt
-        self.q_min, self.q_max = robot.q_min, robot.q_max
+        self.q_min, self.q_max = np.array(robot.q_min, float), np.array(robot.q_max, float)
         self.v_max = np.array(robot.dq_max, dtype=float)
+        self._no_sent = np.zeros(robot.nv)
         self.names = tuple(names)
         jerks = tuple((n, j) for n, j in robot.arm.max_jerk_radps3 if n in names)
         self._ramp = ArmResponse(BrakingConfig(0.0, braking_radps2, jerks), names, dt)
         self._constants()
+        warm_up()
         self.u1 = np.zeros(robot.nv)  # the last command, rad/s
         self.u2 = np.zeros(robot.nv)  # the one before
         #: How many of the last commands the arm is still to follow when the next is sent.
@@ -164,7 +169,18 @@ class CommandRamp:
 
     def box(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The reachable box ``(lo, hi)`` of the next command (nv,), rad/s, at joint angles
-        ``q``: acceleration, jerk and room to brake before the joint limits."""
+        ``q``: acceleration, jerk and room to brake before the joint limits, in one
+        compiled call (:func:`command_box`; :meth:`box_numpy` is the same, term by term)."""
+        in_flight = len(self._sent) > 0
+        sent = sum(self._sent, np.zeros_like(q)) if in_flight else self._no_sent
+        return command_box(
+            kernel_input(q, np.float64), self.u1, self.u2, sent, in_flight, self.dt,
+            self.a_dt, self.j_dt2, self.q_min, self.q_max, self.v_max, self._inv_b,
+            self._lag, self._gain, self._jerk_bound,
+        )  # fmt: skip
+
+    def box_numpy(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`box` in numpy, term by term (the tests' reference for the kernel)."""
         lo, hi = self._reach()
         # room to brake: where the commands in flight leave the joints when this one
         # begins; then a stop begun after it (every joint on one line, at the pace of the
@@ -275,3 +291,61 @@ class CommandRamp:
             return 1.0
         start = self.at_stop or 0.0
         return float(np.max(np.abs(u), initial=0.0)) / start if start > 0.0 else 0.0
+
+
+@njit(cache=True)
+def command_box(
+    q: np.ndarray,
+    u1: np.ndarray,
+    u2: np.ndarray,
+    sent: np.ndarray,
+    in_flight: bool,
+    dt: float,
+    a_dt: np.ndarray,
+    j_dt2: np.ndarray,
+    q_min: np.ndarray,
+    q_max: np.ndarray,
+    v_max: np.ndarray,
+    inv_b: np.ndarray,
+    lag: float,
+    gain: np.ndarray,
+    jerk_bound: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`CommandRamp.box` in one pass over the joints (nv,) each, rad/s.
+
+    The reach of the next command from the last two, ``u₁`` and ``u₂``:
+    ``max(u₁ − a dt, 2u₁ − u₂ − j dt²) ≤ u ≤ min(u₁ + a dt, 2u₁ − u₂ + j dt²)``
+    (:meth:`CommandRamp._reach`); the room to brake from where the commands in flight
+    (their sum ``sent``, if ``in_flight``) leave the joints, ``q̂ = q + dt Σ sent``: a
+    joint at u may travel u H before rest, H = dt + max_j (|u₁,j| + a_j dt + g_j) / (2 b_j)
+    + lag (:meth:`CommandRamp.braking_horizon`), so
+    ``u ≤ max(q_max − q̂, 0) / H`` (less the gain g where the jerk binds), and as much
+    down; both within the velocity limit, then clipped to the reach as ``np.clip`` does.
+    """
+    n = q.shape[0]
+    worst = -np.inf
+    for k in range(n):
+        worst = max(worst, (abs(u1[k]) + a_dt[k] + gain[k]) * inv_b[k])
+    inv_h = 1.0 / (dt + 0.5 * worst + lag)
+    lo_out, hi_out = np.empty(n), np.empty(n)
+    for k in range(n):
+        step = u1[k] - u2[k]
+        lo = max(u1[k] - a_dt[k], u1[k] + step - j_dt2[k])
+        hi = min(u1[k] + a_dt[k], u1[k] + step + j_dt2[k])
+        ahead = q[k] + dt * sent[k] if in_flight else q[k]
+        up = max(q_max[k] - ahead, 0.0) * inv_h
+        down = max(ahead - q_min[k], 0.0) * inv_h
+        if jerk_bound:
+            up, down = max(up - gain[k], 0.0), max(down - gain[k], 0.0)
+        up, down = min(up, v_max[k]), min(down, v_max[k])
+        lo_out[k] = min(max(-down, lo), hi)  # np.clip's order: the lower bound first
+        hi_out[k] = min(max(up, lo), hi)
+    return lo_out, hi_out
+
+
+@functools.cache
+def warm_up() -> None:
+    """Compile (or load from the disk cache) :func:`command_box`, once per process."""
+    with ctrl_c_deferred():
+        z = np.zeros(2)
+        command_box(z, z, z, z, False, 0.01, z, z, z, z, z, z, 0.0, z, False)
