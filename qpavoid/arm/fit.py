@@ -133,7 +133,7 @@ FIRST_PASS = {"xatol": 1e-4, "fatol": 1e-7, "maxiter": 1000}
 #: parameter. SciPy's default steps 0.00025 from a zero parameter, which widens the radius
 #: (x₄²) by 6e-8: the search never tried a wider, shorter capsule, and on the iiwa's squat
 #: link 6 (a 0.06 m radius, 0.081 m cylinder) it ended, with scipy 1.17 and numpy 2.4, in
-#: the 0.0724 m sphere instead of the 0.0661 m capsule (issue 40).
+#: the 0.0724 m sphere instead of the 0.0661 m capsule.
 FIRST_STEP = 0.1
 POLISH = {"xatol": 1e-9, "fatol": 1e-12, "maxiter": 4000}
 

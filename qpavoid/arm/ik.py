@@ -16,7 +16,7 @@ Each start runs damped, step-limited Newton iterations (Levenberg-Marquardt) on 
   being clipped away, which stalls a plain clip on the Panda's narrow elbow;
 * the step is a fraction ``a`` of the Newton step while far and at most ``s_max`` rad on
   any joint: without it, full steps from the UR5's seed (tool down, target up and out)
-  jumped between ±2π for 500 iterations and ended 1.48 away (issue 40).
+  jumped between ±2π for 500 iterations and ended 1.48 away.
 
 :func:`inverse_kinematics` starts from the description's seed (:func:`ik_seed`: it chooses
 the branch) and returns that run's solution when it converges; when it does not (a joint

@@ -175,7 +175,7 @@ def closest_of(tables: Sequence[DistanceTable]) -> tuple[DistanceTable, np.ndarr
             pick("human_index"),
             first.set_names,
             first.part_names,
-            partial(_pick_witnesses, pick),  # only if asked: each person's costs ~6 µs
+            partial(_pick_witnesses, pick),  # only if asked: a pick per person
         ),
         who,
     )

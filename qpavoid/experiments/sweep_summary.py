@@ -81,7 +81,7 @@ def _timing(runs: Sequence[StrikeCheck | CloseWorkCheck]) -> dict[str, float]:
 
 
 def _contact_totals(runs: Sequence[StrikeCheck | CloseWorkCheck]) -> dict[str, Any]:
-    """Power and force limiting over the runs (issue 29): runs whose arm moved while
+    """Power and force limiting over the runs: runs whose arm moved while
     touching the head, face, neck or trunk, runs touching an arm or hand region above its
     limit (both must be zero), runs touching one within it (allowed with ``pfl``), runs
     clamping, the contact ticks within limit, and the fastest touch, its ratio to its

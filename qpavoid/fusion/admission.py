@@ -122,7 +122,7 @@ class Admission:
         in their view: ``(sensor, silent s, person id, a sensor that sees them)`` each,
         after the start-up grace. A camera that sees nobody sends nothing, so silence alone
         is no fault; silence where another camera sees someone is (a camera down, or its
-        datagrams dropped on the way: issue 40's third network adversary)."""
+        datagrams dropped on the way: docs/security.md)."""
         cfg = self.cfg
         if self.first_s is None or t - self.first_s <= cfg.phantom_grace_s:
             return ()

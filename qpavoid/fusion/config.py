@@ -47,8 +47,8 @@ class FusionConfig:
         may have gone), at most ``max_association_gate_m`` (1.5 m: ``forget_beyond_m``'s
         reach). With the fixed 0.6 m gate, a person who walked 0.9 m during a 0.45 s
         dropout came back as a second person, and the first, last seen near the robot,
-        was kept unseen and held the robot for good (issue 40's network adversary: 27
-        datagrams dropped on the path).
+        was kept unseen and held the robot for good (27 datagrams dropped on the path:
+        docs/security.md).
     same_frame_s
         Bodies of one camera frame share its time stamp: a body whose newest frame is older
         than its sensor's newest by more than this is not in that frame, s (0.005: far
@@ -68,10 +68,10 @@ class FusionConfig:
         seats more); others are dropped and counted (``too_many_people``). A body near the
         robot always joins: nobody near it is refused or displaced.
     max_tracks
-        At most this many people are kept (24: four cells' worth; the fusion takes about
-        18 µs a person); beyond, those not seen now are forgotten, flagged ones first, then
-        those unseen longest (``forgotten_for_room``). Those seen now are at most six per
-        sensor, so a flood of forged bodies cannot grow the fusion's work.
+        At most this many people are kept (24: four cells' worth; the fusion's work grows
+        with each, docs/performance.md); beyond, those not seen now are forgotten, flagged
+        ones first, then those unseen longest (``forgotten_for_room``). Those seen now are
+        at most six per sensor, so a flood of forged bodies cannot grow the fusion's work.
     max_new_people_per_s, new_people_burst
         New people far from the robot (beyond ``forget_beyond_m``) may appear at this
         mean rate, 1/s, in bursts of at most ``new_people_burst`` (a token bucket: people
@@ -91,7 +91,7 @@ class FusionConfig:
         stands in its view raises the input alert
         (:meth:`~qpavoid.fusion.fuser.Fuser.silent_sensors`), s (0.5: fifteen Kinect
         frames, past any dropout the frames' own loss rules see; a silenced camera left
-        the robot on one camera with nothing said: issue 40's third network adversary).
+        the robot on one camera with nothing said: docs/security.md).
     velocity_alpha, velocity_beta
         Gains of the α-β filter on each person's fused joints (measured: docs/sensors.md).
     smooth

@@ -451,8 +451,8 @@ def approach_bounds(
 
 @functools.lru_cache(maxsize=8)
 def _body_mask(part_names: tuple[str, ...], body_parts: tuple[str, ...]) -> np.ndarray:
-    """(1, K) True for the parts moving at the body's speed (``np.isin`` on strings costs
-    tens of µs: done once per model, not per tick)."""
+    """(1, K) True for the parts moving at the body's speed (``np.isin`` on strings is
+    slow: done once per model, not per tick)."""
     mask = np.isin(part_names, body_parts)[None, :]
     mask.setflags(write=False)
     return mask

@@ -176,12 +176,12 @@ class Tracker:
         last = self._last
         identical = 0
         if last is not None and self._perceived is not None:
-            # bit for bit (a repeated frame is a copy; NaN equals NaN): 20 µs less than
+            # bit for bit (a repeated frame is a copy; NaN equals NaN): cheaper than
             # np.array_equal(..., equal_nan=True)
             # a frame with no usable joint (a person the fusion keeps unseen) is not a
             # sensor repeating itself: its lost joints are bounded by their growing
             # uncertainty instead (an unseen person's frames are all alike; counted, they
-            # stopped the robot as "frozen" until seen again: issue 40's network adversary)
+            # would stop the robot as "frozen" until seen again: docs/security.md)
             same = (
                 bool(frame.state.any())
                 and frame.joints.tobytes() == last.joints.tobytes()

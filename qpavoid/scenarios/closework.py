@@ -1,7 +1,7 @@
 """Close work: a seated operator working within reach of the robot's path, never at it.
 
 Where :mod:`qpavoid.scenarios.strikes` drives hands *into* the robot, a close-work case is
-the ordinary work beside it that keeps a speed-and-separation robot stopped (issue 29):
+the ordinary work beside it that keeps a speed-and-separation robot stopped:
 the productivity side of power and force limiting. Each case is one of :data:`VARIANTS`:
 
 ``rest_near``

@@ -1,10 +1,10 @@
 """A sensor's camera frames from its datagrams: whole frames only, and every loss seen.
 
 The safety protocols of IEC 61784-3 detect loss on a black channel by a sequence number
-and a watchdog. The skeletons travel one body per datagram, and until issue 40 the
-receiver took each body as it came: a device on the path that dropped only the datagrams
-of the person near the robot, forwarding a bystander's, kept the input fresh while that
-person vanished (492 ticks moving in true contact). Each signed datagram now carries its
+and a watchdog. The skeletons travel one body per datagram; a receiver that took each
+body as it came would let a device on the path drop only the datagrams of the person
+near the robot, forwarding a bystander's: the input stays fresh while that person
+vanishes (492 ticks moving in true contact, docs/security.md). Each signed datagram carries its
 frame's manifest (:mod:`qpavoid.sensing.wire`: the body ids of all the datagrams of its
 camera frame, in order; the frame's number is the sequence number of its first datagram),
 and :func:`assemble` applies two rules per sensor:

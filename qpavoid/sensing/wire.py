@@ -31,7 +31,7 @@ and the payload is ``{"body", "bodies", "joints"}``, ``bodies`` the manifest bel
   converts an SDK's millimetres and confidence); ``state`` 0 (not tracked: the
   coordinates are ignored), 1 (inferred) or 2 (tracked).
 
-**The manifest** (signed payloads only; issue 40): the skeletons travel in clear, one body
+**The manifest** (signed payloads only): the skeletons travel in clear, one body
 per datagram, so a device on the path can tell the person near the robot from a bystander
 and drop only the former's datagrams. Each datagram of a camera frame therefore says, inside
 the signed bytes, what the whole frame holds:
@@ -47,10 +47,10 @@ the sensor's next frame is numbered ``frame + len(bodies)``. A datagram is there
 verifiably part of one frame (its own body not listed: ``bad_manifest``), and a forged or
 altered manifest fails the tag. The receiver (:mod:`qpavoid.sensing.assembly`) delivers a
 frame only once all its bodies came, and a frame missing or incomplete makes the sensor's
-older frames stale at once. A signed payload without ``bodies`` (a sender before issue
-40) is a frame of its one body at its own sequence number: a gap in the numbers still
-shows. An unsigned datagram has no sequence number and no manifest: it is delivered as it
-comes (docs/security.md §3).
+older frames stale at once. A signed payload without ``bodies`` (from a sender that
+writes no manifest) is a frame of its one body at its own sequence number: a gap in the
+numbers still shows. An unsigned datagram has no sequence number and no manifest: it is
+delivered as it comes (docs/security.md §3).
 
 **Why a manifest in each datagram, not a whole camera frame in one.** A body's datagram
 stays inside one Ethernet frame: 926 bytes for a Kinect v2 body of a frame of six, and at

@@ -164,8 +164,8 @@ class PersistentOSQP:
 
         The rows that are inactive (h = +inf) end each solve with duals of about 1e-17
         (rounding), which shrink with every warm-started solve until they are subnormal:
-        then every iteration is twice as slow (measured: 40 → 80 µs a solve after 1500
-        ticks, with the same iterations). Entries below :data:`WARM_START_FLOOR` are set to
+        then every iteration is about twice as slow, the iterations unchanged
+        (docs/performance.md §1). Entries below :data:`WARM_START_FLOOR` are set to
         0 in OSQP's warm start (the answer moves by 1e-11, docs/performance.md).
         """
         x = np.array(solution.x, dtype=np.float64)
@@ -184,8 +184,8 @@ class DirectDAQP:
 
     daqp's form is ``min ½xᵀHx + fᵀx, blower ≤ [x; A x] ≤ bupper`` (its first ``n``
     bounds are simple bounds): here ``A = G``, ``bupper = [ub; h]``,
-    ``blower = [lb; −inf]``. Each tick is one cold ``daqp.solve`` (about 4 µs on our
-    problems), without qpsolvers' conversions. Not warm started: daqp 0.11's
+    ``blower = [lb; −inf]``. Each tick is one cold ``daqp.solve`` (a few µs on these
+    problems, docs/performance.md), without qpsolvers' conversions. Not warm started: daqp 0.11's
     ``Model.update`` + ``solve`` was found (adversarial testing) to return a wrong answer
     reported as optimal on about 1 % of recorded ticks, and a NaN one with exit flag 1
     (tests/data/daqp_warm_start_pairs.npz); a cold solve of the same problems is right.

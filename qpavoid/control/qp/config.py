@@ -49,7 +49,7 @@ class QPConfig:
     backend
         ``"persistent"`` (the default): one ``osqp.OSQP`` problem set up once and updated
         each tick (warm started); ``"daqp"``: daqp called directly each tick, cold
-        (docs/qp.md: 11 µs a solve against persistent OSQP's 53); ``"qpsolvers"``: a new
+        (faster than OSQP on these small problems: docs/qp.md); ``"qpsolvers"``: a new
         problem each tick through qpsolvers.
     solver
         Solver name for the qpsolvers backend (``osqp``, ``proxqp``, ``daqp``, ...).

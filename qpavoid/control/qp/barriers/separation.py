@@ -14,8 +14,7 @@ reach (``inactive_above_mps``), or that are not seen, get the bound +inf (fixed 
 The left side is the velocity dampers' (:mod:`qpavoid.control.qp.limits.velocity_damper`)
 pair for pair, so these bounds tighten the dampers' rows rather than adding as many again
 (:attr:`~qpavoid.control.qp.pieces.QPPiece.tightens`): each pair's row is bounded by the
-smaller of the two, and OSQP factors half the rows (the FR3's persistent solve 212 → 145 µs
-median, docs/performance.md §2f).
+smaller of the two, and OSQP factors half the rows (docs/performance.md §2f).
 """
 
 from __future__ import annotations
