@@ -271,7 +271,7 @@ def test_unknown_names(robot):
         qpavoid.distance_method("boxes", robot, qpavoid.KinectHuman())
     assert (info.value.name, info.value.value) == ("distance", "boxes")
     assert one_line(info.value) == (
-        "unknown distance method 'boxes'; choose from ['capsules', 'spheres']"
+        "unknown distance method 'boxes'; choose from ['capsules', 'capsules-coal', 'spheres']"
     )
     with pytest.raises(InputError) as info:
         qpavoid.AnalyticConfig(limit_mode="wrap")
