@@ -10,6 +10,7 @@ import pytest
 from conftest import PYTHON
 
 from qpavoid.arm.model import load_robot
+from qpavoid.cli.commands import main
 from qpavoid.control.journal import KINDS, Journal, _frame_entry, _frame_of, reproduce
 from qpavoid.control.qp import QPController
 from qpavoid.control.tick import ControllerConfig
@@ -122,22 +123,23 @@ def test_an_entry_of_no_known_kind_is_one_input_error():
         reproduce(QPController(robot), [np.array([KINDS["rest"]]), np.array([42.0])])
 
 
-def test_the_command_line_reproduces_a_runs_bag_and_refuses_a_tampered_one(tmp_path):
+def test_the_command_line_reproduces_a_runs_bag_and_refuses_a_tampered_one(tmp_path, capsys):
     pytest.importorskip("mcap")
     pytest.importorskip("rosbags")
     from qpavoid.output.bag_writer import write_bag
     from qpavoid.output.run_files import load_log
 
+    # the bag written by the installed program, in a process of its own; reproduced here,
+    # in another (the command line's main in this process, as the console script calls it)
     bag = tmp_path / "run.mcap"
     run = [*PYTHON, "-m", "qpavoid", "run", "test1", "--max-time", "1.5", "--rate", "100"]
     run += ["--no-plots", "--no-view", "-q", "--out", str(tmp_path / "r"), "--bag", str(bag)]
     subprocess.run(run, check=True, capture_output=True)
-    done = subprocess.run(
-        [*PYTHON, "-m", "qpavoid", "run", "--human", str(bag)], capture_output=True, text=True
-    )
-    assert done.returncode == 0, done.stderr
-    assert "reproduced the 151 commands of" in done.stdout
-    assert "largest difference 0 rad/s" in done.stdout
+    status = main(["run", "--human", str(bag)])
+    out, err = capsys.readouterr()
+    assert status == 0, err
+    assert "reproduced the 151 commands of" in out
+    assert "largest difference 0 rad/s" in out
     # one joint angle of tick 40 changed in the journal: the commands differ from there
     log = load_log(tmp_path / "r")
     entries = _entries(log)
@@ -149,11 +151,8 @@ def test_the_command_line_reproduces_a_runs_bag_and_refuses_a_tampered_one(tmp_p
     spec = json.loads((tmp_path / "r" / "metrics.json").read_text())["run_spec"]
     robot = load_robot("iiwa14")
     write_bag(tmp_path / "bad.mcap", log, robot.joint_names, run_spec=json.dumps(spec))
-    done = subprocess.run(
-        [*PYTHON, "-m", "qpavoid", "run", "--human", str(tmp_path / "bad.mcap")],
-        capture_output=True,
-        text=True,
-    )
-    assert done.returncode == 2
-    assert "the run's commands are not reproduced (tick 40 differs first" in done.stderr
-    assert done.stderr.count("\n") == 1
+    status = main(["run", "--human", str(tmp_path / "bad.mcap")])
+    out, err = capsys.readouterr()
+    assert status == 2 and out == ""
+    assert "the run's commands are not reproduced (tick 40 differs first" in err
+    assert err.count("\n") == 1
