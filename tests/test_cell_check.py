@@ -3,6 +3,7 @@ operator, said before the first motion, and what a ``free`` run then does."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 
@@ -10,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import PYTHON
 
+from qpavoid.cli.commands import main
 from qpavoid.experiments.cell_check import check_cell
 from qpavoid.experiments.run_spec import RunSpec
 from qpavoid.experiments.runs import simulate_one
@@ -31,11 +33,17 @@ def _spec(robot: str, camera: str, latency: float | None) -> RunSpec:
     )
 
 
-def _agrees(spec: RunSpec) -> tuple[bool, bool]:
+def _agrees(spec: RunSpec, whole_run: bool = True) -> tuple[bool, bool]:
     """(the check says the arm stops, the ``free`` run held it for speed and separation);
     where both, the run's first hold is on the check's first stretch (from 0.5 s of path
-    time before it: the arm slows to it)."""
+    time before it: the arm slows to it). Without ``whole_run``, where the check says the
+    arm stops the run ends a second after the check's first stretch (its first hold must
+    come by then; a run held from the start to its 40 s cap spends the rest holding
+    still)."""
     check = check_cell(spec)
+    if check.stops and not whole_run:
+        end = check.stretches[0].end_s + 1.0  # a second more: the path clock may lag
+        spec = dataclasses.replace(spec, max_time_s=min(spec.max_time_s, end))
     run = simulate_one(spec)
     reasons = run.sim.log["stop_reason"]
     held = [k for k, r in enumerate(reasons) if str(r).startswith("speed and separation")]
@@ -50,13 +58,16 @@ def _agrees(spec: RunSpec) -> tuple[bool, bool]:
 
 @pytest.mark.parametrize(
     ("robot", "camera", "latency", "stops"),
-    [("panda", "k4abt", None, True), ("panda", "k4abt", 0.06, False)],
+    [  # the run at the passing latency (to its goal, 15 s) with the slow ones
+        ("panda", "k4abt", None, True),
+        pytest.param("panda", "k4abt", 0.06, False, marks=pytest.mark.slow),
+    ],
 )
 def test_the_check_says_where_a_free_run_stops(robot, camera, latency, stops):
     """The Panda's task beside its operator, an Azure Kinect at its own 0.10 s: held from
     the start (the left hand 0.31 m from the hand, 0.35 m needed); at 0.06 s it passes,
-    and so does the run."""
-    assert _agrees(_spec(robot, camera, latency)) == (stops, stops)
+    and so does the run. (The slow suite runs every arm and camera to the cap.)"""
+    assert _agrees(_spec(robot, camera, latency), whole_run=False) == (stops, stops)
 
 
 @pytest.mark.slow
@@ -89,7 +100,8 @@ def test_a_stretchs_numbers_are_the_protective_distance_at_the_oldest_frame():
     assert s.passing_latency_s is not None and 0.0 < s.passing_latency_s < 0.12
 
 
-def test_bad_inputs_are_one_line_and_exit_2(tmp_path):
+def test_bad_inputs_are_one_line_and_exit_2(tmp_path, capsys):
+    """In this process: the installed program's own exit statuses are the next test's."""
     bad_task = tmp_path / "task.toml"
     bad_task.write_text(
         "[[waypoints]]\njoints_rad = { no_such_joint = 0.1 }\n"
@@ -107,26 +119,13 @@ def test_bad_inputs_are_one_line_and_exit_2(tmp_path):
         (["--task", str(far)], "waypoints[1]: the arm cannot reach this pose"),
         (["--latency", "-0.1"], "latency"),
     ):
-        done = subprocess.run(
-            [
-                *PYTHON,
-                "-m",
-                "qpavoid",
-                "check",
-                "--robot",
-                "panda",
-                *args,
-                "--out",
-                str(tmp_path / "o"),
-            ],
-            capture_output=True,
-            text=True,
-        )
-        assert done.returncode == 2, (args, done.stdout, done.stderr)
-        assert words in done.stderr and done.stderr.count("\n") == 1, done.stderr
+        status = main(["check", "--robot", "panda", *args, "--out", str(tmp_path / "o")])
+        out, err = capsys.readouterr()
+        assert status == 2, (args, out, err)
+        assert words in err and err.count("\n") == 1, err
 
 
-def test_the_command_line_exits_1_where_the_arm_stops_and_writes_the_figure(tmp_path):
+def test_the_command_line_exits_1_where_the_arm_stops_and_writes_the_figure(tmp_path, capsys):
     done = subprocess.run(
         [
             *PYTHON,
@@ -150,9 +149,6 @@ def test_the_command_line_exits_1_where_the_arm_stops_and_writes_the_figure(tmp_
     result = json.loads((tmp_path / "check.json").read_text())
     assert result["stops"] and result["stretches"][0]["part"] == "left_hand"
     assert (tmp_path / "check.png").stat().st_size > 10_000
-    done = subprocess.run(
-        [*PYTHON, "-m", "qpavoid", "check", "--robot", "panda", "--out", str(tmp_path)],
-        capture_output=True,
-        text=True,
-    )
-    assert done.returncode == 0 and "will not stop" in done.stdout, done.stderr
+    status = main(["check", "--robot", "panda", "--out", str(tmp_path)])  # in this process
+    out, err = capsys.readouterr()
+    assert status == 0 and "will not stop" in out, err
