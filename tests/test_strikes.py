@@ -42,10 +42,20 @@ def stationary_before_contact(log) -> bool:
     return not np.any(log["dq"][contact] != 0.0)
 
 
+#: The strikes the default suite keeps (the default suite's time): at the end effector
+#: and at the base column (not a robot set); `-m slow` runs both controllers at every set
+FAST_TARGETS = ("EE", "base")
+
+
+def _fast_first(targets, fast):
+    """``targets`` as parameters, those not in ``fast`` in the slow suite."""
+    return [t if t in fast else pytest.param(t, marks=pytest.mark.slow) for t in targets]
+
+
 # the analytic controller's five with the slow suite (the default suite's time): the sensor
 # faults below alternate the controllers, and `-m slow` runs both at every set
 @pytest.mark.parametrize("controller", ["qp", pytest.param("analytic", marks=pytest.mark.slow)])
-@pytest.mark.parametrize("target", strike_targets(load_robot()))
+@pytest.mark.parametrize("target", _fast_first(strike_targets(load_robot()), FAST_TARGETS))
 def test_a_hand_at_2_mps_aimed_at_each_set_finds_the_robot_stationary(robot, controller, target):
     case = StrikeCase(0, target, 2.0, "right", False, 2.0, "none")
     sim = run_case(robot, case, controller)
@@ -59,12 +69,12 @@ def test_a_hand_at_2_mps_aimed_at_each_set_finds_the_robot_stationary(robot, con
 
 @pytest.mark.parametrize(
     "fault, controller",
-    [
+    [  # two in the default suite, one per controller (a frozen camera: a test below too)
         ("lost", "qp"),
-        ("inferred", "analytic"),
-        ("frozen", "qp"),
+        pytest.param("inferred", "analytic", marks=pytest.mark.slow),
+        pytest.param("frozen", "qp", marks=pytest.mark.slow),
         ("gap", "analytic"),
-        ("jitter", "qp"),
+        pytest.param("jitter", "qp", marks=pytest.mark.slow),
     ],
 )
 def test_every_sensor_fault_during_a_strike_keeps_the_robot_still_in_contact(
