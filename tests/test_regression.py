@@ -52,7 +52,12 @@ def assert_same_commands(scenario: str, distance: str, rate_hz: float) -> None:
 
 
 @pytest.mark.parametrize(
-    "scenario", ["free", "test1", pytest.param("test2", marks=pytest.mark.slow)]
+    "scenario",
+    [  # test1 (the person comes near) in the default suite, the others with the slow ones
+        pytest.param("free", marks=pytest.mark.slow),
+        "test1",
+        pytest.param("test2", marks=pytest.mark.slow),
+    ],
 )
 def test_qp_commands_unchanged_100hz_spheres(scenario):
     assert_same_commands(scenario, "spheres", 100.0)
