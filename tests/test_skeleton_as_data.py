@@ -41,20 +41,24 @@ def offences(path: Path, root: Path = PACKAGE) -> list[str]:
             names |= {a.asname for a in node.names if a.name in INDEX_NAMES and a.asname}
     joints = set(KINECT_V2.joints)
     found = []
+    relative = path.relative_to(root)
+
+    def where(node: ast.AST) -> str:  # made for an offence only (a path per node: seconds)
+        return f"{relative}:{getattr(node, 'lineno', '?')}"
+
     for node in ast.walk(tree):
-        where = f"{path.relative_to(root)}:{getattr(node, 'lineno', '?')}"
         if isinstance(node, ast.Constant) and id(node) not in docs:
             value = node.value
             if type(value) is int and value == KINECT_V2.n_joints:
-                found.append(f"{where}: the joint count {value}")
+                found.append(f"{where(node)}: the joint count {value}")
             elif isinstance(value, str):
                 if COUNT.search(value):
-                    found.append(f"{where}: {value!r}")
+                    found.append(f"{where(node)}: {value!r}")
                 named = joints & set(re.findall(r"[A-Za-z]+", value))
                 if named:
-                    found.append(f"{where}: joint name(s) {sorted(named)} in {value!r}")
+                    found.append(f"{where(node)}: joint name(s) {sorted(named)} in {value!r}")
         elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Load) and node.id in names:
-            found.append(f"{where}: {node.id}")
+            found.append(f"{where(node)}: {node.id}")
     return found
 
 
