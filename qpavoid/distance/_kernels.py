@@ -27,11 +27,6 @@ __all__ = [
     "warm_up",
 ]
 
-#: Below this ``sin²`` of the angle between two segments (times their squared lengths)
-#: they are taken as parallel: any point of the overlap is a closest pair, and the
-#: error in the squared distance of taking ``s = 0`` is at most this times ``|a|²``.
-PARALLEL = 1e-12
-
 
 @njit(cache=True)
 def sphere_table(
@@ -162,34 +157,43 @@ def _clamp01(x: float) -> float:
 
 
 @njit(cache=True)
+def _gap2(
+    p1: np.ndarray, d1: np.ndarray, p2: np.ndarray, d2: np.ndarray, s: float, t: float
+) -> float:
+    """``‖p1 + s d1 − p2 − t d2‖²``, from the points themselves (no cancellation of
+    expanded terms)."""
+    g = 0.0
+    for k in range(3):
+        x = p1[k] + s * d1[k] - p2[k] - t * d2[k]
+        g += x * x
+    return g
+
+
+@njit(cache=True)
 def segment_closest(
     p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray
 ) -> tuple[float, float]:
     r"""The parameters ``(s, t)`` of the closest points ``p1 + s (q1 − p1)`` and
     ``p2 + t (q2 − p2)`` of two segments, each in [0, 1].
 
-    Ericson, *Real-Time Collision Detection* (2005), §5.1.9. With
-    ``d₁ = q1 − p1``, ``d₂ = q2 − p2``, ``r = p1 − p2``, ``a = d₁·d₁``, ``e = d₂·d₂``,
-    ``b = d₁·d₂``, ``c = d₁·r``, ``f = d₂·r``, the lines' closest points solve
+    The squared distance is a convex quadratic in (s, t) on the unit square, so its
+    minimum is the lines' closest pair where that lies inside, else on an edge: one end of
+    a segment against the other segment (Ericson, *Real-Time Collision Detection* (2005),
+    §5.1.9). With ``d₁ = q1 − p1``, ``d₂ = q2 − p2``, ``r = p1 − p2``, ``a = d₁·d₁``,
+    ``e = d₂·d₂``, ``b = d₁·d₂``, ``c = d₁·r``, ``f = d₂·r`` and ``n = d₁ × d₂``:
 
-    .. math:: s = \frac{b f − c e}{a e − b^2}, \qquad t = \frac{b s + f}{e},
+    .. math:: s = rac{n · (d_2 × r)}{‖n‖^2}, \qquad t = rac{b s + f}{e}
 
-    and where ``t`` leaves [0, 1] it is clamped and ``s`` taken anew as the closest to that
-    end, ``s = \mathrm{clamp}((b t − c) / a)``. Degenerate cases: a segment of zero length
-    is its point (``a`` or ``e`` below :data:`~qpavoid.core.geometry.TINY`² m²); for
-    (nearly) parallel segments (``a e − b² ≤`` :data:`PARALLEL` ``a e``) the lines' closest
-    points are ill-conditioned or far outside both segments, so the minimum lies on the
-    boundary of the square of (s, t): one end of a segment against the other segment, the
-    closest of the four (:func:`_closest_of_the_ends`).
+    (``‖n‖² = a e − b²`` and ``n · (d₂ × r) = b f − c e``, written as cross products:
+    no cancellation when the segments are nearly parallel), clamped as Ericson clamps
+    them; the four edges' pairs are each end's projection on the other segment, clamped.
+    The closest of these five pairs, measured from the points, is returned: exact to
+    rounding however nearly parallel the segments (crossing ones included), and for
+    parallel ones (``n = 0``) a pair of the overlap. A segment of zero length (``a`` or
+    ``e`` below :data:`~qpavoid.core.geometry.TINY`² m²) is its point.
     """
-    a = e = b = c = f = 0.0
-    for k in range(3):
-        d1, d2, r = q1[k] - p1[k], q2[k] - p2[k], p1[k] - p2[k]
-        a += d1 * d1
-        e += d2 * d2
-        b += d1 * d2
-        c += d1 * r
-        f += d2 * r
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a, e, b, c, f = d1 @ d1, d2 @ d2, d1 @ d2, d1 @ r, d2 @ r
     small = TINY * TINY
     if a <= small and e <= small:  # two points
         return 0.0, 0.0
@@ -197,38 +201,26 @@ def segment_closest(
         return 0.0, _clamp01(f / e)
     if e <= small:  # the second a point
         return _clamp01(-c / a), 0.0
-    denom = a * e - b * b
-    if denom <= PARALLEL * a * e:  # parallel: the closest of each end to the other segment
-        return _closest_of_the_ends(a, b, c, e, f)
-    s = _clamp01((b * f - c * e) / denom)
-    t = (b * s + f) / e
-    if t < 0.0:
-        return _clamp01(-c / a), 0.0
-    if t > 1.0:
-        return _clamp01((b - c) / a), 1.0
-    return s, t
-
-
-@njit(cache=True)
-def _closest_of_the_ends(a: float, b: float, c: float, e: float, f: float) -> tuple[float, float]:
-    """The closest of the four pairs (each end of a segment, its projection on the other
-    segment, clamped), in :func:`segment_closest`'s terms; the squared distance of
-    ``(s, t)`` is ``|r|² + a s² + e t² + 2 c s − 2 f t − 2 b s t``, whose ``|r|²`` all
-    four share."""
-    best_s = best_t = 0.0
-    best = np.inf
+    best_s, best_t = 0.0, _clamp01(f / e)  # p1 against the second segment
+    best = _gap2(p1, d1, p2, d2, best_s, best_t)
+    n = np.cross(d1, d2)
+    denom = n @ n
     for k in range(4):
-        if k == 0:  # p1 against the second segment
-            s, t = 0.0, _clamp01(f / e)
-        elif k == 1:  # q1
+        if k == 0:  # q1 against the second segment
             s, t = 1.0, _clamp01((b + f) / e)
-        elif k == 2:  # p2 against the first
+        elif k == 1:  # p2 against the first
             s, t = _clamp01(-c / a), 0.0
-        else:  # q2
+        elif k == 2:  # q2 against the first
             s, t = _clamp01((b - c) / a), 1.0
-        value = a * s * s + e * t * t + 2.0 * c * s - 2.0 * f * t - 2.0 * b * s * t
-        if value < best:
-            best, best_s, best_t = value, s, t
+        elif denom > 0.0:  # the lines' closest pair, clamped
+            s = _clamp01((n @ np.cross(d2, r)) / denom)
+            t = _clamp01((b * s + f) / e)
+            s = _clamp01((b * t - c) / a)
+        else:  # parallel: the ends' pairs cover the overlap
+            continue
+        gap = _gap2(p1, d1, p2, d2, s, t)
+        if gap < best:
+            best, best_s, best_t = gap, s, t
     return best_s, best_t
 
 
@@ -265,7 +257,9 @@ def capsule_table(
     Returns
     -------
     distance
-        (S P,) m; +inf where no person's part is valid.
+        (S P,) m; +inf where no person's part is valid; −inf where a valid part (or the
+        arm's capsule) holds a NaN: in doubt, in contact (the input checks keep NaN out
+        of valid parts; this keeps a NaN from reading as nobody there).
     vector
         (S P, 3) unit, 0 where the distance is infinite.
     s
@@ -302,6 +296,12 @@ def capsule_table(
                     gap2 += (c_r[k] - c_h[k]) ** 2
                 gap = np.sqrt(gap2)
                 d = gap - robot_radii[i] - human_radii[h]
+                if d != d:  # NaN in a valid part or the arm: in doubt, in contact
+                    distance[row], s_out[row], who[row] = -np.inf, 0.0, p
+                    for k in range(3):
+                        vector[row, k] = fallback[k]
+                        robot_point[row, k] = human_point[row, k] = np.nan
+                    break  # nothing is closer than −inf
                 if not d < distance[row]:  # the first of equals is kept
                     continue
                 if gap >= TINY:
