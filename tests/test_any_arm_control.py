@@ -222,7 +222,8 @@ def strike(robot: qpavoid.Robot, target: str, controller: str) -> None:
     assert sim.metrics["ticks_moving_in_true_contact"] == 0
 
 
-@pytest.mark.parametrize("controller", ["qp", "analytic"])
+# the QP at the tool in the default suite; the paper's controller and the other sets slow
+@pytest.mark.parametrize("controller", ["qp", pytest.param("analytic", marks=pytest.mark.slow)])
 @pytest.mark.parametrize(
     "target", ["tool", *(pytest.param(s, marks=pytest.mark.slow) for s in ("column", "elbow_pad"))]
 )
