@@ -53,8 +53,13 @@ def test_import_contracts_hold():
         ("arm/braking.py", "from qpavoid.control import controller", "Each stage"),
         # the QP framework made to know the controller's tick
         ("control/qp/pieces.py", "from qpavoid.control import tick", "The QP framework"),
-        # nobody imports the command line
-        ("loop/simulation.py", "import qpavoid.cli.commands", "Each stage"),
+        # nobody imports the command line (the stages' contract again: with the slow ones)
+        pytest.param(
+            "loop/simulation.py",
+            "import qpavoid.cli.commands",
+            "Each stage",
+            marks=pytest.mark.slow,
+        ),
         # a cycle inside a stage: frames made to import people, which imports frames
         ("human/frames.py", "from qpavoid.human import people", "No import cycles"),
     ],
