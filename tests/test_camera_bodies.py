@@ -7,8 +7,6 @@ from __future__ import annotations
 import re
 import shlex
 import shutil
-import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
@@ -18,6 +16,7 @@ import pytest
 
 from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import load_robot
+from qpavoid.cli.commands import main
 from qpavoid.control.qp import QPController
 from qpavoid.core.errors import InputError, SkeletonFormatError
 from qpavoid.experiments.campaign import campaign_spec, rerun_command
@@ -187,18 +186,20 @@ def test_a_users_camera_file_is_refused_by_the_runs_spec(tmp_path, fmt_edit, bod
 
 
 @pytest.mark.parametrize(("fmt_edit", "body_edit", "match"), BAD_USER_FILES[::10])
-def test_a_users_camera_file_gets_one_line_and_exit_2(tmp_path, fmt_edit, body_edit, match):
-    """... and on the command line: one line on stderr, exit 2 (one file: the others above)."""
+def test_a_users_camera_file_gets_one_line_and_exit_2(
+    tmp_path, fmt_edit, body_edit, match, monkeypatch, capsys
+):
+    """... and on the command line: one line on stderr, exit 2 (one file: the others above;
+    the command line's main in this process, the installed program's refusals are
+    tests/test_cli_errors.py's)."""
     path = _user_camera(tmp_path, fmt_edit, body_edit)
-    done = subprocess.run(
-        [sys.executable, "-m", "qpavoid", "run", "free", "--camera", str(path), "--max-time", "1"],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    assert done.returncode == 2, done.stderr
-    lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and match in lines[0], done.stderr
+    monkeypatch.chdir(tmp_path)  # (a run that went ahead would write runs/ here)
+    status = main(["run", "free", "--camera", str(path), "--max-time", "1"])
+    out, err = capsys.readouterr()
+    assert status == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and match in lines[0], err
+    assert out == "" and not (tmp_path / "runs").exists()
 
 
 def test_a_users_camera_without_its_body_file_is_refused(tmp_path):
