@@ -89,13 +89,13 @@ def kinect(robot):
 @pytest.mark.parametrize(
     "fmt, latency, seed",
     [
-        # two with the default suite, every format with the slow one (its time budget)
+        # one with the default suite, every format with the slow one (its time budget)
         pytest.param("kinect_v2", 0.03, 1, marks=pytest.mark.slow),
         pytest.param("kinect_v2", 0.15, 2, marks=pytest.mark.slow),
         ("k4abt", 0.10, 3),
         pytest.param("zed_body_34", 0.12, 4, marks=pytest.mark.slow),
         pytest.param("zed_body_38", 0.045, 5, marks=pytest.mark.slow),
-        ("mediapipe_pose", 0.07, 6),
+        pytest.param("mediapipe_pose", 0.07, 6, marks=pytest.mark.slow),
     ],
 )
 def test_the_estimate_is_within_its_noise_of_the_true_latency(robot, fmt, latency, seed):
