@@ -387,7 +387,9 @@ def delayed_room_sweep(name: str, dt: float, told_s: float, cases: int, seed: in
 
 
 @pytest.mark.parametrize("name", ["iiwa14", "ur5", "panda"])  # 5, 8, 1 ms
-@pytest.mark.parametrize("dt", [0.01, 0.002])  # 1 or 2 in flight at 100 Hz, 1 to 4 at 500
+@pytest.mark.parametrize(  # 1 or 2 in flight at 100 Hz (slow suite), 1 to 4 at 500
+    "dt", [pytest.param(0.01, marks=pytest.mark.slow), 0.002]
+)
 def test_a_stop_through_the_arms_reaction_keeps_its_room(name: str, dt: float) -> None:
     """:func:`delayed_room_sweep`, 40 cases: told the arm's reaction, no joint whose box's
     end was its room passes its limit; told none (the room counted from the joint angles
