@@ -28,7 +28,10 @@ from qpavoid.scenarios.generated import make_scenario
 EPS = 1e-6  # central differences: error ~ EPS² · |q̈-terms|, far below the tolerance
 
 
-@pytest.fixture(scope="module", params=["spheres", "capsules"])
+# capsules (the default method) in the default suite; the paper's spheres with the slow ones
+@pytest.fixture(
+    scope="module", params=[pytest.param("spheres", marks=pytest.mark.slow), "capsules"]
+)
 def ticks(robot, request):
     """The states of a test1 run under the paper's rules (close approaches: active damper
     rows), measured again by a probe controller with SSM (active separation rows)."""
