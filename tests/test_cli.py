@@ -92,7 +92,8 @@ def test_without_matplotlib_plots_are_skipped(tmp_path, monkeypatch, capsys):
     assert "figures skipped" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("fmt", ["npz", "csv"])
+# NPZ in the default suite; CSV (its files read back: tests/test_io.py) with the slow ones
+@pytest.mark.parametrize("fmt", ["npz", pytest.param("csv", marks=pytest.mark.slow)])
 def test_replay_a_recording(robot, tmp_path, fmt):
     motion = make_scenario("test1", robot)
     t = np.arange(0, 6, 1 / 30) + 100.0  # a recording need not start at 0
