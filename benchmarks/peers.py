@@ -71,6 +71,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 import warnings
 from functools import cache
@@ -463,8 +464,10 @@ def main() -> None:
     results = {}
     for name in args.arms:
         print(f"\n## {name}: {int(args.seconds * RATE_HZ)} ticks at {RATE_HZ:.0f} Hz\n")
+        before = os.getloadavg()[0]
         results[name] = rows = compare(name, args.seconds)
         print(table(rows))
+        print(f"\nload average (1 min) {before:.2f} before, {os.getloadavg()[0]:.2f} after")
         print("\n" + summary(name, rows))
         if args.json:  # after every arm: a run stopped later keeps the arms done
             Path(args.json).write_text(json.dumps(results, indent=1))
