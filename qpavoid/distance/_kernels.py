@@ -157,19 +157,6 @@ def _clamp01(x: float) -> float:
 
 
 @njit(cache=True)
-def _gap2(
-    p1: np.ndarray, d1: np.ndarray, p2: np.ndarray, d2: np.ndarray, s: float, t: float
-) -> float:
-    """``‖p1 + s d1 − p2 − t d2‖²``, from the points themselves (no cancellation of
-    expanded terms)."""
-    g = 0.0
-    for k in range(3):
-        x = p1[k] + s * d1[k] - p2[k] - t * d2[k]
-        g += x * x
-    return g
-
-
-@njit(cache=True)
 def segment_closest(
     p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray
 ) -> tuple[float, float]:
@@ -192,8 +179,15 @@ def segment_closest(
     parallel ones (``n = 0``) a pair of the overlap. A segment of zero length (``a`` or
     ``e`` below :data:`~qpavoid.core.geometry.TINY`² m²) is its point.
     """
-    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
-    a, e, b, c, f = d1 @ d1, d2 @ d2, d1 @ d2, d1 @ r, d2 @ r
+    # scalars throughout: a pair is a few dozen flops, an array allocation would outweigh it
+    u0, u1, u2 = q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2]  # d₁
+    v0, v1, v2 = q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2]  # d₂
+    r0, r1, r2 = p1[0] - p2[0], p1[1] - p2[1], p1[2] - p2[2]  # r
+    a = u0 * u0 + u1 * u1 + u2 * u2
+    e = v0 * v0 + v1 * v1 + v2 * v2
+    b = u0 * v0 + u1 * v1 + u2 * v2
+    c = u0 * r0 + u1 * r1 + u2 * r2
+    f = v0 * r0 + v1 * r1 + v2 * r2
     small = TINY * TINY
     if a <= small and e <= small:  # two points
         return 0.0, 0.0
@@ -201,24 +195,30 @@ def segment_closest(
         return 0.0, _clamp01(f / e)
     if e <= small:  # the second a point
         return _clamp01(-c / a), 0.0
-    best_s, best_t = 0.0, _clamp01(f / e)  # p1 against the second segment
-    best = _gap2(p1, d1, p2, d2, best_s, best_t)
-    n = np.cross(d1, d2)
-    denom = n @ n
-    for k in range(4):
-        if k == 0:  # q1 against the second segment
+    n0, n1, n2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0  # n = d₁ × d₂
+    denom = n0 * n0 + n1 * n1 + n2 * n2
+    best_s, best_t, best = 0.0, 0.0, np.inf
+    for k in range(5):
+        if k == 0:  # p1 against the second segment
+            s, t = 0.0, _clamp01(f / e)
+        elif k == 1:  # q1 against the second segment
             s, t = 1.0, _clamp01((b + f) / e)
-        elif k == 1:  # p2 against the first
+        elif k == 2:  # p2 against the first
             s, t = _clamp01(-c / a), 0.0
-        elif k == 2:  # q2 against the first
+        elif k == 3:  # q2 against the first
             s, t = _clamp01((b - c) / a), 1.0
-        elif denom > 0.0:  # the lines' closest pair, clamped
-            s = _clamp01((n @ np.cross(d2, r)) / denom)
+        elif denom > 0.0:  # the lines' closest pair, clamped: n · (d₂ × r) / ‖n‖²
+            w0, w1, w2 = v1 * r2 - v2 * r1, v2 * r0 - v0 * r2, v0 * r1 - v1 * r0
+            s = _clamp01((n0 * w0 + n1 * w1 + n2 * w2) / denom)
             t = _clamp01((b * s + f) / e)
             s = _clamp01((b * t - c) / a)
         else:  # parallel: the ends' pairs cover the overlap
-            continue
-        gap = _gap2(p1, d1, p2, d2, s, t)
+            break
+        # the squared gap from the points themselves (no cancellation of expanded terms)
+        x0 = r0 + s * u0 - t * v0
+        x1 = r1 + s * u1 - t * v1
+        x2 = r2 + s * u2 - t * v2
+        gap = x0 * x0 + x1 * x1 + x2 * x2
         if gap < best:
             best, best_s, best_t = gap, s, t
     return best_s, best_t
