@@ -15,10 +15,10 @@ import pytest
 from qpavoid.distance.table import DistanceTable
 from qpavoid.laws.ssm import (
     SSMConfig,
+    approach_bounds,
     body_mask,
     separation_bounds,
     separation_constants,
-    approach_bounds,
 )
 
 PARTS = ("head", "trunk", "left_hand", "right_hand", "left_forearm")
