@@ -119,15 +119,19 @@ def _assert_same(compiled, coal, who_c, who_k):
     assert np.all(np.isnan(compiled.robot_point[~finite]))
 
 
+@pytest.mark.parametrize(
+    "n, seed",
+    [(50, 5), pytest.param(400, 6, marks=pytest.mark.slow)],  # 400 more with the slow ones
+)
 @pytest.mark.parametrize("arm", ["iiwa14", "panda", "fr3", "ur5"])
-def test_the_compiled_table_is_coals_on_every_arm(arm):
-    """200 random postures of each arm beside one to six people (a tenth of their joints
+def test_the_compiled_table_is_coals_on_every_arm(arm, n, seed):
+    """``n`` random postures of each arm beside one to six people (a tenth of their joints
     not tracked, so some parts unseen and others widened): coal's table, entry by entry."""
     robot = qpavoid.load_robot(arm)
-    rng = np.random.default_rng(5)
+    rng = np.random.default_rng(seed)
     human = KinectHuman()
     compiled, coal = CapsuleDistance(robot, human), CoalCapsuleDistance(robot, human)
-    for k in range(200):
+    for k in range(n):
         kin = robot.kinematics(random_q(rng, robot), jacobians=False)
         _, geos = _people(rng, kin, 1 + k % 6)
         table_c, who_c = compiled.closest(kin, geos)
