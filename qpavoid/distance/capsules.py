@@ -90,4 +90,4 @@ class CapsuleDistance:
         )
         names = (self.set_names, self.part_names)
         table = DistanceTable.of_capsules(names, d, vector, s, robot_point, human_point)
-        return table, who.reshape(shape).astype(np.intp)
+        return table, who.reshape(shape)  # int64: numpy's intp

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from functools import cached_property, partial
+from functools import cache, cached_property, partial
 
 import numpy as np
 
@@ -96,7 +96,7 @@ class DistanceTable:
     ) -> DistanceTable:
         """A capsule table from its rows ``r = i K + j`` (``names``: the sets', the parts')."""
         shape = (len(names[0]), len(names[1]))
-        none = np.full(shape, -1)
+        none = _no_index(shape)  # one read-only array per shape, not one per tick
         return cls(
             "capsules",
             distance.reshape(shape),
@@ -141,6 +141,14 @@ class DistanceTable:
             assert kin.point_jacobians is not None
             return kin.point_jacobians[self.robot_index[sets, parts]]
         return kin.segment_point_jacobian(sets, self.robot_s[sets, parts])
+
+
+@cache
+def _no_index(shape: tuple[int, int]) -> np.ndarray:
+    """(S, K) of −1, read-only: the capsule tables' robot and human indices."""
+    out = np.full(shape, -1)
+    out.setflags(write=False)
+    return out
 
 
 def require_people(geos: Sequence[object]) -> None:
