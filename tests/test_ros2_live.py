@@ -173,6 +173,23 @@ def _arm(domain: int, timeout_s: float = 0.3):
     return Ros2Arm(robot, cell, 0.002, True), robot.joint_names
 
 
+def _joint_state(t: float, names, q):
+    """A JointState stamped ``t`` (s) naming ``names`` at positions ``q``."""
+    from qpavoid.sensing.ros2_cell import dds_message
+
+    stamp = dds_message(
+        "humble", "builtin_interfaces/msg/Time", sec=int(t), nanosec=int((t % 1) * 1e9)
+    )
+    return dds_message(
+        "humble",
+        "sensor_msgs/msg/JointState",
+        header=dds_message("humble", "std_msgs/msg/Header", stamp=stamp),
+        name=list(names),
+        position=list(q),
+        velocity=[0.0] * len(q),
+    )
+
+
 def test_no_controller_on_the_command_topic_refuses_to_move():
     arm, _ = _arm(_domain())
     with pytest.raises(ArmError) as err:
@@ -184,7 +201,7 @@ def test_no_controller_on_the_command_topic_refuses_to_move():
 
 @pytest.mark.slow
 def test_the_arm_reads_joint_states_by_name_and_commands_in_the_controllers_order():
-    from qpavoid.sensing.ros2_cell import dds_message, reader, take_raw
+    from qpavoid.sensing.ros2_cell import reader, take_raw
 
     domain = _domain()
     arm, names = _arm(domain, 3.0)
@@ -198,30 +215,19 @@ def test_the_arm_reads_joint_states_by_name_and_commands_in_the_controllers_orde
     )
     states = writer(dp, "humble", "/joint_states", "sensor_msgs/msg/JointState")
 
-    def state(t: float, names, q):
-        stamp = dds_message(
-            "humble", "builtin_interfaces/msg/Time", sec=int(t), nanosec=int((t % 1) * 1e9)
-        )
-        return dds_message(
-            "humble",
-            "sensor_msgs/msg/JointState",
-            header=dds_message("humble", "std_msgs/msg/Header", stamp=stamp),
-            name=list(names),
-            position=list(q),
-            velocity=[0.0] * len(q),
-        )
-
     assert _until(lambda: bool(states.get_matched_subscriptions()))
     n = len(names)
     q = 0.1 * np.arange(1, n + 1)
     shuffled = np.random.default_rng(0).permutation(n).tolist()
-    states.write(state(10.0, ("gripper", *(names[i] for i in shuffled)), (9.0, *q[shuffled])))
+    states.write(
+        _joint_state(10.0, ("gripper", *(names[i] for i in shuffled)), (9.0, *q[shuffled]))
+    )
     got = arm.connect()
     assert np.allclose(got.q, q) and got.time_s == pytest.approx(10.0)
-    states.write(state(10.1, names[:-1], q[:-1]))  # a joint missing: dropped
+    states.write(_joint_state(10.1, names[:-1], q[:-1]))  # a joint missing: dropped
     time.sleep(0.05)
     assert np.allclose(arm.read().q, q)
-    states.write(state(10.2, names, [math.nan, *q[1:]]))  # NaN: dropped
+    states.write(_joint_state(10.2, names, [math.nan, *q[1:]]))  # NaN: dropped
     time.sleep(0.05)
     assert np.allclose(arm.read().q, q)
     assert arm.counters["dropped_wrong_joints"] == 1 and arm.counters["dropped_non_finite"] == 1
@@ -239,4 +245,42 @@ def test_the_arm_reads_joint_states_by_name_and_commands_in_the_controllers_orde
     )
     assert np.allclose(got_cmds[0], 0.01 * np.arange(n, 0, -1))  # the controller's order
     assert list(got_cmds[-1]) == [0.0] * n
+    arm.close()
+
+
+@pytest.mark.slow
+def test_a_fresh_read_waits_for_the_next_state_and_a_plain_one_takes_the_queued():
+    """``read()`` gives the newest state queued at once; ``read(fresh=True)`` takes the
+    queued one as the past and gives the next to arrive (here 0.1 s later, within its
+    wait of one period, 0.5 s); with none arriving, it gives the last after the wait."""
+    import threading
+
+    from qpavoid.arm.model import load_robot
+    from qpavoid.drive.ros2_arm import Ros2Arm
+    from qpavoid.sensing.ros2_cell import ArmTopics, reader
+
+    domain = _domain()
+    robot = load_robot("iiwa14")
+    names = robot.joint_names
+    arm = Ros2Arm(robot, Cell(domain_id=domain, arm=ArmTopics(subscriber_timeout_s=3.0)), 0.5, True)
+    dp = participant(domain)
+    commands = reader(  # noqa: F841  (held: the controller on the command topic)
+        dp, "humble", "/forward_velocity_controller/commands", "std_msgs/msg/Float64MultiArray"
+    )
+    states = writer(dp, "humble", "/joint_states", "sensor_msgs/msg/JointState")
+    assert _until(lambda: bool(states.get_matched_subscriptions()))
+    q = np.zeros(len(names))
+    states.write(_joint_state(20.0, names, q))
+    assert arm.connect().time_s == pytest.approx(20.0)
+    states.write(_joint_state(20.1, names, q))
+    assert _until(lambda: arm.read().time_s == pytest.approx(20.1))
+    states.write(_joint_state(20.2, names, q))
+    time.sleep(0.05)
+    later = threading.Timer(0.1, lambda: states.write(_joint_state(20.3, names, q)))
+    later.start()
+    assert arm.read(fresh=True).time_s == pytest.approx(20.3)  # 20.2 was queued: the past
+    later.join()
+    began = time.perf_counter()
+    assert arm.read(fresh=True).time_s == pytest.approx(20.3)  # none came: the last
+    assert time.perf_counter() - began >= 0.5  # after its whole wait
     arm.close()

@@ -33,7 +33,14 @@ from qpavoid.drive.interface import ArmState
 from qpavoid.drive.limits import CommandLimits
 from qpavoid.drive.stop_ramp import ramp_to_rest
 from qpavoid.sensing.dds_input import check_trust
-from qpavoid.sensing.ros2_cell import Cell, participant, reader, take_raw, writer
+from qpavoid.sensing.ros2_cell import (
+    Cell,
+    participant,
+    reader,
+    state_waitset,
+    take_raw,
+    writer,
+)
 from qpavoid.sensing.ros2_types import dds_type, need, stamp_s
 
 __all__ = ["START_TOLERANCE_RAD", "Ros2Arm"]
@@ -93,6 +100,7 @@ class Ros2Arm:
         self._states = reader(
             self._dp, cell.distribution, arm.joint_states, "sensor_msgs/msg/JointState"
         )
+        self._arrival = state_waitset(self._dp, self._states)
         self._commands = writer(
             self._dp, cell.distribution, arm.commands, "std_msgs/msg/Float64MultiArray"
         )
@@ -205,14 +213,21 @@ class Ros2Arm:
             self.counters["accepted"] += 1
         return newest
 
-    def read(self) -> ArmState:
+    def read(self, fresh: bool = False) -> ArmState:
         """The newest joint state (waits at most one period for a newer one; the stamps'
-        clock is the arm's: a state that stops coming is a stalled arm)."""
+        clock is the arm's: a state that stops coming is a stalled arm).
+
+        With ``fresh``, the states already queued are taken as the past and the call waits
+        (on a DDS wait set, at most one period) for the next one to arrive, so that a tick
+        starts on a state one DDS hop old rather than up to one arm period older
+        (benchmarks/ros2_hop.py measures both)."""
         if self.closed:
             raise ArmError("the ROS 2 arm is closed", reason="closed")
         until = time.perf_counter() + self.period_s
-        while (state := self._take()) is None and time.perf_counter() < until:
-            time.sleep(1e-4)
+        if fresh:
+            self._take()
+        while (state := self._take()) is None and (left := until - time.perf_counter()) > 0:
+            self._arrival.wait(int(left * 1e9))
         if state is None:
             state = self._state
         if state is None:

@@ -259,6 +259,17 @@ def writer(dp: Any, distribution: str, topic: str, message: str, reliable: bool 
     return need("cyclonedds.pub").DataWriter(dp, topic_, qos=_qos(reliable, 1))
 
 
+def state_waitset(dp: Any, dds_reader: Any) -> Any:
+    """A DDS wait set woken when ``dds_reader`` holds a sample (any state): its
+    ``wait(timeout_ns)`` blocks until one arrives or the timeout passes."""
+    core = need("cyclonedds.core")
+    mask = core.SampleState.Any | core.ViewState.Any | core.InstanceState.Any
+    waitset, condition = core.WaitSet(dp), core.ReadCondition(dds_reader, mask)
+    waitset.attach(condition)
+    waitset.condition = condition  # held as long as the wait set
+    return waitset
+
+
 def take_raw(dds_reader: Any, n: int = 64) -> list[bytes]:
     """The CDR bytes of up to ``n`` samples taken from ``dds_reader`` (valid data only):
     each deserialized by its caller, so that one malformed sample drops only itself."""
