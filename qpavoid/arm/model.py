@@ -98,6 +98,28 @@ class Kinematics:
         return (1.0 - s) * ends[..., 0, :, :] + s * ends[..., 1, :, :]
 
 
+def frame_translations(data: pin.Data, n_frames: int) -> np.ndarray | None:
+    """Every frame's position in ``data`` (``data.oMf[f].translation``), m, as one
+    read-only (n_frames, 3) view that ``updateFramePlacements`` rewrites in place; None if
+    the placements do not lie at one stride in memory (then read them one by one).
+
+    ``data.oMf`` is a ``std::vector`` of SE3, sized once by ``createData``; each
+    placement's ``translation`` is a view into it. Gathering the frames through one view
+    replaces a Python read per frame, which was the larger half of a tick's kinematics
+    (docs/performance.md §2g). The view lives as long as ``data``, which its holder keeps.
+    """
+    first = data.oMf[0].translation
+    if n_frames < 2 or first.dtype != np.float64 or first.strides != (8,):
+        return None
+    base = first.__array_interface__["data"][0]
+    stride = data.oMf[1].translation.__array_interface__["data"][0] - base
+    for f in range(n_frames):  # every placement where the stride puts it
+        if data.oMf[f].translation.__array_interface__["data"][0] != base + f * stride:
+            return None
+    view = np.lib.stride_tricks.as_strided(first, (n_frames, 3), (stride, 8), writeable=False)
+    return view
+
+
 class Robot:
     """A serial arm as a Pinocchio model plus its control-point description.
 
@@ -196,6 +218,7 @@ class Robot:
                 pair.append(frames.index(placement[key]))
             seg_idx.append(pair)
         self._frames = tuple(frames)
+        self._frame_array = np.array(frames, dtype=np.intp)
         self._segment_index = np.array(seg_idx)
         self._n_points = len(self.point_frames)
         # the velocity columns of the joints that carry each frame (its Jacobian's nonzero
@@ -227,6 +250,7 @@ class Robot:
         # ``data.oMf[f]`` is a reference that updateFramePlacements rewrites, so they are
         # indexed once, not every tick
         self._held = (data, tuple(data.oMf[f] for f in self._frames), data.oMf[self.ee_frame])
+        self._translations = frame_translations(data, self.model.nframes)
 
     def for_thread(self) -> Robot:
         """A copy that computes :meth:`kinematics` in Pinocchio data of its own, for another
@@ -238,7 +262,7 @@ class Robot:
 
     def __getstate__(self) -> dict:
         # copies and pickles carry the data, never references into it
-        state = {k: v for k, v in self.__dict__.items() if k != "_held"}
+        state = {k: v for k, v in self.__dict__.items() if k not in ("_held", "_translations")}
         return {**state, "data": self.data}
 
     def __setstate__(self, state: dict) -> None:
@@ -334,7 +358,10 @@ class Robot:
         else:
             pin.forwardKinematics(model, data, q)
         pin.updateFramePlacements(model, data)
-        pos = np.array([m.translation for m in placements])  # (F, 3), contiguous
+        if self._translations is not None:  # (F, 3), contiguous: one gather
+            pos = self._translations[self._frame_array]
+        else:
+            pos = np.array([m.translation for m in placements])
         points, segments = pos[: self._n_points], pos[self._segment_index]
         ee = ee_placement.homogeneous  # a copy
         pj = sj = ej = None
