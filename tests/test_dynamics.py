@@ -123,16 +123,20 @@ def edit(old: str, new: str):
 @pytest.mark.parametrize(
     "change, name, message",
     [
-        (lambda t: "", "arm", "no [arm] table; add one, e.g. reaction_time_s = 0.005"),
+        (
+            lambda t: "",
+            "arm",
+            "missing key(s) arm: arm must be a table, e.g. [arm] reaction_time_s = 0.005",
+        ),
         (
             edit("[arm]\n", "[arm]\nmax_acceleration = 3\n"),
             "arm",
-            "[arm] has unknown key(s) ['max_acceleration']",
+            "arm has unknown key(s) ['max_acceleration']",
         ),
         (
             edit("max_point_speed_mps = 8.0\n", ""),
-            "arm",
-            "[arm] is missing key(s) max_point_speed_mps",
+            "arm.max_point_speed_mps",
+            "arm is missing key(s) max_point_speed_mps",
         ),
         (  # a joint's acceleration missing
             edit(", wrist_3_joint = 20.0", ""),
@@ -163,7 +167,7 @@ def edit(old: str, new: str):
         ),
         (  # degrees
             edit("[-3.0, 3.0]", "[-170, 170]"),
-            "arm.position_limits_rad.elbow_joint",
+            "arm.position_limits_rad.elbow_joint[0]",
             "must be a number at least -12.5664 and at most 12.5664, got -170",
         ),
         (
@@ -193,13 +197,13 @@ def edit(old: str, new: str):
         ),
         (
             edit("extension = 1.0\n", ""),
-            "arm.stopping[0]",
-            "[[arm.stopping]] entry 0 is missing key(s) extension",
+            "arm.stopping[0].extension",
+            "arm.stopping[0] is missing key(s) extension",
         ),
         (
             edit("extension = 1.0\n", "extension = 1.0\nspeed = 3\n"),
             "arm.stopping[0]",
-            "[[arm.stopping]] entry 0 has unknown key(s) ['speed']",
+            "arm.stopping[0] has unknown key(s) ['speed']",
         ),
         (
             edit('joints = ["shoulder_pan_joint"]', 'joints = ["base"]'),
@@ -229,7 +233,7 @@ def edit(old: str, new: str):
         (  # a misspelt source would leave its fact unsourced
             edit("[arm.sources]\n", '[arm.sources]\nmax_jerk = "x"\n'),
             "arm.sources",
-            "[arm.sources] has unknown key(s) ['max_jerk']",
+            "arm.sources has unknown key(s) ['max_jerk']",
         ),
         (
             edit("reaction_time_s = 0.008", "reaction_time_s = 8"),
@@ -261,7 +265,7 @@ def test_a_ur5_with_its_joints_renamed_cannot_run_with_another_arm_s_acceleratio
         read_arm(cfg, iiwa, renamed)
     with pytest.raises(RobotDescriptionError, match="for each joint of the URDF"):
         arm_of(UR5_ARM, tuple(f"joint{k}" for k in range(6)))
-    with pytest.raises(RobotDescriptionError, match=r"no \[arm\] table"):
+    with pytest.raises(RobotDescriptionError, match=r"missing key\(s\) arm"):
         read_arm({k: v for k, v in cfg.items() if k != "arm"}, iiwa, renamed)
 
 

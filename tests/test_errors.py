@@ -10,6 +10,7 @@ import dataclasses
 import pickle
 import re
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -307,12 +308,13 @@ def test_robot_description_errors(tmp_path):
     with pytest.raises(RobotDescriptionError) as info:
         qpavoid.load_robot(tmp_path)
     err = info.value
-    assert err.path == tmp_path / "control_points.toml" and err.name == "sets[0]"
+    assert err.path == tmp_path / "control_points.toml" and err.name == "sets[0].sphere_radius_m"
     assert err.value == ["sphere_radius_m", "points", "capsule"]
-    assert "[[sets]] entry 0 is missing key(s) sphere_radius_m, points, capsule" in one_line(err)
+    assert "sets[0] is missing key(s) sphere_radius_m, points, capsule" in one_line(err)
+    iiwa = Path(__file__).parents[1] / "robots" / "iiwa14" / "control_points.toml"
     (tmp_path / "control_points.toml").write_text(
-        'urdf = "arm.urdf"\nend_effector = "tool"\nsets = []\n'
-    )
+        iiwa.read_text().replace('urdf = "iiwa14.urdf"', 'urdf = "arm.urdf"')
+    )  # a file of the right shape whose URDF is broken
     (tmp_path / "arm.urdf").write_text("<robot name='broken'><link>")
     with pytest.raises(RobotDescriptionError) as info:
         qpavoid.load_robot(tmp_path)

@@ -223,7 +223,7 @@ def test_description_from_a_folder(tmp_path, robot):
     assert r.name == "myarm"
     np.testing.assert_allclose(r.control_points(np.zeros(6)), robot.control_points(np.zeros(6)))
     (robot_dir / "control_points.toml").write_text('urdf = "iiwa14.urdf"\n')
-    with pytest.raises(RobotDescriptionError, match="missing key 'sets'"):
+    with pytest.raises(RobotDescriptionError, match=r"missing key\(s\) sets"):
         qpavoid.load_robot(robot_dir)
 
 

@@ -241,7 +241,7 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         (
             lambda t: t[: t.index("[roles]")],
             "roles",
-            "no [roles] table; add one, e.g. scaled = {",
+            "missing key(s) roles, arm: roles must be a table, e.g. scaled = {",
         ),
         (
             lambda t: t.replace('repelled = { set = "L2"', 'repelled = { set = "L3"'),
@@ -256,7 +256,7 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         (
             lambda t: t.replace('end_effector = { set = "EE" }', ""),
             "roles.end_effector",
-            "[roles] needs end_effector = { set = ... }",
+            "roles is missing key(s) end_effector: end_effector must be a table { set = ",
         ),
         (
             lambda t: t.replace('elbow = ["A4"]', 'elbow = ["A9"]'),
@@ -270,8 +270,8 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         ),
         (
             lambda t: t.replace("max_point_speed_mps = 3.0\n", ""),
-            "arm",
-            "[arm] is missing key(s) max_point_speed_mps",
+            "arm.max_point_speed_mps",
+            "arm is missing key(s) max_point_speed_mps",
         ),
         (
             lambda t: t.replace("reaction_time_s = 0.005\n", "reaction_time_s = -1.0\n"),
@@ -286,7 +286,7 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         (
             lambda t: t.replace("[roles]\n", "[roles]\nscaled_joints = []\n"),
             "roles",
-            "[roles] has unknown key(s) ['scaled_joints']",
+            "roles has unknown key(s) ['scaled_joints']",
         ),
         (  # a unit error: a reaction time in ms
             lambda t: t.replace("reaction_time_s = 0.005", "reaction_time_s = 5.0"),
@@ -313,17 +313,17 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
                 "sphere_radius_m = 0.09", "sphere_radus_m = 0.09\nsphere_radius_m = 0.09", 1
             ),
             "sets[0]",
-            "[[sets]] entry 0 has unknown key(s) ['sphere_radus_m']",
+            "sets[0] has unknown key(s) ['sphere_radus_m']",
         ),
         (
             lambda t: t.replace("capsule_radius_m = 0.07", "capsule_radius_m = -0.07", 1),
             "sets[0].capsule.capsule_radius_m",
-            "sets[0].capsule.capsule_radius_m must be a number above 0, got -0.07",
+            "sets[0].capsule.capsule_radius_m must be a number above 0 and at most 1, got -0.07",
         ),
         (
             lambda t: t.replace("sphere_radius_m = 0.09", "sphere_radius_m = 0", 1),
             "sets[0].sphere_radius_m",
-            "sets[0].sphere_radius_m must be a number above 0, got 0",
+            "sets[0].sphere_radius_m must be a number above 0 and at most 1, got 0",
         ),
         (  # roles would resolve to the first of two sets of one name
             lambda t: t.replace('name = "L2"', 'name = "L1"'),
@@ -394,7 +394,7 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
             (
                 lambda t, bad=bad: t.replace('points = [["flange"]]', f"points = {bad}"),
                 "sets[2].points",
-                "[[sets]] entry 2: points must be a non-empty list of control points, each the "
+                "sets[2].points must be a non-empty list of control points, each the "
                 'list of the frames it is the centroid of, e.g. points = [["<frame>"], '
                 '["<frame>", "<frame>"], { frame = "<frame>", xyz = [x, y, z] }]',
             )

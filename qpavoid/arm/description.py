@@ -33,14 +33,8 @@ from typing import NamedTuple
 
 import pinocchio as pin
 
-from qpavoid.arm.control_points import (
-    CONFIG_NAME,
-    SET_NAME,
-    ControlSet,
-    read_config,
-    read_coverage,
-)
-from qpavoid.arm.dynamics import ArmDynamics, read_arm
+from qpavoid.arm.control_points import CONFIG_NAME, SET_NAME, ControlSet, read_config
+from qpavoid.arm.dynamics import ArmDynamics, arm_dynamics
 from qpavoid.arm.frames import add_frames, control_sets
 from qpavoid.arm.joints import (
     IKSeed,
@@ -140,13 +134,14 @@ def read_description(
     :class:`~qpavoid.arm.model.Robot` from the returned :class:`Description`.
     """
     folder = _description_dir(name)
-    cfg, urdf, set_cfgs, ee_name = read_config(folder)
+    file, urdf = read_config(folder)
+    ee_name, set_cfgs = file.end_effector, file.sets
     path = folder / CONFIG_NAME
     model = build_urdf_model(urdf)
     check_urdf_joints(model, urdf)
     joints = tuple(str(n) for n in model.names)[1:]
-    held = file_locked(cfg.get("held"), path, model, "held")
-    default = file_locked(cfg.get("locked"), path, model)
+    held = file_locked(file.held, path, model, "held")
+    default = file_locked(file.locked, path, model)
     both = sorted(set(held) & set(default))
     if both:
         raise RobotDescriptionError(
@@ -162,18 +157,11 @@ def read_description(
     by += " and the file's `held`" if held and locked is not None else ""
     locked = {**locked_angles(locked, default, model), **held}
     check_free(joints, locked, path, by)
-    if not set_cfgs:
-        raise RobotDescriptionError(
-            f"{path}: no [[sets]]; give at least one (docs/robot.md)",
-            path=path,
-            name="sets",
-            value=set_cfgs,
-        )
-    roles = read_roles(cfg, path, set_cfgs, joints)
-    arm = read_arm(cfg, path, joints)
-    ik_seed = read_ik_seed(cfg, path, joints)
-    home = read_home(cfg.get("home"), path, model)
-    coverage_exclude = read_coverage(cfg, path)
+    roles = read_roles(file.roles, path, set_cfgs, joints)
+    arm = arm_dynamics(file.arm, path, joints)
+    ik_seed = read_ik_seed(file.ik_seed, path, joints)
+    home = read_home(file.home, path, model)
+    coverage_exclude = dict(file.coverage.exclude)
     add_frames(model, set_cfgs, path, urdf)
     if not model.existFrame(ee_name):
         raise RobotDescriptionError(

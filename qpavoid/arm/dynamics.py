@@ -39,9 +39,11 @@ lasts at least T₀ **and** travels at least D₀. Speed and separation monitori
 joint at the slower of that and the joint's acceleration limit
 (:meth:`ArmDynamics.braking_deceleration_radps2`).
 
-:func:`read_arm` reads the table; every value is bounded (a value beyond the bounds below is
-a unit error or a typo) and every refusal is a one-line :class:`RobotDescriptionError`
-naming the file, the key and the fix.
+:func:`read_arm` reads the table: its shape (types, bounds, keys) is a schema,
+:mod:`qpavoid.arm.dynamics_schema` (every value is bounded: a value beyond a bound is a
+unit error or a typo); the joints it names are checked against the URDF's here. Every
+refusal is a one-line :class:`RobotDescriptionError` naming the file, the key's path and
+the fix.
 """
 
 from __future__ import annotations
@@ -52,66 +54,28 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import numpy as np
 
-from qpavoid.arm.fields import number as _number
-from qpavoid.arm.fields import table as _table
-from qpavoid.arm.fields import unknown_keys as _unknown_keys
+from qpavoid.arm.dynamics_schema import (
+    MAX_PAYLOAD_KG,
+    OPTIONAL_KEYS,
+    ArmOf,
+    ArmTable,
+)
+from qpavoid.arm.fields import refused
 from qpavoid.core.errors import RobotDescriptionError
+from qpavoid.core.schema import convert
 
-#: Plausible bounds of the ``[arm]`` facts (a value outside is a unit error or a typo, and
-#: would make speed and separation never move or never stop the arm in time): a reaction
-#: slower than 0.1 s (arms react within one period of their real-time interface, 1-8 ms
-#: for the arms here: 1 meant as 1 ms is refused); a joint braking below 0.1 rad/s² (10 s
-#: to stop from 1 rad/s) or above 100 rad/s² (arms brake at 5-50: the iiwa 8.6-15.7, the
-#: Panda 7.5-20, the UR5's elbow 19.5; in degrees, 5 rad/s² would read 286 and is
-#: refused); a point faster than 10 m/s (cobots move their tool at up to 1-5 m/s).
-MAX_REACTION_S = 0.1
-MIN_ACCEL_RADPS2, MAX_ACCEL_RADPS2 = 0.1, 100.0
-MAX_SPEED_MPS = 10.0
-#: A joint's jerk: at least 1 rad/s³ (10 s to reach 10 rad/s²: a typo) and at most 10⁶ rad/s³
-#: (1000 rad/s² within 1 ms: indistinguishable from no limit; Franka's are 3750-10000).
-MIN_JERK_RADPS3, MAX_JERK_RADPS3 = 1.0, 1.0e6
-#: A joint's velocity limit: above 0 and at most 20 rad/s (cobot joints turn at 1.3-6.3 rad/s;
-#: 85 °/s written as 85 would pass unnoticed above it).
-MAX_VELOCITY_RADPS = 20.0
-#: A joint's position limit: within ±4π rad (two turns either way; UR joints turn ±2π; an
-#: angle in degrees, 170 for 170°, lies beyond).
-MAX_POSITION_RAD = 4.0 * math.pi
-#: A maker's stop: within 5 s (KUKA's heavy industrial arms stop in 0.2-0.5 s; 244 written
-#: for 244 ms lies beyond) and one turn (30° written as 30 lies beyond); the payload at most
-#: 1000 kg (a stop's, and an arm's rated payload: above 0 and at most this).
-MAX_STOP_TIME_S = 5.0
-MAX_STOP_DISTANCE_RAD = 2.0 * math.pi
-MAX_PAYLOAD_KG = 1000.0
-#: The stop categories of IEC 60204-1 a maker's stopping data may be given for (ISO 10218-1
-#: asks for both): 0, power removed at once; 1, a controlled stop, then power removed.
-STOP_CATEGORIES = (0, 1)
-#: Keys of the ``[arm]`` table that must be given, and those that may be (each of these
-#: then needs its source in ``[arm.sources]``).
-ARM_KEYS = ("reaction_time_s", "max_acceleration_radps2", "max_point_speed_mps")
-OPTIONAL_KEYS = (
-    "max_velocity_radps",
-    "max_jerk_radps3",
-    "position_limits_rad",
-    "stopping",
-    "rated_payload_kg",
-)
-#: Keys of a ``[[arm.stopping]]`` entry (all needed).
-STOPPING_KEYS = (
-    "joints",
-    "category",
-    "speed_radps",
-    "distance_rad",
-    "time_s",
-    "extension",
-    "payload_kg",
-)
-#: The table's shape, shown when it is missing.
-EXAMPLE = (
-    "reaction_time_s = 0.005, max_acceleration_radps2 = { <joint> = 10.0, ... }, "
-    "max_point_speed_mps = 3.0"
-)
+__all__ = [
+    "MAX_PAYLOAD_KG",
+    "ArmDynamics",
+    "StoppingData",
+    "arm_dynamics",
+    "read_arm",
+    "tighter_limits",
+]
+
 
 Pairs = tuple[tuple[str, float], ...]
 
@@ -302,73 +266,26 @@ def read_arm(cfg: Mapping[str, Any], path: Path, joints: Sequence[str]) -> ArmDy
     RobotDescriptionError
         If the table is missing, has an unknown key, lacks a needed key or a joint's
         acceleration, names a joint the URDF lacks, holds a value out of its bounds (see
-        the module's constants), or gives an optional fact without its source.
+        :mod:`qpavoid.arm.dynamics_schema`), or gives an optional fact without its source.
     """
-    table = _table(cfg, "arm", path, EXAMPLE)
-    _unknown_keys(table, (*ARM_KEYS, *OPTIONAL_KEYS, "sources"), "[arm]", path, "arm")
-    missing = [k for k in ARM_KEYS if k not in table]
-    if missing:
-        raise RobotDescriptionError(
-            f"{path}: [arm] is missing key(s) {', '.join(missing)} (docs/robot.md: Arm)",
-            path=path,
-            name="arm",
-            value=missing,
-        )
-    accel = table["max_acceleration_radps2"]
-    if not isinstance(accel, dict) or sorted(accel) != sorted(joints):
-        given = sorted(accel) if isinstance(accel, dict) else accel
+    return arm_dynamics(convert(cfg, ArmOf, refused(path)).arm, path, joints)
+
+
+def arm_dynamics(table: ArmTable, path: Path, joints: Sequence[str]) -> ArmDynamics:
+    """The :class:`ArmDynamics` of an ``[arm]`` table of the shape its schema checked:
+    each joint it names one of the URDF's ``joints``, an acceleration for each of them,
+    a source for each optional fact given."""
+    accel = table.max_acceleration_radps2
+    if sorted(accel) != sorted(joints):
         raise RobotDescriptionError(
             f"{path}: [arm] max_acceleration_radps2 must give one limit (rad/s²) for each "
-            f"joint of the URDF, {list(joints)}; it gives {given!r}",
+            f"joint of the URDF, {list(joints)}; it gives {sorted(accel)!r}",
             path=path,
             name="arm.max_acceleration_radps2",
-            value=given,
+            value=sorted(accel),
         )
-    sources = _sources(table, path)
-    where = "arm.max_acceleration_radps2"
-    return ArmDynamics(
-        reaction_time_s=_number(
-            table["reaction_time_s"], "arm.reaction_time_s", path, 0.0, False, MAX_REACTION_S
-        ),
-        max_acceleration_radps2=tuple(
-            (n, _number(accel[n], f"{where}.{n}", path, MIN_ACCEL_RADPS2, False, MAX_ACCEL_RADPS2))
-            for n in joints
-        ),
-        max_point_speed_mps=_number(
-            table["max_point_speed_mps"], "arm.max_point_speed_mps", path, 0.0, True, MAX_SPEED_MPS
-        ),
-        sources=sources,
-        max_velocity_radps=_per_joint(
-            table, "max_velocity_radps", path, joints, (0.0, True, MAX_VELOCITY_RADPS)
-        ),
-        max_jerk_radps3=_per_joint(
-            table, "max_jerk_radps3", path, joints, (MIN_JERK_RADPS3, False, MAX_JERK_RADPS3)
-        ),
-        position_limits_rad=_position_limits(table, path, joints),
-        stopping=_stopping(table, path, joints),
-        rated_payload_kg=(
-            _number(
-                table["rated_payload_kg"], "arm.rated_payload_kg", path, 0.0, True, MAX_PAYLOAD_KG
-            )
-            if "rated_payload_kg" in table
-            else None
-        ),
-    )
-
-
-def _sources(table: Mapping[str, Any], path: Path) -> tuple[tuple[str, str], ...]:
-    """``[arm.sources]``: a text per fact, one for each optional fact given."""
-    sources = table.get("sources", {})
-    if not isinstance(sources, dict) or not all(isinstance(v, str) for v in sources.values()):
-        raise RobotDescriptionError(
-            f"{path}: [arm.sources] must map each fact to the text of its source",
-            path=path,
-            name="arm.sources",
-            value=sources,
-        )
-    _unknown_keys(sources, (*ARM_KEYS, *OPTIONAL_KEYS), "[arm.sources]", path, "arm.sources")
     for key in OPTIONAL_KEYS:
-        if key in table and not sources.get(key, "").strip():
+        if getattr(table, key) is not None and not getattr(table.sources, key).strip():
             raise RobotDescriptionError(
                 f"{path}: [arm] {key} needs its source: add {key} = "
                 '"<the maker\'s document, table, page or URL>" to [arm.sources]',
@@ -376,163 +293,57 @@ def _sources(table: Mapping[str, Any], path: Path) -> tuple[tuple[str, str], ...
                 name=f"arm.sources.{key}",
                 value=None,
             )
-    return tuple((str(k), v) for k, v in sources.items())
-
-
-def _per_joint(
-    table: Mapping[str, Any],
-    key: str,
-    path: Path,
-    joints: Sequence[str],
-    bounds: tuple[float, bool, float],
-) -> Pairs:
-    """An optional ``{ <joint> = number }`` table, in URDF order (empty if not given)."""
-    if key not in table:
-        return ()
-    value = _joint_table(table[key], f"arm.{key}", path, joints, "{ <joint> = number, ... }")
-    low, strict, high = bounds
-    return tuple(
-        (n, _number(value[n], f"arm.{key}.{n}", path, low, strict, high))
-        for n in joints
-        if n in value
-    )
-
-
-def _position_limits(
-    table: Mapping[str, Any], path: Path, joints: Sequence[str]
-) -> tuple[tuple[str, tuple[float, float]], ...]:
-    """The optional ``position_limits_rad = { <joint> = [lower, upper] }``, in URDF order."""
-    key = "position_limits_rad"
-    if key not in table:
-        return ()
-    shape = "{ <joint> = [lower, upper], ... }"
-    value = _joint_table(table[key], f"arm.{key}", path, joints, shape)
-    out = []
-    for n in joints:
-        if n not in value:
-            continue
-        pair, where = value[n], f"arm.{key}.{n}"
-        if not isinstance(pair, list) or len(pair) != 2:
+    stopping = table.stopping or []
+    for k, entry in enumerate(stopping):
+        where = f"arm.stopping[{k}].joints"
+        if len(set(entry.joints)) != len(entry.joints):
             raise RobotDescriptionError(
-                f"{path}: {where} must be [lower, upper] in rad, got {pair!r}",
+                f"{path}: {where} must be a list of distinct joint names, got {entry.joints!r}",
                 path=path,
                 name=where,
-                value=pair,
+                value=entry.joints,
             )
-        low, high = (
-            _number(x, where, path, -MAX_POSITION_RAD, False, MAX_POSITION_RAD) for x in pair
-        )
+        _check_joints(entry.joints, where, path, joints)
+    tables = {key: getattr(table, key) or {} for key in OPTIONAL_KEYS[:3]}
+    for key, value in tables.items():
+        _check_joints(list(value), f"arm.{key}", path, joints)
+    for name, (low, high) in tables["position_limits_rad"].items():
         if not low < high:
+            where = f"arm.position_limits_rad.{name}"
             raise RobotDescriptionError(
-                f"{path}: {where} must be [lower, upper] with lower below upper, got {pair!r}",
+                f"{path}: {where} must be [lower, upper] with lower below upper, "
+                f"got {[low, high]!r}",
                 path=path,
                 name=where,
-                value=pair,
+                value=[low, high],
             )
-        out.append((n, (low, high)))
-    return tuple(out)
+    sources = msgspec.structs.asdict(table.sources)
 
+    def in_order(values: Mapping[str, Any]) -> tuple[tuple[str, Any], ...]:
+        return tuple((n, values[n]) for n in joints if n in values)
 
-def _stopping(
-    table: Mapping[str, Any], path: Path, joints: Sequence[str]
-) -> tuple[StoppingData, ...]:
-    """The optional ``[[arm.stopping]]`` entries."""
-    if "stopping" not in table:
-        return ()
-    entries = table["stopping"]
-    if (
-        not isinstance(entries, list)
-        or not entries
-        or not all(isinstance(e, dict) for e in entries)
-    ):
-        raise RobotDescriptionError(
-            f"{path}: arm.stopping must be one or more [[arm.stopping]] tables, each with "
-            f"{', '.join(STOPPING_KEYS)} (docs/robot.md: Arm)",
-            path=path,
-            name="arm.stopping",
-            value=entries,
-        )
-    out = []
-    for k, entry in enumerate(entries):
-        where = f"arm.stopping[{k}]"
-        _unknown_keys(entry, STOPPING_KEYS, f"[[arm.stopping]] entry {k}", path, where)
-        missing = [key for key in STOPPING_KEYS if key not in entry]
-        if missing:
-            raise RobotDescriptionError(
-                f"{path}: [[arm.stopping]] entry {k} is missing key(s) {', '.join(missing)} "
-                "(docs/robot.md: Arm)",
-                path=path,
-                name=where,
-                value=missing,
-            )
-        names = entry["joints"]
-        if (
-            not isinstance(names, list)
-            or not names
-            or not all(isinstance(n, str) for n in names)
-            or len(set(names)) != len(names)
-        ):
-            raise RobotDescriptionError(
-                f"{path}: {where}.joints must be a list of distinct joint names, got {names!r}",
-                path=path,
-                name=f"{where}.joints",
-                value=names,
-            )
-        _check_joints(names, f"{where}.joints", path, joints)
-        category = entry["category"]
-        if isinstance(category, bool) or category not in STOP_CATEGORIES:
-            raise RobotDescriptionError(
-                f"{path}: {where}.category must be the stop category 0 or 1 of IEC 60204-1, "
-                f"got {category!r}",
-                path=path,
-                name=f"{where}.category",
-                value=category,
-            )
-        out.append(
+    return ArmDynamics(
+        reaction_time_s=table.reaction_time_s,
+        max_acceleration_radps2=tuple((n, float(accel[n])) for n in joints),
+        max_point_speed_mps=table.max_point_speed_mps,
+        sources=tuple((k, v) for k, v in sources.items() if v),
+        max_velocity_radps=in_order(tables["max_velocity_radps"]),
+        max_jerk_radps3=in_order(tables["max_jerk_radps3"]),
+        position_limits_rad=in_order(tables["position_limits_rad"]),
+        stopping=tuple(
             StoppingData(
-                joints=tuple(names),
-                category=int(category),
-                speed_radps=_number(
-                    entry["speed_radps"],
-                    f"{where}.speed_radps",
-                    path,
-                    0.0,
-                    True,
-                    MAX_VELOCITY_RADPS,
-                ),
-                distance_rad=_number(
-                    entry["distance_rad"],
-                    f"{where}.distance_rad",
-                    path,
-                    0.0,
-                    True,
-                    MAX_STOP_DISTANCE_RAD,
-                ),
-                time_s=_number(
-                    entry["time_s"], f"{where}.time_s", path, 0.0, True, MAX_STOP_TIME_S
-                ),
-                extension=_number(entry["extension"], f"{where}.extension", path, 0.0, True, 1.0),
-                payload_kg=_number(
-                    entry["payload_kg"], f"{where}.payload_kg", path, 0.0, False, MAX_PAYLOAD_KG
-                ),
+                joints=tuple(e.joints),
+                category=e.category,
+                speed_radps=e.speed_radps,
+                distance_rad=e.distance_rad,
+                time_s=e.time_s,
+                extension=e.extension,
+                payload_kg=e.payload_kg,
             )
-        )
-    return tuple(out)
-
-
-def _joint_table(
-    value: object, where: str, path: Path, joints: Sequence[str], shape: str
-) -> dict[str, Any]:
-    """``value`` as a non-empty table keyed by joints of the URDF."""
-    if not isinstance(value, dict) or not value:
-        raise RobotDescriptionError(
-            f"{path}: {where} must be a table {shape}, got {value!r}",
-            path=path,
-            name=where,
-            value=value,
-        )
-    _check_joints(list(value), where, path, joints)
-    return value
+            for e in stopping
+        ),
+        rated_payload_kg=table.rated_payload_kg,
+    )
 
 
 def _check_joints(names: Sequence[str], where: str, path: Path, joints: Sequence[str]) -> None:

@@ -9,14 +9,14 @@ configuration, before any joint is locked, and locking carries them over.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from qpavoid.arm.control_points import ControlSet
+from qpavoid.arm.control_points import ControlSet, Spot
+from qpavoid.arm.description_schema import ControlSetTable, Offset
 from qpavoid.core.errors import RobotDescriptionError
 
 __all__ = ["LWA", "add_frames", "control_sets"]
@@ -50,7 +50,7 @@ def _add_point_frame(
     model: pin.Model,
     data: pin.Data,
     label: str,
-    spot: Sequence[str] | Mapping[str, Any],
+    spot: Spot,
     where: tuple[str, str, Path, Path, int],
 ) -> int:
     """Add an operational frame at a spot of the file; return its id.
@@ -63,9 +63,9 @@ def _add_point_frame(
     the message).
     """
     said, key, path, urdf, n_frames = where
-    if isinstance(spot, Mapping):
-        names: Sequence[str] = [spot["frame"]]
-        offset = np.asarray(spot["xyz"], dtype=float)
+    if isinstance(spot, Offset):
+        names: Sequence[str] = [spot.frame]
+        offset = np.asarray(spot.xyz, dtype=float)
     else:
         names, offset = spot, None
     ids = []
@@ -114,21 +114,19 @@ def _exists_free(model: pin.Model, label: str, said: str, key: str, path: Path, 
         )
 
 
-def add_frames(model: pin.Model, set_cfgs: list, path: Path, urdf: Path) -> None:
+def add_frames(model: pin.Model, sets: Sequence[ControlSetTable], path: Path, urdf: Path) -> None:
     """Operational frames for points and capsule ends, placed at the neutral configuration."""
     data = model.createData()
     pin.framesForwardKinematics(model, data, pin.neutral(model))
     n_frames = model.nframes
-    for i, sc in enumerate(set_cfgs):
-        name, cap = sc["name"], sc["capsule"]
-        entries = [(f"{name}_p{k}", spot, f"points[{k}]") for k, spot in enumerate(sc["points"])]
+    for i, sc in enumerate(sets):
+        name, cap = sc.name, sc.capsule
+        entries: list[tuple[str, Spot, str]] = [
+            (f"{name}_p{k}", spot, f"points[{k}]") for k, spot in enumerate(sc.points)
+        ]
         entries += [
-            (
-                f"{name}_capsule_{end}",
-                [cap[end]] if isinstance(cap[end], str) else cap[end],
-                f"capsule.{end}",
-            )
-            for end in ("from", "to")
+            (f"{name}_capsule_{end}", [spot] if isinstance(spot, str) else spot, f"capsule.{end}")
+            for end, spot in (("from", cap.from_), ("to", cap.to))
         ]
         for label, spot, key in entries:
             said = f"[[sets]] entry {i} ({name}) {key}"
@@ -137,25 +135,27 @@ def add_frames(model: pin.Model, set_cfgs: list, path: Path, urdf: Path) -> None
             )
 
 
-def control_sets(model: pin.Model, set_cfgs: list) -> tuple[list[ControlSet], list[int]]:
+def control_sets(
+    model: pin.Model, tables: Sequence[ControlSetTable]
+) -> tuple[list[ControlSet], list[int]]:
     """The control sets and the frame id of every control point, set after set."""
     sets: list[ControlSet] = []
     point_frames: list[int] = []
-    for sc in set_cfgs:
+    for sc in tables:
         idx = []
-        for k in range(len(sc["points"])):
+        for k in range(len(sc.points)):
             idx.append(len(point_frames))
-            point_frames.append(model.getFrameId(f"{sc['name']}_p{k}"))
+            point_frames.append(model.getFrameId(f"{sc.name}_p{k}"))
         sets.append(
             ControlSet(
-                name=sc["name"],
-                sphere_radius_m=float(sc["sphere_radius_m"]),
+                name=sc.name,
+                sphere_radius_m=sc.sphere_radius_m,
                 points=tuple(idx),
                 capsule_frames=(
-                    model.getFrameId(f"{sc['name']}_capsule_from"),
-                    model.getFrameId(f"{sc['name']}_capsule_to"),
+                    model.getFrameId(f"{sc.name}_capsule_from"),
+                    model.getFrameId(f"{sc.name}_capsule_to"),
                 ),
-                capsule_radius_m=float(sc["capsule"]["capsule_radius_m"]),
+                capsule_radius_m=sc.capsule.capsule_radius_m,
             )
         )
     return sets, point_frames

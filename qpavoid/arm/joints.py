@@ -14,14 +14,11 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from qpavoid.arm.fields import number as _number
-from qpavoid.arm.fields import table as _table
-from qpavoid.arm.fields import unknown_keys as _unknown_keys
+from qpavoid.arm.description_schema import IKSeedTable
 from qpavoid.core.errors import InputError, RobotDescriptionError
 
 __all__ = [
@@ -62,15 +59,11 @@ class IKSeed:
     wrist_to_tool_m: float = 0.0
 
 
-def joint_list(value: object, where: str, path: Path, joints: Sequence[str]) -> tuple[str, ...]:
-    """``value`` as a tuple of joint names of the URDF, or a :class:`RobotDescriptionError`."""
-    if not isinstance(value, list) or not all(isinstance(n, str) for n in value):
-        raise RobotDescriptionError(
-            f"{path}: {where} must be a list of joint names, got {value!r}",
-            path=path,
-            name=where,
-            value=value,
-        )
+def joint_list(
+    value: Sequence[str], where: str, path: Path, joints: Sequence[str]
+) -> tuple[str, ...]:
+    """``value`` (names, as the file's schema read them) as a tuple of joint names of the
+    URDF, or a :class:`RobotDescriptionError`."""
     missing = [n for n in value if n not in joints]
     if missing:
         raise RobotDescriptionError(
@@ -101,14 +94,17 @@ def angle_fault(model: pin.Model, joint: str, angle: float) -> str:
 
 
 def file_locked(
-    value: object, path: Path, model: pin.Model, key: str = "locked"
+    value: Mapping[str, float] | Sequence[str] | None,
+    path: Path,
+    model: pin.Model,
+    key: str = "locked",
 ) -> dict[str, float]:
-    """The file's ``locked`` (or ``held``, as ``key`` says): a table of joint angles
-    (rad), or a list of joint names (locked at 0), each a joint of the URDF locked within
-    its limits."""
+    """The file's ``locked`` (or ``held``, as ``key`` says; its shape checked by the file's
+    schema): a table of joint angles (rad), or a list of joint names (locked at 0), each a
+    joint of the URDF locked within its limits."""
     if value is None:
         return {}
-    if isinstance(value, list) and all(isinstance(n, str) for n in value):
+    if not isinstance(value, Mapping):
         twice = sorted({n for n in value if value.count(n) > 1})
         if twice:
             raise RobotDescriptionError(
@@ -118,14 +114,6 @@ def file_locked(
                 value=twice,
             )
         value = dict.fromkeys(value, 0.0)
-    if not isinstance(value, dict):
-        raise RobotDescriptionError(
-            f"{path}: {key} must be a table of angles (rad), e.g. {key} = {{ <joint> = 0.0 }}, "
-            f'or a list of joint names locked at 0, e.g. {key} = ["<joint>"]; got {value!r}',
-            path=path,
-            name=key,
-            value=value,
-        )
     for joint, angle, fault in _angle_faults(value, path, model, key):
         raise RobotDescriptionError(
             f"{path}: {key}: {joint} = {angle!r} is {fault}; lock it at an angle (rad) "
@@ -138,10 +126,10 @@ def file_locked(
 
 
 def _angle_faults(
-    table: Mapping[str, object], path: Path, model: pin.Model, key: str
-) -> Iterator[tuple[str, object, str]]:
+    table: Mapping[str, float], path: Path, model: pin.Model, key: str
+) -> Iterator[tuple[str, float, str]]:
     """``(joint, angle, fault)`` of each angle of ``table`` (the file's ``key``) that is not
-    a number within its joint's limits; a name that is not a joint of the URDF raised."""
+    within its joint's limits; a name that is not a joint of the URDF raised."""
     for joint, angle in table.items():
         if not model.existJointName(joint):
             raise RobotDescriptionError(
@@ -151,9 +139,7 @@ def _angle_faults(
                 name=key,
                 value=joint,
             )
-        if not isinstance(angle, (int, float)) or isinstance(angle, bool):
-            yield joint, angle, "not an angle (rad)"
-        elif fault := angle_fault(model, joint, float(angle)):
+        if fault := angle_fault(model, joint, angle):
             yield joint, angle, fault
 
 
@@ -221,50 +207,27 @@ def lock_joints(model: pin.Model, locked: Mapping[str, float]) -> pin.Model:
     return pin.buildReducedModel(model, [model.getJointId(jn) for jn in locked], q_ref)
 
 
-def read_ik_seed(cfg: Mapping[str, Any], path: Path, joints: Sequence[str]) -> IKSeed:
-    """The ``[ik_seed]`` table, or the zero configuration's seed without one."""
-    if "ik_seed" not in cfg:
+def read_ik_seed(table: IKSeedTable | None, path: Path, joints: Sequence[str]) -> IKSeed:
+    """The ``[ik_seed]`` table (its shape checked by the file's schema), its joints the
+    URDF's, or the zero configuration's seed without one."""
+    if table is None:
         return IKSeed()
-    table = _table(cfg, "ik_seed", path, 'aim = "<joint>", angles = { <joint> = 0.5 }')
-    _unknown_keys(table, ("aim", "angles", "wrist_to_tool_m"), "[ik_seed]", path, "ik_seed")
-    aim = table.get("aim")
+    aim = table.aim
     if aim is not None:
         (aim,) = joint_list([aim], "ik_seed.aim", path, joints)
-    angles = table.get("angles", {})
-    if not isinstance(angles, dict):
-        raise RobotDescriptionError(
-            f"{path}: [ik_seed] angles must map joint names to angles (rad), got {angles!r}",
-            path=path,
-            name="ik_seed.angles",
-            value=angles,
-        )
-    joint_list(list(angles), "ik_seed.angles", path, joints)
+    joint_list(list(table.angles), "ik_seed.angles", path, joints)
     return IKSeed(
-        aim=aim,
-        angles=tuple(
-            (n, _number(a, f"ik_seed.angles.{n}", path, -np.inf, True)) for n, a in angles.items()
-        ),
-        wrist_to_tool_m=_number(
-            table.get("wrist_to_tool_m", 0.0), "ik_seed.wrist_to_tool_m", path, 0.0, False
-        ),
+        aim=aim, angles=tuple(table.angles.items()), wrist_to_tool_m=table.wrist_to_tool_m
     )
 
 
-def read_home(value: object, path: Path, model: pin.Model) -> dict[str, float]:
-    """The file's ``home``: a table of joint angles (rad), each a joint of the URDF at a
-    finite angle within its limits; ``{}`` without one (:meth:`Robot.neutral
-    <qpavoid.arm.model.Robot.neutral>` then puts every joint at 0, or mid-range where 0 is
-    outside its limits)."""
+def read_home(value: Mapping[str, float] | None, path: Path, model: pin.Model) -> dict[str, float]:
+    """The file's ``home`` (its shape checked by the file's schema): a table of joint
+    angles (rad), each a joint of the URDF at a finite angle within its limits; ``{}``
+    without one (:meth:`Robot.neutral <qpavoid.arm.model.Robot.neutral>` then puts every
+    joint at 0, or mid-range where 0 is outside its limits)."""
     if value is None:
         return {}
-    if not isinstance(value, dict):
-        raise RobotDescriptionError(
-            f"{path}: home must be a table of joint angles (rad), e.g. home = "
-            f"{{ <joint> = -0.785 }}; got {value!r}",
-            path=path,
-            name="home",
-            value=value,
-        )
     for joint, angle, fault in _angle_faults(value, path, model, "home"):
         raise RobotDescriptionError(
             f"{path}: home: {joint} = {angle!r}: {fault}",

@@ -18,6 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from qpavoid.arm.control_points import ControlSet
+from qpavoid.arm.description_schema import ControlSetTable
 from qpavoid.arm.frames import LWA
 from qpavoid.arm.roles import Roles
 from qpavoid.core.errors import RobotDescriptionError
@@ -151,17 +152,19 @@ def check_point_speed(
         )
 
 
-def check_role_joints(model: pin.Model, roles: Roles, set_cfgs: list, path: Path) -> None:
+def check_role_joints(
+    model: pin.Model, roles: Roles, sets: Sequence[ControlSetTable], path: Path
+) -> None:
     """Refuse a role joint that moves none of its set's points: in Pinocchio's tree
     (``model.supports``) it must be an ancestor of at least one point's body."""
     for role, row, role_joints in (
         ("scaled", roles.scaled, roles.scaled_joints),
         ("repelled", roles.repelled, roles.repelled_joints),
     ):
-        name = set_cfgs[row]["name"]
+        name = sets[row].name
         bodies = {
             model.frames[model.getFrameId(f"{name}_p{k}")].parentJoint
-            for k in range(len(set_cfgs[row]["points"]))
+            for k in range(len(sets[row].points))
         }
         moving = sorted({j for b in bodies for j in model.supports[b] if j > 0})
         moving_names = [str(model.names[j]) for j in moving]
@@ -200,7 +203,7 @@ EE_INSIDE_TOLERANCE_M = 1e-6
 
 
 def check_end_effector(
-    model: pin.Model, set_cfgs: list, roles: Roles, ee_name: str, path: Path
+    model: pin.Model, sets: Sequence[ControlSetTable], roles: Roles, ee_name: str, path: Path
 ) -> None:
     """Refuse an end-effector set whose capsule does not hold the end-effector frame.
 
@@ -210,16 +213,16 @@ def check_end_effector(
     paper's), or the frame lies within the capsule's radius of its axis (a capsule
     fitted to a hand's meshes) on a body that carries both ends.
     """
-    sc = set_cfgs[roles.end_effector]
-    ends = [model.frames[model.getFrameId(f"{sc['name']}_capsule_{e}")] for e in ("from", "to")]
+    sc = sets[roles.end_effector]
+    ends = [model.frames[model.getFrameId(f"{sc.name}_capsule_{e}")] for e in ("from", "to")]
     ee = model.frames[model.getFrameId(ee_name)]
     same = ends[1].parentJoint == ee.parentJoint and np.allclose(
         ends[1].placement.translation, ee.placement.translation, rtol=0.0, atol=1e-12
     )
-    if sc["capsule"]["to"] == ee_name or same:
+    if sc.capsule.to == ee_name or same:
         return
     # within the capsule, on the body of both ends (so at every configuration)
-    radius = float(sc["capsule"]["capsule_radius_m"])
+    radius = sc.capsule.capsule_radius_m
     excess = np.inf
     if ends[0].parentJoint == ends[1].parentJoint == ee.parentJoint:
         a, b = ends[0].placement.translation, ends[1].placement.translation
@@ -233,10 +236,10 @@ def check_end_effector(
     )
     raise RobotDescriptionError(
         f"{path}: [roles] end_effector: the end_effector frame {ee_name!r} must lie in the "
-        f"end-effector set's capsule; it is {where} (set {sc['name']!r}): name the set "
+        f"end-effector set's capsule; it is {where} (set {sc.name!r}): name the set "
         f'whose capsule holds it, give this set capsule.to = "{ee_name}", or name a frame '
         "inside the capsule as end_effector",
         path=path,
         name="roles.end_effector.set",
-        value=sc["name"],
+        value=sc.name,
     )

@@ -8,24 +8,22 @@ whether a role's joints move its set, and stay free after locking, needs the mod
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
-from qpavoid.arm.control_points import is_spot
-from qpavoid.arm.fields import table as _table
-from qpavoid.arm.fields import unknown_keys as _unknown_keys
+import msgspec
+
+from qpavoid.arm.control_points import Spot
+from qpavoid.arm.description_schema import ControlSetTable, Offset, RolesTable, SetRole
 from qpavoid.arm.joints import joint_list
 from qpavoid.core.errors import RobotDescriptionError
 
-__all__ = ["ROLE_KEYS", "ROLE_NAMES", "Roles", "read_roles"]
+__all__ = ["ROLE_NAMES", "Roles", "read_roles"]
 
 #: The parts a control set plays in the paper's laws (``[roles]`` of the control-point
 #: file, :class:`Roles`), in the order of :attr:`Roles.rows`.
 ROLE_NAMES = ("scaled", "repelled", "end_effector")
-#: Keys of the ``[roles]`` table: a set per part, and the elbow point.
-ROLE_KEYS = (*ROLE_NAMES, "elbow")
 
 
 @dataclass(frozen=True)
@@ -73,42 +71,33 @@ class Roles:
         return (self.scaled, self.repelled, self.end_effector)
 
 
-def read_roles(cfg: Mapping[str, Any], path: Path, set_cfgs: list, joints: Sequence[str]) -> Roles:
-    """The ``[roles]`` table: which set plays which part, and the elbow point."""
-    table = _table(cfg, "roles", path, 'scaled = { set = "<set>", joints = ["<joint>", ...] }')
-    _unknown_keys(table, ROLE_KEYS, "[roles]", path, "roles")
-    names = [sc["name"] for sc in set_cfgs]
+def read_roles(
+    table: RolesTable, path: Path, sets: Sequence[ControlSetTable], joints: Sequence[str]
+) -> Roles:
+    """The ``[roles]`` table (its shape checked by the file's schema): each role's set one
+    of the file's, its joints the URDF's, each once, and the elbow one of the points."""
+    names = [sc.name for sc in sets]
     rows: dict[str, int] = {}
     role_joints: dict[str, tuple[str, ...]] = {}
     for role in ROLE_NAMES:
-        entry = table.get(role)
-        keys = ("set",) if role == "end_effector" else ("set", "joints")
-        if not isinstance(entry, dict) or any(k not in entry for k in keys):
-            shape = ", ".join(f"{k} = ..." for k in keys)
+        entry = getattr(table, role)
+        if entry.set not in names:
             raise RobotDescriptionError(
-                f"{path}: [roles] needs {role} = {{ {shape} }} (docs/robot.md: Roles)",
-                path=path,
-                name=f"roles.{role}",
-                value=entry,
-            )
-        _unknown_keys(entry, keys, f"[roles] {role}", path, f"roles.{role}")
-        if entry["set"] not in names:
-            raise RobotDescriptionError(
-                f"{path}: [roles] {role}: no set named {entry['set']!r}; the sets are {names}",
+                f"{path}: [roles] {role}: no set named {entry.set!r}; the sets are {names}",
                 path=path,
                 name=f"roles.{role}.set",
-                value=entry["set"],
+                value=entry.set,
             )
-        rows[role] = names.index(entry["set"])
-        if "joints" in keys:
+        rows[role] = names.index(entry.set)
+        if isinstance(entry, SetRole):
             where = f"roles.{role}.joints"
-            role_joints[role] = joint_list(entry["joints"], where, path, joints)
+            role_joints[role] = joint_list(entry.joints, where, path, joints)
             twice = sorted({n for n in role_joints[role] if role_joints[role].count(n) > 1})
             if not role_joints[role] or twice:
                 raise RobotDescriptionError(
                     f"{path}: [roles] {role}.joints "
                     + (f"lists {twice} more than once" if twice else "is empty")
-                    + f"; name each joint that moves the set {entry['set']!r} once "
+                    + f"; name each joint that moves the set {entry.set!r} once "
                     "(docs/robot.md: Roles)",
                     path=path,
                     name=where,
@@ -120,34 +109,36 @@ def read_roles(cfg: Mapping[str, Any], path: Path, set_cfgs: list, joints: Seque
         repelled=rows["repelled"],
         repelled_joints=role_joints["repelled"],
         end_effector=rows["end_effector"],
-        elbow=_elbow(table.get("elbow"), path, set_cfgs),
+        elbow=_elbow(table.elbow, path, sets),
     )
 
 
-def _elbow(frames: object, path: Path, set_cfgs: list) -> int | None:
+def _elbow(spot: Spot | None, path: Path, sets: Sequence[ControlSetTable]) -> int | None:
     """Index of the control point ``[roles] elbow`` names: the list of its frames, or its
     offset table (``{ frame = "<frame>", xyz = [x, y, z] }``), as in its set's points."""
-    if frames is None:
+    if spot is None:
         return None
-    points = [
-        _spot_key(spot) for sc in set_cfgs for spot in sc["points"]
-    ]  # every point, set after set
-    if is_spot(frames):
-        given = _spot_key(frames)  # type: ignore[arg-type]
-        if given in points:
-            return points.index(given)
-    shown = [sorted(spot) if isinstance(spot, list) else spot for spot in points]
+    points = [_spot_key(p) for sc in sets for p in sc.points]  # every point, set after set
+    given = _spot_key(spot)
+    if given in points:
+        return points.index(given)
+    shown = [key if isinstance(key, list) else msgspec.structs.asdict(key) for key in points]
     raise RobotDescriptionError(
         f"{path}: [roles] elbow must be one control point as its set's points give it (the "
-        f"list of its frames, or its {{ frame, xyz }} table); {frames!r} is none of {shown}",
+        f"list of its frames, or its {{ frame, xyz }} table); {_shown(spot)!r} is none of "
+        f"{shown}",
         path=path,
         name="roles.elbow",
-        value=frames,
+        value=_shown(spot),
     )
 
 
-def _spot_key(spot: Sequence[str] | Mapping[str, Any]) -> object:
-    """A comparable form of a point: its frames sorted, or its frame and offset."""
-    if isinstance(spot, Mapping):
-        return {"frame": spot["frame"], "xyz": [float(v) for v in spot["xyz"]]}
-    return sorted(str(n) for n in spot)
+def _spot_key(spot: Spot) -> list[str] | Offset:
+    """A comparable form of a point: its frames sorted, or its offset (structs compare by
+    value)."""
+    return spot if isinstance(spot, Offset) else sorted(spot)
+
+
+def _shown(spot: Spot) -> object:
+    """A point as the file gives it (a list of frames, or a table)."""
+    return msgspec.structs.asdict(spot) if isinstance(spot, Offset) else spot

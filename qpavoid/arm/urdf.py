@@ -17,7 +17,7 @@ from xml.etree import ElementTree
 import numpy as np
 import pinocchio as pin
 
-from qpavoid.arm.fields import unknown_keys as _unknown_keys
+from qpavoid.arm.description_schema import UrdfPackage
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import RobotDescriptionError
 from qpavoid.core.file_bounds import read_bounded
@@ -34,8 +34,6 @@ __all__ = [
 #: Most bytes a URDF may have (the iiwa's has about 5 kB; a detailed arm's, without meshes,
 #: well under 1 MB): checked before it is read.
 MAX_URDF_BYTES = 16 * 2**20
-#: Keys of a ``urdf`` given as a file of an installed Python package (``{ package, path }``).
-PACKAGE_KEYS = ("package", "path")
 #: The extra of qpavoid that installs each package a bundled description takes its URDF
 #: from (the error for a missing one names it).
 EXTRAS = {"example-robot-data": "robots", "franky-sim": "robots"}
@@ -44,30 +42,21 @@ EXTRAS = {"example-robot-data": "robots", "franky-sim": "robots"}
 MESH_SEARCH_DEPTH = 6
 
 
-def urdf_path(value: str | dict, folder: Path, path: Path) -> Path:
+def urdf_path(value: str | UrdfPackage, folder: Path, path: Path) -> Path:
     """The URDF a description names: a file beside it (``urdf = "iiwa14.urdf"``), or a
     file of an installed Python package (``urdf = { package = "example-robot-data", path =
-    "cmeel.prefix/share/.../panda.urdf" }``), found with :mod:`importlib.metadata`.
+    "cmeel.prefix/share/.../panda.urdf" }``, its shape checked by the file's schema), found
+    with :mod:`importlib.metadata`.
 
     Raises
     ------
     RobotDescriptionError
-        If the table has other keys, or the package is not installed (naming the extra of
-        qpavoid that installs it).
+        If the package is not installed (naming the extra of qpavoid that installs it), or
+        has no such file.
     """
     if isinstance(value, str):
         return folder / value
-    _unknown_keys(value, PACKAGE_KEYS, "urdf", path, "urdf")
-    package, inner = value.get("package"), value.get("path")
-    if not isinstance(package, str) or not isinstance(inner, str) or not package or not inner:
-        raise RobotDescriptionError(
-            f"{path}: urdf must be a file name or a table "
-            '{ package = "<Python package>", path = "<file inside it>" }, '
-            f"got {value!r}",
-            path=path,
-            name="urdf",
-            value=value,
-        )
+    package, inner = value.package, value.path
     try:
         dist = metadata.distribution(package)
     except metadata.PackageNotFoundError:

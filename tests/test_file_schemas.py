@@ -1,0 +1,194 @@
+"""The shape of every file a user writes, checked by its schema (msgspec): for each file
+kind a wrong type, an out-of-range value, an unknown key and a missing key are each one
+line naming the field's path (and, through the command line, exit 2); every shipped file
+loads."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from typing import Annotated
+
+import pytest
+from msgspec import Meta, Struct
+
+import qpavoid
+from qpavoid.arm.description_schema import ControlPointFile
+from qpavoid.cli.commands import main
+from qpavoid.core.errors import RobotDescriptionError
+from qpavoid.core.file_bounds import read_toml
+from qpavoid.core.schema import convert
+
+ROBOTS = Path(__file__).resolve().parents[1] / "robots"
+
+
+# --- the refusals' words (qpavoid.core.schema) -----------------------------------------------
+
+
+class _Inner(Struct, frozen=True, forbid_unknown_fields=True):
+    radius_m: Annotated[float, Meta(gt=0.0, le=1.0)]
+    label: str = ""
+
+
+class _Outer(Struct, frozen=True, forbid_unknown_fields=True):
+    name: Annotated[str, Meta(pattern="^[a-z]+$", description="lower-case letters")]
+    parts: list[_Inner]
+    limits: dict[str, Annotated[float, Meta(ge=0.0, le=10.0)]] = {}
+
+
+class _RefusedError(Exception):
+    def __init__(self, name: str, message: str, value: object) -> None:
+        super().__init__(message)
+        self.name, self.value = name, value
+
+
+def _refusal(data: object) -> _RefusedError:
+    with pytest.raises(_RefusedError) as info:
+        convert(data, _Outer, _RefusedError, prefix="cell")
+    assert "\n" not in str(info.value)
+    return info.value
+
+
+@pytest.mark.parametrize(
+    "data, name, message",
+    [
+        (  # a number out of its range: both bounds said, the value given
+            {"name": "a", "parts": [{"radius_m": 1.5}]},
+            "cell.parts[0].radius_m",
+            "cell.parts[0].radius_m must be a number above 0 and at most 1, got 1.5",
+        ),
+        (  # a table's key, which msgspec leaves unnamed ([...]), named
+            {"name": "a", "parts": [], "limits": {"x": 1.0, "y": -1.0}},
+            "cell.limits.y",
+            "cell.limits.y must be a number at least 0 and at most 10, got -1.0",
+        ),
+        (  # every unknown key, and the keys the table has
+            {"name": "a", "parts": [{"radius_m": 0.5, "radius": 1, "colour": 2}]},
+            "cell.parts[0]",
+            "cell.parts[0] has unknown key(s) ['colour', 'radius']; its keys are "
+            "['radius_m', 'label']",
+        ),
+        (  # every missing key
+            {"parts": []},
+            "cell.name",
+            "cell is missing key(s) name: name must be lower-case letters",
+        ),
+        (  # a described field: its description, the value
+            {"name": "A", "parts": []},
+            "cell.name",
+            "cell.name must be lower-case letters, got 'A'",
+        ),
+        (  # a wrong type: no int for a text, no bool for a number
+            {"name": "a", "parts": [{"radius_m": True}]},
+            "cell.parts[0].radius_m",
+            "must be a number above 0 and at most 1, got True",
+        ),
+        (
+            {"name": "a", "parts": [{"radius_m": 0.5, "label": 3}]},
+            "cell.parts[0].label",
+            "cell.parts[0].label: Expected `str`, got `int`, got 3",
+        ),
+    ],
+)
+def test_a_refusal_is_one_line_naming_the_field_s_path(data, name, message):
+    refused = _refusal(data)
+    assert refused.name == name and message in str(refused)
+
+
+# --- robot descriptions (qpavoid.arm.description_schema) -------------------------------------
+
+
+def _iiwa(tmp_path: Path, old: str, new: str) -> Path:
+    folder = tmp_path / "arm"
+    shutil.copytree(ROBOTS / "iiwa14", folder)
+    file = folder / "control_points.toml"
+    text = file.read_text()
+    assert old in text
+    file.write_text(text.replace(old, new, 1))
+    return folder
+
+
+ROBOT_REFUSALS = [
+    (  # a wrong type
+        "sphere_radius_m = 0.09",
+        'sphere_radius_m = "0.09"',
+        "sets[0].sphere_radius_m",
+        "sets[0].sphere_radius_m must be a number above 0 and at most 1, got '0.09'",
+    ),
+    (  # out of range: a radius in mm
+        "capsule_radius_m = 0.07",
+        "capsule_radius_m = 70",
+        "sets[0].capsule.capsule_radius_m",
+        "sets[0].capsule.capsule_radius_m must be a number above 0 and at most 1, got 70",
+    ),
+    (  # an offset in cm
+        'points = [["A2", "A3"]',
+        'points = [{ frame = "A3", xyz = [0, 0, 12] }',
+        "sets[0].points[0].xyz[2]",
+        "sets[0].points[0].xyz[2] must be a number at least -10 and at most 10, got 12",
+    ),
+    (  # an unknown key
+        "wrist_to_tool_m = 0.126",
+        "wrist_to_tool_m = 0.126\nwrist_to_tool = 0.1",
+        "ik_seed",
+        "ik_seed has unknown key(s) ['wrist_to_tool']",
+    ),
+    (  # a missing key
+        ", capsule_radius_m = 0.065 }",
+        " }",
+        "sets[1].capsule.capsule_radius_m",
+        "sets[1].capsule is missing key(s) capsule_radius_m",
+    ),
+    (
+        "A4 = 11.36",
+        "A4 = 1136",
+        "arm.max_acceleration_radps2.A4",
+        "arm.max_acceleration_radps2.A4 must be a number at least 0.1 and at most 100, got 1136",
+    ),
+    (
+        'link_0_0 = "the base',
+        'link_0_0 = 3, link_9 = "the base',
+        "coverage.exclude.link_0_0",
+        "coverage.exclude must be a table mapping each collision object it leaves out to the "
+        "reason",
+    ),
+]
+
+
+@pytest.mark.parametrize("old, new, name, message", ROBOT_REFUSALS)
+def test_a_robot_description_of_the_wrong_shape_is_one_line_naming_the_path(
+    tmp_path, old, new, name, message
+):
+    folder = _iiwa(tmp_path, old, new)
+    with pytest.raises(RobotDescriptionError) as info:
+        qpavoid.load_robot(folder)
+    text = str(info.value)
+    assert text.startswith(f"{folder / 'control_points.toml'}: ") and "\n" not in text
+    assert message in text
+    if name.startswith("coverage"):
+        name = "coverage.exclude"  # the table that says its shape
+    assert info.value.name == name
+
+
+@pytest.mark.parametrize("old, new, name, message", ROBOT_REFUSALS[:2] + ROBOT_REFUSALS[3:5])
+def test_a_run_on_a_robot_description_of_the_wrong_shape_exits_2_in_one_line(
+    tmp_path, capsys, old, new, name, message
+):
+    folder = _iiwa(tmp_path, old, new)
+    out = tmp_path / "out"
+    assert (
+        main(["run", "free", "--robot", str(folder), "--out", str(out), "--max-time", "0.1"]) == 2
+    )
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and not out.exists()
+
+
+def test_every_shipped_robot_description_has_its_schema_s_shape():
+    """Each of robots/*: the file's shape alone (the URDFs of three come from extras)."""
+    names = sorted(p.parent.name for p in ROBOTS.glob("*/control_points.toml"))
+    assert names == ["fr3", "iiwa14", "panda", "ur5"]
+    for name in names:
+        data = read_toml(ROBOTS / name / "control_points.toml", 2**20)
+        file = convert(data, ControlPointFile, _RefusedError)
+        assert file.sets and file.arm.max_acceleration_radps2
+    assert qpavoid.load_robot("iiwa14").sets[0].name == "L1"
