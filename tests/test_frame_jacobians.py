@@ -45,13 +45,14 @@ def test_the_frames_positions_read_through_one_view_are_pinocchios(arm):
     import pickle
 
     robot = qpavoid.load_robot(arm)
-    assert robot._translations is not None  # Pinocchio's vector at one stride
+    view = robot._held[3]
+    assert view is not None  # Pinocchio's vector at one stride
     model, data = robot.model, robot.model.createData()
     others = [robot.for_thread(), pickle.loads(pickle.dumps(robot))]
     for other in others:
-        assert not np.shares_memory(other._translations, robot._translations)
+        assert not np.shares_memory(other._held[3], view)
     one_by_one = robot.for_thread()
-    one_by_one._translations = None
+    one_by_one._held = (*one_by_one._held[:3], None)
     rng = np.random.default_rng(5)
     for _ in range(30):
         q = random_q(rng, robot)

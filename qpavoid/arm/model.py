@@ -106,7 +106,8 @@ def frame_translations(data: pin.Data, n_frames: int) -> np.ndarray | None:
     ``data.oMf`` is a ``std::vector`` of SE3, sized once by ``createData``; each
     placement's ``translation`` is a view into it. Gathering the frames through one view
     replaces a Python read per frame, which was the larger half of a tick's kinematics
-    (docs/performance.md §2g). The view lives as long as ``data``, which its holder keeps.
+    (docs/performance.md §2g). The view does not keep ``data`` alive: hold the two together
+    (:attr:`Robot.data` does, in one tuple).
     """
     first = data.oMf[0].translation
     if n_frames < 2 or first.dtype != np.float64 or first.strides != (8,):
@@ -249,8 +250,13 @@ class Robot:
         # a data assigned meanwhile never mixes with another's placements): each
         # ``data.oMf[f]`` is a reference that updateFramePlacements rewrites, so they are
         # indexed once, not every tick
-        self._held = (data, tuple(data.oMf[f] for f in self._frames), data.oMf[self.ee_frame])
-        self._translations = frame_translations(data, self.model.nframes)
+        # and the view of every frame's position into the same data (None: read one by one)
+        self._held = (
+            data,
+            tuple(data.oMf[f] for f in self._frames),
+            data.oMf[self.ee_frame],
+            frame_translations(data, self.model.nframes),
+        )
 
     def for_thread(self) -> Robot:
         """A copy that computes :meth:`kinematics` in Pinocchio data of its own, for another
@@ -262,7 +268,7 @@ class Robot:
 
     def __getstate__(self) -> dict:
         # copies and pickles carry the data, never references into it
-        state = {k: v for k, v in self.__dict__.items() if k not in ("_held", "_translations")}
+        state = {k: v for k, v in self.__dict__.items() if k != "_held"}
         return {**state, "data": self.data}
 
     def __setstate__(self, state: dict) -> None:
@@ -352,14 +358,14 @@ class Robot:
             Also compute the Jacobians (needed by the controllers, not by distances).
         """
         q = as_array(q, (self.nq,), "q (joint angles, rad)")  # any finite q: check_q's docs
-        model, (data, placements, ee_placement) = self.model, self._held
+        model, (data, placements, ee_placement, translations) = self.model, self._held
         if jacobians:
             pin.computeJointJacobians(model, data, q)
         else:
             pin.forwardKinematics(model, data, q)
         pin.updateFramePlacements(model, data)
-        if self._translations is not None:  # (F, 3), contiguous: one gather
-            pos = self._translations[self._frame_array]
+        if translations is not None:  # (F, 3), contiguous: one gather
+            pos = translations[self._frame_array]
         else:
             pos = np.array([m.translation for m in placements])
         points, segments = pos[: self._n_points], pos[self._segment_index]
