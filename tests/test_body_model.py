@@ -129,13 +129,13 @@ def test_a_wrong_body_file_is_refused_with_the_key(tmp_path):
     err = body_refused(
         tmp_path,
         BODY_TEXT.replace("capsule_radius_m = 0.15", "capsule_radius_m = -0.15"),
-        "capsule_radius_m must be a number > 0",
+        r"parts\[1\].capsule_radius_m must be a number at least 0.01 and at most 1, got -0.15",
     )
-    assert (err.name, err.value) == ("trunk.capsule_radius_m", -0.15)
+    assert (err.name, err.value) == ("parts[1].capsule_radius_m", -0.15)
     err = body_refused(
         tmp_path,
         BODY_TEXT.replace("sphere_radius_m = 0.11\n", ""),
-        r"parts\[0\]: missing key sphere_radius_m",
+        r"parts\[0\] is missing key\(s\) sphere_radius_m",
     )
     err = body_refused(
         tmp_path,
@@ -143,7 +143,9 @@ def test_a_wrong_body_file_is_refused_with_the_key(tmp_path):
         "true or false",
     )
     err = body_refused(
-        tmp_path, BODY_TEXT.replace("reach = [", "fingers = [", 1), "unknown key fingers"
+        tmp_path,
+        BODY_TEXT.replace("reach = [", "fingers = [", 1),
+        r"parts\[4\] has unknown key\(s\) \['fingers'\]",
     )
     err = body_refused(
         tmp_path,

@@ -117,9 +117,18 @@ def test_a_centre_is_the_mean_of_its_joints_as_uncertain_as_the_worst():
     ("edit", "match"),
     [
         (('ELBOW_LEFT"]', 'ELBOW_LFT"]'), "'ELBOW_LFT' is not a joint of the k4abt format"),
-        (("capsule_radius_m = 0.16", "capsule_radius_m = 0"), "must be a number > 0"),
-        (("capsule_radius_m = 0.16", "capsule_radius_m = -0.1"), "must be a number > 0"),
-        (("capsule_radius_m = 0.16", "capsule_radius_m = 1e300"), "between 0.01 and 1.0 m"),
+        (
+            ("capsule_radius_m = 0.16", "capsule_radius_m = 0"),
+            r"parts\[1\].capsule_radius_m must be a number at least 0.01 and at most 1, got 0",
+        ),
+        (
+            ("capsule_radius_m = 0.16", "capsule_radius_m = -0.1"),
+            r"capsule_radius_m must be a number at least 0.01",
+        ),
+        (
+            ("capsule_radius_m = 0.16", "capsule_radius_m = 1e300"),
+            "at least 0.01 and at most 1, got 1e",
+        ),
         (
             (
                 'CLAVICLES = ["CLAVICLE_LEFT", "CLAVICLE_RIGHT"]',
@@ -162,7 +171,7 @@ def _user_camera(tmp_path: Path, fmt_edit=None, body_edit=None) -> Path:
 
 BAD_USER_FILES = [
     (None, ('ELBOW_LEFT"]', 'ELBOW_LFT"]'), "'ELBOW_LFT' is not a joint"),
-    (None, ("capsule_radius_m = 0.16", "capsule_radius_m = 0"), "must be a number > 0"),
+    (None, ("capsule_radius_m = 0.16", "capsule_radius_m = 0"), "must be a number at least 0.01"),
     (None, ('region = "face"', 'region = "fcae"'), "fcae"),
     (('name = "mycam"', 'name = "other"'), None, "name must be the file's name, 'mycam'"),
     (('body = "kinect_v2"', 'body = "mycam"'), None, "body must be 'kinect_v2'"),

@@ -15,9 +15,12 @@ from msgspec import Meta, Struct
 import qpavoid
 from qpavoid.arm.description_schema import ControlPointFile
 from qpavoid.cli.commands import main
-from qpavoid.core.errors import RobotDescriptionError
+from qpavoid.core.errors import RobotDescriptionError, SkeletonFormatError
 from qpavoid.core.file_bounds import read_toml
 from qpavoid.core.schema import convert
+from qpavoid.human.body import BodyModel
+from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.skeleton_file import FORMATS_DIR
 
 ROBOTS = Path(__file__).resolve().parents[1] / "robots"
 
@@ -192,3 +195,56 @@ def test_every_shipped_robot_description_has_its_schema_s_shape():
         file = convert(data, ControlPointFile, _RefusedError)
         assert file.sets and file.arm.max_acceleration_radps2
     assert qpavoid.load_robot("iiwa14").sets[0].name == "L1"
+
+
+# --- camera bodies (qpavoid.human.body_schema) -----------------------------------------------
+
+BODY_REFUSALS = [
+    (  # a wrong type
+        "moves_with_body = true",
+        "moves_with_body = 1",
+        "parts[0].moves_with_body",
+        "parts[0].moves_with_body must be true or false, got 1",
+    ),
+    (  # out of range: a radius in mm
+        "sphere_radius_m = 0.11",
+        "sphere_radius_m = 110",
+        "parts[0].sphere_radius_m",
+        "parts[0].sphere_radius_m must be a number at least 0.01 and at most 1, got 110",
+    ),
+    (  # an unknown key
+        'format = "kinect_v2"',
+        'format = "kinect_v2"\nformats = "x"',
+        "",
+        "the top level has unknown key(s) ['formats']; its keys are ['format', 'parts',",
+    ),
+    (  # a missing key
+        'format = "kinect_v2"',
+        "",
+        "format",
+        "missing key(s) format: format must be a format's name (letters, digits, _ and -)",
+    ),
+]
+
+
+@pytest.mark.parametrize("old, new, name, message", BODY_REFUSALS)
+def test_a_body_file_of_the_wrong_shape_is_one_line_naming_the_path(
+    tmp_path, old, new, name, message
+):
+    text = (FORMATS_DIR / "kinect_v2_body.toml").read_text()
+    assert old in text
+    path = tmp_path / "kinect_v2_body.toml"
+    path.write_text(text.replace(old, new, 1))
+    with pytest.raises(SkeletonFormatError) as info:
+        BodyModel.load(path, KINECT_V2)
+    text = str(info.value)
+    assert text.startswith(f"{path}: ") and "\n" not in text and message in text
+    assert info.value.name == name and info.value.path == path
+
+
+def test_every_shipped_body_loads():
+    bodies = sorted(FORMATS_DIR.glob("*_body.toml"))
+    assert len(bodies) == 5
+    for path in bodies:
+        body = BodyModel.load(path)
+        assert body.part_names
