@@ -56,6 +56,25 @@ def test_import_qpavoid_control_qp_and_robots_in_a_fresh_interpreter():
     assert done.returncode == 0 and done.stdout == "ok\n", done.stderr
 
 
+def test_the_command_line_loads_no_optional_binding_it_does_not_use():
+    """The command line (and a run on OSQP or daqp in the simulation) never imports
+    qpsolvers (about 0.3 s with SciPy's optimizers) nor franky-control (0.1 s): each on
+    first use, by the qpsolvers backend and ``--arm franka``. A second check builds the
+    qpsolvers backend, which then has it."""
+    code = (
+        "import sys, qpavoid.cli.commands\n"
+        "from qpavoid.control.qp import QPController, QPConfig\n"
+        "from qpavoid.arm.model import load_robot\n"
+        "QPController(load_robot('iiwa14'))\n"
+        "print(sorted(m for m in ('qpsolvers', 'franky') if m in sys.modules))\n"
+        "QPController(load_robot('iiwa14'), qp=QPConfig(backend='qpsolvers', solver='osqp'))\n"
+        "print('qpsolvers' in sys.modules)"
+    )
+    done = subprocess.run([*PYTHON, "-c", code], capture_output=True, text=True, cwd="/")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["[]", "True"]
+
+
 def test_analytic_config_takes_l2_joints_as_it_did():
     joints = ("A1", "A2", "A4")
     assert AnalyticConfig("scale", joints).repelled_joints == joints  # positional

@@ -12,16 +12,15 @@ the one ``--robot`` describes. ``ros2:CELL.toml`` is an arm under ros2_control
 from __future__ import annotations
 
 import contextlib
+import importlib
 from collections.abc import Iterator
 
 import numpy as np
 
 from qpavoid.arm.model import Robot
 from qpavoid.core.errors import InputError
-from qpavoid.drive.franka import FrankaArm
 from qpavoid.drive.interface import Arm
 from qpavoid.drive.libfranka import LibfrankaArm
-from qpavoid.drive.panda import PandaArm
 from qpavoid.drive.ros2_arm import Ros2Arm
 from qpavoid.drive.simulated import SimulatedArm
 from qpavoid.sensing.ros2_cell import load_cell
@@ -31,8 +30,19 @@ __all__ = ["ARM_KINDS", "open_arm", "parse_arm"]
 #: What ``--arm`` may name: the kinematic simulation on the wall clock, an FR3 (franky-sim
 #: too) at an FCI address through franky-control, or a Panda through panda-python.
 ARM_KINDS = ("sim", "franka:HOST", "panda:HOST", "ros2:CELL.toml")
-#: The adapter of each Franka kind.
-_FRANKA_ADAPTERS: dict[str, type[LibfrankaArm]] = {"franka": FrankaArm, "panda": PandaArm}
+#: The adapter of each Franka kind, as (module, class): imported when that arm is opened,
+#: so that a run without it never loads its binding (franky-control takes about 0.1 s).
+_FRANKA_ADAPTERS = {
+    "franka": ("qpavoid.drive.franka", "FrankaArm"),
+    "panda": ("qpavoid.drive.panda", "PandaArm"),
+}
+
+
+def franka_adapter(kind: str) -> type[LibfrankaArm]:
+    """The adapter class of the Franka ``kind`` (``"franka"`` or ``"panda"``)."""
+    module, name = _FRANKA_ADAPTERS[kind]
+    adapter: type[LibfrankaArm] = getattr(importlib.import_module(module), name)
+    return adapter
 
 
 def parse_arm(text: str) -> tuple[str, str | None]:
@@ -84,6 +94,6 @@ def open_arm(
         finally:
             arm.close()
         return
-    with _FRANKA_ADAPTERS[kind](robot, host, period_s=period_s) as franka:
+    with franka_adapter(kind)(robot, host, period_s=period_s) as franka:
         franka.move_to(q0)
         yield franka

@@ -32,12 +32,12 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
-import qpsolvers
 
 from qpavoid.arm.model import load_robot
 from qpavoid.control.analytic import AnalyticController
 from qpavoid.control.controller import Controller
 from qpavoid.control.qp import QPConfig, QPController
+from qpavoid.control.qp.backends import qpsolvers
 from qpavoid.control.tick import ControllerConfig
 from qpavoid.distance.methods import CapsuleDistance, SphereDistance
 from qpavoid.fusion.fuser import Fuser
@@ -75,7 +75,7 @@ def _timed(fn: Callable[[Any], object], items: Sequence[Any], repeat: int) -> di
 
 def _has_daqp() -> bool:
     """daqp installed (the solvers extra)."""
-    return "daqp" in qpsolvers.available_solvers
+    return "daqp" in qpsolvers().available_solvers
 
 
 def _controller(kind: str, distance: str, safety: str, **qp: Any) -> Callable[..., Controller]:
@@ -135,7 +135,7 @@ def run_bench(quick: bool = False, robot: str = "iiwa14") -> dict[str, Any]:
         fast = QPController(arm, config=qp.config, qp=QPConfig(backend="daqp"))
         stages["qp_solve/daqp_direct"] = _timed(fast.backend.solve, problems, repeat)
         kinds.append("qp_daqp")
-    for name in sorted(qpsolvers.available_solvers):
+    for name in sorted(qpsolvers().available_solvers):
         other = QPController(arm, qp=QPConfig(backend="qpsolvers", solver=name))
         stages[f"qp_solve/{name}"] = _timed(other.backend.solve, problems, repeat)
     result["stages"] = stages

@@ -15,11 +15,11 @@ success; the controller then stops the robot.
 
 from __future__ import annotations
 
+import importlib
 from typing import Any
 
 import numpy as np
 import osqp
-import qpsolvers
 import scipy.sparse as sp
 
 from qpavoid.control.qp.checks import DEFECTS, crossed_bounds, kernel_arrays, not_finite
@@ -32,9 +32,16 @@ from qpavoid.core.errors import InputError, SolverError
 SOLVER_EXTRAS = {"daqp": "solvers", "proxqp": "solvers"}
 
 
+def qpsolvers() -> Any:
+    """The qpsolvers module, imported on first use: with the solvers it finds (and SciPy's
+    optimizers) it takes about 0.3 s, which a run on OSQP or daqp never needs."""
+    return importlib.import_module("qpsolvers")
+
+
 def check_solver(name: str) -> str:
     """``name`` if qpsolvers has that solver installed; else say which extra brings it."""
-    if name in qpsolvers.available_solvers:
+    available = qpsolvers().available_solvers
+    if name in available:
         return name
     hint = (
         f'; install it with pip install "qpavoid[{SOLVER_EXTRAS[name]}]"'
@@ -42,8 +49,7 @@ def check_solver(name: str) -> str:
         else ""
     )
     raise InputError(
-        f"QP solver {name!r} is not installed (installed: "
-        f"{', '.join(sorted(qpsolvers.available_solvers))}){hint}",
+        f"QP solver {name!r} is not installed (installed: {', '.join(sorted(available))}){hint}",
         name="solver",
         value=name,
     )
@@ -241,14 +247,14 @@ class QPSolversBackend:
     """
 
     def __init__(self, solver: str, cfg: QPConfig):
-        if solver not in qpsolvers.available_solvers:
+        available = qpsolvers().available_solvers
+        if solver not in available:
             raise SolverError(
-                f"QP solver {solver!r} is not installed; available: "
-                f"{sorted(qpsolvers.available_solvers)}",
+                f"QP solver {solver!r} is not installed; available: {sorted(available)}",
                 solver=solver,
                 status="not installed",
             )
-        self.name, self._qpsolvers = solver, qpsolvers
+        self.name, self._qpsolvers = solver, qpsolvers()
         warm_up()  # solver_kernels (checks.not_finite; the controller's hard_excess)
         self._settings = _osqp_settings(cfg) if solver == "osqp" else {}
         if solver == "proxqp":
