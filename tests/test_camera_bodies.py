@@ -175,9 +175,17 @@ BAD_USER_FILES = [
     (None, ('region = "face"', 'region = "fcae"'), "fcae"),
     (('name = "mycam"', 'name = "other"'), None, "name must be the file's name, 'mycam'"),
     (('body = "kinect_v2"', 'body = "mycam"'), None, "body must be 'kinect_v2'"),
-    (("frame_rate_hz = 30.0", "frame_rate_hz = 1e300"), None, "frame_rate_hz must be at most"),
+    (
+        ("frame_rate_hz = 30.0", "frame_rate_hz = 1e300"),
+        None,
+        "sensor.frame_rate_hz must be a number at least 1 and at most 1000",
+    ),
     (('NOSE = { lerp = ["Neck", "Head"], t = 1.2, uncertainty_m = 0.05 }', ""), None, "simulate"),
-    (("latency_s = 0.10", "latency_s = -0.1"), None, "latency_s must be a number >= 0"),
+    (
+        ("latency_s = 0.10", "latency_s = -0.1"),
+        None,
+        "sensor.latency_s must be a number at least 0 and at most 1",
+    ),
     (
         ('latency_s = { basis = "estimate"', 'latency_s = { basis = "measured"'),
         None,

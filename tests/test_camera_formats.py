@@ -344,12 +344,18 @@ def test_each_landmark_comes_back_within_its_uncertainty_over_random_postures(na
     "rule, message",
     [
         ({"weights": {"A": 0.5, "B": 0.4}}, "summing to 1"),
-        ({"lerp": ["A", "B"], "t": 3.0}, r"t in \[-1, 2\]"),
+        (
+            {"lerp": ["A", "B"], "t": 3.0},
+            r"landmarks.Neck.t must be a number at least -1 and at most 2, got 3.0",
+        ),
         ({"lerp": ["A"], "t": 0.5}, "two joints"),
         ({"mean": ["A"], "t": 0.5}, "t goes with lerp"),
         ({"mean": []}, "must name joints"),
         ({"joint": "A", "mean": ["B"]}, "one of joint, mean, lerp or weights"),
-        ({"mean": ["A", "B"], "uncertainty_m": 0.9}, "uncertainty_m must be in"),
+        (
+            {"mean": ["A", "B"], "uncertainty_m": 0.9},
+            "landmarks.Neck.uncertainty_m must be a number at least 0 and at most 0.5",
+        ),
         (3, "a joint name or a table"),
     ],
 )

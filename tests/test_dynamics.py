@@ -130,7 +130,7 @@ def edit(old: str, new: str):
         ),
         (
             edit("[arm]\n", "[arm]\nmax_acceleration = 3\n"),
-            "arm",
+            "arm.max_acceleration",
             "arm has unknown key(s) ['max_acceleration']",
         ),
         (
@@ -202,7 +202,7 @@ def edit(old: str, new: str):
         ),
         (
             edit("extension = 1.0\n", "extension = 1.0\nspeed = 3\n"),
-            "arm.stopping[0]",
+            "arm.stopping[0].speed",
             "arm.stopping[0] has unknown key(s) ['speed']",
         ),
         (
@@ -232,7 +232,7 @@ def edit(old: str, new: str):
         ),
         (  # a misspelt source would leave its fact unsourced
             edit("[arm.sources]\n", '[arm.sources]\nmax_jerk = "x"\n'),
-            "arm.sources",
+            "arm.sources.max_jerk",
             "arm.sources has unknown key(s) ['max_jerk']",
         ),
         (

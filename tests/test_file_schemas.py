@@ -6,6 +6,7 @@ loads."""
 from __future__ import annotations
 
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -20,6 +21,7 @@ from qpavoid.core.file_bounds import read_toml
 from qpavoid.core.schema import convert
 from qpavoid.human.body import BodyModel
 from qpavoid.human.kinect_v2 import KINECT_V2
+from qpavoid.human.skeleton import SkeletonFormat
 from qpavoid.human.skeleton_file import FORMATS_DIR
 
 ROBOTS = Path(__file__).resolve().parents[1] / "robots"
@@ -67,7 +69,7 @@ def _refusal(data: object) -> _RefusedError:
         ),
         (  # every unknown key, and the keys the table has
             {"name": "a", "parts": [{"radius_m": 0.5, "radius": 1, "colour": 2}]},
-            "cell.parts[0]",
+            "cell.parts[0].colour",
             "cell.parts[0] has unknown key(s) ['colour', 'radius']; its keys are "
             "['radius_m', 'label']",
         ),
@@ -89,7 +91,7 @@ def _refusal(data: object) -> _RefusedError:
         (
             {"name": "a", "parts": [{"radius_m": 0.5, "label": 3}]},
             "cell.parts[0].label",
-            "cell.parts[0].label: Expected `str`, got `int`, got 3",
+            "cell.parts[0].label: Expected `str`, got 3",
         ),
     ],
 )
@@ -133,7 +135,7 @@ ROBOT_REFUSALS = [
     (  # an unknown key
         "wrist_to_tool_m = 0.126",
         "wrist_to_tool_m = 0.126\nwrist_to_tool = 0.1",
-        "ik_seed",
+        "ik_seed.wrist_to_tool",
         "ik_seed has unknown key(s) ['wrist_to_tool']",
     ),
     (  # a missing key
@@ -197,6 +199,24 @@ def test_every_shipped_robot_description_has_its_schema_s_shape():
     assert qpavoid.load_robot("iiwa14").sets[0].name == "L1"
 
 
+def _edited_format_file(tmp_path: Path, name: str, old: str, new: str) -> Path:
+    """A copy of the shipped ``formats/<name>`` with ``old`` replaced by ``new`` once."""
+    text = (FORMATS_DIR / name).read_text()
+    assert old in text
+    path = tmp_path / name
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+def _one_line_naming(load: Callable[[], object], path: Path, name: str, message: str) -> None:
+    """``load()`` refused with one line that starts with the file and names ``name``."""
+    with pytest.raises(SkeletonFormatError) as info:
+        load()
+    text = str(info.value)
+    assert text.startswith(f"{path}: ") and "\n" not in text and message in text
+    assert info.value.name == name and info.value.path == path
+
+
 # --- camera bodies (qpavoid.human.body_schema) -----------------------------------------------
 
 BODY_REFUSALS = [
@@ -215,7 +235,7 @@ BODY_REFUSALS = [
     (  # an unknown key
         'format = "kinect_v2"',
         'format = "kinect_v2"\nformats = "x"',
-        "",
+        "formats",
         "the top level has unknown key(s) ['formats']; its keys are ['format', 'parts',",
     ),
     (  # a missing key
@@ -231,15 +251,8 @@ BODY_REFUSALS = [
 def test_a_body_file_of_the_wrong_shape_is_one_line_naming_the_path(
     tmp_path, old, new, name, message
 ):
-    text = (FORMATS_DIR / "kinect_v2_body.toml").read_text()
-    assert old in text
-    path = tmp_path / "kinect_v2_body.toml"
-    path.write_text(text.replace(old, new, 1))
-    with pytest.raises(SkeletonFormatError) as info:
-        BodyModel.load(path, KINECT_V2)
-    text = str(info.value)
-    assert text.startswith(f"{path}: ") and "\n" not in text and message in text
-    assert info.value.name == name and info.value.path == path
+    path = _edited_format_file(tmp_path, "kinect_v2_body.toml", old, new)
+    _one_line_naming(lambda: BodyModel.load(path, KINECT_V2), path, name, message)
 
 
 def test_every_shipped_body_loads():
@@ -248,3 +261,69 @@ def test_every_shipped_body_loads():
     for path in bodies:
         body = BodyModel.load(path)
         assert body.part_names
+
+
+# --- camera formats (qpavoid.human.format_schema) --------------------------------------------
+
+FORMAT_REFUSALS = [
+    (  # a wrong type
+        "max_bodies = 10",
+        "max_bodies = 10.0",
+        "sensor.max_bodies",
+        "sensor.max_bodies must be a whole number from 1 to 100, got 10.0",
+    ),
+    (  # out of range: a latency in ms
+        "latency_s = 0.10",
+        "latency_s = 100",
+        "sensor.latency_s",
+        "sensor.latency_s must be a number at least 0 and at most 1, got 100",
+    ),
+    (  # an unknown key
+        "max_bodies = 10",
+        "max_bodies = 10\nmax_body = 6",
+        "sensor.max_body",
+        "sensor has unknown key(s) ['max_body']; its keys are ['frame_rate_hz',",
+    ),
+    (  # a missing key
+        'title = "Azure Kinect body tracking"\n',
+        "",
+        "title",
+        "missing key(s) title",
+    ),
+]
+
+
+@pytest.mark.parametrize("old, new, name, message", FORMAT_REFUSALS)
+def test_a_format_file_of_the_wrong_shape_is_one_line_naming_the_path(
+    tmp_path, old, new, name, message
+):
+    path = _edited_format_file(tmp_path, "k4abt.toml", old, new)
+    _one_line_naming(lambda: SkeletonFormat.load(path), path, name, message)
+
+
+@pytest.mark.parametrize("old, new, name, message", FORMAT_REFUSALS)
+def test_a_run_with_a_format_file_of_the_wrong_shape_exits_2_in_one_line(
+    tmp_path, capsys, old, new, name, message
+):
+    for file in ("k4abt.toml", "k4abt_body.toml"):
+        text = (FORMATS_DIR / file).read_text().replace('name = "k4abt"', 'name = "mycam"')
+        text = text.replace('format = "k4abt"', 'format = "mycam"')
+        (tmp_path / file.replace("k4abt", "mycam")).write_text(text.replace(old, new, 1))
+    out = tmp_path / "out"
+    argv = ["run", "free", "--camera", str(tmp_path / "mycam.toml"), "--out", str(out)]
+    assert main([*argv, "--max-time", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and not out.exists()
+
+
+def test_every_shipped_format_loads():
+    files = sorted(p for p in FORMATS_DIR.glob("*.toml") if not p.stem.endswith("_body"))
+    assert [p.stem for p in files] == [
+        "k4abt",
+        "kinect_v2",
+        "mediapipe_pose",
+        "zed_body_34",
+        "zed_body_38",
+    ]
+    for path in files:
+        assert SkeletonFormat.load(path).n_joints >= 25

@@ -285,7 +285,7 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         ),
         (
             lambda t: t.replace("[roles]\n", "[roles]\nscaled_joints = []\n"),
-            "roles",
+            "roles.scaled_joints",
             "roles has unknown key(s) ['scaled_joints']",
         ),
         (  # a unit error: a reaction time in ms
@@ -305,14 +305,14 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         ),
         (  # a misspelt top-level key would silently keep the default
             lambda t: t.replace("locked =", "lockd =", 1),
-            "",
+            "lockd",
             "the top level has unknown key(s) ['lockd']",
         ),
         (
             lambda t: t.replace(
                 "sphere_radius_m = 0.09", "sphere_radus_m = 0.09\nsphere_radius_m = 0.09", 1
             ),
-            "sets[0]",
+            "sets[0].sphere_radus_m",
             "sets[0] has unknown key(s) ['sphere_radus_m']",
         ),
         (

@@ -156,11 +156,21 @@ def refused(tmp_path: Path, text: str, match: str) -> SkeletonFormatError:
 
 
 def test_a_missing_or_unknown_key_is_named(tmp_path):
-    err = refused(tmp_path, re.sub(r"(?ms)^torso = \[.*?\]\n", "", TEXT), "torso is missing")
+    err = refused(
+        tmp_path,
+        re.sub(r"(?ms)^torso = \[.*?\]\n", "", TEXT),
+        r"missing key\(s\) torso: torso must be an array of joint names",
+    )
     assert err.name == "torso"
-    err = refused(tmp_path, TEXT.replace("torso = [", "torsso = ["), "unknown key torsso")
+    err = refused(
+        tmp_path,
+        TEXT.replace("torso = [", "torsso = ["),
+        r"the top level has unknown key\(s\) \['torsso'\]",
+    )
     assert err.name == "torsso"
-    err = refused(tmp_path, TEXT.replace("max_bodies = 6", ""), "sensor has no key 'max_bodies'")
+    err = refused(
+        tmp_path, TEXT.replace("max_bodies = 6", ""), r"sensor is missing key\(s\) max_bodies"
+    )
     err = refused(tmp_path, TEXT.replace("max_bone_m = 0.35 }", "max_bone = 0.35 }", 1), "max_bone")
     assert err.name == "joints[1].max_bone"
 
@@ -185,7 +195,11 @@ def test_a_cycle_of_parents_is_refused(tmp_path):
 
 
 def test_bad_bone_bounds_are_refused(tmp_path):
-    err = refused(tmp_path, TEXT.replace("max_bone_m = 0.40", "max_bone_m = -0.40", 1), ">= 0")
+    err = refused(
+        tmp_path,
+        TEXT.replace("max_bone_m = 0.40", "max_bone_m = -0.40", 1),
+        "at least 0 and at most 2",
+    )
     assert err.value == -0.40
     text = TEXT.replace(
         '{ id = 12, name = "HipLeft" }', '{ id = 12, name = "HipLeft", max_bone_m = 0.3 }'
@@ -218,11 +232,19 @@ def test_tracking_states_other_than_the_librarys_are_refused(tmp_path):
 @pytest.mark.parametrize(
     ("line", "bad", "match"),
     [
-        ("latency_s = 0.06", "latency_s = -0.06", "sensor.latency_s must be a number >= 0"),
+        (
+            "latency_s = 0.06",
+            "latency_s = -0.06",
+            "sensor.latency_s must be a number at least 0 and at most 1, got -0.06",
+        ),
         ("range_m = [0.5, 4.5]", "range_m = [4.5, 0.5]", "near < far"),
         ("field_of_view_deg = [70.6, 60.0]", "field_of_view_deg = [70.6]", "two angles"),
         ("max_bodies = 6", "max_bodies = 0", "whole number from 1 to 100"),
-        ("frame_rate_hz = 30.0", 'frame_rate_hz = "30"', "frame_rate_hz must be a number > 0"),
+        (
+            "frame_rate_hz = 30.0",
+            'frame_rate_hz = "30"',
+            "sensor.frame_rate_hz must be a number at least 1 and at most 1000, got '30'",
+        ),
     ],
 )
 def test_bad_sensor_numbers_are_refused(tmp_path, line, bad, match):
@@ -274,9 +296,12 @@ LATENCY_EVIDENCE = re.compile(r"^latency_s = \{ basis = .*$", re.M)
         ('latency_s = { basis = "vendor", source = "  " }', "a vendor number needs its source"),
         ('latency_s = { basis = "estimate" }', "an estimate needs its note"),
         ('latency_s = { basis = "guess", note = "x" }', r"basis must be one of \['measured'"),
-        ('latency_s = { basis = "measured", source = 3 }', "source must be text"),
+        (
+            'latency_s = { basis = "measured", source = 3 }',
+            r"sensor.evidence.latency_s.source must be text, got 3",
+        ),
         ('latency_s = { basis = "measured", source = "a", doi = "b" }', "unknown key"),
-        ("latency_s = 0.06", "must be a table"),
+        ("latency_s = 0.06", "sensor.evidence.latency_s must be a table { basis, source, note }"),
         ('latency = { basis = "estimate", note = "x" }', "latency names no number"),
         ("", "sensor.evidence.latency_s is missing"),
     ],

@@ -29,7 +29,7 @@ import re
 import types
 import typing
 from collections.abc import Callable, Mapping
-from typing import Any, TypeVar
+from typing import Any, TypeVar, overload
 
 import msgspec
 
@@ -53,7 +53,15 @@ class SchemaError(Exception):
         self.name, self.message, self.value = name, message, value
 
 
-def convert(data: object, schema: type[T], fail: Fail, *, prefix: str = "") -> T:
+@overload
+def convert(data: object, schema: type[T], fail: Fail, *, prefix: str = "") -> T: ...
+
+
+@overload
+def convert(data: object, schema: object, fail: Fail, *, prefix: str = "") -> Any: ...
+
+
+def convert(data: object, schema: object, fail: Fail, *, prefix: str = "") -> Any:
     """``data`` (a parsed file, or one of its tables) as a ``schema``, or ``fail``'s error.
 
     Parameters
@@ -61,7 +69,8 @@ def convert(data: object, schema: type[T], fail: Fail, *, prefix: str = "") -> T
     data
         What :func:`~qpavoid.core.file_bounds.read_toml` returned, or a table of it.
     schema
-        The file's (or the table's) :class:`msgspec.Struct`.
+        The file's (or the table's) :class:`msgspec.Struct`, or any type msgspec
+        converts to (a union, an annotated type).
     fail
         Makes the reader's error from the field's path, the message and the value.
     prefix
@@ -109,7 +118,7 @@ def refusal(data: object, schema: object, text: str, prefix: str = "") -> Schema
         known = list(_fields(node))
         extra = sorted(k for k in value if k not in known)
         return SchemaError(
-            path,
+            f"{path}.{extra[0]}" if path else extra[0],
             f"{path or 'the top level'} has unknown key(s) {extra}; its keys are {known}",
             extra,
         )
@@ -123,6 +132,7 @@ def refusal(data: object, schema: object, text: str, prefix: str = "") -> Schema
         return SchemaError(
             name, f"{name} must be {description}; {path}: {said}, got {value!r}", shown
         )
+    said = re.sub(r", got `[^`]*`$", "", said)  # the value itself is said instead
     return SchemaError(path, f"{path}: {said}, got {value!r}", value)
 
 

@@ -14,8 +14,12 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import NoReturn
 
+import msgspec
+
 from qpavoid.core.errors import SkeletonFormatError
-from qpavoid.human.conversion import is_number, only_keys
+from qpavoid.core.schema import convert
+from qpavoid.human.conversion import is_number, refused
+from qpavoid.human.format_schema import BASES, SENSOR_CEILINGS, EvidenceTable
 
 __all__ = [
     "AGE_MARGIN_S",
@@ -26,22 +30,6 @@ __all__ = [
     "Evidence",
 ]
 
-#: How a camera's number was obtained (``[sensor.evidence]``): a published measurement,
-#: the maker's documentation, or our estimate.
-BASES = ("measured", "vendor", "estimate")
-#: The largest plausible value of each of ``[sensor]``'s numbers: a body-tracking camera
-#: beyond 1 kHz, a latency beyond 1 s (``--latency``'s range), a noise or Z_d beyond 1 m, a
-#: stereo reference beyond 100 m or swaps beyond 10 per second (or lasting over a minute)
-#: is a wrong file.
-SENSOR_CEILINGS = {
-    "frame_rate_hz": 1000.0,
-    "latency_s": 1.0,
-    "noise_m": 1.0,
-    "tracked_uncertainty_m": 1.0,
-    "noise_reference_range_m": 100.0,
-    "left_right_swap_per_s": 10.0,
-    "left_right_swap_s": 60.0,
-}
 #: The numbers of ``[sensor]`` that safety rests on (speed and separation's latency term,
 #: Z_d, the simulated noise): each must say how it was obtained.
 EVIDENCED = ("latency_s", "noise_m", "tracked_uncertainty_m")
@@ -70,33 +58,30 @@ class Evidence:
 
     @classmethod
     def read(cls, key: str, value: object) -> Evidence:
-        """``[sensor.evidence]``'s entry for ``key``, checked: a table with a known
-        ``basis``, a ``source`` where it is measured or the maker's, a ``note`` where it is
-        ours."""
+        """``[sensor.evidence]``'s entry for ``key``: its shape the schema's
+        (:class:`~qpavoid.human.format_schema.EvidenceTable`), then :meth:`of`."""
         where = f"sensor.evidence.{key}"
-        if not isinstance(value, dict):
-            _fail(f"{where} must be a table {{ basis, source, note }}, got {value!r}", where, value)
-        only_keys(value, ("basis", "source", "note"), f"{where}.")
-        basis = value.get("basis")
-        if basis not in BASES:
-            _fail(f"{where}.basis must be one of {list(BASES)}, got {basis!r}", where, basis)
-        for field_ in ("source", "note"):
-            if not isinstance(value.get(field_, ""), str):
-                _fail(f"{where}.{field_} must be text", f"{where}.{field_}", value[field_])
-        evidence = cls(basis, value.get("source", "").strip(), value.get("note", "").strip())
+        return cls.of(where, convert(value, EvidenceTable, refused, prefix=where))
+
+    @classmethod
+    def of(cls, where: str, table: EvidenceTable) -> Evidence:
+        """The evidence of a table its schema read: a ``source`` where the number is
+        measured or the maker's, a ``note`` where it is ours."""
+        basis = table.basis
+        evidence = cls(basis, table.source.strip(), table.note.strip())
         if basis != "estimate" and not evidence.source:
             _fail(
                 f"{where}: a {basis} number needs its source (authors, title, venue, year, "
                 "DOI or URL, and what was measured)",
                 f"{where}.source",
-                value,
+                msgspec.structs.asdict(table),
             )
         if basis == "estimate" and not evidence.note:
             _fail(
                 f"{where}: an estimate needs its note (why this value, and what was searched "
                 "and not found)",
                 f"{where}.note",
-                value,
+                msgspec.structs.asdict(table),
             )
         return evidence
 

@@ -27,23 +27,35 @@ table form takes ``uncertainty_m``.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, NoReturn
+from typing import NoReturn
 
+import msgspec
 import numpy as np
 
 from qpavoid.core.errors import SkeletonFormatError
+from qpavoid.core.schema import convert
+from qpavoid.human.format_schema import (
+    CONFIDENCE_KINDS,
+    MAX_RULE_UNCERTAINTY_M,
+    ConfidenceTable,
+    Rule,
+    RuleTable,
+)
 
-__all__ = ["CONFIDENCE_KINDS", "Confidence", "LandmarkRule", "is_number", "only_keys", "parse_rule"]
+__all__ = [
+    "CONFIDENCE_KINDS",
+    "MAX_RULE_UNCERTAINTY_M",
+    "Confidence",
+    "LandmarkRule",
+    "is_number",
+    "parse_rule",
+    "refused",
+    "rule_of",
+]
 
-#: The kinds of a joint's confidence value a format may declare.
-CONFIDENCE_KINDS = ("states", "levels", "score")
 #: The library's tracking states (not tracked, inferred, tracked).
 _STATES = (0, 1, 2)
-#: Largest uncertainty a rule may add, m: a derived landmark further off than this is no
-#: landmark (the longest bone of the body is 0.40 m).
-MAX_RULE_UNCERTAINTY_M = 0.5
 
 
 def _fail(message: str, name: str, value: object) -> NoReturn:
@@ -53,17 +65,6 @@ def _fail(message: str, name: str, value: object) -> NoReturn:
 def is_number(value: object) -> bool:
     """A finite int or float (not a bool): a number a format file may hold."""
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def only_keys(data: Mapping[str, object], known: tuple[str, ...], prefix: str) -> None:
-    """Refuse a key of ``data`` not in ``known`` (a misspelt key would be ignored)."""
-    unknown = [k for k in data if k not in known]
-    if unknown:
-        _fail(
-            f"unknown key {prefix}{unknown[0]}; the keys are {', '.join(known)}",
-            f"{prefix}{unknown[0]}",
-            data[unknown[0]],
-        )
 
 
 @dataclass(frozen=True)
@@ -134,16 +135,20 @@ class Confidence:
 
     @classmethod
     def from_mapping(cls, data: object) -> Confidence:
-        """The ``[confidence]`` table of a format file."""
-        if not isinstance(data, dict):
-            _fail(f"confidence must be a table, got {data!r}", "confidence", data)
-        only_keys(
-            data,
-            ("kind", "levels", "level_names", "range", "inferred_at", "tracked_at"),
-            "confidence.",
+        """The ``[confidence]`` table of a format file (its shape: the schema's)."""
+        return cls.from_table(convert(data, ConfidenceTable, refused, prefix="confidence"))
+
+    @classmethod
+    def from_table(cls, table: ConfidenceTable) -> Confidence:
+        """The confidence of a ``[confidence]`` table its schema read."""
+        return cls(
+            kind=table.kind,
+            levels=tuple(table.levels),
+            level_names=tuple(table.level_names),
+            range=table.range,
+            inferred_at=table.inferred_at,
+            tracked_at=table.tracked_at,
         )
-        args: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
-        return cls(**args)
 
     def states(self, value: np.ndarray) -> np.ndarray:
         """The tracking states (int8) of confidence values ``value`` (any shape).
@@ -201,36 +206,30 @@ class LandmarkRule:
 
 
 def parse_rule(value: object, key: str) -> LandmarkRule:
-    """The rule of a ``[landmarks]`` or ``[simulate]`` entry (module docstring)."""
-    if isinstance(value, str):
-        return LandmarkRule((value,), (1.0,))
-    if not isinstance(value, dict):
-        _fail(f"{key} must be a joint name or a table, got {value!r}", key, value)
-    forms = [k for k in ("joint", "mean", "lerp", "weights") if k in value]
-    known = ("joint", "mean", "lerp", "weights", "t", "uncertainty_m")
-    unknown = [k for k in value if k not in known]
-    if unknown or len(forms) != 1:
+    """The rule of a ``[landmarks]`` or ``[simulate]`` entry (module docstring): its shape
+    the schema's (:data:`~qpavoid.human.format_schema.Rule`), its form checked here."""
+    return rule_of(convert(value, Rule, refused, prefix=key), key)
+
+
+def rule_of(rule: str | RuleTable, key: str) -> LandmarkRule:
+    """The rule of an entry its schema read: one form, weights summing to 1, a ``lerp``'s
+    two joints and its ``t``, the joints of a mean each once."""
+    if isinstance(rule, str):
+        return LandmarkRule((rule,), (1.0,))
+    forms = [k for k in ("joint", "mean", "lerp", "weights") if getattr(rule, k) is not None]
+    if len(forms) != 1:
         _fail(
             f"{key} must have one of joint, mean, lerp or weights (and t, uncertainty_m), "
-            f"got {value!r}",
+            f"got {msgspec.structs.asdict(rule)!r}",
             key,
-            value,
+            rule,
         )
-    uncertainty = value.get("uncertainty_m", 0.0)
-    if not is_number(uncertainty) or not 0.0 <= uncertainty <= MAX_RULE_UNCERTAINTY_M:
-        _fail(
-            f"{key}.uncertainty_m must be in [0, {MAX_RULE_UNCERTAINTY_M}] m, got {uncertainty!r}",
-            f"{key}.uncertainty_m",
-            uncertainty,
-        )
+    uncertainty = rule.uncertainty_m
     form = forms[0]
-    joints = value[form]
-    if form == "weights":
-        table = joints
+    if rule.weights is not None:
+        table = rule.weights
         if (
-            not isinstance(table, dict)
-            or not table
-            or not all(is_number(w) for w in table.values())
+            not table
             or abs(sum(table.values()) - 1.0) > 1e-9
             or not all(-1.0 <= w <= 2.0 for w in table.values())
         ):
@@ -240,25 +239,27 @@ def parse_rule(value: object, key: str) -> LandmarkRule:
                 f"{key}.weights",
                 table,
             )
-        return LandmarkRule(
-            tuple(table), tuple(float(w) for w in table.values()), float(uncertainty)
-        )
-    if form == "joint":
-        joints = [joints]
-    if not isinstance(joints, list) or not joints or not all(isinstance(j, str) for j in joints):
+        return LandmarkRule(tuple(table), tuple(table.values()), uncertainty)
+    joints = [rule.joint] if rule.joint is not None else (rule.mean or rule.lerp or [])
+    if not joints:
         _fail(f"{key}.{form} must name joints, got {joints!r}", f"{key}.{form}", joints)
-    if form == "lerp":
-        t: Any = value.get("t")
-        if len(joints) != 2 or not is_number(t) or not -1.0 <= t <= 2.0:
+    if rule.lerp is not None:
+        t = rule.t
+        if len(joints) != 2 or t is None:
             _fail(
                 f"{key}: lerp takes two joints and t in [-1, 2], got {joints!r}, t={t!r}",
                 key,
-                value,
+                rule,
             )
-        return LandmarkRule(tuple(joints), (1.0 - float(t), float(t)), float(uncertainty))
-    if "t" in value:
-        _fail(f"{key}: t goes with lerp only", f"{key}.t", value["t"])
+        return LandmarkRule(tuple(joints), (1.0 - t, t), uncertainty)
+    if rule.t is not None:
+        _fail(f"{key}: t goes with lerp only", f"{key}.t", rule.t)
     if len(set(joints)) != len(joints):
         _fail(f"{key}.{form} names a joint twice: {joints!r}", f"{key}.{form}", joints)
     n = len(joints)
-    return LandmarkRule(tuple(joints), (1.0 / n,) * n, float(uncertainty))
+    return LandmarkRule(tuple(joints), (1.0 / n,) * n, uncertainty)
+
+
+def refused(name: str, message: str, value: object) -> SkeletonFormatError:
+    """A schema's refusal as a :class:`SkeletonFormatError` (the file added by its reader)."""
+    return SkeletonFormatError(message, name=name, value=value)

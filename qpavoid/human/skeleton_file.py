@@ -16,16 +16,17 @@ the offending value (:meth:`~qpavoid.human.skeleton.SkeletonFormat.load` adds th
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import MISSING
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import SkeletonFormatError
 from qpavoid.core.file_bounds import NotTOMLError
 from qpavoid.core.file_bounds import read_toml as read_toml_file
+from qpavoid.core.schema import convert
 from qpavoid.human.camera_spec import CameraSpec, Evidence
-from qpavoid.human.conversion import Confidence, only_keys, parse_rule
+from qpavoid.human.conversion import Confidence, refused, rule_of
+from qpavoid.human.format_schema import FormatFile
 
 __all__ = [
     "FORMATS_DIR",
@@ -39,26 +40,8 @@ __all__ = [
 FORMATS_DIR = Path(__file__).with_name("formats")
 #: Largest format or body file read, bytes: the Kinect v2's is 6 kB; 1 MB is junk.
 MAX_FORMAT_FILE_BYTES = 2**20
-
-_TOP_KEYS = (
-    "name",
-    "title",
-    "tracking_states",
-    "sensor",
-    "joints",
-    "mirror_pairs",
-    "torso",
-    "groups",
-    "units",
-    "axes",
-    "confidence",
-    "body",
-    "landmarks",
-    "simulate",
-)
 #: A format's length units: metres per unit.
 UNITS_M = {"m": 1.0, "mm": 0.001}
-_JOINT_KEYS = ("id", "name", "parent", "max_bone_m")
 
 
 def read_toml(path: str | Path) -> dict:
@@ -76,107 +59,47 @@ def read_toml(path: str | Path) -> dict:
 
 def format_fields(data: Mapping[str, object]) -> dict[str, Any]:
     """The fields of a :class:`~qpavoid.human.skeleton.SkeletonFormat` from a parsed format
-    file, its shape checked: the keys known, each of its kind, the joints' ids in order,
+    file, its shape checked by its schema (:mod:`qpavoid.human.format_schema`: the keys
+    known and required, each of its kind and range), the joints' ids in order,
     ``[sensor]`` (:class:`~qpavoid.human.camera_spec.CameraSpec`, with its evidence),
-    ``[confidence]`` and the tables of rules parsed. Whether they agree with one another
+    ``[confidence]`` and the tables of rules made. Whether they agree with one another
     (joint names, the tree, the mirror pairs) is the format's to check when built.
 
     Raises
     ------
     SkeletonFormatError
-        Naming the key and the offending value.
+        Naming the key's path and the offending value.
     """
-    only_keys(data, _TOP_KEYS, "")
-    rows = _require(data, "joints", list, "an array of tables")
-    names, parents, bounds = [], [], []
-    for k, row in enumerate(rows):
-        if not isinstance(row, dict):
-            _fail(f"joints[{k}] must be a table, got {row!r}", f"joints[{k}]", row)
-        only_keys(row, _JOINT_KEYS, f"joints[{k}].")
-        if row.get("id") != k or isinstance(row.get("id"), bool):
-            _fail(
-                f"joints[{k}].id must be {k} (ids run 0, 1, 2, ... in file order), "
-                f"got {row.get('id')!r}",
-                f"joints[{k}].id",
-                row.get("id"),
+    file = convert(data, FormatFile, refused)
+    for k, row in enumerate(file.joints):
+        if row.id != k:
+            raise SkeletonFormatError(
+                f"joints[{k}].id must be {k} (ids run 0, 1, 2, ... in file order), got {row.id!r}",
+                name=f"joints[{k}].id",
+                value=row.id,
             )
-        names.append(_require(row, "name", str, "a string", f"joints[{k}]."))
-        parent = row.get("parent")
-        if parent is not None and not isinstance(parent, str):
-            _fail(f"joints[{k}].parent must be a joint name, got {parent!r}", "parent", parent)
-        parents.append(parent)
-        bounds.append(row.get("max_bone_m", 0.0))
-    pairs = _require(data, "mirror_pairs", list, "an array of [left, right] pairs")
-    groups = data.get("groups", {})  # optional: code that needs a role says so
-    if not isinstance(groups, dict):
-        _fail(f"groups must be a table of tables, got {groups!r}", "groups", groups)
-    for group, roles in groups.items():
-        if not isinstance(roles, dict):
-            _fail(f"groups.{group} must be a table, got {roles!r}", f"groups.{group}", roles)
-    sensor = dict(_require(data, "sensor", dict, "a table"))
-    only_keys(sensor, tuple(CameraSpec.__dataclass_fields__), "sensor.")
-    evidence = sensor.pop("evidence", {})
-    if not isinstance(evidence, dict):
-        _fail(f"sensor.evidence must be a table, got {evidence!r}", "sensor.evidence", evidence)
-    sensor["evidence"] = tuple((k, Evidence.read(k, v)) for k, v in evidence.items())
-    missing = [
-        k
-        for k, f in CameraSpec.__dataclass_fields__.items()
-        if k not in sensor and f.default is MISSING
-    ]
-    if missing:
-        _fail(f"sensor has no key {missing[0]!r}", f"sensor.{missing[0]}", None)
-    states = data.get("tracking_states", {})  # absent: the library's (the default)
-    if not isinstance(states, dict):
-        _fail(f"tracking_states must be a table, got {states!r}", "tracking_states", states)
-    units = data.get("units", "m")
-    if units not in UNITS_M:
-        _fail(f"units must be one of {list(UNITS_M)}, got {units!r}", "units", units)
-    axes = data.get("axes", ["left", "up", "forward"])
-    if not isinstance(axes, list):
-        _fail(f"axes must be three directions, got {axes!r}", "axes", axes)
-    tables = {}
-    for key in ("landmarks", "simulate"):
-        table = data.get(key, {})
-        if not isinstance(table, dict):
-            _fail(f"{key} must be a table, got {table!r}", key, table)
-        tables[key] = tuple((k, parse_rule(v, f"{key}.{k}")) for k, v in table.items())
-    body = data.get("body", "")
-    if not isinstance(body, str):
-        _fail(f"body must be a format's name, got {body!r}", "body", body)
+    sensor = file.sensor
+    numbers = {k: getattr(sensor, k) for k in CameraSpec.__dataclass_fields__ if k != "evidence"}
+    evidence = tuple(
+        (k, Evidence.of(f"sensor.evidence.{k}", v)) for k, v in sensor.evidence.items()
+    )
     fields: dict[str, Any] = {
-        "name": _require(data, "name", str, "a string"),
-        "title": _require(data, "title", str, "a string"),
-        "joints": tuple(names),
-        "parents": tuple(parents),
-        "bone_bounds_m": tuple(bounds),
-        "mirror_pairs": tuple(tuple(p) if isinstance(p, list) else p for p in pairs),
-        "torso": tuple(_require(data, "torso", list, "an array of joint names")),
-        "groups": tuple((g, tuple(roles.items())) for g, roles in groups.items()),
-        "sensor": CameraSpec(
-            **{k: tuple(v) if isinstance(v, list) else v for k, v in sensor.items()}  # type: ignore[arg-type]
-        ),
-        "unit_m": UNITS_M[units],
-        "axes": tuple(axes),
-        "confidence": Confidence.from_mapping(data.get("confidence", {})),
-        "body": body,
-        "landmarks": tables["landmarks"],
-        "simulate": tables["simulate"],
+        "name": file.name,
+        "title": file.title,
+        "joints": tuple(row.name for row in file.joints),
+        "parents": tuple(row.parent for row in file.joints),
+        "bone_bounds_m": tuple(row.max_bone_m for row in file.joints),
+        "mirror_pairs": tuple(tuple(p) for p in file.mirror_pairs),
+        "torso": tuple(file.torso),
+        "groups": tuple((g, tuple(roles.items())) for g, roles in file.groups.items()),
+        "sensor": CameraSpec(**numbers, evidence=evidence),
+        "unit_m": UNITS_M[file.units],
+        "axes": tuple(file.axes),
+        "confidence": Confidence.from_table(file.confidence),
+        "body": file.body,
+        "landmarks": tuple((k, rule_of(v, f"landmarks.{k}")) for k, v in file.landmarks.items()),
+        "simulate": tuple((k, rule_of(v, f"simulate.{k}")) for k, v in file.simulate.items()),
     }
-    if "tracking_states" in data:
-        fields["tracking_states"] = tuple(states.items())
+    if file.tracking_states is not None:
+        fields["tracking_states"] = tuple(file.tracking_states.items())
     return fields
-
-
-def _fail(message: str, name: str, value: object) -> NoReturn:
-    raise SkeletonFormatError(message, name=name, value=value)
-
-
-def _require(data: Mapping[str, object], key: str, kind: type, what: str, prefix: str = "") -> Any:
-    """``data[key]``, which must be a ``kind`` (``what`` in the message)."""
-    if key not in data:
-        _fail(f"{prefix}{key} is missing (expected {what})", f"{prefix}{key}", None)
-    value = data[key]
-    if not isinstance(value, kind):
-        _fail(f"{prefix}{key} must be {what}, got {value!r}", f"{prefix}{key}", value)
-    return value
