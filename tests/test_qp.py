@@ -246,18 +246,32 @@ def test_iteration_limit_stops_the_robot(robot):
 
 
 @pytest.mark.parametrize("backend", ["persistent", "qpsolvers"])
-def test_infeasible_problem_stops_the_robot(robot, monkeypatch, backend):
+@pytest.mark.parametrize("writer", ["assembler", "one pass"])
+def test_infeasible_problem_stops_the_robot(robot, monkeypatch, backend, writer):
+    """Crossed bounds (1 ≤ x ≤ −1), written by a piece through the assembler or by the
+    standard pieces' one compiled pass: no command but a stop."""
+    from qpavoid.control.qp import one_pass
+
     path, q = _start(robot)
 
     def crossed(self, tick, dt, lb, ub):  # 1 <= x <= -1
         lb[:], ub[:] = 1.0, -1.0
 
+    def crossed_pass(*args):
+        real(*args)
+        args[-2][:], args[-1][:] = 1.0, -1.0  # its lb and ub, written last
+
+    real = one_pass.standard_problem
     monkeypatch.setattr(VelocityLimit, "tighten_qp_bounds", crossed)
+    monkeypatch.setattr(one_pass, "standard_problem", crossed_pass)
     ctrl = QPController(
         robot,
         path=path,
         qp=QPConfig(backend=backend, solver="daqp" if backend == "qpsolvers" else "osqp"),
     )
+    assert ctrl.one_pass is not None  # the standard pieces
+    if writer == "assembler":
+        ctrl.one_pass = None
     from qpavoid.human.posture import Operator
 
     cmd = ctrl.step(q, Operator().rest(), None, 1.0)

@@ -17,6 +17,7 @@ from qpavoid.control.qp.limits.acceleration import AccelerationLimit
 from qpavoid.control.qp.limits.position import PositionLimit
 from qpavoid.control.qp.limits.velocity import VelocityLimit
 from qpavoid.control.qp.limits.velocity_damper import VelocityDamper
+from qpavoid.control.qp.one_pass import OnePass
 from qpavoid.control.qp.pieces import QPPiece
 from qpavoid.control.qp.problem import Assembler, QPProblem
 from qpavoid.control.qp.solver_kernels import hard_excess
@@ -165,6 +166,9 @@ class QPController(Controller):
         ]
         warm_up()  # the QP's compiled pieces, before the first tick (the backend warms its own)
         self.assembler = Assembler(x.n, pieces)
+        # the standard pieces' problem in one compiled call (None: another set of pieces,
+        # which the assembler writes piece by piece)
+        self.one_pass = OnePass.of(self.assembler)
         self.backend = make_backend(w, x.n, self.assembler.m)
         # the hard rows: the pairs' (the dampers', which the separation's bounds tighten)
         self._hard = self.assembler.rows[VelocityDamper.name]
@@ -174,7 +178,8 @@ class QPController(Controller):
         return self.assembler(tick, self.config.control_period_s)
 
     def act(self, tick: Tick) -> Command:
-        prob = self.assembler.fill(tick, self.config.control_period_s)
+        writer = self.assembler if self.one_pass is None else self.one_pass
+        prob = writer.fill(tick, self.config.control_period_s)
         sol = self.backend.solve(prob)
         info = {"solver": self.backend.name, "status": sol.status, "iterations": sol.iterations}
         if not sol.found or sol.x is None:

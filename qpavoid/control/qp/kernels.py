@@ -20,13 +20,22 @@ from qpavoid.core.compiling import ctrl_c_deferred, kernel_input
 from qpavoid.distance.table import DistanceTable
 
 __all__ = [
+    "MIN_SPEED_MPS",
+    "box_bounds",
     "check_rows",
     "damper_rows",
     "ee_task_cost",
     "pair_inputs",
+    "position_bounds",
+    "raise_rows",
+    "repulsion_row",
     "separation_rows",
+    "velocity_bounds",
     "warm_up",
 ]
+
+#: Repulsive speeds below this are treated as none (m/s): 0.1 mm/s.
+MIN_SPEED_MPS = 1e-4
 
 
 @njit(cache=True)
@@ -151,6 +160,92 @@ def separation_rows(
         h[r] = min(h[r], bound[r])
 
 
+@njit(cache=True)
+def repulsion_row(
+    v: np.ndarray,
+    Jp: np.ndarray,
+    nominal: np.ndarray,
+    slack: int,
+    G: np.ndarray,
+    h: np.ndarray,
+    r: int,
+) -> None:
+    """Row ``r`` of a repulsion, in place: with ``u = v / |v|``,
+
+        −uᵀ J_p q̇ − s ≤ −(uᵀ ṗ_nominal + |v|)
+
+    (:class:`~qpavoid.control.qp.barriers.repulsion.RepulsionTask`): ``v`` (3,) the law's
+    velocity, m/s; ``Jp`` (3, nv) the point's Jacobian and ``nominal`` (3,) its nominal
+    velocity, m/s (read only when ``|v| ≥`` :data:`MIN_SPEED_MPS`; else ``h[r] = +inf``);
+    ``slack`` the slack's column."""
+    nv = Jp.shape[1]
+    G[r, :] = 0.0
+    G[r, slack] = -1.0
+    speed = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    if speed < MIN_SPEED_MPS:
+        h[r] = np.inf
+        return
+    u0, u1, u2 = v[0] / speed, v[1] / speed, v[2] / speed
+    for k in range(nv):
+        G[r, k] = -(u0 * Jp[0, k] + u1 * Jp[1, k] + u2 * Jp[2, k])
+    h[r] = -((u0 * nominal[0] + u1 * nominal[1] + u2 * nominal[2]) + speed)
+
+
+@njit(cache=True, inline="always")
+def _larger(a: float, b: float) -> float:
+    """``np.maximum(a, b)``: a NaN in either gives NaN (the QP's checks then refuse it)."""
+    return a if a >= b or a != a else b
+
+
+@njit(cache=True, inline="always")
+def _smaller(a: float, b: float) -> float:
+    """``np.minimum(a, b)``: a NaN in either gives NaN."""
+    return a if a <= b or a != a else b
+
+
+@njit(cache=True)
+def raise_rows(h: np.ndarray, floor: np.ndarray) -> None:
+    """``h = max(h, floor)`` row by row, in place (``np.maximum``: a NaN stays NaN): power
+    and force limiting's permitted contact speeds raising the dampers' bounds."""
+    for r in range(h.shape[0]):
+        h[r] = _larger(h[r], floor[r])
+
+
+@njit(cache=True)
+def velocity_bounds(limits: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> None:
+    """``−q̇_max ≤ q̇ ≤ q̇_max`` intersected into the joint velocities' bounds ``lb``,
+    ``ub`` (their first ``nv`` entries), in place (eq. 3's ``limits`` (nv,), rad/s)."""
+    for j in range(limits.shape[0]):
+        lb[j] = _larger(lb[j], -limits[j])
+        ub[j] = _smaller(ub[j], limits[j])
+
+
+@njit(cache=True)
+def position_bounds(
+    q: np.ndarray,
+    q_min: np.ndarray,
+    q_max: np.ndarray,
+    gain_per_period: float,
+    lb: np.ndarray,
+    ub: np.ndarray,
+) -> None:
+    """``γ/dt (q_min − q) ≤ q̇ ≤ γ/dt (q_max − q)`` intersected into ``lb``, ``ub``, in
+    place (``gain_per_period`` = γ/dt, 1/s; angles (nv,), rad)."""
+    for j in range(q.shape[0]):
+        lb[j] = _larger(lb[j], gain_per_period * (q_min[j] - q[j]))
+        ub[j] = _smaller(ub[j], gain_per_period * (q_max[j] - q[j]))
+
+
+@njit(cache=True)
+def box_bounds(lo: np.ndarray, hi: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> None:
+    """The bounds so far projected into the command's reachable box ``[lo, hi]`` (nv,),
+    rad/s, in place: each end clipped to the box, so a bound the arm cannot reach this
+    tick becomes the box's nearest end."""
+    for j in range(lo.shape[0]):
+        lb[j] = _smaller(_larger(lb[j], lo[j]), hi[j])
+        ub[j] = _smaller(_larger(ub[j], lo[j]), hi[j])
+
+
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) the kernels, once per process."""
@@ -162,6 +257,12 @@ def warm_up() -> None:
                 np.zeros((1, 3, nv)), np.zeros((1, 2, 3, nv)))  # fmt: skip
         damper_rows(np.ones(2), *pair, np.zeros(2), 0.15, 0.25, np.zeros(2), G, h)
         separation_rows(np.ones(2), *pair, 1.0, G, h)
+        repulsion_row(np.zeros(3), np.zeros((3, nv)), np.zeros(3), 3, G, h, 0)
+        lb, ub = np.zeros(n), np.zeros(n)
+        velocity_bounds(np.ones(nv), lb[:nv], ub[:nv])
+        position_bounds(np.zeros(nv), -np.ones(nv), np.ones(nv), 1.0, lb[:nv], ub[:nv])
+        box_bounds(np.zeros(nv), np.ones(nv), lb[:nv], ub[:nv])
+        raise_rows(h, np.zeros(2))
 
 
 def check_rows(name: str, rows: int, pairs: int, G: np.ndarray, h: np.ndarray) -> None:

@@ -25,12 +25,19 @@ from collections.abc import Callable
 
 import numpy as np
 
+from qpavoid.control.qp.kernels import MIN_SPEED_MPS, repulsion_row
 from qpavoid.control.qp.pieces import Bounds, Objective, QPPiece, free_bounds, readonly
 from qpavoid.control.qp.variables import Variables
 from qpavoid.control.tick import Tick
+from qpavoid.core.compiling import kernel_input
 
-#: Repulsive speeds below this are treated as none (m/s): 0.1 mm/s.
-MIN_SPEED_MPS = 1e-4
+__all__ = [
+    "MIN_SPEED_MPS",
+    "EERepulsionTask",
+    "L2RepulsionTask",
+    "RepelledRepulsionTask",
+    "RepulsionTask",
+]
 
 
 class RepulsionTask(QPPiece[Tick]):
@@ -62,6 +69,8 @@ class RepulsionTask(QPPiece[Tick]):
         lb, ub = free_bounds(n)
         lb[self.slack] = 0.0
         self._bounds = Bounds(lb, ub)
+        # no motion needed (writeable, as the kernel was compiled for: never written)
+        self._idle = (np.zeros((3, variables.nv)), np.zeros(3))
         readonly(H, self._objective.c, lb, ub)
 
     def velocity(self, tick: Tick) -> np.ndarray:
@@ -80,21 +89,19 @@ class RepulsionTask(QPPiece[Tick]):
         """``s ≥ 0``."""
         return self._bounds
 
+    def row_inputs(self, tick: Tick) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(v, J_p, ṗ_nominal)`` as :func:`~qpavoid.control.qp.kernels.repulsion_row`
+        takes them; the point's motion is found only for a speed of at least
+        :data:`MIN_SPEED_MPS` (zeros otherwise, which the row does not read)."""
+        v = kernel_input(self.velocity(tick), np.float64)
+        if math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) < MIN_SPEED_MPS:
+            return v, self._idle[0], self._idle[1]
+        Jp, nominal = self.motion(tick)
+        return v, kernel_input(Jp, np.float64), kernel_input(nominal, np.float64)
+
     def write_qp_inequalities(self, tick: Tick, dt: float, G: np.ndarray, h: np.ndarray) -> None:
         """One row: ``−uᵀ J_p q̇ − s ≤ −(uᵀ ṗ_nominal + |v|)``."""
-        row = G[0]
-        row[:] = 0.0
-        row[self.slack] = -1.0
-        v = self.velocity(tick)
-        speed = math.sqrt(v @ v)
-        if speed < MIN_SPEED_MPS:
-            h[0] = np.inf
-            return
-        u = v / speed
-        Jp, nominal = self.motion(tick)
-        np.matmul(u, Jp, out=row[self.variables.dq])
-        np.negative(row[self.variables.dq], out=row[self.variables.dq])
-        h[0] = -(u @ nominal + speed)
+        repulsion_row(*self.row_inputs(tick), self.slack, G, h, 0)
 
 
 class RepelledRepulsionTask(RepulsionTask):

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from qpavoid.control.qp.kernels import box_bounds
 from qpavoid.control.qp.pieces import QPPiece
 from qpavoid.control.qp.variables import Variables
 from qpavoid.control.tick import Tick
+from qpavoid.core.compiling import kernel_input
 
 
 class AccelerationLimit(QPPiece[Tick]):
@@ -29,7 +31,6 @@ class AccelerationLimit(QPPiece[Tick]):
     def tighten_qp_bounds(self, tick: Tick, dt: float, lb: np.ndarray, ub: np.ndarray) -> None:
         if tick.command_box is None:  # the paper's steps (ControllerConfig.smooth=False)
             return
-        lo, hi = tick.command_box
-        x_lo, x_hi = lb[self.variables.dq], ub[self.variables.dq]
-        np.clip(x_lo, lo, hi, out=x_lo)
-        np.clip(x_hi, lo, hi, out=x_hi)
+        lo, hi = (kernel_input(a, np.float64) for a in tick.command_box)
+        dq = self.variables.dq
+        box_bounds(lo, hi, lb[dq], ub[dq])

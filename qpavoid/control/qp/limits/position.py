@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from qpavoid.control.qp.kernels import position_bounds
 from qpavoid.control.qp.pieces import QPPiece
 from qpavoid.control.qp.variables import Variables
 from qpavoid.control.tick import Tick
+from qpavoid.core.compiling import kernel_input
 
 
 class PositionLimit(QPPiece[Tick]):
@@ -29,10 +31,10 @@ class PositionLimit(QPPiece[Tick]):
 
     def __init__(self, variables: Variables, q_min: np.ndarray, q_max: np.ndarray, gain: float):
         self.variables = variables
-        self.q_min, self.q_max, self.gain = q_min, q_max, gain
+        self.q_min = kernel_input(q_min, np.float64)  # as compiled
+        self.q_max = kernel_input(q_max, np.float64)
+        self.gain = float(gain)
 
     def tighten_qp_bounds(self, tick: Tick, dt: float, lb: np.ndarray, ub: np.ndarray) -> None:
-        k = self.gain / dt
-        lo, hi = lb[self.variables.dq], ub[self.variables.dq]
-        np.maximum(lo, k * (self.q_min - tick.q), out=lo)
-        np.minimum(hi, k * (self.q_max - tick.q), out=hi)
+        dq, q = self.variables.dq, kernel_input(tick.q, np.float64)
+        position_bounds(q, self.q_min, self.q_max, self.gain / dt, lb[dq], ub[dq])

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from qpavoid.control.qp.kernels import velocity_bounds
 from qpavoid.control.qp.pieces import QPPiece
 from qpavoid.control.qp.variables import Variables
 from qpavoid.control.tick import Tick
+from qpavoid.core.compiling import kernel_input
 
 
 class VelocityLimit(QPPiece[Tick]):
@@ -22,6 +24,5 @@ class VelocityLimit(QPPiece[Tick]):
         self.variables = variables
 
     def tighten_qp_bounds(self, tick: Tick, dt: float, lb: np.ndarray, ub: np.ndarray) -> None:
-        lo, hi = lb[self.variables.dq], ub[self.variables.dq]
-        np.maximum(lo, -tick.limits, out=lo)
-        np.minimum(hi, tick.limits, out=hi)
+        dq = self.variables.dq
+        velocity_bounds(kernel_input(tick.limits, np.float64), lb[dq], ub[dq])

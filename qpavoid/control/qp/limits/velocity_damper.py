@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from qpavoid.control.qp.kernels import check_rows, damper_rows, pair_inputs
+from qpavoid.control.qp.kernels import check_rows, damper_rows, pair_inputs, raise_rows
 from qpavoid.control.qp.pieces import QPPiece
 from qpavoid.control.qp.variables import Variables
 from qpavoid.control.tick import Tick
@@ -86,4 +86,4 @@ class VelocityDamper(QPPiece[Tick]):
             h,
         )
         if tick.contact_limit is not None:  # pfl: a transient contact's speed is permitted
-            np.maximum(h, tick.contact_limit.reshape(-1), out=h)
+            raise_rows(h, kernel_input(tick.contact_limit.reshape(-1), np.float64))
