@@ -129,7 +129,8 @@ def test_a_wrong_body_file_is_refused_with_the_key(tmp_path):
     err = body_refused(
         tmp_path,
         BODY_TEXT.replace("capsule_radius_m = 0.15", "capsule_radius_m = -0.15"),
-        r"parts\[1\].capsule_radius_m must be a number at least 0.01 and at most 1, got -0.15",
+        r"part 'trunk': parts\[1\].capsule_radius_m must be a number at least 0.01 and at most "
+        r"1, m, got -0.15",
     )
     assert (err.name, err.value) == ("parts[1].capsule_radius_m", -0.15)
     err = body_refused(

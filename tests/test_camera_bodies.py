@@ -119,7 +119,8 @@ def test_a_centre_is_the_mean_of_its_joints_as_uncertain_as_the_worst():
         (('ELBOW_LEFT"]', 'ELBOW_LFT"]'), "'ELBOW_LFT' is not a joint of the k4abt format"),
         (
             ("capsule_radius_m = 0.16", "capsule_radius_m = 0"),
-            r"parts\[1\].capsule_radius_m must be a number at least 0.01 and at most 1, got 0",
+            r"part 'trunk': parts\[1\].capsule_radius_m must be a number at least 0.01 and at "
+            r"most 1, m, got 0",
         ),
         (
             ("capsule_radius_m = 0.16", "capsule_radius_m = -0.1"),
@@ -127,7 +128,7 @@ def test_a_centre_is_the_mean_of_its_joints_as_uncertain_as_the_worst():
         ),
         (
             ("capsule_radius_m = 0.16", "capsule_radius_m = 1e300"),
-            "at least 0.01 and at most 1, got 1e",
+            "at least 0.01 and at most 1, m, got 1e",
         ),
         (
             (

@@ -181,9 +181,9 @@ def test_a_shrunk_sphere_is_refused_naming_the_sphere_radius(tmp_path):
         (
             '{ link_0_0 = "" }',
             "coverage.exclude",
-            "must be a table mapping each collision object it leaves out to the reason",
+            "must map each collision object it leaves out to the reason",
         ),
-        ('["link_0_0"]', "coverage.exclude", "must be a table mapping each collision object"),
+        ('["link_0_0"]', "coverage.exclude", "must map each collision object"),
     ],
 )
 def test_an_exclusion_needs_an_object_of_the_urdf_and_a_reason(tmp_path, exclude, name, fix):

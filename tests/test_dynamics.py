@@ -126,7 +126,7 @@ def edit(old: str, new: str):
         (
             lambda t: "",
             "arm",
-            "missing key(s) arm: arm must be a table, e.g. [arm] reaction_time_s = 0.005",
+            "no [arm] table; add one, e.g. reaction_time_s = 0.005",
         ),
         (
             edit("[arm]\n", "[arm]\nmax_acceleration = 3\n"),
@@ -136,7 +136,7 @@ def edit(old: str, new: str):
         (
             edit("max_point_speed_mps = 8.0\n", ""),
             "arm.max_point_speed_mps",
-            "arm is missing key(s) max_point_speed_mps",
+            "arm is missing key(s) max_point_speed_mps (docs/robot.md: Arm)",
         ),
         (  # a joint's acceleration missing
             edit(", wrist_3_joint = 20.0", ""),
@@ -198,7 +198,7 @@ def edit(old: str, new: str):
         (
             edit("extension = 1.0\n", ""),
             "arm.stopping[0].extension",
-            "arm.stopping[0] is missing key(s) extension",
+            "arm.stopping[0] is missing key(s) extension (docs/robot.md: Arm)",
         ),
         (
             edit("extension = 1.0\n", "extension = 1.0\nspeed = 3\n"),
@@ -265,7 +265,7 @@ def test_a_ur5_with_its_joints_renamed_cannot_run_with_another_arm_s_acceleratio
         read_arm(cfg, iiwa, renamed)
     with pytest.raises(RobotDescriptionError, match="for each joint of the URDF"):
         arm_of(UR5_ARM, tuple(f"joint{k}" for k in range(6)))
-    with pytest.raises(RobotDescriptionError, match=r"missing key\(s\) arm"):
+    with pytest.raises(RobotDescriptionError, match=r"no \[arm\] table"):
         read_arm({k: v for k, v in cfg.items() if k != "arm"}, iiwa, renamed)
 
 

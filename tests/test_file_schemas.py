@@ -8,7 +8,7 @@ from __future__ import annotations
 import shutil
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, ClassVar
 
 import pytest
 from msgspec import Meta, Struct
@@ -100,6 +100,61 @@ def test_a_refusal_is_one_line_naming_the_field_s_path(data, name, message):
     assert refused.name == name and message in str(refused)
 
 
+class _Piece(Struct, frozen=True, forbid_unknown_fields=True):
+    docs: ClassVar[str] = "docs/pieces.md: Piece"
+
+    name: str
+    size_m: Annotated[float, Meta(gt=0.0, le=2.0, extra={"unit": "m"})]
+    colour: Annotated[str, Meta(description="must name a colour (text)")] = ""
+
+
+class _Box(Struct, frozen=True, forbid_unknown_fields=True):
+    pieces: list[_Piece]
+    lid: _Piece = _Piece("lid", 1.0)
+
+
+@pytest.mark.parametrize(
+    "data, name, message",
+    [
+        (  # a named entry by its name, a number's unit, the table's page in the docs
+            {"pieces": [{"name": "a", "size_m": 1.0}, {"name": "b", "size_m": 3.0}]},
+            "box.pieces[1].size_m",
+            "piece 'b': box.pieces[1].size_m must be a number above 0 and at most 2, m, got 3.0 "
+            "(docs/pieces.md: Piece)",
+        ),
+        (  # a description that says its own verb
+            {"pieces": [{"name": "a", "size_m": 1.0, "colour": 3}]},
+            "box.pieces[0].colour",
+            "piece 'a': box.pieces[0].colour must name a colour (text), got 3 "
+            "(docs/pieces.md: Piece)",
+        ),
+        (  # a missing key, its table's page
+            {"pieces": [], "lid": {"name": "x"}},
+            "box.lid.size_m",
+            "box.lid is missing key(s) size_m (docs/pieces.md: Piece)",
+        ),
+        (  # an entry's own name is not said twice
+            {"pieces": [{"name": 3, "size_m": 1.0}]},
+            "box.pieces[0].name",
+            "box.pieces[0].name: Expected `str`, got 3 (docs/pieces.md: Piece)",
+        ),
+    ],
+)
+def test_a_refusal_names_the_entry_the_unit_and_the_docs(data, name, message):
+    with pytest.raises(_RefusedError) as info:
+        convert(data, _Box, _RefusedError, prefix="box")
+    assert info.value.name == name and str(info.value) == message
+
+
+def test_a_missing_table_is_refused_in_its_own_words():
+    class Holder(Struct, frozen=True, forbid_unknown_fields=True):
+        lid: Annotated[_Piece, Meta(extra={"missing": "needs lid = { name = ..., size_m = ... }"})]
+
+    with pytest.raises(_RefusedError) as info:
+        convert({}, Holder, _RefusedError, prefix="box")
+    assert str(info.value) == "box needs lid = { name = ..., size_m = ... } (docs/pieces.md: Piece)"
+
+
 # --- robot descriptions (qpavoid.arm.description_schema) -------------------------------------
 
 
@@ -154,8 +209,7 @@ ROBOT_REFUSALS = [
         'link_0_0 = "the base',
         'link_0_0 = 3, link_9 = "the base',
         "coverage.exclude.link_0_0",
-        "coverage.exclude must be a table mapping each collision object it leaves out to the "
-        "reason",
+        "coverage.exclude must map each collision object it leaves out to the reason",
     ),
 ]
 
@@ -230,7 +284,8 @@ BODY_REFUSALS = [
         "sphere_radius_m = 0.11",
         "sphere_radius_m = 110",
         "parts[0].sphere_radius_m",
-        "parts[0].sphere_radius_m must be a number at least 0.01 and at most 1, got 110",
+        "part 'head': parts[0].sphere_radius_m must be a number at least 0.01 and at most 1, m, "
+        "got 110",
     ),
     (  # an unknown key
         'format = "kinect_v2"',
@@ -276,7 +331,7 @@ FORMAT_REFUSALS = [
         "latency_s = 0.10",
         "latency_s = 100",
         "sensor.latency_s",
-        "sensor.latency_s must be a number at least 0 and at most 1, got 100",
+        "sensor.latency_s must be a number at least 0 and at most 1, s, got 100",
     ),
     (  # an unknown key
         "max_bodies = 10",

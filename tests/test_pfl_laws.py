@@ -302,7 +302,9 @@ def test_a_body_file_s_region_must_be_a_name(tmp_path):
     path = tmp_path / "kinect_v2_body.toml"
     body = KINECT_V2_BODY_FILE.read_text()
     path.write_text(body.replace('region = "face"', "region = 3"))
-    with pytest.raises(SkeletonFormatError, match=r"parts\[0\].region must be a body region"):
+    with pytest.raises(
+        SkeletonFormatError, match=r"part 'head': parts\[0\].region must name a body region"
+    ):
         BodyModel.load(path)
     path.write_text(body.replace('region = "chest"\n', ""))  # optional: absent is None
     assert BodyModel.load(path).regions[:2] == ("face", None)

@@ -241,7 +241,7 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         (
             lambda t: t[: t.index("[roles]")],
             "roles",
-            "missing key(s) roles, arm: roles must be a table, e.g. scaled = {",
+            "no [roles] table; add one, e.g. scaled = {",
         ),
         (
             lambda t: t.replace('repelled = { set = "L2"', 'repelled = { set = "L3"'),
@@ -256,7 +256,7 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         (
             lambda t: t.replace('end_effector = { set = "EE" }', ""),
             "roles.end_effector",
-            "roles is missing key(s) end_effector: end_effector must be a table { set = ",
+            "roles needs end_effector = { set = ... } (docs/robot.md: Roles)",
         ),
         (
             lambda t: t.replace('elbow = ["A4"]', 'elbow = ["A9"]'),
@@ -271,7 +271,7 @@ ROLES = '[roles]\nscaled = { set = "L1", joints = ["A1", "A2"] }'
         (
             lambda t: t.replace("max_point_speed_mps = 3.0\n", ""),
             "arm.max_point_speed_mps",
-            "arm is missing key(s) max_point_speed_mps",
+            "arm is missing key(s) max_point_speed_mps (docs/robot.md: Arm)",
         ),
         (
             lambda t: t.replace("reaction_time_s = 0.005\n", "reaction_time_s = -1.0\n"),

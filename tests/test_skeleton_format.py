@@ -235,7 +235,7 @@ def test_tracking_states_other_than_the_librarys_are_refused(tmp_path):
         (
             "latency_s = 0.06",
             "latency_s = -0.06",
-            "sensor.latency_s must be a number at least 0 and at most 1, got -0.06",
+            "sensor.latency_s must be a number at least 0 and at most 1, s, got -0.06",
         ),
         ("range_m = [0.5, 4.5]", "range_m = [4.5, 0.5]", "near < far"),
         ("field_of_view_deg = [70.6, 60.0]", "field_of_view_deg = [70.6]", "two angles"),
@@ -243,7 +243,7 @@ def test_tracking_states_other_than_the_librarys_are_refused(tmp_path):
         (
             "frame_rate_hz = 30.0",
             'frame_rate_hz = "30"',
-            "sensor.frame_rate_hz must be a number at least 1 and at most 1000, got '30'",
+            "sensor.frame_rate_hz must be a number at least 1 and at most 1000, Hz, got '30'",
         ),
     ],
 )

@@ -15,11 +15,11 @@ from __future__ import annotations
 
 import math
 import re
-from typing import Annotated
+from typing import Annotated, ClassVar
 
 from msgspec import Meta, Struct, field
 
-from qpavoid.arm.dynamics_schema import ArmTable
+from qpavoid.arm.dynamics_schema import EXAMPLE, ArmTable
 
 __all__ = [
     "SET_NAME",
@@ -117,6 +117,8 @@ class ControlSetTable(Struct, frozen=True, forbid_unknown_fields=True):
 class SetRole(Struct, frozen=True, forbid_unknown_fields=True):
     """A role played by a set, on the joints that move it."""
 
+    docs: ClassVar[str] = "docs/robot.md: Roles"
+
     set: Name
     joints: list[str]
 
@@ -124,22 +126,30 @@ class SetRole(Struct, frozen=True, forbid_unknown_fields=True):
 class EndEffectorRole(Struct, frozen=True, forbid_unknown_fields=True):
     """The end-effector role: a set."""
 
+    docs: ClassVar[str] = "docs/robot.md: Roles"
+
     set: Name
 
 
-_ROLE = '{ set = "<set>", joints = ["<joint>", ...] }' + " (docs/robot.md: Roles)"
-Role = Annotated[SetRole, Meta(description=f"a table {_ROLE}")]
+_ROLE = '{ set = "<set>", joints = ["<joint>", ...] }'
+
+
+def _role(name: str, shape: str = "set = ..., joints = ...") -> Meta:
+    """A role's words: its table's shape, and what ``[roles]`` needs without it."""
+    return Meta(
+        description=f"a table {{ {shape} }}", extra={"missing": f"needs {name} = {{ {shape} }}"}
+    )
 
 
 class RolesTable(Struct, frozen=True, forbid_unknown_fields=True):
     """``[roles]``: which set plays which part in the paper's laws
     (:class:`~qpavoid.arm.roles.Roles`)."""
 
-    scaled: Role
-    repelled: Role
-    end_effector: Annotated[
-        EndEffectorRole, Meta(description='a table { set = "<set>" } (docs/robot.md: Roles)')
-    ]
+    docs: ClassVar[str] = "docs/robot.md: Roles"
+
+    scaled: Annotated[SetRole, _role("scaled")]
+    repelled: Annotated[SetRole, _role("repelled")]
+    end_effector: Annotated[EndEffectorRole, _role("end_effector", "set = ...")]
     elbow: (
         Annotated[
             Spot,
@@ -170,7 +180,7 @@ class CoverageTable(Struct, frozen=True, forbid_unknown_fields=True):
     exclude: Annotated[
         dict[str, Annotated[str, Meta(pattern=r"\S")]],
         Meta(
-            description="a table mapping each collision object it leaves out to the reason, "
+            description="must map each collision object it leaves out to the reason, "
             'e.g. exclude = { "link_0_0" = "fixed to the base: never moves" }'
         ),
     ] = {}
@@ -199,6 +209,8 @@ Home = Annotated[
 class ControlPointFile(Struct, frozen=True, forbid_unknown_fields=True):
     """A robot description's ``control_points.toml`` (``docs/robot.md``)."""
 
+    docs: ClassVar[str] = "docs/robot.md"
+
     urdf: Annotated[
         Name | UrdfPackage,
         Meta(
@@ -214,8 +226,20 @@ class ControlPointFile(Struct, frozen=True, forbid_unknown_fields=True):
         ),
     ]
     end_effector: Annotated[Name, Meta(description="a frame name (text)")]
-    roles: Annotated[RolesTable, Meta(description=f"a table, e.g. scaled = {_ROLE}")]
-    arm: Annotated[ArmTable, Meta(description="a table (docs/robot.md: Arm)")]
+    roles: Annotated[
+        RolesTable,
+        Meta(
+            description=f"a table, e.g. scaled = {_ROLE}",
+            extra={"missing": f"no [roles] table; add one, e.g. scaled = {_ROLE}"},
+        ),
+    ]
+    arm: Annotated[
+        ArmTable,
+        Meta(
+            description="a table (docs/robot.md: Arm)",
+            extra={"missing": f"no [arm] table; add one, e.g. {EXAMPLE}"},
+        ),
+    ]
     locked: Locked | None = None
     held: Held | None = None
     home: Home | None = None

@@ -10,7 +10,7 @@ would make speed and separation never move or never stop the arm in time.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
 from msgspec import Meta, Struct
 
@@ -105,6 +105,8 @@ PositionLimits = Annotated[
 class StoppingTable(Struct, frozen=True, forbid_unknown_fields=True):
     """One ``[[arm.stopping]]`` entry: a stop the maker measured (ISO 10218-1 Annex B)."""
 
+    docs: ClassVar[str] = "docs/robot.md: Arm"
+
     joints: JointNames
     category: Annotated[Literal[0, 1], Meta(description="the stop category 0 or 1 of IEC 60204-1")]
     #: v₀, rad/s.
@@ -137,6 +139,8 @@ class Sources(Struct, frozen=True, forbid_unknown_fields=True):
 class ArmTable(Struct, frozen=True, forbid_unknown_fields=True):
     """The ``[arm]`` table (``docs/robot.md``: Arm); the optional facts are None if not given."""
 
+    docs: ClassVar[str] = "docs/robot.md: Arm"
+
     #: s: from a command to the arm starting to follow it.
     reaction_time_s: Annotated[float, Meta(ge=0.0, le=MAX_REACTION_S)]
     #: rad/s² (m/s² for a prismatic joint), one for each joint of the URDF.
@@ -167,5 +171,9 @@ class ArmOf(Struct, frozen=True):
     """A control-point file's ``[arm]`` alone (its other tables are the file's schema's)."""
 
     arm: Annotated[
-        ArmTable, Meta(description=f"a table, e.g. [arm] {EXAMPLE} (docs/robot.md: Arm)")
+        ArmTable,
+        Meta(
+            description=f"a table, e.g. [arm] {EXAMPLE}",
+            extra={"missing": f"no [arm] table; add one, e.g. {EXAMPLE}"},
+        ),
     ]

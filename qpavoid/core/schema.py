@@ -11,10 +11,18 @@ names the field's path as the file says it (``sets[1].capsule.capsule_radius_m``
 ``[...]``) and the offending value.
 
 The wording is the project's: a number ``must be a number at least 0 and at most 0.1, got
-8`` (its bounds from the schema); a field whose type carries a ``description``
-(``Meta(description=...)``) ``must be <description>, got ...``; an unknown key lists every
-unknown key and the keys the table has; a missing key is named. Any other refusal keeps
-msgspec's own words (``Expected `str`, got `int```).
+8`` (its bounds from the schema; its unit after them, ``..., m, got 8``, where its type's
+``Meta(extra={"unit": "m"})`` says one); a field whose type carries a ``description``
+(``Meta(description=...)``) ``must be <description>, got ...`` (or ``<description>, got
+...`` where the description says its own verb: ``must map each ...``, ``needs ...``); an
+unknown key lists every unknown key and the keys the table has; a missing key is named,
+in the field's own words where its type's ``Meta(extra={"missing": ...})`` gives them
+(``roles needs end_effector = { set = ... }``, ``no [arm] table; add one, e.g. ...``).
+Any other refusal keeps msgspec's own words (``Expected `str`, got `int```). An entry of a
+list that has a ``name`` is named before the message (``part 'trunk': parts[1]...``), and
+a table whose struct has a ``docs`` class variable (``docs: ClassVar[str] =
+"docs/robot.md: Arm"``) points there, the innermost such table on the path
+(``arm is missing key(s) max_point_speed_mps (docs/robot.md: Arm)``).
 
 msgspec was chosen over pydantic 2 for the command line's start-up and for its messages:
 its import is about 30 ms against pydantic's 45-71 ms, it is strict by default where asked,
@@ -94,12 +102,35 @@ def refusal(data: object, schema: object, text: str, prefix: str = "") -> Schema
     steps = _STEP.findall(where.rstrip("`"))
     node, value, path = _plain(schema, data), data, prefix
     described: tuple[str, str, object] | None = None  # the nearest table that says its shape
-    for name, index in steps:
+    docs = _docs(node)  # the nearest table's page in the docs
+    named: list[str] = []  # the named entries on the way: "part 'trunk'"
+    for k, (name, index) in enumerate(steps):
         if description := _description(node):
             described = (path, description, value)
         node, value, key = _step(node, value, name, index)
         node = _plain(node, value)
+        entry = value.get("name") if index.isdigit() and isinstance(value, Mapping) else None
+        if isinstance(entry, str) and steps[k + 1 :] != [("name", "")]:
+            named.append(f"{_singular(path)} {entry!r}")
         path = f"{path}.{key}" if path and not key.startswith("[") else f"{path}{key}"
+        docs = _docs(node) or docs
+    found = _worded(node, value, path, said, described)
+    if said.startswith("Object missing required field") and isinstance(found.value, list):
+        # a missing key: its own table's page
+        docs = _docs(_fields(node).get(found.value[0])) or docs
+    lead = f"{', '.join(named)}: " if named else ""
+    tail = f" ({docs})" if docs and docs not in found.message else ""
+    return SchemaError(found.name, f"{lead}{found.message}{tail}", found.value)
+
+
+def _worded(
+    node: object,
+    value: object,
+    path: str,
+    said: str,
+    described: tuple[str, str, object] | None,
+) -> SchemaError:
+    """The refusal of ``value`` (of type ``node``, at ``path``) that msgspec ``said``."""
     missing = re.fullmatch(r"Object missing required field `(.+)`", said)
     unknown = re.fullmatch(r"Object contains unknown field `(.+)`", said)
     if missing:  # every required key the table lacks, in the schema's order
@@ -107,11 +138,14 @@ def refusal(data: object, schema: object, text: str, prefix: str = "") -> Schema
         given = value if isinstance(value, Mapping) else {}
         keys = [k for k in fields if k not in given and k in _required(node)]
         keys = keys or [missing.group(1)]
+        name = f"{path}.{keys[0]}" if path else keys[0]
+        if said_so := _extra(fields.get(keys[0]), "missing"):  # the table's own words
+            return SchemaError(name, f"{path} {said_so}" if path else said_so, keys)
         hint = _description(fields.get(keys[0]))
         return SchemaError(
-            f"{path}.{keys[0]}" if path else keys[0],
+            name,
             f"{f'{path} is missing' if path else 'missing'} key(s) {', '.join(keys)}"
-            + (f": {keys[0]} must be {hint}" if hint else ""),
+            + (f": {keys[0]} {_must(hint)}" if hint else ""),
             keys,
         )
     if unknown and isinstance(value, Mapping):
@@ -123,17 +157,38 @@ def refusal(data: object, schema: object, text: str, prefix: str = "") -> Schema
             extra,
         )
     if description := _description(node):
-        return SchemaError(path, f"{path} must be {description}, got {value!r}", value)
+        return SchemaError(path, f"{path} {_must(description)}, got {value!r}", value)
     bound = _bounds(node)
     if bound is not None:
+        unit = _extra(node, "unit")
+        bound += f", {unit}" if unit else ""
         return SchemaError(path, f"{path} must be a number{bound}, got {value!r}", value)
+    said = re.sub(r", got `[^`]*`$", "", said)  # the value itself is said instead
     if described is not None:
         name, description, shown = described
         return SchemaError(
-            name, f"{name} must be {description}; {path}: {said}, got {value!r}", shown
+            name, f"{name} {_must(description)}; {path}: {said}, got {value!r}", shown
         )
-    said = re.sub(r", got `[^`]*`$", "", said)  # the value itself is said instead
     return SchemaError(path, f"{path}: {said}, got {value!r}", value)
+
+
+def _must(description: str) -> str:
+    """What a field must be, as its description says it: ``must be <description>``, or the
+    description itself where it says its verb (``must map each ...``, ``needs ...``)."""
+    return description if description.startswith(("must ", "needs ")) else f"must be {description}"
+
+
+def _singular(path: str) -> str:
+    """What one entry of the list at ``path`` is called: ``parts`` -> ``part``."""
+    last = re.split(r"[.\]]", path)[-1] or "entry"
+    return last[:-1] if last.endswith("s") else last
+
+
+def _docs(node: object) -> str | None:
+    """The docs page a table's struct points to (its ``docs`` class variable), if any."""
+    node = _unannotated(node)
+    found = getattr(node, "docs", None) if isinstance(node, type) else None
+    return found if isinstance(found, str) else None
 
 
 def _step(node: object, value: object, name: str, index: str) -> tuple[object, object, str]:
@@ -194,6 +249,12 @@ def _metas(node: object) -> list[msgspec.Meta]:
 
 def _description(node: object) -> str | None:
     return next((m.description for m in _metas(node) if m.description), None)
+
+
+def _extra(node: object, key: str) -> str | None:
+    """``key`` of the ``extra`` of ``node``'s metadata: a number's ``unit`` (``"m"``), a
+    field's words when it is ``missing`` (``"needs end_effector = { set = ... }"``)."""
+    return next((str(m.extra[key]) for m in _metas(node) if m.extra and key in m.extra), None)
 
 
 def _fields(node: object) -> dict[str, object]:

@@ -19,7 +19,7 @@ __all__ = ["BodyFile", "PartTable"]
 
 Joints = Annotated[list[str], Meta(description="an array of joint names")]
 #: m: a finger is 1 cm thick; a capsule over 1 m wide covers no body part.
-Radius = Annotated[float, Meta(ge=MIN_RADIUS_M, le=MAX_RADIUS_M)]
+Radius = Annotated[float, Meta(ge=MIN_RADIUS_M, le=MAX_RADIUS_M, extra={"unit": "m"})]
 
 
 class PartTable(Struct, frozen=True, forbid_unknown_fields=True):
@@ -38,7 +38,9 @@ class PartTable(Struct, frozen=True, forbid_unknown_fields=True):
     reach: Joints = []
     moves_with_body: Annotated[bool, Meta(description="true or false")] = False
     #: The body region of ISO/TS 15066 Annex A it is (power and force limiting).
-    region: Annotated[str, Meta(pattern=r"\S", description="a body region (text)")] | None = None
+    region: (
+        Annotated[str, Meta(pattern=r"\S", description="must name a body region (text)")] | None
+    ) = None
 
 
 class BodyFile(Struct, frozen=True, forbid_unknown_fields=True):

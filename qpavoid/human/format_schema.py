@@ -66,7 +66,7 @@ class JointRow(Struct, frozen=True, forbid_unknown_fields=True):
     name: Annotated[str, Meta(min_length=1, description="a joint's name (text)")]
     parent: Annotated[str, Meta(description="a joint name")] | None = None
     #: The longest plausible bone to the parent, m (0: unbounded).
-    max_bone_m: Annotated[float, Meta(ge=0.0, le=MAX_BONE_M)] = 0.0
+    max_bone_m: Annotated[float, Meta(ge=0.0, le=MAX_BONE_M, extra={"unit": "m"})] = 0.0
 
 
 class EvidenceTable(Struct, frozen=True, forbid_unknown_fields=True):
@@ -81,8 +81,9 @@ class EvidenceTable(Struct, frozen=True, forbid_unknown_fields=True):
 
 
 def _ceiling(key: str, low: float = 0.0) -> Meta:
-    """A ``[sensor]`` number's range: at least ``low``, at most its ceiling."""
-    return Meta(ge=low, le=SENSOR_CEILINGS[key])
+    """A ``[sensor]`` number's range: at least ``low``, at most its ceiling; its unit."""
+    unit = "Hz" if key.endswith("_hz") else "per s" if key.endswith("_per_s") else key[-1]
+    return Meta(ge=low, le=SENSOR_CEILINGS[key], extra={"unit": unit})
 
 
 class SensorTable(Struct, frozen=True, forbid_unknown_fields=True):
@@ -139,7 +140,9 @@ class RuleTable(Struct, frozen=True, forbid_unknown_fields=True):
     #: Where along ``lerp``'s two joints: in [-1, 2] (no point far off its joints).
     t: Annotated[float, Meta(ge=-1.0, le=2.0)] | None = None
     #: m: how far the true landmark may be from the point.
-    uncertainty_m: Annotated[float, Meta(ge=0.0, le=MAX_RULE_UNCERTAINTY_M)] = 0.0
+    uncertainty_m: Annotated[
+        float, Meta(ge=0.0, le=MAX_RULE_UNCERTAINTY_M, extra={"unit": "m"})
+    ] = 0.0
 
 
 #: A ``[landmarks]`` or ``[simulate]`` entry: a joint's name, or a table.
