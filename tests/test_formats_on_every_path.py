@@ -95,7 +95,7 @@ def test_an_unknown_format_in_the_calibration_is_refused_naming_the_sensor(tmp_p
     with pytest.raises(CalibrationError) as err:
         load_calibration(path)
     assert err.value.sensor == "left" and err.value.value == "kinect_v3"
-    assert "'left'" in str(err.value) and "kinect_v3" in str(err.value)
+    assert "sensors.left.format" in str(err.value) and "kinect_v3" in str(err.value)
     assert "k4abt" in str(err.value) and "\n" not in str(err.value)
     with pytest.raises(CalibrationError):
         SensorCalibration("a", POSE, format="nope")

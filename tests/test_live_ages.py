@@ -60,7 +60,10 @@ def test_a_calibration_files_latency_is_read_checked_and_written_back():
     again = calibration_from_dict(__import__("tomllib").loads(c.to_toml()))
     assert again["femto"].latency_s == 0.104
     for bad in (-0.01, 1.5, "0.1", True):
-        with pytest.raises(CalibrationError, match="latency_s must be a number from 0 to 1 s"):
+        with pytest.raises(
+            CalibrationError,
+            match=r"sensors\.femto\.latency_s must be a number at least 0 and at most 1, s",
+        ):
             calibration_from_dict({"sensors": {"femto": {**table, "latency_s": bad}}})
 
 

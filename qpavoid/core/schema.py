@@ -159,11 +159,12 @@ def _worded(
     if description := _description(node):
         return SchemaError(path, f"{path} {_must(description)}, got {value!r}", value)
     bound = _bounds(node)
-    if bound is not None:
+    if bound is not None and (bound or described is None):  # else the table's shape
         unit = _extra(node, "unit")
         bound += f", {unit}" if unit else ""
         return SchemaError(path, f"{path} must be a number{bound}, got {value!r}", value)
     said = re.sub(r", got `[^`]*`$", "", said)  # the value itself is said instead
+    said = re.sub(r"(of length .*), got (\d+)$", r"\1 (it has \2)", said)
     if described is not None:
         name, description, shown = described
         return SchemaError(
