@@ -95,3 +95,73 @@ def test_every_shipped_calibration_has_its_schema_s_shape():
     for path in paths:
         file = convert(read_toml(path, 2**20), CalibrationFile, _RefusedError)
         assert file.sensors and all(s.key_file for s in file.sensors.values())
+
+
+# --- key files (qpavoid.sensing.key_schema) --------------------------------------------------
+
+SECRET = "ab" * 32
+KEY_FILE = f'sensor = "cam"\n\n[[key]]\nid = 2\nsecret = "{SECRET}"\n'
+KEY_REFUSALS = [
+    (
+        "id = 2",
+        'id = "2"',
+        "key[0].id",
+        "key[0].id must be a whole number at least 0",
+    ),  # a wrong type
+    (  # out of range: ids are 32-bit
+        "id = 2",
+        "id = 4294967296",
+        "key[0].id",
+        "key[0].id must be a whole number at least 0 and at most 4294967295, got 4294967296",
+    ),
+    (  # an unknown key
+        "id = 2",
+        "id = 2\nkid = 3",
+        "key[0].kid",
+        "key[0] has unknown key(s) ['kid']; its keys are ['id', 'secret']",
+    ),
+    ("id = 2\n", "", "key[0].id", "key[0] is missing key(s) id (docs/security.md)"),  # missing
+    (  # a secret is never shown, even a wrong one
+        f'secret = "{SECRET}"',
+        f'secret = "{SECRET}0"',
+        "key[0].secret",
+        "key[0].secret must be 64 hex digits (256 bits), got <hidden> (docs/security.md)",
+    ),
+]
+
+
+def _keyed_cell(tmp_path: Path, old: str, new: str) -> Path:
+    assert old in KEY_FILE
+    key = tmp_path / "cam.key"
+    key.write_text(KEY_FILE.replace(old, new, 1))
+    key.chmod(0o600)
+    path = tmp_path / "calib.toml"
+    path.write_text(CALIBRATION + 'key_file = "cam.key"\n')
+    return path
+
+
+@pytest.mark.parametrize("old, new, name, message", KEY_REFUSALS)
+def test_a_key_file_of_the_wrong_shape_is_one_line_naming_the_path(
+    tmp_path, old, new, name, message
+):
+    with pytest.raises(CalibrationError) as info:
+        load_calibration(_keyed_cell(tmp_path, old, new))
+    text = str(info.value)
+    assert text.startswith(f"key file {tmp_path / 'cam.key'} of sensor 'cam': ")
+    assert "\n" not in text and message in text and SECRET not in text
+    assert info.value.name == name and info.value.value is None
+
+
+@pytest.mark.parametrize("old, new, name, message", KEY_REFUSALS)
+def test_a_run_with_a_key_file_of_the_wrong_shape_exits_2_in_one_line(
+    tmp_path, capsys, old, new, name, message
+):
+    path, out = _keyed_cell(tmp_path, old, new), tmp_path / "out"
+    assert main(["run", "--listen", "127.0.0.1:9", "--sensors", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and SECRET not in err and not out.exists()
+
+
+def test_a_key_file_of_the_right_shape_loads(tmp_path):
+    path = _keyed_cell(tmp_path, "id = 2", "id = 2")
+    assert load_calibration(path).keys["cam"].ids == (2,)

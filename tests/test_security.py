@@ -78,7 +78,11 @@ def test_a_key_file_round_trips_rotates_and_never_shows_its_secret(tmp_path):
         ("ok", 0o640, "lets its group or others"),
         ("ok", 0o604, "lets its group or others"),
         ('sensor = "b"\n', 0o600, "the key of sensor 'b'"),
-        ('sensor = "a"\n[[key]]\nid = 1\nsecret = "00"\n', 0o600, "not 64 hex digits"),
+        (
+            'sensor = "a"\n[[key]]\nid = 1\nsecret = "00"\n',
+            0o600,
+            r"key\[0\]\.secret must be 64 hex",
+        ),
         ('sensor = "a"\n', 0o600, "1 or 2"),
         ("x" * (MAX_KEY_FILE_BYTES + 1), 0o600, "more than the 4096"),
         ("ok3", 0o600, "1 or 2"),

@@ -162,7 +162,8 @@ def _worded(
     if bound is not None and (bound or described is None):  # else the table's shape
         unit = _extra(node, "unit")
         bound += f", {unit}" if unit else ""
-        return SchemaError(path, f"{path} must be a number{bound}, got {value!r}", value)
+        number = "a whole number" if _unannotated(node) is int else "a number"
+        return SchemaError(path, f"{path} must be {number}{bound}, got {value!r}", value)
     said = re.sub(r", got `[^`]*`$", "", said)  # the value itself is said instead
     said = re.sub(r"(of length .*), got (\d+)$", r"\1 (it has \2)", said)
     if described is not None:
@@ -286,9 +287,17 @@ def _bounds(node: object) -> str | None:
         return next((getattr(m, attr) for m in metas if getattr(m, attr) is not None), None)
 
     gt, ge, le, lt = first("gt"), first("ge"), first("le"), first("lt")
+
+    def shown(x: float) -> str:  # short, unless that loses digits (4294967295, not 4.29497e+09)
+        return f"{x:g}" if float(f"{x:g}") == x or not float(x).is_integer() else str(int(x))
+
     parts = []
-    if gt is not None or ge is not None:
-        parts.append(f"above {gt:g}" if gt is not None else f"at least {ge:g}")
-    if (le is not None and math.isfinite(le)) or lt is not None:
-        parts.append(f"at most {le:g}" if le is not None else f"below {lt:g}")
+    if gt is not None:
+        parts.append(f"above {shown(gt)}")
+    elif ge is not None:
+        parts.append(f"at least {shown(ge)}")
+    if le is not None and math.isfinite(le):
+        parts.append(f"at most {shown(le)}")
+    elif lt is not None:
+        parts.append(f"below {shown(lt)}")
     return "".join(f" {p}" if not k else f" and {p}" for k, p in enumerate(parts))

@@ -13,6 +13,10 @@ may read, write or run is refused), at most :data:`MAX_KEY_FILE_BYTES`::
     id = 1
     secret = "..."
 
+The file's shape is :class:`~qpavoid.sensing.key_schema.KeyFile`'s, refused in one line
+naming the field's path (``key[0].secret``) and never showing a secret; that the file is
+its owner's only, the sensor's and holds no id twice is checked here.
+
 A calibration file names each sensor's key file (``key_file``, relative to the calibration
 file) and may restrict the ids it accepts (``key_ids = [2, 1]``: the first signs). The
 secrets are never printed: a :class:`SensorKeys` shows its ids only.
@@ -24,7 +28,6 @@ the current key kept second, anything older dropped.
 from __future__ import annotations
 
 import os
-import re
 import secrets
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,6 +35,8 @@ from pathlib import Path
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import CalibrationError
 from qpavoid.core.file_bounds import read_toml
+from qpavoid.core.schema import convert
+from qpavoid.sensing.key_schema import KEY_BYTES, MAX_KEY_ID, MAX_KEYS, KeyFile
 
 __all__ = [
     "KEY_BYTES",
@@ -43,16 +48,9 @@ __all__ = [
     "toml_string",
 ]
 
-#: A key is 256 bits, the size of HMAC-SHA256's hash (RFC 2104: longer adds nothing).
-KEY_BYTES = 32
 #: A key file holds two keys of 64 hex digits and a name: 4 KiB leaves room for comments
 #: and refuses a file that is something else (a device, a log) before it is read whole.
 MAX_KEY_FILE_BYTES = 4096
-#: At most two keys are accepted at once: the new one and, during a rotation, the old one.
-MAX_KEYS = 2
-#: Key ids are sent as 32-bit unsigned integers.
-MAX_KEY_ID = 2**32 - 1
-_HEX = re.compile(r"[0-9a-fA-F]{64}")
 #: A sensor's name is sent in each datagram's header after a one-byte length.
 MAX_SENSOR_NAME_BYTES = 255
 
@@ -184,27 +182,23 @@ def load_key_file(path: str | Path, sensor: str) -> SensorKeys:
         raise fail("missing (write one with: qpavoid keygen " + sensor + f" --out {p})") from None
     except (OSError, ValueError) as exc:
         raise fail(one_line(exc)) from None
-    unknown = sorted(set(data) - {"sensor", "key"})
-    if unknown:
-        raise fail(f"unknown key {unknown[0]!r} (keys: sensor, [[key]])", unknown[0])
-    if "sensor" not in data:
-        raise fail("it names no sensor (sensor = NAME, then [[key]] tables)", "sensor")
-    if data.get("sensor") != sensor:
-        raise fail(f"it is the key of sensor {data.get('sensor')!r}", "sensor")
     entries = data.get("key")
-    if not isinstance(entries, list) or not 1 <= len(entries) <= MAX_KEYS:
-        raise fail(f"it must hold 1 or {MAX_KEYS} [[key]] tables (id, secret)", "key")
-    keys = []
-    for entry in entries:
-        kid = entry.get("id") if isinstance(entry, dict) else None
-        secret = entry.get("secret") if isinstance(entry, dict) else None
-        if not isinstance(entry, dict) or set(entry) != {"id", "secret"}:
-            raise fail("each [[key]] has exactly an id and a secret", "key")
-        if not isinstance(kid, int) or isinstance(kid, bool) or not 0 <= kid <= MAX_KEY_ID:
-            raise fail(f"key id {kid!r} is not an integer from 0 to {MAX_KEY_ID}", "id")
-        if not isinstance(secret, str) or not _HEX.fullmatch(secret):
-            raise fail(f"the secret of key {kid} is not {2 * KEY_BYTES} hex digits", "secret")
-        keys.append((kid, bytes.fromhex(secret)))
+    secrets_given = [
+        repr(entry["secret"])
+        for entry in (entries if isinstance(entries, list) else [])
+        if isinstance(entry, dict) and isinstance(entry.get("secret"), str)
+    ]
+
+    def refused(name: str, message: str, value: object) -> CalibrationError:
+        for secret in secrets_given:  # a secret is never shown, even a wrong one
+            message = message.replace(secret, "<hidden>")
+        return fail(message, name or "key_file")
+
+    named = data.get("sensor", sensor)
+    if isinstance(named, str) and named != sensor:  # another sensor's file: whatever its shape
+        raise fail(f"it is the key of sensor {named!r}", "sensor")
+    file = convert(data, KeyFile, refused)
+    keys = [(entry.id, bytes.fromhex(entry.secret)) for entry in file.key]
     if len({kid for kid, _ in keys}) != len(keys):
         raise fail("two keys have the same id", "id")
     return SensorKeys(sensor, tuple(keys))
