@@ -19,8 +19,8 @@ from qpavoid.control.qp.limits.velocity import VelocityLimit
 from qpavoid.control.qp.limits.velocity_damper import VelocityDamper
 from qpavoid.control.qp.one_pass import OnePass
 from qpavoid.control.qp.pieces import QPPiece
-from qpavoid.control.qp.problem import Assembler, QPProblem
-from qpavoid.control.qp.solver_kernels import hard_excess
+from qpavoid.control.qp.problem import Assembler, QPProblem, QPSolution
+from qpavoid.control.qp.solver_kernels import hard_excess, unreachable_row
 from qpavoid.control.qp.tasks.ee import EndEffectorTask
 from qpavoid.control.qp.tasks.elbow import ElbowClearanceTask
 from qpavoid.control.qp.tasks.posture import PostureTask
@@ -177,10 +177,20 @@ class QPController(Controller):
         """The QP of a tick (for inspection and cross-checks)."""
         return self.assembler(tick, self.config.control_period_s)
 
+    def _unreachable(self, prob: QPProblem, row: int) -> QPSolution:
+        """The solution of a problem whose row ``row`` no x within the bounds meets."""
+        pieces = ", ".join(n for n, rows in prob.rows.items() if rows.start <= row < rows.stop)
+        return QPSolution(
+            None, False, f"primal infeasible: row {row} ({pieces}) beyond the bounds", 0
+        )
+
     def act(self, tick: Tick) -> Command:
         writer = self.assembler if self.one_pass is None else self.one_pass
         prob = writer.fill(tick, self.config.control_period_s)
-        sol = self.backend.solve(prob)
+        # a row beyond the bounds: infeasible, said at once (a solver takes hundreds of
+        # iterations to say so, thousands at worst: a hold's every tick late)
+        row = unreachable_row(prob.G, prob.h, prob.lb, prob.ub, FEASIBILITY_TOL)
+        sol = self.backend.solve(prob) if row < 0 else self._unreachable(prob, row)
         info = {"solver": self.backend.name, "status": sol.status, "iterations": sol.iterations}
         if not sol.found or sol.x is None:
             reason = f"QP not solved ({self.backend.name}: {sol.status})"

@@ -25,6 +25,7 @@ __all__ = [
     "osqp_arrays",
     "problem_defect",
     "stacked_bounds",
+    "unreachable_row",
     "warm_up",
 ]
 
@@ -176,6 +177,33 @@ def hard_excess(
     return worst
 
 
+@njit(cache=True)
+def unreachable_row(
+    G: np.ndarray, h: np.ndarray, lb: np.ndarray, ub: np.ndarray, tol: float
+) -> int:
+    """The first row ``G_r x ≤ h_r`` that no ``x`` within ``lb ≤ x ≤ ub`` meets by ``tol``,
+    or −1: where ``min_{lb≤x≤ub} G_r x = Σ_j (G_rj lb_j if G_rj > 0 else G_rj ub_j)``
+    exceeds ``h_r + tol``, the problem is infeasible, whatever a solver would say, and after
+    how many iterations. A row with a slack (whose upper bound is +inf) never is; a row or
+    bound holding a NaN is not judged (the solver's checks refuse it)."""
+    for r in range(G.shape[0]):
+        if not h[r] < np.inf:
+            continue
+        low = 0.0
+        for j in range(G.shape[1]):
+            g = G[r, j]
+            if g > 0.0:
+                low += g * lb[j]
+            elif g < 0.0:
+                low += g * ub[j]
+            elif g != g:  # NaN: the row is the solver's checks' to refuse
+                low = np.nan
+                break
+        if low > h[r] + tol:
+            return r
+    return -1
+
+
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) the kernels, once per process."""
@@ -184,6 +212,7 @@ def warm_up() -> None:
         H, c, G, h = np.zeros((n, n)), np.zeros(n), np.zeros((2, n)), np.zeros(2)
         problem_defect(H, c, G, h, c, c)
         hard_excess(c, nv, c, c, G, h, 0, 2)
+        unreachable_row(G, h, c, c, 1e-5)
         flush_tiny(c, 1e-20)
         lower, upper = np.zeros(n + 2), np.zeros(n + 2)
         p_index, Px = np.zeros(n * (n + 1) // 2, dtype=np.int64), np.zeros(n * (n + 1) // 2)
