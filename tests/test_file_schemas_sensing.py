@@ -5,16 +5,20 @@ command line exit 2 in one line; every shipped file of the kind has its schema's
 
 from __future__ import annotations
 
+import typing
 from pathlib import Path
 
 import pytest
 
 from qpavoid.cli.commands import main
-from qpavoid.core.errors import CalibrationError
+from qpavoid.core.errors import CalibrationError, InputError
 from qpavoid.core.file_bounds import read_toml
 from qpavoid.core.schema import convert
 from qpavoid.sensing.calibration_file import load_calibration
 from qpavoid.sensing.calibration_schema import CalibrationFile
+from qpavoid.sensing.ros2_cell import load_cell
+from qpavoid.sensing.ros2_cell_schema import CellFile
+from qpavoid.sensing.ros2_types import DISTRIBUTIONS
 
 ROOT = Path(__file__).resolve().parents[1]
 EYE = "[[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]"
@@ -58,11 +62,32 @@ CALIBRATION_REFUSALS = [
 ]
 
 
-def _calibration(tmp_path: Path, old: str, new: str) -> Path:
-    assert old in CALIBRATION
-    path = tmp_path / "calib.toml"
-    path.write_text(CALIBRATION.replace(old, new, 1))
+def _written(path: Path, text: str, old: str, new: str) -> Path:
+    """``text`` with ``old`` replaced by ``new``, written to ``path``."""
+    assert old in text
+    path.write_text(text.replace(old, new, 1))
     return path
+
+
+def _calibration(tmp_path: Path, old: str, new: str) -> Path:
+    return _written(tmp_path / "calib.toml", CALIBRATION, old, new)
+
+
+def _refused(error: type[Exception], load, path: Path, start: str, message: str) -> Exception:
+    """``load(path)``'s refusal: one line, starting ``start``, saying ``message``."""
+    with pytest.raises(error) as info:
+        load(path)
+    text = str(info.value)
+    assert text.startswith(start) and "\n" not in text and message in text
+    return info.value
+
+
+def _exits_2(capsys, args: list[str], out: Path, message: str) -> str:
+    """The command line's refusal of ``args``: exit 2, one line saying ``message``."""
+    assert main([*args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and not out.exists()
+    return err
 
 
 @pytest.mark.parametrize("old, new, name, message", CALIBRATION_REFUSALS)
@@ -70,22 +95,18 @@ def test_a_calibration_of_the_wrong_shape_is_one_line_naming_the_path(
     tmp_path, old, new, name, message
 ):
     path = _calibration(tmp_path, old, new)
-    with pytest.raises(CalibrationError) as info:
-        load_calibration(path)
-    text = str(info.value)
-    assert text.startswith(f"calibration {path}: ") and "\n" not in text and message in text
-    assert info.value.name == name and info.value.sensor == "cam"
+    err = _refused(CalibrationError, load_calibration, path, f"calibration {path}: ", message)
+    assert isinstance(err, CalibrationError) and (err.name, err.sensor) == (name, "cam")
 
 
 @pytest.mark.parametrize("old, new, name, message", CALIBRATION_REFUSALS)
 def test_a_run_with_a_calibration_of_the_wrong_shape_exits_2_in_one_line(
     tmp_path, capsys, old, new, name, message
 ):
-    path, out = _calibration(tmp_path, old, new), tmp_path / "out"
-    args = ["run", "--listen", "127.0.0.1:9", "--sensors", str(path), "--out", str(out)]
-    assert main(args) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and message in err and not out.exists()
+    path = _calibration(tmp_path, old, new)
+    _exits_2(
+        capsys, ["run", "--listen", "127.0.0.1:9", "--sensors", str(path)], tmp_path / "o", message
+    )
 
 
 def test_every_shipped_calibration_has_its_schema_s_shape():
@@ -144,24 +165,85 @@ def _keyed_cell(tmp_path: Path, old: str, new: str) -> Path:
 def test_a_key_file_of_the_wrong_shape_is_one_line_naming_the_path(
     tmp_path, old, new, name, message
 ):
-    with pytest.raises(CalibrationError) as info:
-        load_calibration(_keyed_cell(tmp_path, old, new))
-    text = str(info.value)
-    assert text.startswith(f"key file {tmp_path / 'cam.key'} of sensor 'cam': ")
-    assert "\n" not in text and message in text and SECRET not in text
-    assert info.value.name == name and info.value.value is None
+    start = f"key file {tmp_path / 'cam.key'} of sensor 'cam': "
+    err = _refused(
+        CalibrationError, load_calibration, _keyed_cell(tmp_path, old, new), start, message
+    )
+    assert SECRET not in str(err) and isinstance(err, CalibrationError)
+    assert err.name == name and err.value is None
 
 
 @pytest.mark.parametrize("old, new, name, message", KEY_REFUSALS)
 def test_a_run_with_a_key_file_of_the_wrong_shape_exits_2_in_one_line(
     tmp_path, capsys, old, new, name, message
 ):
-    path, out = _keyed_cell(tmp_path, old, new), tmp_path / "out"
-    assert main(["run", "--listen", "127.0.0.1:9", "--sensors", str(path), "--out", str(out)]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and message in err and SECRET not in err and not out.exists()
+    path = _keyed_cell(tmp_path, old, new)
+    args = ["run", "--listen", "127.0.0.1:9", "--sensors", str(path)]
+    assert SECRET not in _exits_2(capsys, args, tmp_path / "out", message)
 
 
 def test_a_key_file_of_the_right_shape_loads(tmp_path):
     path = _keyed_cell(tmp_path, "id = 2", "id = 2")
     assert load_calibration(path).keys["cam"].ids == (2,)
+
+
+# --- ROS 2 cell files (qpavoid.sensing.ros2_cell_schema) -------------------------------------
+
+CELL = (
+    'distribution = "humble"\ndomain_id = 7\n[arm]\njoints = ["a", "b"]\n[output]\nrate_hz = 20.0\n'
+)
+CELL_REFUSALS = [
+    ("domain_id = 7", 'domain_id = "7"', "domain_id", "domain_id must be a whole number"),
+    (  # out of range
+        "rate_hz = 20.0",
+        "rate_hz = 500.0",
+        "output.rate_hz",
+        "output.rate_hz must be a number at least 1 and at most 30, Hz, got 500.0",
+    ),
+    (  # an unknown key
+        "rate_hz = 20.0",
+        "rate = 20.0",
+        "output.rate",
+        "output has unknown key(s) ['rate']; its keys are ['rate_hz', 'diagnostics', 'markers']",
+    ),
+    (  # a missing key
+        'distribution = "humble"\n',
+        "",
+        "distribution",
+        "missing key(s) distribution: distribution must be one of humble, jazzy (docs/ros2.md)",
+    ),
+]
+
+
+def _cell(tmp_path: Path, old: str, new: str) -> Path:
+    return _written(tmp_path / "cell.toml", CELL, old, new)
+
+
+@pytest.mark.parametrize("old, new, name, message", CELL_REFUSALS)
+def test_a_cell_file_of_the_wrong_shape_is_one_line_naming_the_path(
+    tmp_path, old, new, name, message
+):
+    path = _cell(tmp_path, old, new)
+    err = _refused(InputError, load_cell, path, f"ROS 2 cell file {path}: ", message)
+    assert isinstance(err, InputError) and err.name == name
+
+
+@pytest.mark.parametrize("old, new, name, message", CELL_REFUSALS)
+def test_a_run_with_a_cell_file_of_the_wrong_shape_exits_2_in_one_line(
+    tmp_path, capsys, old, new, name, message
+):
+    cell = _cell(tmp_path, old, new)
+    calib = _calibration(tmp_path, "weight = 1.0", 'topic = "/body_tracking_data"')
+    _exits_2(
+        capsys,
+        ["run", "--listen", f"ros2:{cell}", "--sensors", str(calib)],
+        tmp_path / "o",
+        message,
+    )
+
+
+def test_a_cell_file_of_the_right_shape_loads_and_its_distributions_are_the_library_s(tmp_path):
+    cell = load_cell(_cell(tmp_path, "domain_id = 7", "domain_id = 7"))
+    assert (cell.distribution, cell.domain_id, cell.arm.joints) == ("humble", 7, ("a", "b"))
+    distribution = typing.get_type_hints(CellFile, include_extras=True)["distribution"]
+    assert typing.get_args(typing.get_args(distribution)[0]) == DISTRIBUTIONS

@@ -65,7 +65,7 @@ def test_a_cell_file_is_read_and_a_bad_one_is_one_line(tmp_path):
         ('distribution = "foxy"\n', "distribution must be one of humble, jazzy"),
         ('distribution = "humble"\ndomain_id = 300\n', "domain_id must be"),
         ('distribution = "humble"\n[arm]\njoint_states = "joint states"\n', "ROS 2 topic"),
-        ('distribution = "humble"\nspeed = 1\n', "unknown key 'speed'"),
+        ('distribution = "humble"\nspeed = 1\n', "the top level has unknown key(s) ['speed']"),
         ('distribution = "humble"\n[arm]\njoints = ["a", "a"]\n', "twice"),
     ):
         good.write_text(text)

@@ -22,6 +22,7 @@ from qpavoid.sensing.calibration import (
     MAX_WEIGHT,
     MIN_WEIGHT,
 )
+from qpavoid.sensing.ros2_cell_schema import TOPIC
 
 __all__ = ["CalibrationFile", "SensorTable"]
 
@@ -33,9 +34,6 @@ Row = tuple[float, float, float, float]
 MAX_VIEW_DEG, MAX_RANGE_M = 360.0, 1000.0
 Angle = Annotated[float, Meta(gt=0.0, le=MAX_VIEW_DEG, extra={"unit": "deg"})]
 Distance = Annotated[float, Meta(ge=0.0, le=MAX_RANGE_M, extra={"unit": "m"})]
-#: A ROS 2 topic name: ``/`` then tokens of letters, digits and ``_``, not starting with a
-#: digit, no ``__`` (ROS 2's topic name rules), at most 256 characters.
-TOPIC = r"^(?!.*__)(/[A-Za-z_][A-Za-z0-9_]*)+$"
 
 
 class SensorTable(Struct, frozen=True, forbid_unknown_fields=True):
@@ -72,6 +70,7 @@ class SensorTable(Struct, frozen=True, forbid_unknown_fields=True):
     #: s, measured (``qpavoid latency``): a camera's is 0.03-0.25 s; above 1 s is a unit
     #: error, or no camera to drive a robot by.
     latency_s: Annotated[float, Meta(ge=0.0, le=MAX_LATENCY_S, extra={"unit": "s"})] | None = None
+    #: A ROS 2 topic name (ROS 2's rules), at most 256 characters.
     topic: (
         Annotated[
             str,

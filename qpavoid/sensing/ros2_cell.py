@@ -26,15 +26,15 @@ bytes, so that one malformed sample is one dropped sample) and :func:`write_raw`
 
 from __future__ import annotations
 
-import math
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from qpavoid.core.errors import InputError
 from qpavoid.core.file_bounds import read_toml
-from qpavoid.sensing.ros2_types import DISTRIBUTIONS, dds_topic, dds_type, need, typestore
+from qpavoid.core.schema import convert
+from qpavoid.sensing.ros2_cell_schema import CellFile
+from qpavoid.sensing.ros2_types import dds_topic, dds_type, need, typestore
 
 __all__ = [
     "ArmTopics",
@@ -48,14 +48,6 @@ __all__ = [
     "write_raw",
     "writer",
 ]
-
-#: A fully qualified ROS 2 topic name (as the calibration's ``topic`` key).
-_TOPIC = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)+$")
-_KEYS = {"distribution", "domain_id", "arm", "output"}
-_ARM_KEYS = {"joint_states", "controller", "joints", "subscriber_timeout_s"}
-_OUTPUT_KEYS = {"rate_hz", "diagnostics", "markers"}
-#: ROS 2's highest domain id on Linux (ports beyond it overflow).
-MAX_DOMAIN_ID = 232
 
 
 @dataclass(frozen=True)
@@ -129,105 +121,35 @@ class Cell:
     output: OutputTopics = OutputTopics()
 
 
-def _fail(path: str, message: str, key: str, value: object) -> InputError:
-    return InputError(f"ROS 2 cell file {path}: {message}", name=key, value=value)
-
-
-def _topic(path: str, key: str, value: object) -> str:
-    if not (isinstance(value, str) and _TOPIC.match(value) and "__" not in value):
-        raise _fail(
-            path, f"{key} must be a ROS 2 topic such as /joint_states, got {value!r}", key, value
-        )
-    return value
-
-
-def _number(path: str, key: str, value: object, low: float, high: float, unit: str) -> float:
-    ok = isinstance(value, int | float) and not isinstance(value, bool)
-    if not (ok and math.isfinite(float(value)) and low <= float(value) <= high):  # type: ignore[arg-type]
-        raise _fail(path, f"{key} must be {low:g} to {high:g} {unit}, got {value!r}", key, value)
-    return float(value)  # type: ignore[arg-type]
-
-
-def _table(path: str, data: dict, key: str, allowed: set[str]) -> dict:
-    table = data.get(key, {})
-    if not isinstance(table, dict):
-        raise _fail(path, f"[{key}] must be a table", key, table)
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        raise _fail(
-            path,
-            f"unknown key {unknown[0]!r} in [{key}] (it has {sorted(allowed)})",
-            key,
-            unknown[0],
-        )
-    return table
-
-
 def load_cell(path: str | Path) -> Cell:
     """The cell file at ``path``, checked (module docstring).
+
+    Its shape is :class:`~qpavoid.sensing.ros2_cell_schema.CellFile`'s; a joint named twice
+    is refused here.
 
     Raises
     ------
     InputError
-        One line: the file cannot be read, is no TOML, or a key is unknown, missing or wrong.
+        One line naming the field's path: the file cannot be read, is no TOML, or a key is
+        unknown, missing or wrong.
     """
     where = str(path)
-    data = read_toml(Path(path), 1 << 16)
-    unknown = sorted(set(data) - _KEYS)
-    if unknown:
-        raise _fail(where, f"unknown key {unknown[0]!r} (it has {sorted(_KEYS)})", unknown[0], None)
-    distribution = data.get("distribution")
-    if distribution not in DISTRIBUTIONS:
-        raise _fail(
-            where,
-            f"distribution must be one of {', '.join(DISTRIBUTIONS)}, got {distribution!r}",
-            "distribution",
-            distribution,
-        )
-    domain = data.get("domain_id", 0)
-    if isinstance(domain, bool) or not isinstance(domain, int) or not 0 <= domain <= MAX_DOMAIN_ID:
-        raise _fail(
-            where,
-            f"domain_id must be a whole number 0 to {MAX_DOMAIN_ID}, got {domain!r}",
-            "domain_id",
-            domain,
-        )
-    arm = _table(where, data, "arm", _ARM_KEYS)
-    joints = arm.get("joints", [])
-    if not (isinstance(joints, list) and all(isinstance(j, str) and j for j in joints)):
-        raise _fail(where, "[arm] joints must be a list of joint names", "joints", joints)
-    if len(set(joints)) != len(joints):
-        raise _fail(where, "[arm] joints names a joint twice", "joints", joints)
-    out = _table(where, data, "output", _OUTPUT_KEYS)
-    defaults, out_defaults = ArmTopics(), OutputTopics()
+
+    def fail(name: str, message: str, value: object) -> InputError:
+        return InputError(f"ROS 2 cell file {where}: {message}", name=name, value=value)
+
+    file = convert(read_toml(Path(path), 1 << 16), CellFile, fail)
+    arm, out = file.arm, file.output
+    if len(set(arm.joints)) != len(arm.joints):
+        raise fail("arm.joints", "arm.joints names a joint twice", arm.joints)
     return Cell(
         path=where,
-        distribution=str(distribution),
-        domain_id=int(domain),
+        distribution=file.distribution,
+        domain_id=file.domain_id,
         arm=ArmTopics(
-            joint_states=_topic(
-                where, "joint_states", arm.get("joint_states", defaults.joint_states)
-            ),
-            controller=_topic(where, "controller", arm.get("controller", defaults.controller)),
-            joints=tuple(joints),
-            subscriber_timeout_s=_number(
-                where,
-                "subscriber_timeout_s",
-                arm.get("subscriber_timeout_s", defaults.subscriber_timeout_s),
-                0.1,
-                60.0,
-                "s",
-            ),
+            arm.joint_states, arm.controller, tuple(arm.joints), arm.subscriber_timeout_s
         ),
-        output=OutputTopics(
-            rate_hz=_number(
-                where, "rate_hz", out.get("rate_hz", out_defaults.rate_hz), 1.0, 30.0, "Hz"
-            ),
-            diagnostics=_topic(
-                where, "diagnostics", out.get("diagnostics", out_defaults.diagnostics)
-            ),
-            markers=_topic(where, "markers", out.get("markers", out_defaults.markers)),
-        ),
+        output=OutputTopics(out.rate_hz, out.diagnostics, out.markers),
     )
 
 
