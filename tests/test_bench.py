@@ -30,6 +30,7 @@ def test_bench_writes_every_documented_key(tmp_path):
         "prelude",
         "analytic_law",
         "qp_assembly",
+        "qp_assembly/one_pass",
         "qp_solve/persistent_osqp",
         "qp_solve/daqp_direct",
     ):

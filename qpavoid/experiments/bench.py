@@ -9,7 +9,9 @@ stable (docs/performance.md):
 * ``stages``: ``kinematics``, ``human_geometry``, ``sphere_table``, ``capsule_table``,
   ``perception`` (tracker update: lost joints, velocities), ``fusion`` (two sensors, one
   person: add + fuse), ``analytic_law`` (eqs. 4-9 after the prelude), ``prelude``,
-  ``qp_assembly``, ``qp_solve/persistent_osqp``, ``qp_solve/daqp_direct`` (the ``daqp``
+  ``qp_assembly`` (piece by piece, the assembler), ``qp_assembly/one_pass`` (the standard
+  pieces in one compiled call, as the loop writes them), ``qp_solve/persistent_osqp``,
+  ``qp_solve/daqp_direct`` (the ``daqp``
   backend, when daqp is installed) and ``qp_solve/<solver>`` for each qpsolvers solver;
 * ``ticks``: ``<controller>/<distance>/<safety>`` for both controllers (``analytic``,
   ``qp``; and ``qp_daqp``, the QP controller on the ``daqp`` backend, when
@@ -128,6 +130,9 @@ def run_bench(quick: bool = False, robot: str = "iiwa14") -> dict[str, Any]:
     stages["prelude"] = _timed(partial(_measure, qp), states, repeat)
     stages["analytic_law"] = _timed(analytic.act, ticks, repeat)
     stages["qp_assembly"] = _timed(qp.problem, ticks, repeat)
+    if qp.one_pass is not None:
+        fill = qp.one_pass.fill
+        stages["qp_assembly/one_pass"] = _timed(lambda t: fill(t, 0.01), ticks, repeat)
     problems = [qp.problem(t) for t in ticks]
     stages["qp_solve/persistent_osqp"] = _timed(qp.backend.solve, problems, repeat)
     kinds = ["analytic", "qp"]
