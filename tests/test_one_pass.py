@@ -101,6 +101,13 @@ def test_a_table_of_another_size_is_refused_not_written():
     bad = replace(tick, human_approach=np.zeros(tick.human_approach.size + 1))
     with pytest.raises(ValueError, match="set × part pairs"):
         probe.one_pass.fill(bad, 0.01)
+    for wrong in (  # a joint too many anywhere: refused before any write
+        replace(tick, limits=np.ones(tick.q.size + 1)),
+        replace(tick, q=np.zeros(tick.q.size + 1)),
+        replace(tick, command_box=(np.zeros(tick.q.size + 1), np.ones(tick.q.size + 1))),
+    ):
+        with pytest.raises(ValueError, match="joints for a problem of"):
+            probe.one_pass.fill(wrong, 0.01)
     for n in ARRAYS:
         np.testing.assert_array_equal(getattr(probe.assembler._filled, n), before[n])
 

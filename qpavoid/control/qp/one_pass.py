@@ -197,6 +197,7 @@ class OnePass:
         self._damper, self._ee, self._position = damper, ee, position
         self._separation = separation
         self._damper_start = rows[damper.name].start
+        self._nv = len(position.q_min)
         self._none = np.zeros(0)
         self._constant = (assembler.H0, assembler.c0, assembler.lb0, assembler.ub0)
 
@@ -235,6 +236,12 @@ class OnePass:
             )
         pairs = pair_inputs(table, tick.kin)
         assert tick.kin.ee_jacobian is not None  # a tick's kinematics carry the Jacobians
+        nv = self._nv  # and one column per joint everywhere
+        joints = [tick.q.shape[0], tick.limits.shape[0], tick.kin.ee_jacobian.shape[-1]]
+        joints += [pairs[3].shape[-1], pairs[4].shape[-1]]
+        joints += [] if box is None else [box[0].shape[0], box[1].shape[0]]
+        if any(size != nv for size in joints):
+            raise ValueError(f"a tick of {joints} joints for a problem of {nv}")
         standard_problem(
             *self._constant,
             kernel_input(tick.kin.ee_jacobian, np.float64),
