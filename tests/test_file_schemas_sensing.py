@@ -9,8 +9,8 @@ import typing
 from pathlib import Path
 
 import pytest
+from schema_files import RefusedError, exits_2, refused, written
 
-from qpavoid.cli.commands import main
 from qpavoid.core.errors import CalibrationError, InputError
 from qpavoid.core.file_bounds import read_toml
 from qpavoid.core.schema import convert
@@ -23,12 +23,6 @@ from qpavoid.sensing.ros2_types import DISTRIBUTIONS
 ROOT = Path(__file__).resolve().parents[1]
 EYE = "[[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]"
 CALIBRATION = f'cell = "c"\n\n[sensors.cam]\nbase_from_camera = {EYE}\nweight = 1.0\n'
-
-
-class _RefusedError(Exception):
-    def __init__(self, name: str, message: str, value: object) -> None:
-        super().__init__(message)
-        self.name, self.value = name, value
 
 
 # --- calibration files (qpavoid.sensing.calibration_schema) ----------------------------------
@@ -62,32 +56,8 @@ CALIBRATION_REFUSALS = [
 ]
 
 
-def _written(path: Path, text: str, old: str, new: str) -> Path:
-    """``text`` with ``old`` replaced by ``new``, written to ``path``."""
-    assert old in text
-    path.write_text(text.replace(old, new, 1))
-    return path
-
-
 def _calibration(tmp_path: Path, old: str, new: str) -> Path:
-    return _written(tmp_path / "calib.toml", CALIBRATION, old, new)
-
-
-def _refused(error: type[Exception], load, path: Path, start: str, message: str) -> Exception:
-    """``load(path)``'s refusal: one line, starting ``start``, saying ``message``."""
-    with pytest.raises(error) as info:
-        load(path)
-    text = str(info.value)
-    assert text.startswith(start) and "\n" not in text and message in text
-    return info.value
-
-
-def _exits_2(capsys, args: list[str], out: Path, message: str) -> str:
-    """The command line's refusal of ``args``: exit 2, one line saying ``message``."""
-    assert main([*args, "--out", str(out)]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and message in err and not out.exists()
-    return err
+    return written(tmp_path / "calib.toml", CALIBRATION, old, new)
 
 
 @pytest.mark.parametrize("old, new, name, message", CALIBRATION_REFUSALS)
@@ -95,7 +65,7 @@ def test_a_calibration_of_the_wrong_shape_is_one_line_naming_the_path(
     tmp_path, old, new, name, message
 ):
     path = _calibration(tmp_path, old, new)
-    err = _refused(CalibrationError, load_calibration, path, f"calibration {path}: ", message)
+    err = refused(CalibrationError, load_calibration, path, f"calibration {path}: ", message)
     assert isinstance(err, CalibrationError) and (err.name, err.sensor) == (name, "cam")
 
 
@@ -104,7 +74,7 @@ def test_a_run_with_a_calibration_of_the_wrong_shape_exits_2_in_one_line(
     tmp_path, capsys, old, new, name, message
 ):
     path = _calibration(tmp_path, old, new)
-    _exits_2(
+    exits_2(
         capsys, ["run", "--listen", "127.0.0.1:9", "--sensors", str(path)], tmp_path / "o", message
     )
 
@@ -114,7 +84,7 @@ def test_every_shipped_calibration_has_its_schema_s_shape():
     paths = sorted((ROOT / "docs" / "calibrations").glob("*.toml"))
     assert len(paths) == 5
     for path in paths:
-        file = convert(read_toml(path, 2**20), CalibrationFile, _RefusedError)
+        file = convert(read_toml(path, 2**20), CalibrationFile, RefusedError)
         assert file.sensors and all(s.key_file for s in file.sensors.values())
 
 
@@ -166,7 +136,7 @@ def test_a_key_file_of_the_wrong_shape_is_one_line_naming_the_path(
     tmp_path, old, new, name, message
 ):
     start = f"key file {tmp_path / 'cam.key'} of sensor 'cam': "
-    err = _refused(
+    err = refused(
         CalibrationError, load_calibration, _keyed_cell(tmp_path, old, new), start, message
     )
     assert SECRET not in str(err) and isinstance(err, CalibrationError)
@@ -179,7 +149,7 @@ def test_a_run_with_a_key_file_of_the_wrong_shape_exits_2_in_one_line(
 ):
     path = _keyed_cell(tmp_path, old, new)
     args = ["run", "--listen", "127.0.0.1:9", "--sensors", str(path)]
-    assert SECRET not in _exits_2(capsys, args, tmp_path / "out", message)
+    assert SECRET not in exits_2(capsys, args, tmp_path / "out", message)
 
 
 def test_a_key_file_of_the_right_shape_loads(tmp_path):
@@ -216,7 +186,7 @@ CELL_REFUSALS = [
 
 
 def _cell(tmp_path: Path, old: str, new: str) -> Path:
-    return _written(tmp_path / "cell.toml", CELL, old, new)
+    return written(tmp_path / "cell.toml", CELL, old, new)
 
 
 @pytest.mark.parametrize("old, new, name, message", CELL_REFUSALS)
@@ -224,7 +194,7 @@ def test_a_cell_file_of_the_wrong_shape_is_one_line_naming_the_path(
     tmp_path, old, new, name, message
 ):
     path = _cell(tmp_path, old, new)
-    err = _refused(InputError, load_cell, path, f"ROS 2 cell file {path}: ", message)
+    err = refused(InputError, load_cell, path, f"ROS 2 cell file {path}: ", message)
     assert isinstance(err, InputError) and err.name == name
 
 
@@ -234,7 +204,7 @@ def test_a_run_with_a_cell_file_of_the_wrong_shape_exits_2_in_one_line(
 ):
     cell = _cell(tmp_path, old, new)
     calib = _calibration(tmp_path, "weight = 1.0", 'topic = "/body_tracking_data"')
-    _exits_2(
+    exits_2(
         capsys,
         ["run", "--listen", f"ros2:{cell}", "--sensors", str(calib)],
         tmp_path / "o",

@@ -165,7 +165,7 @@ def test_a_malformed_region_file_is_one_line_naming_the_file_and_the_key(tmp_pat
     err = _refused(
         tmp_path,
         REGIONS_TEXT.replace("effective_mass_kg = 0.6\n", ""),
-        r"regions\[9\] \(hand_finger\): missing key\(s\) \['effective_mass_kg'\]",
+        r"region 'hand_finger': regions\[9\] is missing key\(s\) effective_mass_kg",
     )
     assert err.name == "regions[9].effective_mass_kg"
     err = _refused(
@@ -183,7 +183,8 @@ def test_a_malformed_region_file_is_one_line_naming_the_file_and_the_key(tmp_pat
             "spring_constant_n_per_mm = 75.0\neffective_mass_kg = 0.6",
             "spring_constant_n_per_mm = 75000.0\neffective_mass_kg = 0.6",
         ),
-        "spring_constant_n_per_mm must be at most 1000 N/mm",
+        r"regions\[9\].spring_constant_n_per_mm must be a number above 0 and at most 1000, N/mm, "
+        r"got 75000.0 \(a unit error\?\)",
     )
     assert err.value == 75000.0
     err = _refused(

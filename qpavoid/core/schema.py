@@ -17,7 +17,9 @@ The wording is the project's: a number ``must be a number at least 0 and at most
 ...`` where the description says its own verb: ``must map each ...``, ``needs ...``); an
 unknown key lists every unknown key and the keys the table has; a missing key is named,
 in the field's own words where its type's ``Meta(extra={"missing": ...})`` gives them
-(``roles needs end_effector = { set = ... }``, ``no [arm] table; add one, e.g. ...``).
+(``roles needs end_effector = { set = ... }``, ``no [arm] table; add one, e.g. ...``); a
+number beyond its upper bound says what that most likely is where its type's
+``Meta(extra={"beyond": ...})`` does (``..., N/mm, got 75000.0 (a unit error?)``).
 Any other refusal keeps msgspec's own words (``Expected `str`, got `int```). An entry of a
 list that has a ``name`` is named before the message (``part 'trunk': parts[1]...``), and
 a table whose struct has a ``docs`` class variable (``docs: ClassVar[str] =
@@ -163,7 +165,9 @@ def _worded(
         unit = _extra(node, "unit")
         bound += f", {unit}" if unit else ""
         number = "a whole number" if _unannotated(node) is int else "a number"
-        return SchemaError(path, f"{path} must be {number}{bound}, got {value!r}", value)
+        beyond = _extra(node, "beyond") if _above(node, value) else None
+        why = f" ({beyond})" if beyond else ""
+        return SchemaError(path, f"{path} must be {number}{bound}, got {value!r}{why}", value)
     said = re.sub(r", got `[^`]*`$", "", said)  # the value itself is said instead
     said = re.sub(r"(of length .*), got (\d+)$", r"\1 (it has \2)", said)
     if described is not None:
@@ -282,11 +286,7 @@ def _bounds(node: object) -> str | None:
     if _unannotated(node) not in (float, int):
         return None
     metas = _metas(node)
-
-    def first(attr: str) -> float | None:
-        return next((getattr(m, attr) for m in metas if getattr(m, attr) is not None), None)
-
-    gt, ge, le, lt = first("gt"), first("ge"), first("le"), first("lt")
+    gt, ge, le, lt = (_first(metas, attr) for attr in ("gt", "ge", "le", "lt"))
 
     def shown(x: float) -> str:  # short, unless that loses digits (4294967295, not 4.29497e+09)
         return f"{x:g}" if float(f"{x:g}") == x or not float(x).is_integer() else str(int(x))
@@ -301,3 +301,17 @@ def _bounds(node: object) -> str | None:
     elif lt is not None:
         parts.append(f"below {shown(lt)}")
     return "".join(f" {p}" if not k else f" and {p}" for k, p in enumerate(parts))
+
+
+def _first(metas: list[msgspec.Meta], attr: str) -> float | None:
+    """The outermost of ``metas``' bounds ``attr`` (``"gt"``, ``"le"``, ...), if any."""
+    return next((getattr(m, attr) for m in metas if getattr(m, attr) is not None), None)
+
+
+def _above(node: object, value: object) -> bool:
+    """Whether ``value`` is a number beyond the upper bound of the number type ``node``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    metas = _metas(node)
+    le, lt = _first(metas, "le"), _first(metas, "lt")
+    return (le is not None and value > le) or (lt is not None and value >= lt)

@@ -48,11 +48,11 @@ from __future__ import annotations
 import functools
 import math
 import numbers
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+import msgspec
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -60,6 +60,8 @@ from qpavoid.arm.dynamics import MAX_PAYLOAD_KG
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import DataFileError, InputError
 from qpavoid.core.file_bounds import NotTOMLError, read_toml
+from qpavoid.core.schema import convert
+from qpavoid.laws.regions_schema import CONTACT_KINDS, RegionsFile, RegionTable
 
 __all__ = [
     "BODY_REGIONS",
@@ -78,18 +80,8 @@ __all__ = [
 
 #: The body regions of ISO/TS 15066 Annex A (Tables A.2 and A.3), with their sources.
 BODY_REGIONS_FILE = Path(__file__).with_name("body_regions.toml")
-#: A region's contact kinds: transient contact permitted (power and force limiting), or no
-#: contact at all (speed and separation monitoring alone).
-CONTACT_KINDS = ("transient", "none")
 #: The largest body-region file read, bytes (the bundled one is 8 kB).
 MAX_REGIONS_FILE_BYTES = 1 << 20
-#: Plausible bounds of a region's numbers (beyond them, a unit error: a spring constant in N/m
-#: where N/mm is asked reads 1000 times too stiff): the TS's forces are 65-220 N, its spring
-#: constants 10-150 N/mm, its masses 0.6-75 kg. The transient factor is the TS's own bound:
-#: transient contact may reach at most twice the quasi-static limit, never more.
-MAX_FORCE_N, MAX_SPRING_N_PER_MM, MAX_MASS_KG = 1000.0, 1000.0, 200.0
-MIN_TRANSIENT_FACTOR, MAX_TRANSIENT_FACTOR = 1.0, 2.0
-_NAME = re.compile(r"[a-z][a-z0-9_]*\Z")
 
 
 @dataclass(frozen=True)
@@ -120,9 +112,9 @@ class BodyRegion:
     Raises
     ------
     InputError
-        For a name that is not snake_case, an empty title or source, an unknown contact kind,
-        or a number that is not a finite number above 0 within its bound (the module's
-        constants); ``name`` is the field.
+        For a field not of :class:`~qpavoid.laws.regions_schema.RegionTable`'s shape: a
+        name that is not snake_case, an empty title or source, an unknown contact kind, or
+        a number that is not a number within its bounds; ``name`` is the field.
     """
 
     name: str
@@ -135,48 +127,14 @@ class BodyRegion:
     source: str
 
     def __post_init__(self) -> None:
-        if not isinstance(self.name, str) or not _NAME.match(self.name):
-            raise InputError(
-                f"name must be a snake_case name ([a-z][a-z0-9_]*), got {self.name!r}",
-                name="name",
-                value=self.name,
-            )
-        for key in ("title", "source"):
-            text = getattr(self, key)
-            if not isinstance(text, str) or not text.strip():
-                raise InputError(
-                    f"{key} must be a non-empty text, got {text!r}", name=key, value=text
-                )
-        if self.contact not in CONTACT_KINDS:
-            raise InputError(
-                f"contact must be one of {', '.join(map(repr, CONTACT_KINDS))}, "
-                f"got {self.contact!r}",
-                name="contact",
-                value=self.contact,
-            )
-        for key, low, high, unit in (
-            ("max_force_n", 0.0, MAX_FORCE_N, " N"),
-            ("spring_constant_n_per_mm", 0.0, MAX_SPRING_N_PER_MM, " N/mm"),
-            ("effective_mass_kg", 0.0, MAX_MASS_KG, " kg"),
-            ("transient_factor", MIN_TRANSIENT_FACTOR, MAX_TRANSIENT_FACTOR, ""),
-        ):
-            value = getattr(self, key)
-            number = float(value) if _is_real(value) else math.nan
-            strict = key != "transient_factor"
-            if not (math.isfinite(number) and (number > low if strict else number >= low)):
-                bound = f"{'above' if strict else 'at least'} {low:g}"
-                raise InputError(
-                    f"{key} must be a number {bound} and at most {high:g}{unit}, got {value!r}",
-                    name=key,
-                    value=value,
-                )
-            if number > high:
-                raise InputError(
-                    f"{key} must be at most {high:g}{unit} (a unit error?), got {value!r}",
-                    name=key,
-                    value=value,
-                )
-            object.__setattr__(self, key, number)
+        def fail(name: str, message: str, value: object) -> InputError:
+            return InputError(message, name=name, value=value)
+
+        given = {key: getattr(self, key) for key in _FIELDS}  # numpy's numbers as floats
+        given |= {k: float(v) for k, v in given.items() if k in _NUMBERS and _is_real(v)}
+        region = convert(given, RegionTable, fail)
+        for key in _NUMBERS:
+            object.__setattr__(self, key, getattr(region, key))
 
     @property
     def spring_constant_n_per_m(self) -> float:
@@ -200,63 +158,45 @@ def _is_real(value: object) -> bool:
 
 
 _FIELDS = tuple(f.name for f in fields(BodyRegion))
+_NUMBERS = tuple(key for key in _FIELDS if key.endswith(("_n", "_factor", "_mm", "_kg")))
 
 
 def load_regions(path: str | Path | None = None) -> dict[str, BodyRegion]:
     """The body regions of the file at ``path`` (default: the bundled
     ``body_regions.toml``), by name, in the file's order.
 
+    The file's shape is :class:`~qpavoid.laws.regions_schema.RegionsFile`'s, refused in one
+    line naming the field's path (``region 'hand_finger': regions[9].max_force_n must be a
+    number above 0 ...``); two regions of one name are refused here.
+
     Raises
     ------
     DataFileError
-        (an :class:`InputError`) in one line naming the file and the key: a file that cannot
-        be read or is not TOML, a key other than ``regions``, no ``[[regions]]`` table, an
-        unknown or missing key in a region, two regions of one name, an unknown contact kind,
-        or a number that is not a finite number above 0 (within the module's bounds).
+        (an :class:`InputError`) in one line naming the file and the key's path: a file that
+        cannot be read or is not TOML, a key other than ``regions``, no ``[[regions]]``
+        table, an unknown or missing key in a region, an unknown contact kind, a number out
+        of its bounds, or two regions of one name.
     """
     file = BODY_REGIONS_FILE if path is None else Path(path)
 
-    def fail(message: str, key: str | None, value: object) -> DataFileError:
-        return DataFileError(f"{file}: {message}", path=file, name=key, value=value)
+    def fail(key: str | None, message: str, value: object) -> DataFileError:
+        return DataFileError(f"{file}: {message}", path=file, name=key or None, value=value)
 
     try:
         data = read_toml(file, MAX_REGIONS_FILE_BYTES)
     except NotTOMLError as exc:
-        raise fail(f"not TOML: {one_line(exc)}", None, None) from None
+        raise fail(None, f"not TOML: {one_line(exc)}", None) from None
     except (OSError, ValueError) as exc:
-        raise fail(f"cannot read the file: {one_line(exc)}", None, None) from None
-    unknown = sorted(set(data) - {"regions"})
-    if unknown:
-        raise fail(
-            f"unknown key(s) {unknown}; the file holds [[regions]] tables only", unknown[0], unknown
-        )
-    rows = data.get("regions")
-    if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
-        raise fail(f"regions must be one or more [[regions]] tables, got {rows!r}", "regions", rows)
+        raise fail(None, f"cannot read the file: {one_line(exc)}", None) from None
     out: dict[str, BodyRegion] = {}
-    for k, row in enumerate(rows):
-        label = f"regions[{k}]" + (f" ({row['name']})" if isinstance(row.get("name"), str) else "")
-        unknown = sorted(set(row) - set(_FIELDS))
-        missing = [key for key in _FIELDS if key not in row]
-        if unknown or missing:
-            key = (unknown or missing)[0]
-            what = f"unknown key(s) {unknown}" if unknown else f"missing key(s) {missing}"
+    for k, row in enumerate(convert(data, RegionsFile, fail).regions):
+        if row.name in out:
             raise fail(
-                f"{label}: {what}; the keys are {', '.join(_FIELDS)}",
-                f"regions[{k}].{key}",
-                row.get(key),
-            )
-        try:
-            region = BodyRegion(**row)
-        except InputError as exc:
-            raise fail(f"{label}: {exc}", f"regions[{k}].{exc.name}", exc.value) from None
-        if region.name in out:
-            raise fail(
-                f"{label}: a second region called {region.name!r}",
                 f"regions[{k}].name",
-                region.name,
+                f"regions[{k}].name: a second region called {row.name!r}",
+                row.name,
             )
-        out[region.name] = region
+        out[row.name] = BodyRegion(**msgspec.structs.asdict(row))
     return out
 
 
