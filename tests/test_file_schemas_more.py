@@ -1,19 +1,26 @@
 """The shape of the last user files, checked by their schemas (msgspec): for each kind (the
-body-region file, ...) a wrong type, an out-of-range value, an unknown key and a missing key
-are each one line naming the field's path, through the command line (where a flag reads
-the file) exit 2 in one line; every shipped file of the kind has its schema's shape."""
+body-region file, a Franka description's model file, ...) a wrong type, an out-of-range
+value, an unknown key and a missing key are each one line naming the field's path, through
+the command line (where a flag reads the file) exit 2 in one line; every shipped file of
+the kind has its schema's shape."""
 
 from __future__ import annotations
 
 import re
+import shutil
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
-from schema_files import RefusedError, refused, written
+from schema_files import RefusedError, exits_2, refused, written
 
-from qpavoid.core.errors import DataFileError
+import qpavoid
+from qpavoid.core.errors import DataFileError, RobotDescriptionError
 from qpavoid.core.file_bounds import read_toml
 from qpavoid.core.schema import convert
+from qpavoid.drive import franka
+from qpavoid.drive.franka_model import MODEL_FILE, FrankaModel, bundled_models
+from qpavoid.drive.franka_model_schema import ModelFile
 from qpavoid.laws.pfl import BODY_REGIONS_FILE, PFLConfig, load_regions
 from qpavoid.laws.regions_schema import RegionsFile
 
@@ -114,3 +121,92 @@ def test_every_shipped_region_file_has_its_schema_s_shape():
     assert paths == [BODY_REGIONS_FILE]
     file = convert(read_toml(BODY_REGIONS_FILE, 2**20), RegionsFile, RefusedError)
     assert len(file.regions) == len(load_regions()) == 12
+
+
+# --- Franka model files (qpavoid.drive.franka_model_schema) ----------------------------------
+
+FR3 = Path(qpavoid.load_robot("fr3").path).parent
+MODEL = (FR3 / MODEL_FILE).read_text()
+VERSIONS = "server_versions = [6, 7, 8, 9, 10]"
+MODEL_REFUSALS = [
+    (  # a wrong type
+        VERSIONS,
+        "server_versions = [6, 7, 8, 9, 10.0]",
+        "server_versions[4]",
+        "server_versions[4] must be a whole number at least 1 and at most 65535, got 10.0 "
+        "(docs/real-robot.md §1b)",
+    ),
+    (  # out of range
+        VERSIONS,
+        "server_versions = [0]",
+        "server_versions[0]",
+        "server_versions[0] must be a whole number at least 1 and at most 65535, got 0",
+    ),
+    (  # none at all
+        VERSIONS,
+        "server_versions = []",
+        "server_versions",
+        "server_versions must list the versions of libfranka's protocol the arm speaks, whole "
+        "numbers from 1 to 65535 (server_versions = [10]), got []",
+    ),
+    (  # an unknown key
+        VERSIONS,
+        VERSIONS + "\nwhoami = 1",
+        "whoami",
+        "the top level has unknown key(s) ['whoami']; its keys are ['model', 'server_versions', "
+        "'sources'] (docs/real-robot.md §1b)",
+    ),
+    (  # an unknown source
+        "[sources]\n",
+        '[sources]\nmodle = "x"\n',
+        "sources.modle",
+        "sources has unknown key(s) ['modle']; its keys are ['model', 'server_versions']",
+    ),
+    (  # a missing key
+        'model = "FR3"\n',
+        "",
+        "model",
+        'missing key(s) model: model must name the arm (model = "FR3") (docs/real-robot.md §1b)',
+    ),
+    ('model = "FR3"', 'model = " "', "model", "model must name the arm (model = \"FR3\"), got ' '"),
+]
+
+
+def _fr3(tmp_path: Path, old: str, new: str) -> Path:
+    """A copy of the FR3's description whose franka.toml has ``old`` replaced by ``new``."""
+    folder = tmp_path / "myfr3"
+    shutil.copytree(FR3, folder, ignore=shutil.ignore_patterns("__pycache__"))
+    written(folder / MODEL_FILE, MODEL, old, new)
+    return folder
+
+
+@pytest.mark.parametrize("old, new, name, message", MODEL_REFUSALS)
+def test_a_franka_model_file_of_the_wrong_shape_is_one_line_naming_the_path(
+    tmp_path, old, new, name, message
+):
+    path = _fr3(tmp_path, old, new) / MODEL_FILE
+    err = refused(
+        RobotDescriptionError, lambda p: FrankaModel.read(p, "myfr3"), path, f"{path}: ", message
+    )
+    assert isinstance(err, RobotDescriptionError) and (err.name, err.path) == (name, path)
+
+
+@pytest.mark.parametrize("old, new, name, message", MODEL_REFUSALS)
+def test_a_run_on_an_fr3_whose_model_file_is_of_the_wrong_shape_exits_2_in_one_line(
+    tmp_path, capsys, monkeypatch, old, new, name, message
+):
+    """Refused before connecting: a franky that cannot make a robot stands in."""
+    monkeypatch.setattr(franka, "franky", SimpleNamespace())
+    folder = _fr3(tmp_path, old, new)
+    args = ["run", "free", "--robot", str(folder), "--arm", "franka:127.0.0.1"]
+    exits_2(capsys, [*args, "--max-time", "0.1"], tmp_path / "out", message)
+
+
+def test_every_shipped_franka_model_file_has_its_schema_s_shape():
+    """robots/fr3/franka.toml and robots/panda/franka.toml, each with its sources."""
+    paths = sorted(Path(qpavoid.robots.__file__).parent.glob(f"*/{MODEL_FILE}"))
+    assert [p.parent.name for p in paths] == ["fr3", "panda"]
+    for path in paths:
+        file = convert(read_toml(path, 2**16), ModelFile, RefusedError)
+        assert file.sources.model and file.sources.server_versions
+    assert [m.robot for m in bundled_models()] == ["fr3", "panda"]

@@ -25,11 +25,13 @@ from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
-from qpavoid.arm.fields import unknown_keys
+from qpavoid.arm.fields import refused
 from qpavoid.arm.model import Robot
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import ArmError, InputError, RobotDescriptionError
 from qpavoid.core.file_bounds import NotTOMLError, read_toml
+from qpavoid.core.schema import convert
+from qpavoid.drive.franka_model_schema import ModelFile
 
 __all__ = [
     "BINDINGS",
@@ -47,8 +49,6 @@ __all__ = [
 MODEL_FILE = "franka.toml"
 #: Most bytes a model file may have (each bundled one has under 2 kB).
 MAX_MODEL_BYTES = 64 * 1024
-#: The keys of a model file.
-MODEL_KEYS = ("model", "server_versions", "sources")
 
 
 @dataclass(frozen=True)
@@ -138,8 +138,10 @@ class FrankaModel:
         Raises
         ------
         RobotDescriptionError
-            The file cannot be read, is not TOML, has an unknown key, no ``model`` text or
-            no ``server_versions`` list of whole numbers from 1 to 65535.
+            The file cannot be read, is not TOML, or is not of
+            :class:`~qpavoid.drive.franka_model_schema.ModelFile`'s shape (an unknown key,
+            no ``model`` text, no ``server_versions`` list of whole numbers from 1 to
+            65535), in one line naming the field's path.
         """
         try:
             data = read_toml(path, MAX_MODEL_BYTES)
@@ -149,31 +151,8 @@ class FrankaModel:
             raise RobotDescriptionError(
                 f"{path}: cannot read the model file: {one_line(exc)}", path=path
             ) from None
-        unknown_keys(data, MODEL_KEYS, "the top level", path, "")
-        name, versions = data.get("model"), data.get("server_versions")
-        if not isinstance(name, str) or not name.strip():
-            raise RobotDescriptionError(
-                f'{path}: model must name the arm (model = "FR3"), got {name!r}',
-                path=path,
-                name="model",
-                value=name,
-            )
-        if not (
-            isinstance(versions, list)
-            and versions
-            and all(
-                isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 65535 for v in versions
-            )
-        ):
-            raise RobotDescriptionError(
-                f"{path}: server_versions must list the versions of libfranka's protocol the "
-                f"arm speaks, whole numbers from 1 to 65535 (server_versions = [10]), got "
-                f"{versions!r}",
-                path=path,
-                name="server_versions",
-                value=versions,
-            )
-        return cls(name.strip(), tuple(sorted(set(versions))), robot)
+        file = convert(data, ModelFile, refused(path))
+        return cls(file.model.strip(), tuple(sorted(set(file.server_versions))), robot)
 
     def speaks(self, version: int) -> bool:
         """Whether this model's controllers speak ``version`` of libfranka's protocol."""
