@@ -1,5 +1,5 @@
 """The shape of the last user files, checked by their schemas (msgspec): for each kind (the
-body-region file, a Franka description's model file, ...) a wrong type, an out-of-range
+body-region file, a Franka description's model file, a task file) a wrong type, an out-of-range
 value, an unknown key and a missing key are each one line naming the field's path, through
 the command line (where a flag reads the file) exit 2 in one line; every shipped file of
 the kind has its schema's shape."""
@@ -12,9 +12,12 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
+import tomllib
 from schema_files import RefusedError, exits_2, refused, written
 
 import qpavoid
+from qpavoid.control.task import load_task
+from qpavoid.control.task_schema import TaskFile
 from qpavoid.core.errors import DataFileError, RobotDescriptionError
 from qpavoid.core.file_bounds import read_toml
 from qpavoid.core.schema import convert
@@ -210,3 +213,91 @@ def test_every_shipped_franka_model_file_has_its_schema_s_shape():
         file = convert(read_toml(path, 2**16), ModelFile, RefusedError)
         assert file.sources.model and file.sources.server_versions
     assert [m.robot for m in bundled_models()] == ["fr3", "panda"]
+
+
+# --- task files (qpavoid.control.task_schema) ------------------------------------------------
+
+ROBOTS = Path(qpavoid.robots.__file__).parent
+TASK = (ROBOTS / "iiwa14" / "task.toml").read_text()
+TASK_REFUSALS = [
+    (  # a wrong type
+        "duration_s = 15.0",
+        'duration_s = "15"',
+        "waypoints[1].duration_s",
+        "waypoints[1].duration_s must be a number above 0 and at most 3600, s, got '15' "
+        "(docs/tasks.md §2)",
+    ),
+    (  # out of range: a position in mm
+        "position_m = [0.3524, 0.6105, 0.5779]",
+        "position_m = [352.4, 0.6105, 0.5779]",
+        "waypoints[0].position_m[0]",
+        "waypoints[0].position_m[0] must be a number at least -10 and at most 10, m, got 352.4 "
+        "(a unit error?)",
+    ),
+    (  # out of range: the seat behind the base
+        "distance_m = 1.05",
+        "distance_m = -1.05",
+        "operator.distance_m",
+        "operator.distance_m must be a number above 0 and at most 10, m, got -1.05",
+    ),
+    (  # an unknown key
+        "x_m = 0.15",
+        "x_m = 0.15\nseat_m = 1.0",
+        "operator.seat_m",
+        "operator has unknown key(s) ['seat_m']; its keys are ['x_m', 'distance_m', "
+        "'max_lean_m'] (docs/tasks.md §2)",
+    ),
+    (  # a missing key
+        "reach_m = 0.946",
+        "",
+        "scaling.reach_m",
+        "scaling is missing key(s) reach_m (docs/tasks.md §2)",
+    ),
+    (  # a strike that is neither a frame nor { frame, xyz }
+        'shoulder = "A2"',
+        "shoulder = 2",
+        "strikes.shoulder",
+        'strikes.shoulder must be "<frame>" or { frame = "<frame>", xyz = [x, y, z] }, got 2',
+    ),
+]
+
+
+@pytest.mark.parametrize("old, new, name, message", TASK_REFUSALS)
+def test_a_task_file_of_the_wrong_shape_is_one_line_naming_the_path(
+    tmp_path, old, new, name, message
+):
+    robot = qpavoid.load_robot("iiwa14")
+    path = written(tmp_path / "task.toml", TASK, old, new)
+    err = refused(RobotDescriptionError, lambda p: load_task(p, robot), path, f"{path}: ", message)
+    assert isinstance(err, RobotDescriptionError) and (err.name, err.path) == (name, path)
+
+
+@pytest.mark.parametrize("old, new, name, message", TASK_REFUSALS)
+def test_a_run_with_a_task_file_of_the_wrong_shape_exits_2_in_one_line(
+    tmp_path, capsys, old, new, name, message
+):
+    path = written(tmp_path / "task.toml", TASK, old, new)
+    err = exits_2(capsys, ["run", "test1", "--task", str(path)], tmp_path / "out", message)
+    assert err.startswith(f"qpavoid: error: --task {path}: ")
+
+
+def _toml_blocks(page: Path) -> list[str]:
+    """The ``toml`` code blocks of a docs page."""
+    parts = page.read_text().split("```toml\n")[1:]
+    return [part.split("```")[0] for part in parts]
+
+
+def test_every_shipped_task_file_loads(tmp_path):
+    """robots/*/task.toml on their arms; docs/tasks.md's two files (the keys and the
+    example) on the iiwa, whose joints and frames they name."""
+    for folder in sorted(p.parent for p in ROBOTS.glob("*/task.toml")):
+        robot = qpavoid.load_robot(folder.name)
+        assert load_task(folder / "task.toml", robot).file == folder / "task.toml"
+    examples = _toml_blocks(ROOT / "docs" / "tasks.md")
+    assert len(examples) == 2
+    iiwa = qpavoid.load_robot("iiwa14")
+    for k, text in enumerate(examples):
+        assert convert(tomllib.loads(text), TaskFile, RefusedError).waypoints
+        path = tmp_path / f"example{k}.toml"
+        path.write_text(text)
+        assert len(load_task(path, iiwa).path.segments) >= 2

@@ -70,7 +70,7 @@ BAD_TASKS = [
     (None, "cannot read the task file"),
     ("waypoints = [\n", "not TOML"),
     (FIRST, "give at least two [[waypoints]]"),
-    (FIRST + SECOND + "[operator]\nseat_m = 1.0\n", "operator.seat_m: unknown key"),
+    (FIRST + SECOND + "[operator]\nseat_m = 1.0\n", "operator has unknown key(s) ['seat_m']"),
     (
         FIRST + "[[waypoints]]\njoints_rad = { A1 = 0.5, A2 = 0.6, A4 = -1.4, A5 = 0.0, "
         "A6 = -1.0, A7 = 0.0, A9 = 0.1 }\nduration_s = 2.0\n",

@@ -57,13 +57,14 @@ paper's: :class:`Task`'s defaults). Everything is in the robot's base frame, m a
 
 The iiwa's ``robots/iiwa14/task.toml`` is the paper's task, and gives :class:`ArcPath`'s
 references bit for bit; the other arms' files scale it by their reach (their
-``[scaling]`` and comments). ``docs/tasks.md`` says more: the frames and units of every
-key, how to write a task, the operator's seat, and ``qpavoid run --task FILE``.
+``[scaling]`` and comments). The file's shape (its keys, types and plausible ranges) is a
+schema, :mod:`qpavoid.control.task_schema`. ``docs/tasks.md`` says more: the frames and
+units of every key, how to write a task, the operator's seat, and ``qpavoid run --task
+FILE``.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from os import PathLike
 from pathlib import Path
@@ -74,27 +75,24 @@ import pinocchio as pin
 from qpavoid.arm.ik import inverse_kinematics
 from qpavoid.arm.model import Robot
 from qpavoid.control.path import ArcPath, PlannedPath, WaypointPath
+from qpavoid.control.task_schema import (
+    MAX_ROTATION_DEFECT,
+    ScalingTable,
+    StrikeTable,
+    TaskFile,
+    WaypointTable,
+)
 from qpavoid.core.checks import one_line
 from qpavoid.core.errors import IKNotConvergedError, RobotDescriptionError
 from qpavoid.core.file_bounds import NotTOMLError, read_toml
 from qpavoid.core.geometry import orthonormalize
+from qpavoid.core.schema import convert
 from qpavoid.human.posture import Operator
 
 #: The task file of a robot description folder (optional; docs in this module).
 TASK_FILE = "task.toml"
 #: Most bytes a task file may have (the iiwa's has about 3 kB): checked before reading.
 MAX_TASK_BYTES = 2**20
-#: Keys of the task file, of a waypoint, of ``[operator]``, ``[test2]`` and ``[scaling]``
-#: (a misspelt one would otherwise be ignored).
-TASK_KEYS = ("waypoints", "operator", "test2", "strikes", "scaling")
-WAYPOINT_KEYS = ("position_m", "rotation", "rpy_rad", "joints_rad", "duration_s", "sagitta_m")
-OPERATOR_KEYS = ("x_m", "distance_m", "max_lean_m")
-TEST2_KEYS = ("operator_x_m", "operator_distance_m")
-SCALING_KEYS = ("reference", "shoulder", "reach_m", "scale")
-#: How far a written rotation matrix may be from a rotation, ``‖RᵀR − I‖`` (Frobenius):
-#: the paper prints its matrices to 3-4 digits (8e-5 for its poses); beyond 0.01 it is a
-#: typo, not rounding.
-MAX_ROTATION_DEFECT = 1e-2
 #: Turns below this angle between two waypoints' orientations are rounding: the segment
 #: holds the first one (as the paper's, whose two poses print one orientation), rad.
 MIN_TURN_RAD = 1e-9
@@ -205,6 +203,10 @@ def default_task(robot: Robot, folder: str | PathLike[str] | None = None) -> Tas
 def load_task(file: str | PathLike[str], robot: Robot) -> Task:
     """Read a task file for ``robot`` (format: this module's docs and ``robots/iiwa14/task.toml``).
 
+    The file's shape is :class:`~qpavoid.control.task_schema.TaskFile`'s, refused in one line
+    naming the field's path (``waypoints[1].duration_s must be a number above 0 ...``); what
+    needs the robot or several keys is checked here (``<file>: <key>: <what is wrong>``).
+
     Raises
     ------
     RobotDescriptionError
@@ -224,57 +226,51 @@ def load_task(file: str | PathLike[str], robot: Robot) -> Task:
             f"{path}: cannot read the task file: {one_line(exc)}", path=path
         ) from None
     reader = _TaskReader(path, robot)
-    reader.keys(data, TASK_KEYS, "the top level", "")
-    waypoints = data.get("waypoints")
-    if not isinstance(waypoints, list) or len(waypoints) < 2:
-        raise reader.error(
-            "waypoints",
-            "give at least two [[waypoints]] tables: the start, then each waypoint with "
-            "its duration_s",
-            waypoints,
-        )
-    poses = [reader.pose(w, k) for k, w in enumerate(waypoints)]
-    _check_reachable(poses, robot, reader)
-    segments = []
-    for k in range(1, len(poses)):
-        where = f"waypoints[{k}]"
-        duration = reader.number(waypoints[k], "duration_s", where, low=0.0, strict=True)
-        sagitta = reader.number(waypoints[k], "sagitta_m", where, low=0.0, default=0.0)
-        R0, R1 = orthonormalize(poses[k - 1][:3, :3]), orthonormalize(poses[k][:3, :3])
-        turn = bool(np.linalg.norm(pin.log3(R0.T @ R1)) > MIN_TURN_RAD)
-        segments.append(ArcPath(poses[k - 1], poses[k], duration, sagitta, turn))
+    task = convert(data, TaskFile, reader.refused)
+    waypoints = task.waypoints
     for key in ("duration_s", "sagitta_m"):
-        if key in waypoints[0]:
+        if getattr(waypoints[0], key) is not None:
             raise reader.error(
                 f"waypoints[0].{key}",
                 "the first waypoint is the start: give its duration_s and sagitta_m to "
                 "the next one (the segment that ends there)",
-                waypoints[0][key],
+                getattr(waypoints[0], key),
             )
-    default = Task()
-    op = reader.table(data, "operator", OPERATOR_KEYS)
+    poses = [reader.pose(w, k) for k, w in enumerate(waypoints)]
+    _check_reachable(poses, robot, reader)
+    segments = []
+    for k in range(1, len(poses)):
+        duration, sagitta = waypoints[k].duration_s, waypoints[k].sagitta_m
+        if duration is None:
+            raise reader.error(
+                f"waypoints[{k}].duration_s", "missing: give it (docs: qpavoid.control.task)"
+            )
+        R0, R1 = orthonormalize(poses[k - 1][:3, :3]), orthonormalize(poses[k][:3, :3])
+        turn = bool(np.linalg.norm(pin.log3(R0.T @ R1)) > MIN_TURN_RAD)
+        segments.append(ArcPath(poses[k - 1], poses[k], duration, sagitta or 0.0, turn))
+    paper, op, test2 = Task(), task.operator, task.test2
     operator = Operator(
-        x_m=reader.number(op, "x_m", "operator", default=default.operator.x_m),
-        distance_m=reader.number(
-            op, "distance_m", "operator", low=0.0, strict=True, default=default.operator.distance_m
-        ),
-        max_lean_m=reader.number(
-            op, "max_lean_m", "operator", low=0.0, default=default.operator.max_lean_m
-        ),
-    )
-    test2 = reader.table(data, "test2", TEST2_KEYS)
-    test2_x = reader.number(test2, "operator_x_m", "test2", default=default.test2_operator.x_m)
-    test2_distance = reader.number(
-        test2, "operator_distance_m", "test2", low=0.0, strict=True, default=operator.distance_m
+        x_m=_given(op.x_m, paper.operator.x_m),
+        distance_m=_given(op.distance_m, paper.operator.distance_m),
+        max_lean_m=_given(op.max_lean_m, paper.operator.max_lean_m),
     )
     return Task(
         WaypointPath(tuple(segments)),
         operator,
-        replace(operator, x_m=test2_x, distance_m=test2_distance),
-        reader.body_targets(data.get("strikes", {})),
-        reader.scaling(data),
+        replace(
+            operator,
+            x_m=_given(test2.operator_x_m, paper.test2_operator.x_m),
+            distance_m=_given(test2.operator_distance_m, operator.distance_m),
+        ),
+        reader.body_targets(task.strikes),
+        None if task.scaling is None else reader.scaling(task.scaling),
         path,
     )
+
+
+def _given(value: float | None, default: float) -> float:
+    """A key's value, or its default where the file leaves it out."""
+    return default if value is None else value
 
 
 def _check_reachable(poses: list[np.ndarray], robot: Robot, reader: _TaskReader) -> None:
@@ -299,7 +295,8 @@ def _check_reachable(poses: list[np.ndarray], robot: Robot, reader: _TaskReader)
 
 
 class _TaskReader:
-    """Checks and reads the parts of one task file, every error naming the file and key."""
+    """Checks what a task file's schema cannot (module docstring of
+    :mod:`qpavoid.control.task_schema`), every error naming the file and key."""
 
     def __init__(self, path: Path, robot: Robot):
         self.path, self.robot = path, robot
@@ -310,70 +307,24 @@ class _TaskReader:
             f"{self.path}: {key}: {message}", path=self.path, name=key, value=value
         )
 
-    def keys(self, table: object, allowed: tuple[str, ...], where: str, prefix: str) -> None:
-        """Refuse a table that is not one, or a key of it that is not ``allowed``."""
-        if not isinstance(table, dict):
-            raise self.error(where, "must be a table", table)
-        for key in table:
-            if key not in allowed:
-                raise self.error(
-                    prefix + str(key), f"unknown key in {where}; known: {', '.join(allowed)}"
-                )
+    def refused(self, name: str, message: str, value: object) -> RobotDescriptionError:
+        """A schema's refusal (:func:`~qpavoid.core.schema.convert`): ``<file>: <message>``,
+        the message naming the field's path."""
+        return RobotDescriptionError(
+            f"{self.path}: {message}", path=self.path, name=name, value=value
+        )
 
-    def table(self, data: dict, key: str, allowed: tuple[str, ...]) -> dict:
-        """The optional table ``[key]`` (empty if absent), its keys checked."""
-        table = data.get(key, {})
-        self.keys(table, allowed, f"[{key}]", f"{key}.")
-        return table
-
-    def number(
-        self,
-        table: dict,
-        key: str,
-        where: str,
-        *,
-        low: float = -math.inf,
-        strict: bool = False,
-        default: float | None = None,
-    ) -> float:
-        """``table[key]`` as a finite float above ``low`` (or at it, unless ``strict``)."""
-        name = f"{where}.{key}"
-        if key not in table:
-            if default is None:
-                raise self.error(name, "missing: give it (docs: qpavoid.control.task)")
-            return default
-        value = table[key]
-        ok = isinstance(value, int | float) and not isinstance(value, bool)
-        number = float(value) if ok else math.nan
-        if not math.isfinite(number) or number < low or (strict and number == low):
-            bound = "" if low == -math.inf else f" {'above' if strict else 'at least'} {low:g}"
-            raise self.error(name, f"must be a finite number{bound}, got {value!r}", value)
-        return number
-
-    def vector(self, table: dict, key: str | int, where: str, n: int) -> np.ndarray:
-        """``table[key]`` as ``n`` finite numbers."""
-        value = table[key]
-        if (
-            not isinstance(value, list)
-            or len(value) != n
-            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
-            or not all(math.isfinite(v) for v in value)
-        ):
-            name = f"{where}[{key}]" if isinstance(key, int) else f"{where}.{key}"
-            raise self.error(name, f"must be {n} finite numbers, got {value!r}", value)
-        return np.array(value, dtype=float)
-
-    def pose(self, waypoint: object, k: int) -> np.ndarray:
+    def pose(self, waypoint: WaypointTable, k: int) -> np.ndarray:
         """The pose (4, 4) of waypoint ``k``: its position and rotation, or the end
         effector's pose at its joint angles (Pinocchio's forward kinematics)."""
         where = f"waypoints[{k}]"
-        self.keys(waypoint, WAYPOINT_KEYS, where, f"{where}.")
-        assert isinstance(waypoint, dict)  # keys() refused anything else
         given = [
-            key for key in ("position_m", "rotation", "rpy_rad", "joints_rad") if key in waypoint
+            key
+            for key in ("position_m", "rotation", "rpy_rad", "joints_rad")
+            if getattr(waypoint, key) is not None
         ]
-        if given == ["joints_rad"]:
-            return self.robot.end_effector(self.joints(waypoint["joints_rad"], where))
+        if waypoint.joints_rad is not None and given == ["joints_rad"]:
+            return self.robot.end_effector(self.joints(waypoint.joints_rad, where))
         if len(given) != 2 or given[0] != "position_m" or given[1] == "joints_rad":
             raise self.error(
                 where,
@@ -381,50 +332,40 @@ class _TaskReader:
                 f"alone; got {given}",
             )
         T = np.eye(4)
-        T[:3, 3] = self.vector(waypoint, "position_m", where, 3)
-        if given[1] == "rpy_rad":
-            T[:3, :3] = pin.rpy.rpyToMatrix(*self.vector(waypoint, "rpy_rad", where, 3))
+        T[:3, 3] = waypoint.position_m
+        if waypoint.rpy_rad is not None:
+            T[:3, :3] = pin.rpy.rpyToMatrix(*waypoint.rpy_rad)
             return T
-        rows = waypoint["rotation"]
-        if not isinstance(rows, list) or len(rows) != 3:
-            raise self.error(
-                f"{where}.rotation", f"must be 3 rows of 3 numbers, got {rows!r}", rows
-            )
-        R = np.array(
-            [self.vector(dict(enumerate(rows)), i, f"{where}.rotation", 3) for i in range(3)]
-        )
+        R = np.array(waypoint.rotation, dtype=float)
         defect = float(np.linalg.norm(R.T @ R - np.eye(3)))
         if defect > MAX_ROTATION_DEFECT or np.linalg.det(R) <= 0:
             raise self.error(
                 f"{where}.rotation",
                 f"not a rotation matrix (‖RᵀR − I‖ = {defect:.2g}, det {np.linalg.det(R):.3g}):"
                 " give its rows (orthonormal, det +1, to 2 digits at least) or rpy_rad",
-                rows,
+                [list(row) for row in R.tolist()],
             )
         T[:3, :3] = R  # as written: ArcPath takes the nearest rotation
         return T
 
-    def joints(self, value: object, where: str) -> np.ndarray:
+    def joints(self, value: dict[str, float], where: str) -> np.ndarray:
         """The joint angles (nq,) of a ``joints_rad`` table naming every joint of the
         model (a locked joint only at its locked angle)."""
         robot, key = self.robot, f"{where}.joints_rad"
-        if not isinstance(value, dict):
-            raise self.error(key, "must be a table { <joint> = <angle, rad>, ... }", value)
         q = np.zeros(robot.nq)
         for name, angle in value.items():
-            number = self.number(value, name, key)
             if name in robot.joint_names:
                 i = robot.joint_names.index(name)
-                if not robot.q_min[i] <= number <= robot.q_max[i]:
+                if not robot.q_min[i] <= angle <= robot.q_max[i]:
                     raise self.error(
                         f"{key}.{name}",
-                        f"{number:g} rad is outside the joint's limits "
+                        f"{angle:g} rad is outside the joint's limits "
                         f"[{robot.q_min[i]:g}, {robot.q_max[i]:g}]",
                         angle,
                     )
-                q[i] = number
+                q[i] = angle
             elif name in robot.locked:
-                if abs(number - robot.locked[name]) > LOCKED_ANGLE_TOLERANCE_RAD:
+                if abs(angle - robot.locked[name]) > LOCKED_ANGLE_TOLERANCE_RAD:
                     raise self.error(
                         f"{key}.{name}",
                         f"the joint is locked at {robot.locked[name]:g} rad: give that "
@@ -440,19 +381,17 @@ class _TaskReader:
             raise self.error(key, f"give every joint of the arm: {missing} missing", value)
         return q
 
-    def frame(self, name: object, key: str) -> str:
+    def frame(self, name: str, key: str) -> str:
         """``name`` if it is a frame of the robot's model."""
-        if not isinstance(name, str) or not self.robot.model.existFrame(name):
+        if not self.robot.model.existFrame(name):
             frames = [f.name for f in self.robot.model.frames][:40]
             raise self.error(
                 key, f"no frame {name!r} in the robot's model; its frames are {frames}", name
             )
         return name
 
-    def body_targets(self, strikes: object) -> tuple[BodyTarget, ...]:
+    def body_targets(self, strikes: dict[str, str | StrikeTable]) -> tuple[BodyTarget, ...]:
         """The ``[strikes]`` table: ``<name> = "<frame>"`` or ``{ frame, xyz }``."""
-        if not isinstance(strikes, dict):
-            raise self.error("strikes", "must be a table [strikes] of <name> = <frame>", strikes)
         out = []
         for name, spot in strikes.items():
             key = f"strikes.{name}"
@@ -460,29 +399,11 @@ class _TaskReader:
                 raise self.error(key, "a set's name: strikes aim at every set already; rename it")
             if isinstance(spot, str):
                 out.append(BodyTarget(name, self.frame(spot, key)))
-                continue
-            self.keys(spot, ("frame", "xyz"), key, f"{key}.")
-            assert isinstance(spot, dict)
-            if "frame" not in spot or "xyz" not in spot:
-                raise self.error(
-                    key, 'must be "<frame>" or { frame = "<frame>", xyz = [x, y, z] }', spot
-                )
-            x, y, z = (float(v) for v in self.vector(spot, "xyz", key, 3))
-            target = BodyTarget(name, self.frame(spot["frame"], f"{key}.frame"), (x, y, z))
-            out.append(target)
+            else:
+                out.append(BodyTarget(name, self.frame(spot.frame, f"{key}.frame"), spot.xyz))
         return tuple(out)
 
-    def scaling(self, data: dict) -> TaskScaling | None:
-        """The optional ``[scaling]`` table."""
-        if "scaling" not in data:
-            return None
-        table = self.table(data, "scaling", SCALING_KEYS)
-        for key in ("reference", "shoulder"):
-            if not isinstance(table.get(key), str):
-                raise self.error(f"scaling.{key}", "must be a name (text)", table.get(key))
-        return TaskScaling(
-            table["reference"],
-            self.frame(table["shoulder"], "scaling.shoulder"),
-            self.number(table, "reach_m", "scaling", low=0.0, strict=True),
-            self.number(table, "scale", "scaling", low=0.0, strict=True),
-        )
+    def scaling(self, table: ScalingTable) -> TaskScaling:
+        """The ``[scaling]`` table, its shoulder a frame of the model."""
+        shoulder = self.frame(table.shoulder, "scaling.shoulder")
+        return TaskScaling(table.reference, shoulder, table.reach_m, table.scale)
