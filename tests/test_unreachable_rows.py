@@ -59,8 +59,9 @@ def test_inactive_rows_and_nan_flag_nothing_and_the_first_unreachable_row_is_nam
 def test_a_hold_said_before_the_solver_commands_what_the_solver_gave(backend):
     """Test 1 with speed and separation on the UR5 (half its ticks a hold: the person
     inside the protective distance): the same commands with the check as with the solver
-    alone (daqp, cold: bit for bit; OSQP, warm-started from other ticks: within its
-    tolerance), and every stop said as speed and separation's hold."""
+    alone (daqp, cold: bit for bit; OSQP, warm started from other ticks: within its
+    tolerance on this run, whose holds are far from their limits: other closed-loop runs
+    can drift apart, docs/qp.md), and every stop said as speed and separation's hold."""
     pytest.importorskip("daqp") if backend == "daqp" else None
     robot = load_robot("ur5")
     cfg = ControllerConfig(control_period_s=0.01, safety="ssm")

@@ -185,7 +185,14 @@ class QPController(Controller):
         )
 
     def act(self, tick: Tick) -> Command:
-        writer = self.assembler if self.one_pass is None else self.one_pass
+        # the pass only for the assembler it was made for (one swapped in later writes its
+        # own pieces, as problem() shows them)
+        one_pass = self.one_pass
+        writer: Assembler[Tick] | OnePass = (
+            one_pass
+            if one_pass is not None and one_pass.assembler is self.assembler
+            else self.assembler
+        )
         prob = writer.fill(tick, self.config.control_period_s)
         # a row beyond the bounds: infeasible, said at once (a solver takes hundreds of
         # iterations to say so, thousands at worst: a hold's every tick late)

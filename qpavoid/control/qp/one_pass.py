@@ -24,7 +24,11 @@ import functools
 import numpy as np
 from numba import njit
 
-from qpavoid.control.qp.barriers.repulsion import RepulsionTask
+from qpavoid.control.qp.barriers.repulsion import (
+    EERepulsionTask,
+    RepelledRepulsionTask,
+    RepulsionTask,
+)
 from qpavoid.control.qp.barriers.separation import SeparationLimit
 from qpavoid.control.qp.kernels import (
     box_bounds,
@@ -37,28 +41,32 @@ from qpavoid.control.qp.kernels import (
     separation_rows,
     velocity_bounds,
 )
+from qpavoid.control.qp.limits.acceleration import AccelerationLimit
 from qpavoid.control.qp.limits.position import PositionLimit
+from qpavoid.control.qp.limits.velocity import VelocityLimit
 from qpavoid.control.qp.limits.velocity_damper import VelocityDamper
 from qpavoid.control.qp.pieces import QPPiece
 from qpavoid.control.qp.problem import Assembler, QPProblem
 from qpavoid.control.qp.tasks.ee import EndEffectorTask
+from qpavoid.control.qp.tasks.regularization import Regularization
 from qpavoid.control.tick import Tick
 from qpavoid.core.compiling import ctrl_c_deferred, kernel_input
 
 __all__ = ["STANDARD_PIECES", "OnePass", "standard_problem", "warm_up"]
 
-#: The pieces :class:`OnePass` writes, in order (``separation`` optional).
-STANDARD_PIECES = (
-    "ee_task",
-    "repulsion_repelled",
-    "repulsion_end_effector",
-    "regularization",
-    "velocity_damper",
-    "separation",
-    "velocity_limits",
-    "position_limits",
-    "acceleration_limits",
-)
+#: The pieces :class:`OnePass` writes, in order, by name and exact class (``separation``
+#: optional): a subclass may write otherwise, so it leaves the set to the assembler.
+STANDARD_PIECES: dict[str, type[QPPiece[Tick]]] = {
+    "ee_task": EndEffectorTask,
+    "repulsion_repelled": RepelledRepulsionTask,
+    "repulsion_end_effector": EERepulsionTask,
+    "regularization": Regularization,
+    "velocity_damper": VelocityDamper,
+    "separation": SeparationLimit,
+    "velocity_limits": VelocityLimit,
+    "position_limits": PositionLimit,
+    "acceleration_limits": AccelerationLimit,
+}
 
 
 @njit(cache=True)
@@ -204,16 +212,15 @@ class OnePass:
     @classmethod
     def of(cls, assembler: Assembler[Tick]) -> OnePass | None:
         """The pass for ``assembler``'s pieces, or None if they are not the standard ones
-        (:data:`STANDARD_PIECES`, in that order, ``separation`` optional)."""
+        (:data:`STANDARD_PIECES`: those names in that order, each of exactly that class,
+        ``separation`` optional)."""
         pieces = {p.name: p for p in assembler.pieces}
         names = [p.name for p in assembler.pieces]
         if names != [n for n in STANDARD_PIECES if n in pieces]:
             return None
-        needed = set(STANDARD_PIECES) - {"separation"}
-        if not needed <= set(names):
+        if not set(STANDARD_PIECES) - {"separation"} <= set(names):
             return None
-        separation = pieces.get("separation")
-        if separation is not None and not isinstance(separation, SeparationLimit):
+        if any(type(p) is not STANDARD_PIECES[p.name] for p in assembler.pieces):
             return None
         warm_up()
         return cls(assembler, pieces)
