@@ -12,6 +12,7 @@ from typing import Annotated, ClassVar
 
 import pytest
 from msgspec import Meta, Struct
+from schema_files import RefusedError, refused, written
 
 import qpavoid
 from qpavoid.arm.description_schema import ControlPointFile
@@ -41,15 +42,9 @@ class _Outer(Struct, frozen=True, forbid_unknown_fields=True):
     limits: dict[str, Annotated[float, Meta(ge=0.0, le=10.0)]] = {}
 
 
-class _RefusedError(Exception):
-    def __init__(self, name: str, message: str, value: object) -> None:
-        super().__init__(message)
-        self.name, self.value = name, value
-
-
-def _refusal(data: object) -> _RefusedError:
-    with pytest.raises(_RefusedError) as info:
-        convert(data, _Outer, _RefusedError, prefix="cell")
+def _refusal(data: object) -> RefusedError:
+    with pytest.raises(RefusedError) as info:
+        convert(data, _Outer, RefusedError, prefix="cell")
     assert "\n" not in str(info.value)
     return info.value
 
@@ -141,8 +136,8 @@ class _Box(Struct, frozen=True, forbid_unknown_fields=True):
     ],
 )
 def test_a_refusal_names_the_entry_the_unit_and_the_docs(data, name, message):
-    with pytest.raises(_RefusedError) as info:
-        convert(data, _Box, _RefusedError, prefix="box")
+    with pytest.raises(RefusedError) as info:
+        convert(data, _Box, RefusedError, prefix="box")
     assert info.value.name == name and str(info.value) == message
 
 
@@ -150,8 +145,8 @@ def test_a_missing_table_is_refused_in_its_own_words():
     class Holder(Struct, frozen=True, forbid_unknown_fields=True):
         lid: Annotated[_Piece, Meta(extra={"missing": "needs lid = { name = ..., size_m = ... }"})]
 
-    with pytest.raises(_RefusedError) as info:
-        convert({}, Holder, _RefusedError, prefix="box")
+    with pytest.raises(RefusedError) as info:
+        convert({}, Holder, RefusedError, prefix="box")
     assert str(info.value) == "box needs lid = { name = ..., size_m = ... } (docs/pieces.md: Piece)"
 
 
@@ -162,9 +157,7 @@ def _iiwa(tmp_path: Path, old: str, new: str) -> Path:
     folder = tmp_path / "arm"
     shutil.copytree(ROBOTS / "iiwa14", folder)
     file = folder / "control_points.toml"
-    text = file.read_text()
-    assert old in text
-    file.write_text(text.replace(old, new, 1))
+    written(file, file.read_text(), old, new)
     return folder
 
 
@@ -248,27 +241,21 @@ def test_every_shipped_robot_description_has_its_schema_s_shape():
     assert names == ["fr3", "iiwa14", "panda", "ur5"]
     for name in names:
         data = read_toml(ROBOTS / name / "control_points.toml", 2**20)
-        file = convert(data, ControlPointFile, _RefusedError)
+        file = convert(data, ControlPointFile, RefusedError)
         assert file.sets and file.arm.max_acceleration_radps2
     assert qpavoid.load_robot("iiwa14").sets[0].name == "L1"
 
 
 def _edited_format_file(tmp_path: Path, name: str, old: str, new: str) -> Path:
     """A copy of the shipped ``formats/<name>`` with ``old`` replaced by ``new`` once."""
-    text = (FORMATS_DIR / name).read_text()
-    assert old in text
-    path = tmp_path / name
-    path.write_text(text.replace(old, new, 1))
-    return path
+    return written(tmp_path / name, (FORMATS_DIR / name).read_text(), old, new)
 
 
 def _one_line_naming(load: Callable[[], object], path: Path, name: str, message: str) -> None:
     """``load()`` refused with one line that starts with the file and names ``name``."""
-    with pytest.raises(SkeletonFormatError) as info:
-        load()
-    text = str(info.value)
-    assert text.startswith(f"{path}: ") and "\n" not in text and message in text
-    assert info.value.name == name and info.value.path == path
+    error = refused(SkeletonFormatError, lambda _: load(), path, f"{path}: ", message)
+    assert isinstance(error, SkeletonFormatError)
+    assert error.name == name and error.path == path
 
 
 # --- camera bodies (qpavoid.human.body_schema) -----------------------------------------------
