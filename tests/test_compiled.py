@@ -166,3 +166,35 @@ def test_kernel_input_passes_only_the_warmed_up_array_type_through():
     states = np.array([2, 1, 0], dtype=np.int8)
     assert kernel_input(states, np.int8) is states
     assert numba.typeof(kernel_input(states.astype(int), np.int8)) == numba.typeof(states)
+
+
+def test_cold_is_true_only_for_a_kernel_without_its_cache_index(tmp_path):
+    """The first run after an install compiles for tens of seconds: the command line says so
+    (``core.compiling.cold``) instead of waiting in silence; a cached kernel, or one whose
+    cache numba keeps elsewhere, says nothing."""
+    from qpavoid.core.compiling import cold
+
+    index = tmp_path / "kernel.nbi"
+
+    class Kernel:
+        _cache = types.SimpleNamespace(_cache_file=types.SimpleNamespace(_index_path=str(index)))
+
+    assert cold(Kernel(), law_kernels.avoidance_terms)  # nothing cached for the first
+    index.write_text("")
+    assert not cold(Kernel(), law_kernels.avoidance_terms)
+    assert not cold(object())  # nowhere to look: nothing known
+
+
+def test_the_command_line_says_once_that_it_compiles_on_a_cold_cache(monkeypatch, capsys, tmp_path):
+    from qpavoid.cli import commands
+
+    def run(out: str) -> str:
+        argv = ["run", "free", "--max-time", "0.2", "-q", "--no-plots", "--no-view"]
+        assert commands.main([*argv, "--out", str(tmp_path / out)]) == 0
+        return capsys.readouterr().err
+
+    monkeypatch.setattr(commands, "cold", lambda *kernels: True)
+    err = run("cold")
+    assert err.count("compiling its kernels for this install") == 1, err
+    monkeypatch.setattr(commands, "cold", lambda *kernels: False)
+    assert "compiling" not in run("warm")

@@ -26,6 +26,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from qpavoid.arm._kernels import frame_jacobians
 from qpavoid.cli.args import (
     HelpFormatter,
     Parser,
@@ -47,12 +48,16 @@ from qpavoid.cli.latency import add_latency_command
 from qpavoid.cli.robot import add_robot_command
 from qpavoid.cli.sensors import add_sensor_commands
 from qpavoid.cli.view import add_view_command
+from qpavoid.control.qp.one_pass import standard_problem
 from qpavoid.control.tick import SAFETY_MODES
+from qpavoid.core.compiling import cold
+from qpavoid.distance._kernels import capsule_table
 from qpavoid.experiments.compare import compare
 from qpavoid.experiments.jobs import progress_bar
 from qpavoid.experiments.reproduce import reproduce_bag
 from qpavoid.experiments.run_spec import BENCHES, CONTROLLERS, DISTANCE_METHODS, LIMIT_MODES
 from qpavoid.experiments.runs import RunSpec, live_view, run_one, spec_robot
+from qpavoid.human._kernels import tracked_body
 from qpavoid.loop.live_input import check_listening, parse_address
 from qpavoid.loop.metrics import describe
 from qpavoid.output.bag_writer import check_bag_path, write_run_bag
@@ -390,6 +395,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (:func:`~qpavoid.cli.args.run_command`)."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if cold(capsule_table, standard_problem, frame_jacobians, tracked_body):
+        print(
+            "qpavoid: compiling its kernels for this install (once, about 30 s; later runs "
+            "load them from the disk cache)",
+            file=sys.stderr,
+            flush=True,
+        )
     if args.command == "run":
         return run_command(lambda: _run(args, args.parser))
     if args.command == "compare":

@@ -19,7 +19,7 @@ import numpy as np
 
 from qpavoid.core.signals import held
 
-__all__ = ["ctrl_c_deferred", "kernel_input", "recompile_if_stale"]
+__all__ = ["cold", "ctrl_c_deferred", "kernel_input", "recompile_if_stale"]
 
 
 def ctrl_c_deferred() -> AbstractContextManager[None]:
@@ -44,6 +44,18 @@ def kernel_input(array: object, dtype: type) -> np.ndarray:
     ):
         return array
     return np.array(array, dtype=dtype, order="C")
+
+
+def cold(*kernels: Any) -> bool:
+    """True if one of ``kernels`` has nothing in its disk cache yet (the first run after an
+    install compiles it: tens of seconds in all); False if each has its cache's index, or
+    numba keeps it where this cannot look (then nothing is known)."""
+    for kernel in kernels:
+        cache_file = getattr(getattr(kernel, "_cache", None), "_cache_file", None)
+        index = getattr(cache_file, "_index_path", None)
+        if index is not None and not os.path.exists(index):
+            return True
+    return False
 
 
 def recompile_if_stale(kernel: Any, *modules: ModuleType) -> bool:
